@@ -1,0 +1,1 @@
+//! The FES stimulator CAN protocol (to be written).

@@ -1,0 +1,2 @@
+//! Criterion benchmark of the pattern-generator tick (to be written).
+fn main() {}

@@ -1,0 +1,2 @@
+//! Virtual muscle and stimulator (to be written).
+pub mod stimulator;

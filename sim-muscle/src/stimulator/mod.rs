@@ -1,0 +1,1 @@
+//! The virtual stimulator on the CAN bus (to be written).
