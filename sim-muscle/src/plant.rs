@@ -1,0 +1,32 @@
+//! The interface every simulated muscle implements, so the data-set recorder, the CLI and
+//! the virtual stimulator on the CAN bus can drive any of them (the Ding model, an LMN model
+//! file) the same way.
+
+/// One stimulation pulse as delivered by the stimulator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pulse {
+    /// Pulse amplitude in milliamperes.
+    pub amplitude_ma: f64,
+    /// Pulse (phase) width in microseconds.
+    pub width_us: f64,
+}
+
+impl Pulse {
+    /// The thesis protocol's supramaximal pulse (5.1): 200 us; the amplitude is nominal.
+    pub const SUPRAMAXIMAL: Pulse = Pulse { amplitude_ma: 20.0, width_us: 200.0 };
+}
+
+/// A muscle advanced in fixed steps of [`MusclePlant::ts`] seconds.
+///
+/// Timing convention (shared with the data-set format): sample k covers
+/// `[k Ts, (k+1) Ts)`. A pulse passed to `step` fires at `t = k Ts`; `step` advances the
+/// muscle to `t = (k+1) Ts` and returns the force there, in newtons. A muscle at rest has
+/// zero force, so a record's first sample is the force at `t = 0` before any step.
+pub trait MusclePlant: Send {
+    /// Sample period in seconds.
+    fn ts(&self) -> f64;
+    /// Advances one sample, firing `pulse` at its start; returns the force (N) at its end.
+    fn step(&mut self, pulse: Option<Pulse>) -> f64;
+    /// Returns the muscle to rest (no force, no stimulation history).
+    fn reset(&mut self);
+}
