@@ -38,21 +38,23 @@ pub struct LimitsError {
 }
 
 impl Default for StimLimits {
-    /// 100 mA, 500 us, 2 ms minimum IPI (DESIGN.md), at most 100 pulses per 1000 ms
-    /// (a mean of 100 Hz), 100 ms watchdog (10 host heartbeats).
     fn default() -> Self {
-        Self {
-            max_amplitude_100ua: 1000,
-            max_width_us: 500,
-            min_ipi_ms: 2,
-            max_pulses: 100,
-            rate_window_ms: 1000,
-            watchdog_ms: 100,
-        }
+        Self::DEFAULT
     }
 }
 
 impl StimLimits {
+    /// 100 mA, 500 us, 2 ms minimum IPI (DESIGN.md), at most 100 pulses per 1000 ms
+    /// (a mean of 100 Hz), 100 ms watchdog (10 host heartbeats).
+    pub const DEFAULT: StimLimits = StimLimits {
+        max_amplitude_100ua: 1000,
+        max_width_us: 500,
+        min_ipi_ms: 2,
+        max_pulses: 100,
+        rate_window_ms: 1000,
+        watchdog_ms: 100,
+    };
+
     /// Each limit with its CONFIG signal, in page order.
     fn fields(&self) -> [(&'static SignalDesc, u16); 6] {
         [
