@@ -8,10 +8,21 @@ struct Counting;
 
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 
+std::thread_local! {
+    /// Only the measuring thread counts (libtest's own threads allocate meanwhile).
+    static MEASURING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+fn count() {
+    if MEASURING.with(std::cell::Cell::get) {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
 // SAFETY: forwards every call unchanged to the system allocator; only counts.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count();
         // SAFETY: same contract as the caller's.
         unsafe { System.alloc(layout) }
     }
@@ -20,7 +31,7 @@ unsafe impl GlobalAlloc for Counting {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count();
         // SAFETY: same contract as the caller's.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
@@ -88,6 +99,7 @@ fn codec_hot_path_allocates_nothing() {
     let mut seq = SequenceCheck::new();
     let mut asm = ConfigAssembler::new();
     let limits = StimLimits::default();
+    MEASURING.with(|m| m.set(true));
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     let mut ok = 0usize;
     for i in 0..10_000u32 {
@@ -108,6 +120,7 @@ fn codec_hot_path_allocates_nothing() {
         let _ = limits.validate();
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
+    MEASURING.with(|m| m.set(false));
     assert_eq!(ok, 10_000 * messages.len());
     assert_eq!(after - before, 0, "heap allocations on the codec path");
 }

@@ -10,7 +10,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use fes_can::{
-    AliveCounter, DecodeError, Frame, Heartbeat, Message, Nmt, NmtCommand, NmtState, Nodes, Pulse, StimLimits,
+    AliveCounter, DecodeError, Frame, Heartbeat, Message, Nmt, NmtCommand, NmtState, Nodes, Pulse,
+    StimLimits,
 };
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, StandardId};
 
@@ -58,35 +59,62 @@ impl Tap {
         let frames = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
         let (f, s) = (frames.clone(), stop.clone());
-        let thread = std::thread::Builder::new().name("can-tap".into()).spawn(move || {
-            while !s.load(Ordering::Relaxed) {
-                match socket.read_frame() {
-                    Ok(frame) => {
-                        let at = Instant::now();
-                        let id = frame.raw_id()
-                            | if frame.is_extended() { 0x8000_0000 } else { 0 }
-                            | if matches!(frame, CanFrame::Remote(_)) { 0x4000_0000 } else { 0 };
-                        let data = frame.data().to_vec();
-                        let message = fes_can::decode(id, &data);
-                        f.lock().unwrap_or_else(PoisonError::into_inner).push(RxFrame { at, id, data, message });
+        let thread = std::thread::Builder::new()
+            .name("can-tap".into())
+            .spawn(move || {
+                while !s.load(Ordering::Relaxed) {
+                    match socket.read_frame() {
+                        Ok(frame) => {
+                            let at = Instant::now();
+                            let id = frame.raw_id()
+                                | if frame.is_extended() { 0x8000_0000 } else { 0 }
+                                | if matches!(frame, CanFrame::Remote(_)) {
+                                    0x4000_0000
+                                } else {
+                                    0
+                                };
+                            let data = frame.data().to_vec();
+                            let message = fes_can::decode(id, &data);
+                            f.lock()
+                                .unwrap_or_else(PoisonError::into_inner)
+                                .push(RxFrame {
+                                    at,
+                                    id,
+                                    data,
+                                    message,
+                                });
+                        }
+                        Err(e)
+                            if matches!(
+                                e.kind(),
+                                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                            ) => {}
+                        Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                        Err(_) => break,
                     }
-                    Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) => {}
-                    Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                    Err(_) => break,
                 }
-            }
-        })?;
-        Ok(Self { frames, stop, thread: Some(thread) })
+            })?;
+        Ok(Self {
+            frames,
+            stop,
+            thread: Some(thread),
+        })
     }
 
     /// A copy of everything received so far.
     pub fn frames(&self) -> Vec<RxFrame> {
-        self.frames.lock().unwrap_or_else(PoisonError::into_inner).clone()
+        self.frames
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
     }
 
     /// Number of frames received so far.
     pub fn len(&self) -> usize {
-        self.frames.lock().unwrap_or_else(PoisonError::into_inner).len()
+        self.frames
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .len()
     }
 
     /// True when nothing was received yet.
@@ -124,7 +152,9 @@ impl Tap {
         timeout: Duration,
         pick: impl Fn(&Message) -> Option<T>,
     ) -> Option<(usize, Instant, T)> {
-        let (i, f) = self.wait_for(from, timeout, |f| f.msg().is_some_and(|m| pick(m).is_some()))?;
+        let (i, f) = self.wait_for(from, timeout, |f| {
+            f.msg().is_some_and(|m| pick(m).is_some())
+        })?;
         let m = f.msg().and_then(&pick)?;
         Some((i, f.at, m))
     }
@@ -140,13 +170,16 @@ impl Drop for Tap {
 }
 
 fn write(socket: &CanSocket, f: &Frame) -> io::Result<()> {
-    let id = StandardId::new(f.id).ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "identifier above 0x7FF"))?;
-    let frame = CanFrame::new(id, f.payload()).ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "payload over 8 bytes"))?;
+    let id = StandardId::new(f.id)
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "identifier above 0x7FF"))?;
+    let frame = CanFrame::new(id, f.payload())
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "payload over 8 bytes"))?;
     socket.write_frame(&frame)
 }
 
 fn encode(m: &Message, nodes: &Nodes) -> io::Result<Frame> {
-    m.encode_for(nodes).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))
+    m.encode_for(nodes)
+        .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))
 }
 
 /// The host's side of the protocol, for scripted tests.
@@ -160,7 +193,12 @@ pub struct HostPort {
 impl HostPort {
     /// Opens `iface` with the default nodes.
     pub fn open(iface: &str) -> io::Result<Self> {
-        Ok(Self { socket: CanSocket::open(iface)?, nodes: Nodes::DEFAULT, alive: AliveCounter::new(), seq: 0 })
+        Ok(Self {
+            socket: CanSocket::open(iface)?,
+            nodes: Nodes::DEFAULT,
+            alive: AliveCounter::new(),
+            seq: 0,
+        })
     }
 
     /// Sends a message.
@@ -177,7 +215,10 @@ impl HostPort {
 
     /// Sends NMT `command` to the stimulator.
     pub fn nmt(&self, command: NmtCommand) -> io::Result<Frame> {
-        self.send(&Message::Nmt(Nmt { command, node: self.nodes.stim() }))
+        self.send(&Message::Nmt(Nmt {
+            command,
+            node: self.nodes.stim(),
+        }))
     }
 
     /// Sends both CONFIG pages of `limits` under `config_id`.
@@ -191,7 +232,13 @@ impl HostPort {
     /// The next pulse with fresh counters (advances them; nothing is sent).
     pub fn next_pulse(&mut self, amplitude_100ua: u16, width_us: u16) -> Pulse {
         self.seq = self.seq.wrapping_add(1);
-        Pulse { seq: self.seq, alive_counter: self.alive.next_value(), channel: 0, amplitude_100ua, width_us }
+        Pulse {
+            seq: self.seq,
+            alive_counter: self.alive.next_value(),
+            channel: 0,
+            amplitude_100ua,
+            width_us,
+        }
     }
 
     /// Sends a well-formed pulse.
@@ -204,7 +251,12 @@ impl HostPort {
     /// Encodes (without sending) the pulse the next [`HostPort::pulse`] would send, with the
     /// CRC byte XORed with `crc_xor`; the counters do not advance, as the stimulator must
     /// drop the frame without learning from it.
-    pub fn corrupt_pulse_frame(&self, amplitude_100ua: u16, width_us: u16, crc_xor: u8) -> io::Result<(Pulse, Frame)> {
+    pub fn corrupt_pulse_frame(
+        &self,
+        amplitude_100ua: u16,
+        width_us: u16,
+        crc_xor: u8,
+    ) -> io::Result<(Pulse, Frame)> {
         let mut alive = self.alive;
         let p = Pulse {
             seq: self.seq.wrapping_add(1),
@@ -237,27 +289,38 @@ impl HeartbeatSender {
     /// Starts sending `HOST_HEARTBEAT (operational)` on `iface` every `period`.
     pub fn start(iface: &str, period: Duration) -> io::Result<Self> {
         let socket = CanSocket::open(iface)?;
-        let frame = encode(&Message::HostHeartbeat(Heartbeat { state: NmtState::Operational }), &Nodes::DEFAULT)?;
+        let frame = encode(
+            &Message::HostHeartbeat(Heartbeat {
+                state: NmtState::Operational,
+            }),
+            &Nodes::DEFAULT,
+        )?;
         let state = Arc::new(Mutex::new(BeatState::default()));
         let stop = Arc::new(AtomicBool::new(false));
         let (st, sp) = (state.clone(), stop.clone());
-        let thread = std::thread::Builder::new().name("host-heartbeat".into()).spawn(move || {
-            let start = Instant::now();
-            let mut n: u32 = 0;
-            while !sp.load(Ordering::Relaxed) {
-                {
-                    let mut s = st.lock().unwrap_or_else(PoisonError::into_inner);
-                    if !s.paused && write(&socket, &frame).is_ok() {
-                        s.last_sent = Some(Instant::now());
-                        s.sent += 1;
+        let thread = std::thread::Builder::new()
+            .name("host-heartbeat".into())
+            .spawn(move || {
+                let start = Instant::now();
+                let mut n: u32 = 0;
+                while !sp.load(Ordering::Relaxed) {
+                    {
+                        let mut s = st.lock().unwrap_or_else(PoisonError::into_inner);
+                        if !s.paused && write(&socket, &frame).is_ok() {
+                            s.last_sent = Some(Instant::now());
+                            s.sent += 1;
+                        }
                     }
+                    n += 1;
+                    let next = start + period * n;
+                    std::thread::sleep(next.saturating_duration_since(Instant::now()));
                 }
-                n += 1;
-                let next = start + period * n;
-                std::thread::sleep(next.saturating_duration_since(Instant::now()));
-            }
-        })?;
-        Ok(Self { state, stop, thread: Some(thread) })
+            })?;
+        Ok(Self {
+            state,
+            stop,
+            thread: Some(thread),
+        })
     }
 
     /// Stops sending; returns when the last heartbeat went out (none follows).
@@ -269,12 +332,18 @@ impl HeartbeatSender {
 
     /// Sends again.
     pub fn resume(&self) {
-        self.state.lock().unwrap_or_else(PoisonError::into_inner).paused = false;
+        self.state
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .paused = false;
     }
 
     /// Heartbeats sent so far.
     pub fn sent(&self) -> u64 {
-        self.state.lock().unwrap_or_else(PoisonError::into_inner).sent
+        self.state
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .sent
     }
 }
 

@@ -189,6 +189,7 @@ pub fn run_until(
                 .with_context(|| format!("--log {:?}", args.log))?,
         )
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
     let settings = args.settings()?;
     let ts = plant.ts();

@@ -17,7 +17,8 @@ pub struct TickRecord {
     pub tick: u64,
     /// Scheduled time of the tick, CLOCK_MONOTONIC ns.
     pub nominal_ns: u64,
-    /// Wake-up lateness, ns.
+    /// Wake-up lateness behind the deadline the loop slept for, ns (a lateness over
+    /// 1 ms means periods were skipped).
     pub late_ns: u64,
     /// State after the tick.
     pub state: StimState,

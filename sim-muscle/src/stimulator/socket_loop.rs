@@ -22,7 +22,7 @@ pub struct RunSummary {
     pub ticks: u64,
     /// Ticks skipped because the loop woke more than a period late.
     pub missed_ticks: u64,
-    /// Largest wake-up lateness, ns.
+    /// Largest wake-up lateness behind the deadline slept for, ns.
     pub max_late_ns: u64,
     /// Frames received (data frames, all identifiers that passed the socket filter).
     pub frames_rx: u64,
@@ -161,13 +161,14 @@ pub fn run_loop(
             Err(e) => return Err(e).context("clock_nanosleep failed"),
         }
         let now = monotonic_ns();
+        let late_ns = now.saturating_sub(deadline);
+        summary.max_late_ns = summary.max_late_ns.max(late_ns);
         // Woke more than a period late: skip the missed periods, keep the phase.
         let late_k = now.saturating_sub(t0) / TICK_NS;
         if late_k > k {
             k = late_k;
         }
         let nominal = t0 + k * TICK_NS;
-        summary.max_late_ns = summary.max_late_ns.max(now.saturating_sub(nominal));
 
         loop {
             match socket.read_frame() {
@@ -214,7 +215,7 @@ pub fn run_loop(
             r.push(TickRecord {
                 tick: k,
                 nominal_ns: nominal,
-                late_ns: now.saturating_sub(nominal),
+                late_ns,
                 state: report.state,
                 force_n: report.force_n,
                 pulse: report

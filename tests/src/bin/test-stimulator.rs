@@ -4,7 +4,7 @@
 //! Takes the stimulator's options (`--iface`, limits, watchdog, `--record`, ...).
 
 use clap::Parser;
-use sim_muscle::stimulator::{run, test_plant::ChargeIntegrator, StimulatorArgs};
+use sim_muscle::stimulator::{StimulatorArgs, run, test_plant::ChargeIntegrator};
 
 /// The virtual stimulator with the charge-integrator test plant.
 #[derive(Parser, Debug)]

@@ -50,7 +50,9 @@ fn main() {
         (Some(s), _) => GuestCommand::shell(s),
         (None, false) => GuestCommand::new(cli.argv.clone()),
         (None, true) => {
-            eprintln!("vcan-run: nothing to run; give `-- PROGRAM ARGS...` or `-c 'shell command'`");
+            eprintln!(
+                "vcan-run: nothing to run; give `-- PROGRAM ARGS...` or `-c 'shell command'`"
+            );
             std::process::exit(2);
         }
     };

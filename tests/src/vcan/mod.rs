@@ -139,7 +139,9 @@ pub enum HarnessError {
     #[error("{0}")]
     Unavailable(String),
     /// `with_vcan` was called outside a libtest test thread.
-    #[error("with_vcan must be called from a #[test] function (the thread is named after the test)")]
+    #[error(
+        "with_vcan must be called from a #[test] function (the thread is named after the test)"
+    )]
     NotInTest,
 }
 
@@ -159,8 +161,16 @@ pub struct GuestCommand {
 impl GuestCommand {
     /// `argv` in the current directory with the default timeout (`FES_VCAN_TIMEOUT_S`).
     pub fn new(argv: Vec<String>) -> Result<Self, HarnessError> {
-        let cwd = std::env::current_dir().map_err(|source| HarnessError::Io { what: "current directory".into(), source })?;
-        Ok(Self { argv, cwd, env: Vec::new(), timeout: timeout_from_env()? })
+        let cwd = std::env::current_dir().map_err(|source| HarnessError::Io {
+            what: "current directory".into(),
+            source,
+        })?;
+        Ok(Self {
+            argv,
+            cwd,
+            env: Vec::new(),
+            timeout: timeout_from_env()?,
+        })
     }
 
     /// `sh -c script`.
@@ -174,7 +184,11 @@ fn timeout_from_env() -> Result<Duration, HarnessError> {
         Err(_) => Ok(DEFAULT_TIMEOUT),
         Ok(v) => match v.parse::<u64>() {
             Ok(s) if s > 0 => Ok(Duration::from_secs(s)),
-            _ => Err(HarnessError::BadEnv { var: ENV_TIMEOUT, value: v, expected: "a positive number of seconds" }),
+            _ => Err(HarnessError::BadEnv {
+                var: ENV_TIMEOUT,
+                value: v,
+                expected: "a positive number of seconds",
+            }),
         },
     }
 }
@@ -218,7 +232,11 @@ fn decide() -> Result<Plan, HarnessError> {
         "native" => (true, false),
         "uml" => (false, true),
         _ => {
-            return Err(HarnessError::BadEnv { var: ENV_BACKEND, value: requested, expected: "auto, native or uml" });
+            return Err(HarnessError::BadEnv {
+                var: ENV_BACKEND,
+                value: requested,
+                expected: "auto, native or uml",
+            });
         }
     };
     if try_native && let Ok(iface) = std::env::var(ENV_CAN_IFACE) {
@@ -243,7 +261,10 @@ fn decide() -> Result<Plan, HarnessError> {
     } else {
         format!("not tried ({ENV_BACKEND}={requested})")
     };
-    Err(HarnessError::NoCan { native: native_why, uml: uml_why })
+    Err(HarnessError::NoCan {
+        native: native_why,
+        uml: uml_why,
+    })
 }
 
 fn plan() -> Result<Plan, HarnessError> {
@@ -270,20 +291,35 @@ pub fn try_with_vcan<F: FnOnce(&CanEnv)>(body: F) -> Result<(), HarnessError> {
     match plan()? {
         Plan::Inside(env) => {
             body(&env);
-            if let (Ok(nonce), Some(name)) = (std::env::var(ENV_NONCE), std::thread::current().name()) {
+            if let (Ok(nonce), Some(name)) =
+                (std::env::var(ENV_NONCE), std::thread::current().name())
+            {
                 println!("\n{}BODY-OK {nonce} {name}", uml::MARK);
             }
             Ok(())
         }
         Plan::Native(iface) => {
             let _lock = native::lock_iface(&iface)?;
-            body(&CanEnv { iface, backend: Backend::Native });
+            body(&CanEnv {
+                iface,
+                backend: Backend::Native,
+            });
             Ok(())
         }
         Plan::Uml(kernel) => {
-            let name = std::thread::current().name().map(str::to_owned).filter(|n| n != "main").ok_or(HarnessError::NotInTest)?;
-            let exe = std::env::current_exe().map_err(|source| HarnessError::Io { what: "current executable".into(), source })?;
-            let exe = exe.to_str().ok_or_else(|| HarnessError::BadPath(exe.clone()))?.to_owned();
+            let name = std::thread::current()
+                .name()
+                .map(str::to_owned)
+                .filter(|n| n != "main")
+                .ok_or(HarnessError::NotInTest)?;
+            let exe = std::env::current_exe().map_err(|source| HarnessError::Io {
+                what: "current executable".into(),
+                source,
+            })?;
+            let exe = exe
+                .to_str()
+                .ok_or_else(|| HarnessError::BadPath(exe.clone()))?
+                .to_owned();
             let argv = vec![
                 exe,
                 name.clone(),
@@ -302,10 +338,15 @@ pub fn try_with_vcan<F: FnOnce(&CanEnv)>(body: F) -> Result<(), HarnessError> {
                 outcome.status
             );
             if outcome.status != 0 {
-                panic!("test {name} failed inside the UML guest (exit status {}); its output is above", outcome.status);
+                panic!(
+                    "test {name} failed inside the UML guest (exit status {}); its output is above",
+                    outcome.status
+                );
             }
-            if !outcome.body_ok.iter().any(|n| *n == name) {
-                panic!("test {name} did not run its CAN body inside the UML guest (was it filtered out?); output above");
+            if !outcome.body_ok.contains(&name) {
+                panic!(
+                    "test {name} did not run its CAN body inside the UML guest (was it filtered out?); output above"
+                );
             }
             Ok(())
         }
@@ -314,12 +355,22 @@ pub fn try_with_vcan<F: FnOnce(&CanEnv)>(body: F) -> Result<(), HarnessError> {
 
 /// Runs `cmd` in a CAN environment (native or UML) and streams its output lines to
 /// `on_line`. Used by `vcan-run`; inside an environment the command simply runs.
-pub fn run_command(cmd: &GuestCommand, on_line: &mut dyn FnMut(&str)) -> Result<RunOutcome, HarnessError> {
+pub fn run_command(
+    cmd: &GuestCommand,
+    on_line: &mut dyn FnMut(&str),
+) -> Result<RunOutcome, HarnessError> {
     match plan()? {
         Plan::Inside(env) => run_local(cmd, &env, on_line),
         Plan::Native(iface) => {
             let _lock = native::lock_iface(&iface)?;
-            run_local(cmd, &CanEnv { iface, backend: Backend::Native }, on_line)
+            run_local(
+                cmd,
+                &CanEnv {
+                    iface,
+                    backend: Backend::Native,
+                },
+                on_line,
+            )
         }
         Plan::Uml(kernel) => uml::run(&kernel, cmd, on_line),
     }
@@ -328,13 +379,24 @@ pub fn run_command(cmd: &GuestCommand, on_line: &mut dyn FnMut(&str)) -> Result<
 /// The backend and interface a run would use, without running anything.
 pub fn describe() -> Result<String, HarnessError> {
     Ok(match plan()? {
-        Plan::Inside(env) => format!("inside a prepared environment ({:?}), interface {}", env.backend, env.iface),
+        Plan::Inside(env) => format!(
+            "inside a prepared environment ({:?}), interface {}",
+            env.backend, env.iface
+        ),
         Plan::Native(iface) => format!("native, interface {iface}"),
-        Plan::Uml(k) => format!("User-Mode Linux guest ({:?}), interface {}", k, uml::GUEST_IFACE),
+        Plan::Uml(k) => format!(
+            "User-Mode Linux guest ({:?}), interface {}",
+            k,
+            uml::GUEST_IFACE
+        ),
     })
 }
 
-fn run_local(cmd: &GuestCommand, env: &CanEnv, on_line: &mut dyn FnMut(&str)) -> Result<RunOutcome, HarnessError> {
+fn run_local(
+    cmd: &GuestCommand,
+    env: &CanEnv,
+    on_line: &mut dyn FnMut(&str),
+) -> Result<RunOutcome, HarnessError> {
     let start = std::time::Instant::now();
     let (program, args) = cmd.argv.split_first().ok_or(HarnessError::BadEnv {
         var: "argv",
@@ -342,11 +404,22 @@ fn run_local(cmd: &GuestCommand, env: &CanEnv, on_line: &mut dyn FnMut(&str)) ->
         expected: "a program to run",
     })?;
     let mut c = std::process::Command::new(program);
-    c.args(args).current_dir(&cmd.cwd).envs(cmd.env.iter().map(|(k, v)| (k, v)));
+    c.args(args)
+        .current_dir(&cmd.cwd)
+        .envs(cmd.env.iter().map(|(k, v)| (k, v)));
     c.env(ENV_IFACE, &env.iface).env(ENV_CAN_IFACE, &env.iface);
-    c.env(ENV_BACKEND, if env.backend == Backend::Uml { "uml" } else { "native" });
-    let mut child =
-        process::Streamed::spawn(&mut c).map_err(|source| HarnessError::Spawn { what: program.clone(), source })?;
+    c.env(
+        ENV_BACKEND,
+        if env.backend == Backend::Uml {
+            "uml"
+        } else {
+            "native"
+        },
+    );
+    let mut child = process::Streamed::spawn(&mut c).map_err(|source| HarnessError::Spawn {
+        what: program.clone(),
+        source,
+    })?;
     let deadline = start + cmd.timeout;
     let mut output = Vec::new();
     loop {
@@ -358,16 +431,25 @@ fn run_local(cmd: &GuestCommand, env: &CanEnv, on_line: &mut dyn FnMut(&str)) ->
             process::Next::Eof => break,
             process::Next::TimedOut => {
                 child.kill_group();
-                return Err(HarnessError::Timeout { after: cmd.timeout, log: output.join("\n") });
+                return Err(HarnessError::Timeout {
+                    after: cmd.timeout,
+                    log: output.join("\n"),
+                });
             }
         }
     }
     let status = child
         .wait_until(deadline)
-        .map_err(|source| HarnessError::Io { what: format!("waiting for {program}"), source })?;
+        .map_err(|source| HarnessError::Io {
+            what: format!("waiting for {program}"),
+            source,
+        })?;
     let Some(status) = status else {
         child.kill_group();
-        return Err(HarnessError::Timeout { after: cmd.timeout, log: output.join("\n") });
+        return Err(HarnessError::Timeout {
+            after: cmd.timeout,
+            log: output.join("\n"),
+        });
     };
     Ok(RunOutcome {
         backend: env.backend,

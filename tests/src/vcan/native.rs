@@ -13,7 +13,9 @@ const ARPHRD_CAN: u32 = 280;
 const IFF_UP: u32 = 0x1;
 
 fn sysfs(iface: &str, attr: &str) -> Option<String> {
-    std::fs::read_to_string(format!("/sys/class/net/{iface}/{attr}")).ok().map(|s| s.trim().to_string())
+    std::fs::read_to_string(format!("/sys/class/net/{iface}/{attr}"))
+        .ok()
+        .map(|s| s.trim().to_string())
 }
 
 fn parse_hex(s: &str) -> Option<u32> {
@@ -30,11 +32,17 @@ pub(crate) fn usable(iface: &str) -> Result<(), String> {
         return Err(format!("interface {iface} does not exist"));
     };
     if ty.parse::<u32>().ok() != Some(ARPHRD_CAN) {
-        return Err(format!("interface {iface} is not a CAN interface (link type {ty}, CAN is {ARPHRD_CAN})"));
+        return Err(format!(
+            "interface {iface} is not a CAN interface (link type {ty}, CAN is {ARPHRD_CAN})"
+        ));
     }
-    let flags = sysfs(iface, "flags").and_then(|f| parse_hex(&f)).unwrap_or(0);
+    let flags = sysfs(iface, "flags")
+        .and_then(|f| parse_hex(&f))
+        .unwrap_or(0);
     if flags & IFF_UP == 0 {
-        return Err(format!("interface {iface} is down (ip link set up {iface})"));
+        return Err(format!(
+            "interface {iface} is down (ip link set up {iface})"
+        ));
     }
     Ok(())
 }
@@ -49,7 +57,11 @@ fn run_quiet(program: &str, args: &[&str]) -> Result<(), String> {
         Ok(())
     } else {
         let err = String::from_utf8_lossy(&out.stderr);
-        Err(format!("`{program} {}` failed: {}", args.join(" "), err.trim()))
+        Err(format!(
+            "`{program} {}` failed: {}",
+            args.join(" "),
+            err.trim()
+        ))
     }
 }
 
@@ -101,12 +113,23 @@ pub(crate) fn lock_path(name: &str) -> PathBuf {
 
 /// Opens `path` and takes an exclusive flock on it, waiting if another process holds it.
 pub(crate) fn lock_file(path: &std::path::Path) -> Result<File, HarnessError> {
-    let io = |source| HarnessError::Io { what: format!("lock file {}", path.display()), source };
-    let file = File::options().create(true).truncate(false).write(true).open(path).map_err(io)?;
+    let io = |source| HarnessError::Io {
+        what: format!("lock file {}", path.display()),
+        source,
+    };
+    let file = File::options()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(path)
+        .map_err(io)?;
     match file.try_lock() {
         Ok(()) => {}
         Err(std::fs::TryLockError::WouldBlock) => {
-            eprintln!("vcan harness: waiting for {} (another CAN test is running)", path.display());
+            eprintln!(
+                "vcan harness: waiting for {} (another CAN test is running)",
+                path.display()
+            );
             file.lock().map_err(io)?;
         }
         Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
@@ -122,8 +145,16 @@ mod tests {
     fn loopback_is_not_a_can_interface() {
         let e = usable("lo").unwrap_err();
         assert!(e.contains("not a CAN interface"), "{e}");
-        assert!(usable("no-such-if0").unwrap_err().contains("does not exist"));
-        assert!(usable("../etc").unwrap_err().contains("not an interface name"));
+        assert!(
+            usable("no-such-if0")
+                .unwrap_err()
+                .contains("does not exist")
+        );
+        assert!(
+            usable("../etc")
+                .unwrap_err()
+                .contains("not an interface name")
+        );
     }
 
     #[test]
@@ -131,7 +162,10 @@ mod tests {
         let path = lock_path(&format!("fes-vcan-selftest-{}.lock", std::process::id()));
         let a = lock_file(&path).unwrap();
         let b = File::options().write(true).open(&path).unwrap();
-        assert!(matches!(b.try_lock(), Err(std::fs::TryLockError::WouldBlock)));
+        assert!(matches!(
+            b.try_lock(),
+            Err(std::fs::TryLockError::WouldBlock)
+        ));
         drop(a);
         assert!(b.try_lock().is_ok());
         let _ = std::fs::remove_file(&path);

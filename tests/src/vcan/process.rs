@@ -4,7 +4,7 @@
 use std::io::{BufRead, BufReader, Read};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::thread::JoinHandle;
 use std::time::Instant;
 
@@ -50,7 +50,10 @@ impl Streamed {
     /// children), stdin from /dev/null, stdout and stderr captured; the child is killed
     /// if the spawning thread dies.
     pub(crate) fn spawn(cmd: &mut Command) -> std::io::Result<Self> {
-        cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped()).process_group(0);
+        cmd.stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .process_group(0);
         // SAFETY: the closure runs between fork and exec and only calls prctl(2), which
         // is async-signal-safe; it touches no memory of the parent.
         unsafe {
@@ -70,7 +73,12 @@ impl Streamed {
         if let Some(err) = child.stderr.take() {
             readers.push(forward(err, tx));
         }
-        Ok(Self { child, lines: rx, readers, reaped: None })
+        Ok(Self {
+            child,
+            lines: rx,
+            readers,
+            reaped: None,
+        })
     }
 
     /// Waits for the next output line until `deadline`.
@@ -134,5 +142,7 @@ impl Drop for Streamed {
 
 /// The shell-style exit code of a status: the code, or 128 + the signal number.
 pub(crate) fn exit_code(status: ExitStatus) -> i32 {
-    status.code().unwrap_or_else(|| 128 + status.signal().unwrap_or(0))
+    status
+        .code()
+        .unwrap_or_else(|| 128 + status.signal().unwrap_or(0))
 }

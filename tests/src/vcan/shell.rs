@@ -45,8 +45,20 @@ mod tests {
     /// The quoted word, read back by a real shell, is the original string.
     #[test]
     fn quoting_round_trips_through_sh() {
-        for s in ["plain", "with space", "it's", "'", "$HOME `x` \"q\" \\ ;|&", "line\nbreak", ""] {
-            let out = Command::new("sh").arg("-c").arg(format!("printf %s {}", quote(s))).output().unwrap();
+        for s in [
+            "plain",
+            "with space",
+            "it's",
+            "'",
+            "$HOME `x` \"q\" \\ ;|&",
+            "line\nbreak",
+            "",
+        ] {
+            let out = Command::new("sh")
+                .arg("-c")
+                .arg(format!("printf %s {}", quote(s)))
+                .output()
+                .unwrap();
             assert_eq!(String::from_utf8(out.stdout).unwrap(), s);
         }
     }

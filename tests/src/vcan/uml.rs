@@ -15,11 +15,18 @@ use std::time::{Duration, Instant};
 use super::native::{lock_file, lock_path};
 use super::process::{Next, Streamed};
 use super::shell::{exports, quote};
-use super::{Backend, GuestCommand, HarnessError, RunOutcome, ENV_BACKEND, ENV_CAN_IFACE, ENV_IFACE, ENV_NONCE};
+use super::{
+    Backend, ENV_BACKEND, ENV_CAN_IFACE, ENV_IFACE, ENV_NONCE, GuestCommand, HarnessError,
+    RunOutcome,
+};
 
 /// Kernel modules the guest loads, in dependency order (relative to the modules' `kernel/`).
-const MODULES: [&str; 4] =
-    ["net/can/can.ko", "net/can/can-raw.ko", "drivers/net/can/dev/can-dev.ko", "drivers/net/can/vcan.ko"];
+const MODULES: [&str; 4] = [
+    "net/can/can.ko",
+    "net/can/can-raw.ko",
+    "drivers/net/can/dev/can-dev.ko",
+    "drivers/net/can/vcan.ko",
+];
 const MODULES_ROOT: &str = "/usr/lib/uml/modules";
 /// Marker prefix of the lines the guest script prints for the host.
 pub(crate) const MARK: &str = "@@FES-VCAN-";
@@ -35,28 +42,40 @@ pub(crate) struct UmlKernel {
 }
 
 fn in_path(name: &str) -> Option<PathBuf> {
-    std::env::var_os("PATH")
-        .and_then(|p| std::env::split_paths(&p).map(|d| d.join(name)).find(|c| c.is_file()))
+    std::env::var_os("PATH").and_then(|p| {
+        std::env::split_paths(&p)
+            .map(|d| d.join(name))
+            .find(|c| c.is_file())
+    })
 }
 
 /// Finds `linux.uml` (or `$FES_UML_KERNEL`) and the guest's CAN modules.
 pub(crate) fn find() -> Result<UmlKernel, String> {
     let binary = match std::env::var_os("FES_UML_KERNEL") {
         Some(p) => PathBuf::from(p),
-        None => in_path("linux.uml").ok_or("linux.uml not found in PATH (Debian package user-mode-linux)")?,
+        None => in_path("linux.uml")
+            .ok_or("linux.uml not found in PATH (Debian package user-mode-linux)")?,
     };
     if !binary.is_file() {
         return Err(format!("UML kernel {} does not exist", binary.display()));
     }
     let versions = std::fs::read_dir(MODULES_ROOT).map_err(|e| format!("{MODULES_ROOT}: {e}"))?;
-    let complete = versions
-        .flatten()
-        .any(|v| MODULES.iter().all(|m| v.path().join("kernel").join(m).is_file()));
+    let complete = versions.flatten().any(|v| {
+        MODULES
+            .iter()
+            .all(|m| v.path().join("kernel").join(m).is_file())
+    });
     if !complete {
-        return Err(format!("no UML module set under {MODULES_ROOT} has {}", MODULES.join(", ")));
+        return Err(format!(
+            "no UML module set under {MODULES_ROOT} has {}",
+            MODULES.join(", ")
+        ));
     }
     for tool in ["insmod", "ip"] {
-        if in_path(tool).is_none() && !Path::new("/usr/sbin").join(tool).is_file() && !Path::new("/sbin").join(tool).is_file() {
+        if in_path(tool).is_none()
+            && !Path::new("/usr/sbin").join(tool).is_file()
+            && !Path::new("/sbin").join(tool).is_file()
+        {
             return Err(format!("{tool} not found (packages kmod, iproute2)"));
         }
     }
@@ -77,8 +96,10 @@ impl RunDir {
         let umid = format!("fes-{pid}-{n}");
         let path = std::env::temp_dir().join(format!("fes-vcan-{pid}-{n}"));
         let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir(&path)
-            .map_err(|source| HarnessError::Io { what: format!("creating {}", path.display()), source })?;
+        std::fs::create_dir(&path).map_err(|source| HarnessError::Io {
+            what: format!("creating {}", path.display()),
+            source,
+        })?;
         Ok((Self { path }, umid))
     }
 }
@@ -94,14 +115,27 @@ impl Drop for RunDir {
 }
 
 fn nonce() -> String {
-    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
-    format!("{:x}{:x}{:x}", t, std::process::id(), RUNS.load(Ordering::Relaxed))
+    let t = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    format!(
+        "{:x}{:x}{:x}",
+        t,
+        std::process::id(),
+        RUNS.load(Ordering::Relaxed)
+    )
 }
 
 /// The guest's init script.
 fn init_script(run_dir: &Path, nonce: &str, cmd: &GuestCommand) -> Result<String, HarnessError> {
-    let dir = run_dir.to_str().ok_or_else(|| HarnessError::BadPath(run_dir.to_path_buf()))?;
-    let cwd = cmd.cwd.to_str().ok_or_else(|| HarnessError::BadPath(cmd.cwd.clone()))?;
+    let dir = run_dir
+        .to_str()
+        .ok_or_else(|| HarnessError::BadPath(run_dir.to_path_buf()))?;
+    let cwd = cmd
+        .cwd
+        .to_str()
+        .ok_or_else(|| HarnessError::BadPath(cmd.cwd.clone()))?;
     let mut env: Vec<(String, String)> = std::env::vars().collect();
     env.extend(cmd.env.iter().cloned());
     env.push((ENV_IFACE.into(), GUEST_IFACE.into()));
@@ -157,7 +191,8 @@ pub(crate) fn run(
     let script_path = dir.path.join("init.sh");
     let script = init_script(&dir.path, &nonce, cmd)?;
     let io = |what: String| move |source| HarnessError::Io { what, source };
-    std::fs::write(&script_path, script).map_err(io(format!("writing {}", script_path.display())))?;
+    std::fs::write(&script_path, script)
+        .map_err(io(format!("writing {}", script_path.display())))?;
     {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&script_path, std::fs::Permissions::from_mode(0o755))
@@ -177,8 +212,10 @@ pub(crate) fn run(
         "quiet".into(),
     ]);
     let start = Instant::now();
-    let mut child = Streamed::spawn(&mut command)
-        .map_err(|source| HarnessError::Spawn { what: kernel.binary.display().to_string(), source })?;
+    let mut child = Streamed::spawn(&mut command).map_err(|source| HarnessError::Spawn {
+        what: kernel.binary.display().to_string(),
+        source,
+    })?;
     let deadline = start + cmd.timeout;
     let mut boot_log: Vec<String> = Vec::new();
     let mut output: Vec<String> = Vec::new();
@@ -205,7 +242,10 @@ pub(crate) fn run(
                 }
                 if let Some(step) = marker(&line, "SETUP-FAILED") {
                     let _ = child.wait_until(Instant::now() + Duration::from_secs(10));
-                    return Err(HarnessError::GuestSetup { step, log: tail(&boot_log) });
+                    return Err(HarnessError::GuestSetup {
+                        step,
+                        log: tail(&boot_log),
+                    });
                 } else if marker(&line, "READY").is_some() {
                     ready = Some(start.elapsed());
                 } else if let Some(code) = marker(&line, "EXIT") {
@@ -224,12 +264,20 @@ pub(crate) fn run(
                 child.kill_group();
                 let mut log = boot_log;
                 log.extend(output);
-                return Err(HarnessError::Timeout { after: cmd.timeout, log: tail(&log) });
+                return Err(HarnessError::Timeout {
+                    after: cmd.timeout,
+                    log: tail(&log),
+                });
             }
         }
     }
     // The guest halts right after the exit marker; give it a moment, then make sure.
-    if child.wait_until(Instant::now() + Duration::from_secs(20)).ok().flatten().is_none() {
+    if child
+        .wait_until(Instant::now() + Duration::from_secs(20))
+        .ok()
+        .flatten()
+        .is_none()
+    {
         child.kill_group();
     }
     let Some(status) = status else {
@@ -238,7 +286,14 @@ pub(crate) fn run(
         log.extend(child.remaining_lines());
         return Err(HarnessError::GuestCrashed { log: tail(&log) });
     };
-    Ok(RunOutcome { backend: Backend::Uml, status, output, body_ok, boot: ready, total: start.elapsed() })
+    Ok(RunOutcome {
+        backend: Backend::Uml,
+        status,
+        output,
+        body_ok,
+        boot: ready,
+        total: start.elapsed(),
+    })
 }
 
 fn tail(lines: &[String]) -> String {
@@ -259,13 +314,25 @@ mod tests {
             timeout: Duration::from_secs(1),
         };
         let s = init_script(Path::new("/tmp/run1"), "abc", &cmd).unwrap();
-        assert!(s.contains("'/bin/echo' 'it'\\''s here' </dev/null 2>&1\n"), "{s}");
+        assert!(
+            s.contains("'/bin/echo' 'it'\\''s here' </dev/null 2>&1\n"),
+            "{s}"
+        );
         assert!(s.contains("cd '/tmp/a dir' ||"));
         assert!(s.contains("export EXTRA='1'\n"));
         assert!(s.contains("export FES_VCAN_IFACE='vcan0'\n"));
         assert!(s.contains("echo \"@@FES-VCAN-EXIT $N $?\""));
         // The script is valid shell.
-        let out = Command::new("sh").arg("-n").arg("-c").arg(&s).output().unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = Command::new("sh")
+            .arg("-n")
+            .arg("-c")
+            .arg(&s)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
 }
