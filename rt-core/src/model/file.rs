@@ -232,9 +232,6 @@ pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError>
     };
     let order = root.usize("order")?;
     let knots = root.nums("knots")?;
-    let expected_units = knots.len().checked_sub(order);
-    let validity =
-        ValidityFunctions::from_knots(&knots, order).map_err(|e| bad("knots", e.to_string()))?;
     let structure: Structure = root
         .str("structure")?
         .parse()
@@ -242,17 +239,19 @@ pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError>
     let zero_offsets = root.bool("zero_offsets")?;
     let force_scale_n = root.num("force_scale_n")?;
     let units = root.arr("units")?;
-    if Some(units.len()) != expected_units {
+    if knots.len() != units.len() + order {
         return Err(bad(
-            "units",
+            "knots",
             format!(
-                "{} units given but {} knots with order {order} define {} (knot count = units + order)",
-                units.len(),
+                "{} knots given for {} units of order {order}: the knot count must be units + order = {}",
                 knots.len(),
-                validity.units()
+                units.len(),
+                units.len() + order
             ),
         ));
     }
+    let validity =
+        ValidityFunctions::from_knots(&knots, order).map_err(|e| bad("knots", e.to_string()))?;
     let mut allowed_root = vec![
         "schema",
         "ts_s",
