@@ -11,6 +11,7 @@
 //!   z[k] = x[k+d] plus an output ring) of the delayed network.
 //! - [`simulate`]: free-run simulation, one-step prediction, MSE (App. B.1).
 //! - [`lmn`]: a complete model described in its parameterisation (what the file stores).
+//! - [`params`]: the free parameters as one flat vector theta, generic (identification).
 //! - [`file`]: the JSON model file `fes-lmn/1`, validated on load.
 //!
 //! Conventions and the file format are documented in `docs/model.md`.
@@ -21,6 +22,7 @@ pub mod forms;
 pub mod lmn;
 pub mod local_model;
 pub mod network;
+pub mod params;
 pub mod scheduling;
 pub mod simulate;
 pub mod validity;
