@@ -1,6 +1,7 @@
 //! One Local Model Network step (advanced form, the pattern generator's path) for
 //! M = 1, 6, 10 units, plus a hand-written f64 baseline (no generics, no enums) of the same
 //! M = 10 step to show the generic code costs nothing.
+#![allow(clippy::needless_range_loop)] // index loops mirror the equations
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use rt_core::model::local_model::EigLocalUnit;

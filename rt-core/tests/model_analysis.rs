@@ -1,5 +1,6 @@
 //! Static analysis (thesis 2.4.2, 5.4.3) against independent truths: simulated pulse-response
 //! sums, simulated steady states, eigenvalues by construction, and the common-eigenvector test.
+#![allow(clippy::needless_range_loop)] // index loops mirror the equations
 
 use rt_core::analysis::static_analysis::{
     FrozenModel, analyse, analyse_at, common_eigenvectors, phi_grid,

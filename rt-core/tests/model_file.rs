@@ -1,4 +1,5 @@
 //! The model file `fes-lmn/1`: round trips and rejections that name the problem.
+#![allow(clippy::needless_range_loop)] // index loops mirror the equations
 
 use rt_core::model::arx::ArxUnit;
 use rt_core::model::file::{self, FileError, SCHEMA};

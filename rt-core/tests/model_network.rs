@@ -1,6 +1,7 @@
 //! The network core against independent truths: closed-form modal solutions, the shift-domain
 //! counterpart, a direct delta-form ARX simulation, a derived stability bound, and finite
 //! differences for the Dual-number sensitivities.
+#![allow(clippy::needless_range_loop)] // index loops mirror the equations
 
 use proptest::prelude::*;
 use rt_core::model::arx::ArxUnit;
@@ -111,12 +112,10 @@ proptest! {
     ) {
         // alpha from real poles: prod (delta - p_i) (so the model is stable).
         let mut alpha = [1.0, 0.0, 0.0, 0.0]; // ascending powers, monic
-        let mut deg = 0;
-        for &p in poles.iter().take(n) {
+        for (deg, &p) in poles.iter().take(n).enumerate() {
             let mut next = [0.0; 4];
             for i in 0..=deg { next[i + 1] += alpha[i]; next[i] -= p * alpha[i]; }
             alpha = next;
-            deg += 1;
         }
         let mut unit = ArxUnit::zero();
         unit.a[..n].copy_from_slice(&alpha[..n]);
@@ -141,7 +140,7 @@ proptest! {
             prop_assert!((y[k] - yd).abs() < 1e-8 * scale, "n={} k={} shift {} delta {}", n, k, y[k], yd);
             let v = if k + 1 >= delay { u[k + 1 - delay] } else { 0.0 };
             let mut dxi = [0.0; 3];
-            for i in 0..n - 1 { dxi[i] = xi[i + 1]; }
+            dxi[..n - 1].copy_from_slice(&xi[1..n]);
             dxi[n - 1] = v - (0..n).map(|i| alpha[i] * xi[i]).sum::<f64>();
             for i in 0..n { xi[i] += TS * dxi[i]; }
         }
@@ -150,7 +149,7 @@ proptest! {
 
 /// A random common-eigenvector network (thesis form, eq. 5.6, general V).
 fn common_network(
-    seed_units: &[(f64, f64, [f64; 2], [f64; 2], [f64; 2], f64)],
+    seed_units: &[UnitParams],
     angles: [f64; 2],
 ) -> (CommonEigenvectorForm, Network<f64>) {
     let form = CommonEigenvectorForm {

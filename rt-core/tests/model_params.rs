@@ -1,6 +1,7 @@
 //! The flat parameter vector theta (identification): round trips for every structure, and the
 //! Dual Jacobian of the free-run MSSE through the parameterisation maps against central
 //! finite differences.
+#![allow(clippy::needless_range_loop)] // index loops mirror the equations
 
 use rt_core::model::arx::ArxUnit;
 use rt_core::model::lmn::{Lmn, LocalModelSet, Provenance};

@@ -1,4 +1,5 @@
 //! The input-scheduling prefilter (thesis 5.4.1, eq. 5.3-5.4), discretised exactly (ZOH).
+#![allow(clippy::needless_range_loop)] // index loops mirror the equations
 
 use rt_core::model::scheduling::Prefilter;
 

@@ -325,54 +325,62 @@ impl<S: Scalar> Network<S> {
         })
     }
 
-    /// Lowest root of h(phi) = y_eq(phi) - phi (output scheduling).
+    /// Lowest root of h(phi) = y_eq(phi) - phi (output scheduling). Grid points where the
+    /// interpolated model is singular break the bracket (y_eq has a pole there, and a sign
+    /// change across a pole is not a root); a bisected bracket is accepted only if h is
+    /// small at its end.
     fn output_fixed_point(&self) -> Result<S, NetworkError> {
-        let h = |phi: f64| -> Result<f64, NetworkError> {
-            let (y, _) = self
-                .equilibrium_at(S::from_f64(phi))
-                .ok_or(NetworkError::NoRestState { phi })?;
-            Ok(y.value() - phi)
+        let h = |phi: f64| -> Option<f64> {
+            let (y, _) = self.equilibrium_at(S::from_f64(phi))?;
+            let v = y.value() - phi;
+            v.is_finite().then_some(v)
         };
         let (lo, hi) = self.validity.valid_range();
         let (lo, hi) = (lo.value(), hi.value());
-        let root = {
-            let h_lo = h(lo)?;
-            if h_lo <= 0.0 {
+        let root = 'search: {
+            if let Some(h_lo) = h(lo)
+                && h_lo <= 0.0
+            {
                 // Below the range y_eq is constant, so the lowest root is y_eq(lo) <= lo.
-                h_lo + lo
-            } else {
-                const GRID: usize = 400;
-                let mut prev = (lo, h_lo);
-                let mut found = None;
-                for g in 1..=GRID {
-                    let p = lo + (hi - lo) * g as f64 / GRID as f64;
-                    let hp = h(p)?;
-                    if hp <= 0.0 {
-                        found = Some((prev.0, p));
-                        break;
-                    }
-                    prev = (p, hp);
-                }
-                match found {
-                    // Above the range y_eq is constant: the root is y_eq(hi) > hi.
-                    None => prev.1 + hi,
-                    Some((mut a, mut b)) => {
-                        for _ in 0..200 {
-                            let mid = 0.5 * (a + b);
-                            if mid <= a || mid >= b {
-                                break;
-                            }
-                            if h(mid)? > 0.0 {
-                                a = mid;
-                            } else {
-                                b = mid;
-                            }
+                break 'search h_lo + lo;
+            }
+            const GRID: usize = 400;
+            let mut prev = h(lo).map(|v| (lo, v));
+            for g in 1..=GRID {
+                let p = lo + (hi - lo) * g as f64 / GRID as f64;
+                let Some(hp) = h(p) else {
+                    prev = None;
+                    continue;
+                };
+                if let Some((a0, _)) = prev
+                    && hp <= 0.0
+                {
+                    let (mut a, mut b) = (a0, p);
+                    for _ in 0..200 {
+                        let mid = 0.5 * (a + b);
+                        if mid <= a || mid >= b {
+                            break;
                         }
-                        0.5 * (a + b)
+                        match h(mid) {
+                            Some(v) if v > 0.0 => a = mid,
+                            Some(_) => b = mid,
+                            None => break,
+                        }
+                    }
+                    let r = 0.5 * (a + b);
+                    if h(r).is_some_and(|v| v.abs() <= 1e-9 * (1.0 + r.abs())) {
+                        break 'search r;
                     }
                 }
+                prev = Some((p, hp));
+            }
+            // Above the range y_eq is constant: the root is y_eq(hi) if that is > hi.
+            match h(hi) {
+                Some(v) if v > 0.0 => v + hi,
+                _ => return Err(NetworkError::NoRestState { phi: hi }),
             }
         };
+        let h = |phi: f64| h(phi).ok_or(NetworkError::NoRestState { phi });
         // One Newton step in S: value stays (h(root) ~ 0), derivatives become
         // -dh/dtheta / h'(root) (implicit function theorem).
         let eps = 1e-6 * (hi - lo);
