@@ -18,12 +18,15 @@
 //! (eq. C.21) so that `A - L c'` (eq. C.19) has the given estimator poles.
 //!
 //! Every design is checked: the controllability matrix `F` (eq. C.15) and the observability
-//! matrix `O` (eq. C.22) must be numerically well conditioned, and the characteristic
-//! polynomial of the resulting closed loop must match the requested one. A failure is an
-//! error naming the unit, never a silent fallback.
+//! matrix `O` (eq. C.22) must be numerically well conditioned, and the eigenvalues of the
+//! resulting closed loop must be the requested poles (to [`PLACEMENT_TOLERANCE`]). A
+//! failure is an error naming the unit, never a silent fallback.
 
-use nalgebra::{Complex, Matrix2, Matrix3, RowVector2, RowVector3, Vector2, Vector3};
+use nalgebra::{Complex, Matrix2, Matrix3, RowVector3, Schur, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
+
+use crate::model::SsLocalModel;
+use crate::model::local_model::eig2;
 
 use super::poles::Pole;
 
@@ -79,9 +82,10 @@ impl Default for DesignOptions {
     }
 }
 
-/// Relative tolerance of the check that the placed characteristic polynomial is the one
-/// requested (coefficient `j` compared against `R^j`, `R` the largest pole modulus).
-pub const PLACEMENT_TOLERANCE: f64 = 1e-8;
+/// Largest accepted relative distance `|λ - p| / |p|` between a requested pole `p` and
+/// the nearest eigenvalue `λ` of the designed closed loop. Every design is verified
+/// against it; a model too badly conditioned to meet it is refused.
+pub const PLACEMENT_TOLERANCE: f64 = 1e-6;
 
 /// Why a local controller or estimator cannot be designed.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -180,27 +184,19 @@ pub enum DesignError {
         min_rcond: f64,
     },
     /// Ackermann's formula returned gains whose closed loop does not have the requested
-    /// characteristic polynomial (numerical breakdown).
+    /// poles to within [`PLACEMENT_TOLERANCE`] (numerical breakdown on a badly conditioned
+    /// local model, e.g. nearly equal eigenvalues with nearly parallel eigenvectors).
     #[error(
-        "unit {unit}: placed characteristic polynomial differs from the requested one by \
-         {rel_error:e} (relative); the local model is too badly conditioned for these poles"
+        "unit {unit}: the designed closed loop misses the requested poles by {rel_error:e} \
+         (relative, limit {PLACEMENT_TOLERANCE:e}); the local model is too badly conditioned \
+         for these poles"
     )]
     PlacementInaccurate {
         /// Unit index.
         unit: usize,
-        /// Largest scaled coefficient error.
+        /// Largest relative pole error.
         rel_error: f64,
     },
-}
-
-/// Local steady-state gain `G = -c'A^-1 b` (eq. A.18), or `None` when `A` is singular.
-fn steady_state_gain(a: &Matrix2<f64>, b: &Vector2<f64>, c: &Vector2<f64>) -> Option<f64> {
-    let det = a.determinant();
-    if det == 0.0 || !det.is_finite() {
-        return None;
-    }
-    let x = a.lu().solve(b)?;
-    Some(-c.dot(&x))
 }
 
 /// Real coefficients `[a1, a2]` of `λ² + a1 λ + a2` with roots `p, q` (both real or a
@@ -232,6 +228,15 @@ fn check_pole(unit: usize, which: &'static str, p: Pole, ts: f64) -> Result<(), 
         });
     }
     Ok(())
+}
+
+/// `(A, b, c)` of a local model as nalgebra values.
+pub fn plant_matrices(m: &SsLocalModel<f64>) -> (Matrix2<f64>, Vector2<f64>, Vector2<f64>) {
+    (
+        Matrix2::new(m.a[0][0], m.a[0][1], m.a[1][0], m.a[1][1]),
+        Vector2::new(m.b[0], m.b[1]),
+        Vector2::new(m.c[0], m.c[1]),
+    )
 }
 
 fn check_plant(
@@ -317,22 +322,35 @@ pub fn observability_matrix(a: &Matrix2<f64>, c: &Vector2<f64>) -> Matrix2<f64> 
     Matrix2::from_rows(&[ct, cta])
 }
 
-/// Coefficients of the characteristic polynomial `λ³ + c1 λ² + c2 λ + c3` of a 3x3 matrix.
-fn char_poly3(m: &Matrix3<f64>) -> [f64; 3] {
-    let minors = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)] + m[(0, 0)] * m[(2, 2)]
-        - m[(0, 2)] * m[(2, 0)]
-        + m[(1, 1)] * m[(2, 2)]
-        - m[(1, 2)] * m[(2, 1)];
-    [-m.trace(), minors, -m.determinant()]
+/// Largest relative distance from each requested pole to its nearest not yet matched
+/// eigenvalue (greedy matching); infinite when there are fewer eigenvalues than poles.
+fn pole_mismatch(eigenvalues: &[Complex<f64>], poles: &[Pole]) -> f64 {
+    let mut used = [false; 3];
+    let mut worst = 0.0f64;
+    for p in poles {
+        let p = p.to_complex();
+        let mut best: Option<(usize, f64)> = None;
+        for (i, ev) in eigenvalues.iter().enumerate() {
+            let d = (ev - p).norm();
+            if !used[i] && best.is_none_or(|(_, bd)| d < bd) {
+                best = Some((i, d));
+            }
+        }
+        let Some((i, d)) = best else {
+            return f64::INFINITY;
+        };
+        used[i] = true;
+        worst = worst.max(d / p.norm().max(f64::MIN_POSITIVE));
+    }
+    worst
 }
 
-/// Largest relative coefficient error, coefficient `j` scaled by `R^j`.
-fn coefficient_error(got: &[f64], want: &[f64], r: f64) -> f64 {
-    got.iter()
-        .zip(want)
-        .enumerate()
-        .map(|(j, (g, w))| (g - w).abs() / r.powi(j as i32 + 1))
-        .fold(0.0, f64::max)
+/// Eigenvalues of a 3x3 matrix (real Schur form, bounded iterations); `None` if the
+/// iteration does not converge.
+fn eigenvalues3(m: &Matrix3<f64>) -> Option<[Complex<f64>; 3]> {
+    let schur = Schur::try_new(*m, f64::EPSILON, 10_000)?;
+    let ev = schur.complex_eigenvalues();
+    Some([ev[0], ev[1], ev[2]])
 }
 
 /// Design the state-feedback gains with integral action of local model `unit` by pole
@@ -342,17 +360,16 @@ fn coefficient_error(got: &[f64], want: &[f64], r: f64) -> f64 {
 /// Checks, in order: finite data, poles inside the stability region and self-conjugate,
 /// `A` non-singular, the sign of the steady-state gain `G = -c'A^-1 b` (refused when
 /// negative unless `opts.allow_negative_gain`), the conditioning of `F` (eq. C.15), and that
-/// the placed characteristic polynomial equals the requested one.
+/// the eigenvalues of the closed loop are the requested poles.
 pub fn design_controller(
     unit: usize,
-    a: &Matrix2<f64>,
-    b: &Vector2<f64>,
-    c: &Vector2<f64>,
+    model: &SsLocalModel<f64>,
     poles: &ClosedLoopPoles,
     ts: f64,
     opts: &DesignOptions,
 ) -> Result<LocalGains, DesignError> {
-    check_plant(unit, a, b, c)?;
+    let (a, b, c) = plant_matrices(model);
+    check_plant(unit, &a, &b, &c)?;
     check_pole(unit, "p1", poles.p1, ts)?;
     check_pole(unit, "p2", poles.p2, ts)?;
     check_pole(unit, "p3", poles.p3, ts)?;
@@ -367,12 +384,13 @@ pub fn design_controller(
     // (λ² + s1 λ + s2)(λ - p3)
     let want = [s1 - p3, s2 - s1 * p3, -s2 * p3];
 
-    let gain = steady_state_gain(a, b, c).ok_or(DesignError::SingularA { unit })?;
+    // eq. (A.18), from the model library.
+    let gain = model.gain().ok_or(DesignError::SingularA { unit })?;
     if gain < 0.0 && !opts.allow_negative_gain {
         return Err(DesignError::NegativeGain { unit, gain });
     }
 
-    let (a_aug, b_aug) = augmented(a, b, c);
+    let (a_aug, b_aug) = augmented(&a, &b, &c);
     let f = controllability_matrix(&a_aug, &b_aug);
     let rcond = rcond_columns3(&f);
     if rcond.is_nan() || rcond < opts.min_rcond {
@@ -400,11 +418,9 @@ pub fn design_controller(
         return Err(DesignError::NonFinite { unit, field: "K" });
     }
     let closed = a_aug - b_aug * k;
-    let r = [poles.p1, poles.p2, poles.p3]
-        .iter()
-        .map(|p| p.to_complex().norm())
-        .fold(0.0, f64::max);
-    let rel_error = coefficient_error(&char_poly3(&closed), &want, r);
+    let rel_error = eigenvalues3(&closed).map_or(f64::INFINITY, |ev| {
+        pole_mismatch(&ev, &[poles.p1, poles.p2, poles.p3])
+    });
     if rel_error.is_nan() || rel_error > PLACEMENT_TOLERANCE {
         return Err(DesignError::PlacementInaccurate { unit, rel_error });
     }
@@ -419,12 +435,13 @@ pub fn design_controller(
 /// (eq. C.19) has the roots `poles`.
 pub fn design_estimator(
     unit: usize,
-    a: &Matrix2<f64>,
-    c: &Vector2<f64>,
+    model: &SsLocalModel<f64>,
     poles: &EstimatorPoles,
     ts: f64,
     opts: &DesignOptions,
 ) -> Result<[f64; 2], DesignError> {
+    let (a, _, c) = plant_matrices(model);
+    let (a, c) = (&a, &c);
     if !a.iter().all(|v| v.is_finite()) {
         return Err(DesignError::NonFinite { unit, field: "A" });
     }
@@ -461,40 +478,14 @@ pub fn design_estimator(
         return Err(DesignError::NonFinite { unit, field: "L" });
     }
     let closed = a - l * c.transpose();
-    let got = [-closed.trace(), closed.determinant()];
-    let r = poles
-        .p1
-        .to_complex()
-        .norm()
-        .max(poles.p2.to_complex().norm());
-    let rel_error = coefficient_error(&got, &want, r);
+    // Closed-form 2x2 eigenvalues from the model library.
+    let ev = eig2(&[
+        [closed[(0, 0)], closed[(0, 1)]],
+        [closed[(1, 0)], closed[(1, 1)]],
+    ]);
+    let rel_error = pole_mismatch(&ev, &[poles.p1, poles.p2]);
     if rel_error.is_nan() || rel_error > PLACEMENT_TOLERANCE {
         return Err(DesignError::PlacementInaccurate { unit, rel_error });
     }
     Ok([l[0], l[1]])
-}
-
-/// Eigenvalues of the closed augmented local loop `A_aug - b_aug K` (eq. C.27), for
-/// analysis and tests (Schur decomposition).
-pub fn closed_loop_eigenvalues(
-    a: &Matrix2<f64>,
-    b: &Vector2<f64>,
-    c: &Vector2<f64>,
-    gains: &LocalGains,
-) -> [Complex<f64>; 3] {
-    let (a_aug, b_aug) = augmented(a, b, c);
-    let k = RowVector3::new(gains.k_i, gains.k_x[0], gains.k_x[1]);
-    let ev = (a_aug - b_aug * k).complex_eigenvalues();
-    [ev[0], ev[1], ev[2]]
-}
-
-/// Eigenvalues of the estimator error dynamics `A - L c'` (eq. C.19).
-pub fn estimator_eigenvalues(
-    a: &Matrix2<f64>,
-    c: &Vector2<f64>,
-    l: &[f64; 2],
-) -> [Complex<f64>; 2] {
-    let lc = Vector2::new(l[0], l[1]) * RowVector2::new(c[0], c[1]);
-    let ev = (a - lc).complex_eigenvalues();
-    [ev[0], ev[1]]
 }
