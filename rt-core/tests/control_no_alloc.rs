@@ -5,7 +5,6 @@ mod control_support;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use control_support::{TS, fast_muscle, table_6_1_specs};
 use rt_core::control::design::EstimatorPoles;
@@ -13,18 +12,18 @@ use rt_core::control::file::{Controller, ControllerSettings};
 use rt_core::control::pattern_generator::{FeedbackMode, TickInput};
 use rt_core::control::poles::dominant_pair;
 
-/// Counts allocations made by threads that armed it (other test threads are ignored).
+/// Counts allocations per thread, only while that thread has armed it (the other test
+/// threads of this binary neither count nor disturb the count).
 struct CountingAlloc;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
 
 thread_local! {
     static ARMED: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
 }
 
 fn count() {
     if ARMED.with(Cell::get) {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        ALLOCATIONS.with(|n| n.set(n.get() + 1));
     }
 }
 
@@ -58,11 +57,11 @@ static GLOBAL: CountingAlloc = CountingAlloc;
 
 /// Allocations made by `f` on this thread.
 fn allocations_in(f: impl FnOnce()) -> u64 {
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = ALLOCATIONS.with(Cell::get);
     ARMED.with(|a| a.set(true));
     f();
     ARMED.with(|a| a.set(false));
-    ALLOCATIONS.load(Ordering::Relaxed) - before
+    ALLOCATIONS.with(Cell::get) - before
 }
 
 #[test]

@@ -440,21 +440,15 @@ pub fn design_estimator(
     ts: f64,
     opts: &DesignOptions,
 ) -> Result<[f64; 2], DesignError> {
-    let (a, _, c) = plant_matrices(model);
-    let (a, c) = (&a, &c);
-    if !a.iter().all(|v| v.is_finite()) {
-        return Err(DesignError::NonFinite { unit, field: "A" });
-    }
-    if !c.iter().all(|v| v.is_finite()) {
-        return Err(DesignError::NonFinite { unit, field: "c" });
-    }
+    let (a, b, c) = plant_matrices(model);
+    check_plant(unit, &a, &b, &c)?;
     check_pole(unit, "estimator p1", poles.p1, ts)?;
     check_pole(unit, "estimator p2", poles.p2, ts)?;
     let want = pair_coefficients(poles.p1, poles.p2).ok_or(DesignError::NotConjugate {
         unit,
         which: "estimator p1, p2",
     })?;
-    let o = observability_matrix(a, c);
+    let o = observability_matrix(&a, &c);
     let rcond = rcond_rows2(&o);
     if rcond.is_nan() || rcond < opts.min_rcond {
         return Err(DesignError::Unobservable {
