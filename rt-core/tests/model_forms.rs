@@ -21,12 +21,15 @@ fn ss_network(m: usize, delay: usize, sched: SchedulingSpec, seed: u64) -> Netwo
         s ^= s << 17;
         lo + (hi - lo) * ((s >> 11) as f64 / (1u64 << 53) as f64)
     };
+    // Eigenvectors near a common pair (jitter +- 0.2 rad), so the interpolated A stays
+    // regular and the rest state exists for output scheduling too.
+    let (th0, dth) = (r(0.0, 3.0), r(0.8, 2.2));
     let units: Vec<_> = (0..m)
         .map(|_| {
-            let th = r(0.0, 3.0);
+            let th = th0 + r(-0.2, 0.2);
             EigLocalUnit {
                 eigenvalues: [r(-600.0, -50.0), r(-60.0, -2.0)],
-                eigenvector_angles: [th, th + r(0.4, 2.5)],
+                eigenvector_angles: [th, th + dth + r(-0.2, 0.2)],
                 b: [r(-2.0, 2.0), r(-2.0, 2.0)],
                 c: [r(-3.0, 3.0), r(-3.0, 3.0)],
                 dx: [r(-1.0, 1.0), r(-1.0, 1.0)],
@@ -42,11 +45,7 @@ fn ss_network(m: usize, delay: usize, sched: SchedulingSpec, seed: u64) -> Netwo
 
 fn compare(net: Network<f64>, u: &[f64]) -> Result<(), TestCaseError> {
     let d = net.delay();
-    // A random interpolated model can be singular somewhere: then neither form starts.
-    let Ok(mut thesis) = ThesisForm::new(net) else {
-        prop_assert!(AdvancedForm::new(net).is_err());
-        return Ok(());
-    };
+    let mut thesis = ThesisForm::new(net).unwrap();
     let mut adv = AdvancedForm::new(net).unwrap();
     let mut ahead = Vec::with_capacity(u.len());
     for (k, &uk) in u.iter().enumerate() {

@@ -46,7 +46,7 @@ impl<S: Scalar> ArxUnit<S> {
         }
     }
 
-    /// One shift-form output: y_k = sum_l b_l u_hist[l] - sum_i a_i y_hist[i] + d, with
+    /// One shift-form output: y_k = sum_l b_l u_hist\[l\] - sum_i a_i y_hist\[i\] + d, with
     /// `u_hist[l]` = u_{k-d-l} and `y_hist[i]` = y_{k-1-i}.
     #[inline(always)]
     pub fn output(

@@ -1,10 +1,10 @@
 //! Two equivalent ways to run a network with input delay d (thesis 2.2.2).
 //!
 //! - [`ThesisForm`]: a delay line on the input, as in eq. 2.14: the core (local models and
-//!   scheduler) is driven by u[k-d]; its state is the thesis's x[k]. Used for simulation and
+//!   scheduler) is driven by u\[k-d\]; its state is the thesis's x\[k\]. Used for simulation and
 //!   identification, and wherever a plant is simulated.
-//! - [`AdvancedForm`]: the core driven by u[k] directly, followed by a ring buffer of the last
-//!   d core outputs. Its state is z[k] = x[k+d], known exactly at time k because every input
+//! - [`AdvancedForm`]: the core driven by u\[k\] directly, followed by a ring buffer of the last
+//!   d core outputs. Its state is z\[k\] = x\[k+d\], known exactly at time k because every input
 //!   that reaches it is already decided. The pattern generator's controller acts on z.
 //!
 //! Both start "from rest" (see [`Network::rest_state`]); the advanced form's ring holds the
@@ -78,7 +78,7 @@ impl<T: Copy> DelayLine<T> {
     }
 }
 
-/// The network in the thesis's form: delay line on the input, state x[k].
+/// The network in the thesis's form: delay line on the input, state x\[k\].
 #[derive(Debug, Clone)]
 pub struct ThesisForm<S: Scalar = f64> {
     net: Network<S>,
@@ -99,14 +99,14 @@ impl<S: Scalar> ThesisForm<S> {
         })
     }
 
-    /// One sample: pulse input u[k] in, model output y[k] out.
+    /// One sample: pulse input u\[k\] in, model output y\[k\] out.
     #[inline]
     pub fn step(&mut self, u: f64) -> S {
         let v = self.input_delay.push(u);
         self.net.step(&mut self.state, v)
     }
 
-    /// The core state before the next step (x[k], prefilter state, phi[k]).
+    /// The core state before the next step (x\[k\], prefilter state, phi\[k\]).
     #[inline]
     pub fn state(&self) -> &CoreState<S> {
         &self.state
@@ -122,13 +122,13 @@ impl<S: Scalar> ThesisForm<S> {
 /// Outputs of one [`AdvancedForm::step`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AdvancedStep<S = f64> {
-    /// The model output now, y[k] (identical to the thesis form's).
+    /// The model output now, y\[k\] (identical to the thesis form's).
     pub y: S,
-    /// The core output y[k + d]: the output the model will show d samples from now.
+    /// The core output y\[k + d\]: the output the model will show d samples from now.
     pub y_ahead: S,
 }
 
-/// The network in the advanced form: core state z[k] = x[k+d] plus a ring of d outputs.
+/// The network in the advanced form: core state z\[k\] = x\[k+d\] plus a ring of d outputs.
 #[derive(Debug, Clone)]
 pub struct AdvancedForm<S: Scalar = f64> {
     net: Network<S>,
@@ -153,7 +153,7 @@ impl<S: Scalar> AdvancedForm<S> {
         })
     }
 
-    /// The core state z[k] = x[k+d] with its scheduling value (before the next step).
+    /// The core state z\[k\] = x\[k+d\] with its scheduling value (before the next step).
     #[inline]
     pub fn state(&self) -> &CoreState<S> {
         &self.state
@@ -171,7 +171,7 @@ impl<S: Scalar> AdvancedForm<S> {
         self.net.activation(&self.state)
     }
 
-    /// One sample: pulse u[k] decided now.
+    /// One sample: pulse u\[k\] decided now.
     #[inline]
     pub fn step(&mut self, u: f64) -> AdvancedStep<S> {
         let act = self.net.activation(&self.state);
@@ -187,7 +187,7 @@ impl<S: Scalar> AdvancedForm<S> {
     }
 
     /// The model outputs already determined for the next d samples, oldest first: entry i is
-    /// y[k + i] before the step at time k.
+    /// y\[k + i\] before the step at time k.
     #[inline]
     pub fn pending_output(&self, i: usize) -> Option<S> {
         self.outputs.get(i)

@@ -1,7 +1,7 @@
 //! State-space local models in the delta domain (thesis 2.2.2, eq. 2.13; App. D.2.2) and
 //! their parameterisations (5.4.2, eq. 5.5-5.6).
 //!
-//! A local model is x[k+1] = x[k] + Ts (A x[k] + b u[k-d] + dx), y[k] = c' x[k] + dy, with
+//! A local model is x\[k+1\] = x\[k\] + Ts (A x\[k\] + b u\[k-d\] + dx), y\[k\] = c' x\[k\] + dy, with
 //! state order n = 2. The network interpolates A, b, c, dx, dy with the validity functions
 //! (eq. 2.16), so every parameterisation is first mapped to this direct form
 //! ([`SsLocalModel`]):
@@ -50,7 +50,7 @@ impl<S: Scalar> SsLocalModel<S> {
         }
     }
 
-    /// One delta-domain step: returns (y[k], x[k+1]) for state x[k] and input u.
+    /// One delta-domain step: returns (y\[k\], x\[k+1\]) for state x\[k\] and input u.
     #[inline(always)]
     pub fn step(&self, x: [S; 2], u: S, ts: f64) -> (S, [S; 2]) {
         let y = self.c[0] * x[0] + self.c[1] * x[1] + self.dy;

@@ -8,11 +8,11 @@
 //! - [`network`]: the undelayed LPV core (eq. 2.14-2.16, 2.24), generic over
 //!   [`crate::num::Scalar`].
 //! - [`forms`]: the thesis form (input delay line) and the advanced form (core state
-//!   z[k] = x[k+d] plus an output ring) of the delayed network.
+//!   z\[k\] = x\[k+d\] plus an output ring) of the delayed network.
 //! - [`simulate`]: free-run simulation, one-step prediction, MSE (App. B.1).
 //! - [`lmn`]: a complete model described in its parameterisation (what the file stores).
 //! - [`params`]: the free parameters as one flat vector theta, generic (identification).
-//! - [`file`]: the JSON model file `fes-lmn/1`, validated on load.
+//! - [`mod@file`]: the JSON model file `fes-lmn/1`, validated on load.
 //!
 //! Conventions and the file format are documented in `docs/model.md`.
 

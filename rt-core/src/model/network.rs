@@ -1,8 +1,8 @@
 //! The Local Model Network core: an undelayed LPV system (thesis 2.2.2, eq. 2.14-2.16, 2.24).
 //!
 //! The network with input delay d (eq. 2.14: the local models and, by our convention, the
-//! scheduler see u[k-d]) is exactly this core driven by v[k] = u[k-d]. Equivalently it is the
-//! core driven by u[k] followed by a pure d-sample output delay. [`super::forms`] runs it both
+//! scheduler see u\[k-d\]) is exactly this core driven by v\[k\] = u\[k-d\]. Equivalently it is the
+//! core driven by u\[k\] followed by a pure d-sample output delay. [`super::forms`] runs it both
 //! ways.
 //!
 //! One core step at (core) time j, with scheduling value phi_j known before the input:

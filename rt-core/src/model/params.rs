@@ -8,13 +8,13 @@
 //! Per unit i, in this order (bracketed entries only when `zero_offsets` is false):
 //! - `ss-direct`: a00 a01 a10 a11 b0 b1 c0 c1 [dx0 dx1 dy]
 //! - `ss-eig-local`: eta0 eta1 theta0 theta1 b0 b1 c0 c1 [dx0 dx1 dy], e_j =
-//!   [`eigenvalue_from_eta`](super::local_model::eigenvalue_from_eta)(eta_j), theta_j the
+//!   [`super::local_model::eigenvalue_from_eta`]`(eta_j)`, theta_j the
 //!   eigenvector angles
 //! - `ss-eig-common`: eta0 eta1 b0 b1 c0 c1 [dx0 dx1 dy], without b0 b1 for the reference unit
 //!   (fixed at (1, 1), the gauge)
-//! - `arx-shift`: b_0..b_{n-1}, -a_1..-a_n, [d]: the thesis's Theta' (eq. A.30b), so that
+//! - `arx-shift`: b_0..b_{n-1}, -a_1..-a_n, \[d\]: the thesis's Theta' (eq. A.30b), so that
 //!   y = psi'^T Theta' is linear in theta (prediction-mode least squares, B.2)
-//! - `arx-delta`: beta_0..beta_{n-1}, -alpha_0..-alpha_{n-1}, [d]
+//! - `arx-delta`: beta_0..beta_{n-1}, -alpha_0..-alpha_{n-1}, \[d\]
 //!
 //! The knots are not in theta; pass them separately (as `Dual` variables for knot
 //! optimisation, 5.4.2).

@@ -8,7 +8,7 @@
 //!   phi of (K / w_n^2) f Ts = f / 100 for the thesis values.
 //! - **Output scheduling** (eq. 5.1): phi_k = y_{k-1}.
 //!
-//! Convention (docs/model.md): the scheduler is driven by the DELAYED input u[k-d], the same
+//! Convention (docs/model.md): the scheduler is driven by the DELAYED input u\[k-d\], the same
 //! input the local models see, so the whole network is an undelayed LPV core followed by a
 //! pure d-sample output delay (see [`super::network`]).
 
@@ -100,7 +100,7 @@ impl Scheduler {
 }
 
 /// G_pre(s) = K / (s^2 + 2 zeta w_n s + w_n^2) discretised exactly with a zero-order hold:
-/// w[k+1] = Phi w[k] + Gamma v[k], phi[k] = w_1[k], in the companion realisation
+/// w\[k+1\] = Phi w\[k\] + Gamma v\[k\], phi\[k\] = w_1\[k\], in the companion realisation
 /// w_1' = w_2, w_2' = -w_n^2 w_1 - 2 zeta w_n w_2 + K v, with Phi = expm(A Ts) and
 /// Gamma = A^-1 (Phi - I) B.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -151,13 +151,13 @@ impl Prefilter {
         )
     }
 
-    /// The output phi[k] for filter state w[k].
+    /// The output phi\[k\] for filter state w\[k\].
     #[inline(always)]
     pub fn output(&self, w: &[f64; 2]) -> f64 {
         w[0]
     }
 
-    /// w[k+1] = Phi w[k] + Gamma v[k].
+    /// w\[k+1\] = Phi w\[k\] + Gamma v\[k\].
     #[inline(always)]
     pub fn advance(&self, w: &mut [f64; 2], v: f64) {
         let w0 = self.phi[0][0] * w[0] + self.phi[0][1] * w[1] + self.gamma[0] * v;

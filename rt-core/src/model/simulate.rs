@@ -29,7 +29,7 @@ pub enum RunError {
     Network(#[from] NetworkError),
 }
 
-/// Free-run simulation from rest (eq. B.6/B.7): y_hat[k] for the pulse train u[0..N], with
+/// Free-run simulation from rest (eq. B.6/B.7): y_hat\[k\] for the pulse train u\[0..N\], with
 /// u = 0 before the record. Writes `y.len() == u.len()` outputs.
 pub fn simulate<S: Scalar>(net: &Network<S>, u: &[f64], y: &mut [S]) -> Result<(), RunError> {
     if y.len() != u.len() {
@@ -48,9 +48,9 @@ pub fn simulate<S: Scalar>(net: &Network<S>, u: &[f64], y: &mut [S]) -> Result<(
     Ok(())
 }
 
-/// One-step-ahead prediction (eq. B.4) of an ARX network: y_hat[k] from measured outputs
-/// y[k-1..k-n] (and, with output scheduling, phi_k = y[k-1]); the measured record is
-/// extended to negative times by y[0] and the input by zeros (records start at rest).
+/// One-step-ahead prediction (eq. B.4) of an ARX network: y_hat\[k\] from measured outputs
+/// y\[k-1..k-n\] (and, with output scheduling, phi_k = y\[k-1\]); the measured record is
+/// extended to negative times by y\[0\] and the input by zeros (records start at rest).
 pub fn predict<S: Scalar>(
     net: &Network<S>,
     u: &[f64],
