@@ -9,7 +9,7 @@
 //! - [`shaper`]: the pulse shaper (6.5.2, eq. 6.7-6.8).
 //! - [`estimator`]: the state estimator of the measured-force mode (C.2.2, Fig. 6.6(a)).
 //! - [`pattern_generator`]: the 1 ms tick of Fig. 6.8 in the model's advanced form.
-//! - [`file`]: the controller file `fes-lcn/1`.
+//! - [`mod@file`]: the controller file `fes-lcn/1`.
 //!
 //! See `docs/control.md` for the equations, the design procedure and the conventions.
 
