@@ -13,7 +13,10 @@ pub struct Pulse {
 
 impl Pulse {
     /// The thesis protocol's supramaximal pulse (5.1): 200 us; the amplitude is nominal.
-    pub const SUPRAMAXIMAL: Pulse = Pulse { amplitude_ma: 20.0, width_us: 200.0 };
+    pub const SUPRAMAXIMAL: Pulse = Pulse {
+        amplitude_ma: 20.0,
+        width_us: 200.0,
+    };
 }
 
 /// A muscle advanced in fixed steps of [`MusclePlant::ts`] seconds.
