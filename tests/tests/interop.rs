@@ -27,19 +27,6 @@ fn require_in_path(program: &str, hint: &str) {
     assert!(found, "{program} not found in PATH: {hint}");
 }
 
-fn require(program: &str, args: &[&str], hint: &str) {
-    let ok = Command::new(program)
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status();
-    assert!(
-        matches!(ok, Ok(s) if s.success()),
-        "`{program} {}` failed: {hint}",
-        args.join(" ")
-    );
-}
-
 fn cansend(iface: &str, frame: &str) {
     let s = Command::new("cansend")
         .args([iface, frame])
@@ -80,14 +67,11 @@ fn wait_for_file(path: &Path, needle: &str, timeout: Duration) -> bool {
 }
 
 fn interop(can: &CanEnv) {
+    let t0 = Instant::now();
+    let phase = |what: &str| println!("[{:6.2} s] {what}", t0.elapsed().as_secs_f64());
     let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fes-can/dbc/fes.dbc");
     require_in_path("candump", "install can-utils (scripts/setup)");
     require_in_path("cansend", "install can-utils (scripts/setup)");
-    require(
-        "python3",
-        &["-c", "import cantools"],
-        "install cantools: python3 -m pip install cantools (scripts/setup)",
-    );
     let dir = std::env::temp_dir().join(format!("fes-interop-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let log = dir.join("candump.log");
@@ -114,10 +98,12 @@ fn interop(can: &CanEnv) {
         host.send_frame(&probe).unwrap();
     }
 
+    phase("candump recording");
     let tap = Tap::open(&can.iface).unwrap();
     let stim = StimProcess::spawn(&can.iface, &[]);
     tap.wait_msg(0, Duration::from_secs(10), boot_up)
         .expect("boot-up message");
+    phase("stimulator booted");
     let hb = HeartbeatSender::start(&can.iface, Duration::from_millis(10)).unwrap();
 
     // cansend, typed by hand: NMT start to node 0x10.
@@ -203,6 +189,7 @@ fn interop(can: &CanEnv) {
         tapped.len()
     );
 
+    phase("candump log checked");
     // cantools decodes every logged frame with the project's DBC.
     let out = Command::new("python3")
         .args(["-m", "cantools", "decode", "--single-line"])
@@ -210,11 +197,13 @@ fn interop(can: &CanEnv) {
         .stdin(File::open(&log).unwrap())
         .output()
         .expect("run cantools");
+    let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        out.status.success(),
-        "cantools: {}",
-        String::from_utf8_lossy(&out.stderr)
+        !stderr.contains("No module named cantools"),
+        "python3 lacks cantools: python3 -m pip install cantools (scripts/setup does)"
     );
+    assert!(out.status.success(), "cantools: {stderr}");
+    phase("cantools finished");
     let decoded = String::from_utf8_lossy(&out.stdout);
     let lines: Vec<&str> = decoded.lines().collect();
     assert_eq!(lines.len(), logged.len(), "one decoded line per frame");
