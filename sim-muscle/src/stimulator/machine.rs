@@ -1,6 +1,6 @@
 //! The stimulator side of the protocol as a pure state machine: frames and time in,
 //! frames and plant steps out. No socket, no clock, no allocation; the socket loop
-//! ([`super::socket_loop`]) is a thin adapter around it, and tests drive it directly.
+//! (`socket_loop`) is a thin adapter around it, and tests drive it directly.
 //!
 //! States (STATUS `state`): boot -> pre-operational -> operational (armed / stimulating)
 //! -> stopped; a watchdog expiry enters *fault*, which (like stopped) has the output off

@@ -132,7 +132,8 @@ fn flush(socket: &CanSocket, out: &mut Outbox, stim_nodes: &Nodes, summary: &mut
 }
 
 /// Runs the stimulator on `iface` until `stop` is set: 1 ms absolute-time ticks on
-/// CLOCK_MONOTONIC; on stop, output off and a final STATUS.
+/// CLOCK_MONOTONIC; on stop (or a socket or clock failure, which is then returned),
+/// output off and a final STATUS.
 pub fn run_loop(
     iface: &str,
     settings: Settings,
@@ -153,12 +154,17 @@ pub fn run_loop(
     let mut k: u64 = 0;
     let mut tx_errors_reported = 0;
     let mut state = stim.state();
-    while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| summary.ticks < m) {
+    // A failure ends the loop but not before the orderly shutdown below.
+    let mut failure: Option<anyhow::Error> = None;
+    'ticks: while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| summary.ticks < m) {
         let deadline = t0 + k * TICK_NS;
         match sleep_until(deadline) {
             Ok(()) => {}
             Err(Errno::EINTR) => continue,
-            Err(e) => return Err(e).context("clock_nanosleep failed"),
+            Err(e) => {
+                failure = Some(anyhow::Error::new(e).context("clock_nanosleep failed"));
+                break;
+            }
         }
         let now = monotonic_ns();
         let late_ns = now.saturating_sub(deadline);
@@ -184,7 +190,10 @@ pub fn run_loop(
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(e).with_context(|| format!("reading from {iface}")),
+                Err(e) => {
+                    failure = Some(anyhow::Error::new(e).context(format!("reading from {iface}")));
+                    break 'ticks;
+                }
             }
             flush(&socket, &mut out, &settings.nodes, &mut summary);
         }
@@ -235,7 +244,10 @@ pub fn run_loop(
         summary.records_dropped = r.finish()?;
     }
     tracing::info!(?summary, "stimulator stopped");
-    Ok(summary)
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(summary),
+    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@
 //! 3. **native vcan**: `vcan0` exists and is up, or `modprobe vcan` + `ip link add dev
 //!    vcan0 type vcan` + `ip link set up vcan0` work (a kernel with CAN, run as root);
 //! 4. **UML**: a User-Mode Linux guest with the host filesystem and its own `vcan0`
-//!    ([`uml`] module docs);
+//!    (see `docs/vcan.md`);
 //!
 //! and fails loudly, naming what it tried, when none works: a CAN test never skips.
 //! `FES_VCAN_BACKEND=native|uml` forces a backend (default `auto`).
