@@ -50,7 +50,7 @@ pub struct Settings {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum SettingsError {
     /// A limit is outside what the protocol can carry.
-    #[error("stimulator limit: {0}")]
+    #[error(transparent)]
     Limits(#[from] fes_can::LimitsError),
     /// Channel count outside 1..=16 (PULSE carries a 4-bit channel).
     #[error("{0} output channels; the protocol addresses 1..=16")]

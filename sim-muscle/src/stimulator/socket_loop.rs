@@ -156,7 +156,7 @@ pub fn run_loop(
     let mut state = stim.state();
     // A failure ends the loop but not before the orderly shutdown below.
     let mut failure: Option<anyhow::Error> = None;
-    'ticks: while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| summary.ticks < m) {
+    'ticks: while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| k < m) {
         let deadline = t0 + k * TICK_NS;
         match sleep_until(deadline) {
             Ok(()) => {}
