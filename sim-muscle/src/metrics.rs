@@ -1,6 +1,10 @@
 //! Force-time integral and force-time integral per pulse (thesis 6.1), in one place for
 //! the optimal-pattern analyses.
 
+use crate::pattern::from_samples;
+use crate::plant::{MusclePlant, Pulse};
+use crate::simulate::simulate;
+
 /// Why an FTIpP could not be formed.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum MetricsError {
@@ -27,6 +31,16 @@ pub fn ftipp(fti_p: f64, fti_1: f64, p: usize) -> Result<f64, MetricsError> {
         return Err(MetricsError::BadTwitch(fti_1));
     }
     Ok(fti_p / (fti_1 * p as f64))
+}
+
+/// FTI (eq. 6.2) of the response of `plant`, from rest, to supramaximal pulses at the
+/// sample indices `pulses`, over the window `[0, window ts)`. Choose `window` long enough
+/// for the force to return to rest after the last pulse, or eq. (6.3) compares truncated
+/// responses.
+pub fn response_fti(plant: &mut dyn MusclePlant, pulses: &[usize], window: usize) -> f64 {
+    plant.reset();
+    let force = simulate(plant, &from_samples(pulses, window), Pulse::SUPRAMAXIMAL);
+    fti(&force, plant.ts())
 }
 
 #[cfg(test)]

@@ -70,6 +70,27 @@ impl MuscleConfig {
     }
 }
 
+/// The muscle's maximal force, N: the peak of a 1 s, 100 Hz train from rest (the top of
+/// the protocols' frequency range, where both presets' force-frequency curves have
+/// flattened). Scales the default sensor noise and offset.
+pub fn max_force_n(ding: &DingParams) -> Result<f64, ParamError> {
+    let config = MuscleConfig {
+        ding: *ding,
+        emd_s: 0.0,
+        ..MuscleConfig::preset(Preset::Fast)
+    };
+    let mut muscle = Muscle::new(config)?;
+    let train = crate::pattern::constant_train(100.0, 0, 1000, config.ts_s).map_err(|_| {
+        ParamError::NotFinite {
+            name: "ts",
+            value: config.ts_s,
+        }
+    })?;
+    let pattern = crate::pattern::from_samples(&train, 1000);
+    let force = crate::simulate::simulate(&mut muscle, &pattern, Pulse::SUPRAMAXIMAL);
+    Ok(force.into_iter().fold(0.0, f64::max))
+}
+
 /// A pulse waiting out the electromechanical delay.
 #[derive(Debug, Clone, Copy)]
 struct Pending {

@@ -41,8 +41,8 @@ impl Preset {
         match self {
             Preset::Fast => DingParams {
                 tauc: 0.010,
-                r0: 5.0,
-                km: 0.5,
+                r0: 8.0,
+                km: 0.3,
                 a: 6000.0,
                 tau1: 0.030,
                 tau2: 0.060,
