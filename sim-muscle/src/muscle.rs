@@ -1,7 +1,7 @@
 //! The Ding muscle as a sampled plant: pulses at sample starts, an electromechanical
 //! delay, force in newtons at sample ends ([`MusclePlant`] timing convention).
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 
 use serde::{Deserialize, Serialize};
 
@@ -46,6 +46,67 @@ impl MuscleConfig {
             ts_s: 1e-3,
             max_substep_s: DEFAULT_MAX_SUBSTEP_S,
         }
+    }
+
+    /// Sets the model parameter `name` (as in the papers: `tauc`, `r0`, `km`, `a`,
+    /// `tau1`, `tau2`; with fatigue on also `alpha_a`, `alpha_km`, `alpha_tau1`,
+    /// `tau_fat`; SI units) and re-validates.
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), ParamError> {
+        let slot = match (self.ding.get_mut(name), self.fatigue.as_mut()) {
+            (Some(slot), _) => slot,
+            (None, Some(f)) => match f.get_mut(name) {
+                Some(slot) => slot,
+                None => return Err(self.unknown(name)),
+            },
+            (None, None) => return Err(self.unknown(name)),
+        };
+        *slot = value;
+        self.validate()
+    }
+
+    fn unknown(&self, name: &str) -> ParamError {
+        let mut known: Vec<String> = DingParams::NAMES
+            .iter()
+            .map(|(n, u)| format!("{n} [{u}]"))
+            .collect();
+        let fatigue: Vec<String> = FatigueParams::NAMES
+            .iter()
+            .map(|(n, u)| format!("{n} [{u}]"))
+            .collect();
+        if self.fatigue.is_some() {
+            known.extend(fatigue);
+        } else if FatigueParams::NAMES.iter().any(|(n, _)| *n == name) {
+            return ParamError::Unknown {
+                name: name.to_string(),
+                known: format!("{} (fatigue coefficients need --fatigue)", known.join(", ")),
+            };
+        }
+        ParamError::Unknown {
+            name: name.to_string(),
+            known: known.join(", "),
+        }
+    }
+
+    /// Every model number by name, SI units, for a data set's `parameters`.
+    pub fn parameters(&self) -> BTreeMap<String, f64> {
+        let mut m: BTreeMap<String, f64> = self
+            .ding
+            .entries()
+            .iter()
+            .map(|&(n, v)| (n.to_string(), v))
+            .collect();
+        if let Some(f) = &self.fatigue {
+            m.extend(f.entries().iter().map(|&(n, v)| (n.to_string(), v)));
+        }
+        if let Some(p) = &self.pulse_width {
+            m.insert("pd0_us".into(), p.pd0_us);
+            m.insert("pdt_us".into(), p.pdt_us);
+            m.insert("ref_us".into(), p.ref_us);
+        }
+        m.insert("emd_s".into(), self.emd_s);
+        m.insert("ts_s".into(), self.ts_s);
+        m.insert("max_substep_s".into(), self.max_substep_s);
+        m
     }
 
     /// Checks every field.
@@ -152,7 +213,11 @@ impl Muscle {
     /// Activation gain of a delivered pulse: 0 without charge, else the pulse-width
     /// variant's gain, else 1 (supramaximal).
     fn gain(&self, pulse: &Pulse) -> f64 {
-        if !(pulse.amplitude_ma > 0.0) || !(pulse.width_us > 0.0) {
+        if pulse.amplitude_ma.is_nan()
+            || pulse.amplitude_ma <= 0.0
+            || pulse.width_us.is_nan()
+            || pulse.width_us <= 0.0
+        {
             return 0.0;
         }
         match &self.config.pulse_width {
