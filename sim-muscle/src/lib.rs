@@ -18,6 +18,7 @@
 #![deny(missing_docs)]
 
 pub mod ding;
+pub mod lmn_plant;
 pub mod metrics;
 pub mod muscle;
 pub mod pattern;

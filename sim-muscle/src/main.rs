@@ -1,5 +1,6 @@
 //! `sim-muscle`: simulate the Ding muscle, record thesis-protocol data sets, plot them.
 
+use std::collections::BTreeMap;
 use std::io::{self, BufWriter, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -8,9 +9,10 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use rt_core::dataset::{DataSet, WriteMode};
 use sim_muscle::ding::{FatigueParams, PulseWidthParams};
-use sim_muscle::muscle::{Muscle, MuscleConfig, max_force_n};
+use sim_muscle::lmn_plant::LmnPlant;
+use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
 use sim_muscle::pattern::{constant_train, from_samples, from_times_ms, samples_on_grid};
-use sim_muscle::plant::Pulse;
+use sim_muscle::plant::{MusclePlant, Pulse};
 use sim_muscle::plot::{default_selection, plot_records};
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::{ProtocolConfig, ProtocolKind};
@@ -131,8 +133,12 @@ enum ProtocolArg {
 #[derive(Args)]
 struct MuscleArgs {
     /// Muscle preset.
-    #[arg(long, value_enum)]
-    preset: PresetArg,
+    #[arg(long, value_enum, required_unless_present = "model")]
+    preset: Option<PresetArg>,
+    /// Use an LMN model file (rt-core `fes-lmn/1`) as the muscle instead of a preset:
+    /// force = model output x the file's force_scale_n. Pulses are binary (u = 1).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["preset", "set", "fatigue", "emd_ms"])]
+    model: Option<PathBuf>,
     /// Change a model parameter, SI units, repeatable: tauc [s] (CN time constant), r0 [1]
     /// (catch-like enhancement, >= 1), km [1] (CN sensitivity), a [N/s] (force scale),
     /// tau1 [s] (force decay without cross-bridges), tau2 [s] (extra decay from
@@ -309,9 +315,8 @@ fn parse_assignment(s: &str) -> Result<(String, f64), String> {
     Ok((name.to_string(), v))
 }
 
-/// The muscle described by the flags, sampled every `ts_s`.
-fn muscle_config(args: &MuscleArgs, ts_s: f64) -> Result<MuscleConfig> {
-    let preset = Preset::from(args.preset);
+/// The Ding muscle described by the flags, sampled every `ts_s`.
+fn muscle_config(args: &MuscleArgs, preset: Preset, ts_s: f64) -> Result<MuscleConfig> {
     let mut cfg = MuscleConfig {
         ts_s,
         emd_s: args.emd_ms * 1e-3,
@@ -335,9 +340,63 @@ fn muscle_config(args: &MuscleArgs, ts_s: f64) -> Result<MuscleConfig> {
     Ok(cfg)
 }
 
+/// The muscle chosen by the flags, and what a data set records about it.
+struct Chosen {
+    plant: Box<dyn MusclePlant>,
+    preset: Option<Preset>,
+    parameters: BTreeMap<String, f64>,
+    source: String,
+}
+
+/// Builds the preset muscle (with `configure` applied) or the LMN plant.
+fn choose_plant(
+    args: &MuscleArgs,
+    ts_s: f64,
+    configure: impl FnOnce(&mut MuscleConfig) -> Result<()>,
+) -> Result<Chosen> {
+    let source = format!("sim-muscle {}", env!("CARGO_PKG_VERSION"));
+    if let Some(path) = &args.model {
+        let plant = LmnPlant::load(path).with_context(|| format!("--model {}", path.display()))?;
+        if (plant.ts() - ts_s).abs() > 1e-9 * ts_s {
+            bail!(
+                "--model {}: the model samples every {} ms, the run every {} ms",
+                path.display(),
+                plant.ts() * 1e3,
+                ts_s * 1e3
+            );
+        }
+        let parameters = BTreeMap::from([("force_scale_n".to_string(), plant.scale_n())]);
+        let source = format!("{source}, LMN model {}", path.display());
+        return Ok(Chosen {
+            plant: Box::new(plant),
+            preset: None,
+            parameters,
+            source,
+        });
+    }
+    let preset = args
+        .preset
+        .map(Preset::from)
+        .context("--preset or --model is required")?;
+    let mut cfg = muscle_config(args, preset, ts_s)?;
+    configure(&mut cfg)?;
+    let parameters = cfg.parameters();
+    Ok(Chosen {
+        plant: Box::new(Muscle::new(cfg)?),
+        preset: Some(preset),
+        parameters,
+        source,
+    })
+}
+
 /// The sensor described by the flags, defaults scaled to the muscle's maximal force.
-fn sensor_config(args: &SensorArgs, cfg: &MuscleConfig, seed: u64) -> Result<SensorConfig> {
-    let fmax = max_force_n(&cfg.ding)?;
+fn sensor_config(
+    args: &SensorArgs,
+    plant: &mut dyn MusclePlant,
+    seed: u64,
+) -> Result<SensorConfig> {
+    let fmax = max_force(plant);
+    plant.reset();
     let defaults = SensorConfig::defaults_for(fmax, seed);
     let sensor = SensorConfig {
         offset_n: args.offset_n.unwrap_or(defaults.offset_n),
@@ -351,13 +410,17 @@ fn sensor_config(args: &SensorArgs, cfg: &MuscleConfig, seed: u64) -> Result<Sen
 
 fn simulate_cmd(args: SimulateArgs) -> Result<()> {
     let ts_s = 1e-3;
-    let mut cfg = muscle_config(&args.muscle, ts_s)?;
-    if let Some(w) = args.pulse_width_us {
-        if !(w.is_finite() && w > 0.0) {
-            bail!("--pulse-width-us {w}: must be a width > 0 us");
-        }
-        cfg.pulse_width = Some(PulseWidthParams::DING_2007);
+    if let Some(w) = args.pulse_width_us
+        && !(w.is_finite() && w > 0.0)
+    {
+        bail!("--pulse-width-us {w}: must be a width > 0 us");
     }
+    let mut chosen = choose_plant(&args.muscle, ts_s, |cfg| {
+        if args.pulse_width_us.is_some() {
+            cfg.pulse_width = Some(PulseWidthParams::DING_2007);
+        }
+        Ok(())
+    })?;
     let pulse = Pulse {
         width_us: args.pulse_width_us.unwrap_or(200.0),
         ..Pulse::SUPRAMAXIMAL
@@ -400,12 +463,11 @@ fn simulate_cmd(args: SimulateArgs) -> Result<()> {
         }
     }
     let force = if args.measured {
-        let sensor = ForceSensor::new(sensor_config(&args.sensor, &cfg, args.seed)?, ts_s)?;
-        let mut plant = Measured::new(Muscle::new(cfg)?, sensor);
+        let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
+        let mut plant = Measured::new(chosen.plant, ForceSensor::new(sensor, ts_s)?);
         simulate(&mut plant, &train, pulse)
     } else {
-        let mut plant = Muscle::new(cfg)?;
-        simulate(&mut plant, &train, pulse)
+        simulate(chosen.plant.as_mut(), &train, pulse)
     };
     let stdout = io::stdout();
     let mut out = BufWriter::new(stdout.lock());
@@ -423,7 +485,8 @@ fn simulate_cmd(args: SimulateArgs) -> Result<()> {
 }
 
 fn record_cmd(args: RecordArgs) -> Result<()> {
-    let preset = Preset::from(args.muscle.preset);
+    // An LMN model takes the fast muscle's protocol numbers unless given.
+    let preset = args.muscle.preset.map(Preset::from).unwrap_or(Preset::Fast);
     let thesis = ProtocolConfig::thesis(preset);
     let protocol = ProtocolConfig {
         kind: match args.protocol {
@@ -448,27 +511,28 @@ fn record_cmd(args: RecordArgs) -> Result<()> {
         doublet_max_ms: args.doublet_max_ms,
     };
     protocol.validate()?;
-    let cfg = muscle_config(&args.muscle, protocol.ts_ms * 1e-3)?;
-    let sensor = sensor_config(&args.sensor, &cfg, args.seed)?;
+    let mut chosen = choose_plant(&args.muscle, protocol.ts_ms * 1e-3, |_| Ok(()))?;
+    let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
     let mode = if args.force {
         WriteMode::Overwrite
     } else {
         WriteMode::CreateNew
     };
+    if args.out.exists() && !args.out.is_dir() {
+        bail!("{} exists and is not a directory", args.out.display());
+    }
     if mode == WriteMode::CreateNew && args.out.read_dir().is_ok_and(|mut d| d.next().is_some()) {
         bail!(
             "{} exists and is not empty; choose another --out or add --force",
             args.out.display()
         );
     }
-    if args.out.exists() && !args.out.is_dir() {
-        bail!("{} exists and is not a directory", args.out.display());
-    }
-    let mut plant = Measured::new(Muscle::new(cfg)?, ForceSensor::new(sensor, cfg.ts_s)?);
+    let ts_s = chosen.plant.ts();
+    let mut plant = Measured::new(chosen.plant, ForceSensor::new(sensor, ts_s)?);
     let origin = Origin {
-        source: format!("sim-muscle {}", env!("CARGO_PKG_VERSION")),
-        preset: Some(preset.name().to_string()),
-        parameters: cfg.parameters(),
+        source: chosen.source,
+        preset: chosen.preset.map(|p| p.name().to_string()),
+        parameters: chosen.parameters,
         seed: args.seed,
         noise: serde_json::to_value(sensor)?,
     };

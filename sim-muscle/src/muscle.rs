@@ -131,25 +131,28 @@ impl MuscleConfig {
     }
 }
 
-/// The muscle's maximal force, N: the peak of a 1 s, 100 Hz train from rest (the top of
+/// A muscle's maximal force, N: the peak of a 1 s, 100 Hz train from rest (the top of
 /// the protocols' frequency range, where both presets' force-frequency curves have
-/// flattened). Scales the default sensor noise and offset.
+/// flattened). Scales the default sensor noise and offset. The plant is reset first and
+/// left wherever the train leaves it.
+pub fn max_force(plant: &mut dyn MusclePlant) -> f64 {
+    plant.reset();
+    let n = (1.0 / plant.ts()).round().max(2.0) as usize;
+    let hz = 100f64.min(1.0 / plant.ts());
+    let train = crate::pattern::constant_train(hz, 0, n, plant.ts()).unwrap_or_default();
+    let pattern = crate::pattern::from_samples(&train, n);
+    let force = crate::simulate::simulate(plant, &pattern, Pulse::SUPRAMAXIMAL);
+    force.into_iter().fold(0.0, f64::max)
+}
+
+/// [`max_force`] of the Ding muscle with parameters `ding` (no delay, 1 ms sampling).
 pub fn max_force_n(ding: &DingParams) -> Result<f64, ParamError> {
     let config = MuscleConfig {
         ding: *ding,
         emd_s: 0.0,
         ..MuscleConfig::preset(Preset::Fast)
     };
-    let mut muscle = Muscle::new(config)?;
-    let train = crate::pattern::constant_train(100.0, 0, 1000, config.ts_s).map_err(|_| {
-        ParamError::NotFinite {
-            name: "ts",
-            value: config.ts_s,
-        }
-    })?;
-    let pattern = crate::pattern::from_samples(&train, 1000);
-    let force = crate::simulate::simulate(&mut muscle, &pattern, Pulse::SUPRAMAXIMAL);
-    Ok(force.into_iter().fold(0.0, f64::max))
+    Ok(max_force(&mut Muscle::new(config)?))
 }
 
 /// A pulse waiting out the electromechanical delay.

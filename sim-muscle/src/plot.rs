@@ -140,6 +140,7 @@ fn draw(
         .disable_mesh()
         .disable_x_axis()
         .y_labels(2)
+        .y_label_formatter(&|y| format!("{y:.0}"))
         .y_desc("pulse")
         .draw()
         .map_err(|x| e(&x))?;
@@ -163,6 +164,7 @@ fn draw(
     bottom
         .configure_mesh()
         .light_line_style(WHITE.mix(0.0))
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .x_desc("time (ms), records concatenated, rests omitted")
         .y_desc("force (normalised)")
         .draw()

@@ -176,3 +176,69 @@ pub fn record(
     let raw = run_records(plant, protocol, plans)?;
     build_dataset(raw, protocol, origin)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::muscle::{Muscle, MuscleConfig};
+    use crate::preset::Preset;
+    use crate::sensor::{ForceSensor, Measured, SensorConfig};
+
+    fn origin() -> Origin {
+        Origin {
+            source: "test".into(),
+            preset: None,
+            parameters: BTreeMap::new(),
+            seed: 5,
+            noise: serde_json::Value::Null,
+        }
+    }
+
+    /// A known sensor offset is recovered from the rest samples within 4 standard errors
+    /// (noise 1 N); the normalised maximum is exactly 1; the split is 30 / rest.
+    #[test]
+    fn offset_recovered_and_scale_normalises() {
+        let protocol = ProtocolConfig::thesis(Preset::Fast);
+        let sensor = SensorConfig {
+            offset_n: 5.0,
+            noise_std_n: 1.0,
+            lowpass_tau_s: 0.0,
+            seed: 5,
+        };
+        let cfg = MuscleConfig::preset(Preset::Fast);
+        let mut plant = Measured::new(
+            Muscle::new(cfg).expect("valid"),
+            ForceSensor::new(sensor, cfg.ts_s).expect("valid"),
+        );
+        let plans = protocol.plan(5).expect("plan");
+        let raw = run_records(&mut plant, &protocol, plans).expect("run");
+        let rest_samples = protocol.records * (protocol.train_start_ms as usize + 1);
+        let offset = estimate_offset(&raw);
+        assert!(
+            (offset - 5.0).abs() < 4.0 / (rest_samples as f64).sqrt(),
+            "offset {offset}"
+        );
+        let ds = build_dataset(raw, &protocol, origin()).expect("build");
+        let max = ds
+            .records
+            .iter()
+            .flat_map(|r| r.force.iter().copied())
+            .fold(f64::MIN, f64::max);
+        assert_eq!(max, 1.0);
+        assert_eq!(ds.header.split.train.len(), 30);
+        assert_eq!(ds.header.split.test.len(), 30);
+        assert_eq!(ds.header.offset_n, offset);
+    }
+
+    /// A plant sampled at another period than the protocol is refused.
+    #[test]
+    fn sample_period_mismatch_is_refused() {
+        let protocol = ProtocolConfig {
+            ts_ms: 0.5,
+            ..ProtocolConfig::thesis(Preset::Slow)
+        };
+        let mut plant = Muscle::new(MuscleConfig::preset(Preset::Slow)).expect("valid");
+        let err = record(&mut plant, &protocol, origin()).expect_err("mismatch");
+        assert!(matches!(err, RecordError::SamplePeriod { .. }), "{err}");
+    }
+}
