@@ -184,15 +184,15 @@ impl Muscle {
     pub fn new(config: MuscleConfig) -> Result<Self, ParamError> {
         config.validate()?;
         let model = DingModel::new(config.ding, config.fatigue, config.max_substep_s)?;
+        // emd / ts split into whole samples and a fraction; a fraction within 1e-9 of a
+        // whole sample counts as whole (7e-3 / 1e-3 is not exactly 7 in floating point).
         let delay = config.emd_s / config.ts_s;
-        let mut whole = (delay + 1e-9).floor();
-        let mut frac = delay - whole;
-        if frac < 1e-9 {
-            frac = 0.0;
-        }
-        if whole < 0.0 {
-            whole = 0.0;
-        }
+        let whole = (delay + 1e-9).floor();
+        let frac = if delay - whole < 1e-9 {
+            0.0
+        } else {
+            delay - whole
+        };
         Ok(Self {
             config,
             model,
