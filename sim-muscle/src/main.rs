@@ -193,7 +193,7 @@ struct SimulateArgs {
     duration_ms: u32,
     /// Pulse width, us. Turns on the pulse-width variant (Ding et al. 2007): widths
     /// below 200 us recruit fewer motor units; 200 us gives the base model.
-    #[arg(long, value_name = "US")]
+    #[arg(long, value_name = "US", conflicts_with = "model")]
     pulse_width_us: Option<f64>,
     /// Print the measured force (sensor offset, noise, low-pass) instead of the true one.
     #[arg(long)]
@@ -410,6 +410,11 @@ fn sensor_config(
 
 fn simulate_cmd(args: SimulateArgs) -> Result<()> {
     let ts_s = 1e-3;
+    let s = &args.sensor;
+    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
+    {
+        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
+    }
     if let Some(w) = args.pulse_width_us
         && !(w.is_finite() && w > 0.0)
     {
