@@ -21,7 +21,7 @@ fn step(c: &mut Criterion) {
             b.iter(|| {
                 k = k.wrapping_add(1);
                 // 40 Hz: a pulse every 25 samples.
-                black_box(m.step((k % 25 == 0).then_some(Pulse::SUPRAMAXIMAL)))
+                black_box(m.step(k.is_multiple_of(25).then_some(Pulse::SUPRAMAXIMAL)))
             })
         });
     }
