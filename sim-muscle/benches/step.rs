@@ -16,7 +16,11 @@ fn step(c: &mut Criterion) {
         }
         let mut m = Muscle::new(cfg).expect("valid preset");
         let mut k = 0u32;
-        let name = if fatigue { "muscle_step_fatigue" } else { "muscle_step" };
+        let name = if fatigue {
+            "muscle_step_fatigue"
+        } else {
+            "muscle_step"
+        };
         c.bench_function(name, |b| {
             b.iter(|| {
                 k = k.wrapping_add(1);
