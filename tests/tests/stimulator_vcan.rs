@@ -3,7 +3,8 @@
 //! CONFIG, 200 pulses at random legal IPIs all acknowledged and applied (STATUS count,
 //! FORCE stream), min-IPI and CRC rejections, the watchdog (timed), staying in fault
 //! while pulses resume, re-arming by NMT start, and SIGTERM (final STATUS, exit 0).
-//! The FORCE stream must have no sequence gap over the whole session.
+//! The FORCE stream must have no sequence gap over the whole session. A second test runs
+//! the Ding muscle (fast preset) behind the stimulator and replays its record offline.
 
 mod common;
 
@@ -13,6 +14,9 @@ use common::*;
 use fes_can::{ErrorCode, NmtCommand, StimLimits, StimState};
 use fes_tests::bus::{HeartbeatSender, HostPort, Tap};
 use fes_tests::vcan::{Backend, CanEnv, with_vcan};
+use sim_muscle::muscle::{Muscle, MuscleConfig};
+use sim_muscle::plant::MusclePlant;
+use sim_muscle::preset::Preset;
 
 /// Host heartbeat period (the DBC's HOST_HEARTBEAT cycle time).
 const HOST_HB: Duration = Duration::from_millis(10);
@@ -380,4 +384,109 @@ fn session(can: &CanEnv) {
         all.len()
     );
     let _ = std::fs::remove_file(&record);
+}
+
+/// The stimulator drives the physiological model (Ding fast preset) as well: no force at
+/// rest, a finite positive force during a 40 Hz train of supramaximal pulses (thesis 5.1:
+/// 200 us), and relaxation afterwards.
+#[test]
+fn ding_muscle_over_can() {
+    with_vcan(|can| {
+        let tap = Tap::open(&can.iface).expect("open the tap");
+        let mut host = HostPort::open(&can.iface).expect("open the host port");
+        let record = std::env::temp_dir().join(format!("stim-ding-{}.csv", std::process::id()));
+        let record_arg = record.to_str().expect("utf-8 temp dir").to_owned();
+        let stim = StimProcess::spawn(
+            &can.iface,
+            &[
+                "--plant",
+                "fast",
+                "--watchdog-ms",
+                "250",
+                "--record",
+                &record_arg,
+            ],
+        );
+        tap.wait_msg(0, Duration::from_secs(10), boot_up)
+            .expect("boot-up message");
+        let hb = HeartbeatSender::start(&can.iface, HOST_HB).unwrap();
+        host.nmt(NmtCommand::Start).unwrap();
+        wait_status(&tap, 0, PROMPT, "armed", |s| s.state == StimState::Armed);
+        let rest = force_after(&tap, Duration::from_millis(20));
+        assert_eq!(rest.force_mn, 0, "a muscle at rest has no force");
+        let i = tap.len();
+        for _ in 0..12 {
+            host.pulse(200, 200).unwrap(); // 20 mA, 200 us
+            std::thread::sleep(Duration::from_millis(25));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let train: Vec<i32> = forces(&tap.frames()[i..])
+            .iter()
+            .map(|f| f.force_mn)
+            .collect();
+        let peak = *train.iter().max().expect("FORCE during the train");
+        std::thread::sleep(Duration::from_millis(1500));
+        let relaxed = force_after(&tap, Duration::ZERO).force_mn;
+        let now = tap.len();
+        let delivered = wait_status(&tap, now, PROMPT, "a fresh STATUS", |_| true)
+            .1
+            .pulses_delivered;
+        println!(
+            "Ding fast muscle: {delivered} pulses delivered, peak force {:.3} N, {:.3} N 1.5 s later",
+            f64::from(peak) / 1e3,
+            f64::from(relaxed) / 1e3
+        );
+        assert!(
+            delivered >= 10,
+            "most of the 40 Hz train was applied ({delivered})"
+        );
+        assert!(peak > 0, "the train produced force");
+        assert!(
+            relaxed.abs() * 20 < peak,
+            "the muscle relaxes (< 5 % of the peak after 1.5 s)"
+        );
+        drop(hb);
+        assert!(stim.terminate().success());
+
+        // Independent replay: the same muscle stepped offline once per tick, with the
+        // pulses at the ticks the stimulator recorded, gives the force it published at
+        // every tick (missed ticks included: the plant is advanced through them).
+        let text = std::fs::read_to_string(&record).expect("the stimulator's record");
+        let _ = std::fs::remove_file(&record);
+        let rows: Vec<Vec<&str>> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect())
+            .collect();
+        let mut muscle = Muscle::new(MuscleConfig::preset(Preset::Fast)).unwrap();
+        let mut force = 0.0;
+        let mut k = 0u64;
+        let mut pulses = 0;
+        let mut worst = 0.0f64;
+        for r in &rows {
+            let tick: u64 = r[0].parse().unwrap();
+            while k < tick {
+                force = muscle.step(None);
+                k += 1;
+            }
+            let published: f64 = r[4].parse().unwrap();
+            worst = worst.max((published - force).abs());
+            let pulse = (!r[5].is_empty()).then(|| sim_muscle::plant::Pulse {
+                amplitude_ma: r[6].parse().unwrap(),
+                width_us: r[7].parse().unwrap(),
+            });
+            pulses += usize::from(pulse.is_some());
+            force = muscle.step(pulse);
+            k += 1;
+        }
+        println!(
+            "offline replay of {} ticks, {pulses} pulses: largest difference {worst:.2e} N",
+            rows.len()
+        );
+        assert_eq!(pulses, 12);
+        assert!(
+            worst <= 1e-6,
+            "published force differs from the replay by {worst} N"
+        );
+    });
 }
