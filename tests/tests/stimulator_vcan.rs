@@ -193,32 +193,39 @@ fn session(can: &CanEnv) {
     //    the check is repeated.
     let mut delivered = 200;
     let mut rejected_pair = None;
+    let rejected = 1u8; // the pre-operational pulse
     for attempt in 0..5 {
         std::thread::sleep(Duration::from_millis(30));
+        let before = settled_force(&tap).force_mn;
         let i = tap.len();
-        let before = force_after(&tap, Duration::ZERO).force_mn;
         let (p1, _) = host.pulse(300, 300).unwrap();
         let (p2, _) = host.pulse(300, 300).unwrap();
-        std::thread::sleep(Duration::from_millis(30));
+        // Wait until STATUS accounts for both frames (applied or rejected), then for two
+        // more FORCE samples, which show the last application; no fixed sleeps, so a
+        // stalled guest only makes this slower.
+        let (j, s) = wait_status(&tap, i, PROMPT, "both frames accounted for", |s| {
+            u32::from(s.rejected.wrapping_sub(rejected))
+                + s.pulses_delivered.wrapping_sub(delivered)
+                == 2
+        });
+        let (j, _, _) = tap.wait_msg(j, PROMPT, force).expect("FORCE flows");
+        tap.wait_msg(j + 1, PROMPT, force).expect("FORCE flows");
         let frames = tap.frames()[i..].to_vec();
+        let after = forces(&frames).last().expect("FORCE frames").force_mn;
         match emcys(&frames).as_slice() {
             [e] if e.code == ErrorCode::MinIpiViolation && e.seq == p2.seq => {
-                delivered += 1;
-                wait_status(&tap, i, PROMPT, "one more delivered", |s| {
-                    s.pulses_delivered == delivered
-                });
-                let after = force_after(&tap, Duration::from_millis(20)).force_mn;
+                assert_eq!(s.pulses_delivered, delivered + 1, "the first pulse applied");
                 assert_eq!(
                     after - before,
                     (charge_uc(&p1) * 1000.0).round() as i32,
                     "only the first pulse applied"
                 );
                 assert!(e.detail <= 1, "IPI {} ms reported", e.detail);
+                delivered += 1;
                 rejected_pair = Some(*e);
                 break;
             }
             [] => {
-                delivered += 2;
                 let f = forces(&frames);
                 let steps: Vec<u32> = f
                     .windows(2)
@@ -228,6 +235,7 @@ fn session(can: &CanEnv) {
                 assert_eq!(steps.len(), 2, "both pulses applied once");
                 let gap = steps[1].wrapping_sub(steps[0]) & 0xFF_FFFF;
                 assert!(gap >= 2000, "an accepted pair applied {gap} us apart");
+                delivered += 2;
                 println!(
                     "attempt {attempt}: the host stalled between the two writes (applied {gap} us apart); again"
                 );

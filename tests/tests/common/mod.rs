@@ -172,6 +172,16 @@ pub fn force_after(tap: &Tap, settle: Duration) -> Force {
     *forces(&tap.frames()).last().expect("FORCE frames flow")
 }
 
+/// The force once everything sent so far has been applied: the FORCE two samples after
+/// a STATUS sent after this call (a pulse shows in FORCE one tick after it is applied,
+/// and STATUS comes no earlier than the tick that applied it).
+pub fn settled_force(tap: &Tap) -> Force {
+    let (i, _) = wait_status(tap, tap.len(), PROMPT, "a fresh STATUS", |_| true);
+    let (j, _, _) = tap.wait_msg(i, PROMPT, force).expect("FORCE flows");
+    let (_, _, f) = tap.wait_msg(j + 1, PROMPT, force).expect("FORCE flows");
+    f
+}
+
 /// xorshift32: a fixed, seedable sequence for the test's random IPIs and pulses.
 pub struct XorShift(pub u32);
 
