@@ -132,12 +132,16 @@ fn interop(can: &CanEnv) {
 
     // The Rust host's own pulses.
     let mut rust_sent = vec![(u32::from(probe.id), probe.payload().to_vec())];
-    for _ in 0..3 {
-        std::thread::sleep(Duration::from_millis(10));
+    for n in 2..=4 {
+        // Each waits for the previous one to be applied, so a stalled guest cannot
+        // squeeze two into one tick.
         let (_, f) = host.pulse(150, 100).unwrap();
         rust_sent.push((u32::from(f.id), f.payload().to_vec()));
+        wait_status(&tap, 0, PROMPT, "the Rust pulse delivered", |s| {
+            s.pulses_delivered == n
+        });
+        std::thread::sleep(Duration::from_millis(5));
     }
-    wait_status(&tap, 0, PROMPT, "4 delivered", |s| s.pulses_delivered == 4);
 
     let exit = stim.terminate();
     assert!(exit.success(), "test-stimulator exit status {exit}");
