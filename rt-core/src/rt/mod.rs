@@ -12,6 +12,7 @@
 //!   without I/O ([`PatternLoop`] around a [`TickSource`]).
 //! - [`process_config`], [`runner`], [`signals`]: the rt-core process (configuration file,
 //!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM).
+//! - [`probe`]: file formats of the `rt-probe` measurement process.
 
 pub mod alloc;
 pub mod clock;
@@ -20,6 +21,7 @@ pub mod feedback;
 pub mod generator;
 pub mod histogram;
 pub mod hlog;
+pub mod probe;
 pub mod process_config;
 pub mod realtime;
 pub mod reference;

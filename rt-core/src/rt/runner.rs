@@ -10,9 +10,8 @@
 //! blocks); notify the tick event; push the tick's timing into the telemetry queue. Nothing
 //! on this path allocates, locks, logs or blocks; failures are counted, not logged.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
@@ -67,7 +66,11 @@ fn port_err(port: &'static str) -> impl Fn(&dyn std::fmt::Debug) -> RunError {
 /// process installs [`super::signals::install_stop_handler`]).
 pub fn create_node(name: &str) -> Result<Node<ipc::Service>, RunError> {
     let node_name = NodeName::new(name).map_err(|e| RunError::Node(format!("{e:?}")))?;
+    // An explicit default configuration: iceoryx2's defaults, without its warning that no
+    // global configuration file was found.
+    let config = iceoryx2::config::Config::default();
     NodeBuilder::new()
+        .config(&config)
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
@@ -142,6 +145,14 @@ pub fn run_pattern_loop<S: TickSource>(
     references
         .update_connections()
         .map_err(|e| port_err("Reference connections")(&e))?;
+    if let Some(n) = &notifier {
+        n.update_connections()
+            .map_err(|e| port_err("stim-tick event connections")(&e))?;
+    }
+    if let Some(f) = &force_subscriber {
+        f.update_connections()
+            .map_err(|e| port_err("ForceSample connections")(&e))?;
+    }
 
     let mut generator = PatternLoop::new(
         source,
@@ -164,7 +175,7 @@ pub fn run_pattern_loop<S: TickSource>(
 
     // ---- hot path from here on: no allocation, lock, log or blocking call ----
     alloc::track_current_thread(true);
-    let alloc_baseline = alloc::current_thread_allocations().allocations;
+    let alloc_baseline = alloc::current_thread_allocations();
     let counters = &telemetry.counters;
     let max_references = Reference::QOS.subscriber_buffer;
     let max_forces = ForceSample::QOS.subscriber_buffer;
@@ -228,8 +239,13 @@ pub fn run_pattern_loop<S: TickSource>(
         if events.source_fault {
             LoopCounters::bump(&counters.source_faults, 1);
         }
+        let allocs = alloc::current_thread_allocations();
         counters.hot_path_allocations.store(
-            alloc::current_thread_allocations().allocations - alloc_baseline,
+            allocs.allocations - alloc_baseline.allocations,
+            Ordering::Relaxed,
+        );
+        counters.pool_allocations.store(
+            allocs.pool_allocations - alloc_baseline.pool_allocations,
             Ordering::Relaxed,
         );
         telemetry.push(TickTiming {
@@ -279,8 +295,6 @@ pub struct TelemetrySettings {
     pub node_name: String,
     /// Service-name prefix.
     pub prefix: String,
-    /// Interval log to write, if any.
-    pub hlog: Option<PathBuf>,
     /// Period of reports and hlog intervals.
     pub report_period: Duration,
     /// Who is reporting.
@@ -293,7 +307,6 @@ impl TelemetrySettings {
         Self {
             node_name: "rt-core-telemetry".to_owned(),
             prefix: config.ipc.prefix.clone(),
-            hlog: config.telemetry.hlog.clone(),
             report_period: Duration::from_millis(config.telemetry.report_period_ms),
             source: TimingSource::RtCore,
         }
@@ -304,13 +317,16 @@ impl TelemetrySettings {
 pub const DRAIN_PERIOD: Duration = Duration::from_millis(10);
 
 /// Runs the telemetry thread (normal priority) until `stop` is set: drains `channel` every
-/// [`DRAIN_PERIOD`], and every report period writes an hlog interval and publishes a
-/// cumulative [`TimingReport`]. On stop it drains what is left and writes the final interval
-/// and the final report ([`TimingReport::FLAG_FINAL`]), which it also returns.
+/// [`DRAIN_PERIOD`], and every report period writes an interval to `hlog` (if given) and
+/// publishes a cumulative [`TimingReport`]. `on_ready` is called once its port exists. On
+/// stop it drains what is left and writes the final interval and the final report
+/// ([`TimingReport::FLAG_FINAL`]), which it also returns.
 pub fn run_telemetry(
     settings: &TelemetrySettings,
+    mut hlog: Option<HlogWriter>,
     channel: &TelemetryChannel,
     stop: &AtomicBool,
+    on_ready: impl FnOnce(),
 ) -> Result<TimingReport, RunError> {
     let node = create_node(&settings.node_name)?;
     let service = open_pubsub::<TimingReport>(&node, &settings.prefix)?;
@@ -319,18 +335,8 @@ pub fn run_telemetry(
         .backpressure_strategy(BACKPRESSURE)
         .create()
         .map_err(|e| port_err("TimingReport publisher")(&e))?;
+    on_ready();
     let start = Instant::now();
-    let mut hlog = match &settings.hlog {
-        Some(path) => Some(HlogWriter::create(
-            path,
-            &format!(
-                "{:?} timing: wake-up lateness, compute, publish",
-                settings.source
-            ),
-            SystemTime::now(),
-        )?),
-        None => None,
-    };
     let mut aggregator = TimingAggregator::new();
     let mut seq = 0u64;
     let mut interval_start = Duration::ZERO;

@@ -39,8 +39,11 @@ pub struct LoopCounters {
     pub overruns: AtomicU64,
     /// Inputs rejected by validation or ordering.
     pub rejected_inputs: AtomicU64,
-    /// Allocations made by the real-time thread after start-up.
+    /// System-heap allocations made by the real-time thread after start-up (must stay 0).
     pub hot_path_allocations: AtomicU64,
+    /// Allocations the real-time thread took from the real-time pool of
+    /// [`super::alloc::CountingAllocator`] (iceoryx2's one `Rc` per publish).
+    pub pool_allocations: AtomicU64,
     /// Ticks on which the tick source produced a non-finite value.
     pub source_faults: AtomicU64,
     /// Failed publishes (loan or send errors).
@@ -60,8 +63,10 @@ pub struct CounterSnapshot {
     pub overruns: u64,
     /// Inputs rejected.
     pub rejected_inputs: u64,
-    /// Hot-path allocations.
+    /// Hot-path heap allocations.
     pub hot_path_allocations: u64,
+    /// Hot-path pool allocations.
+    pub pool_allocations: u64,
     /// Source faults.
     pub source_faults: u64,
     /// Publish errors.
@@ -87,6 +92,7 @@ impl LoopCounters {
             overruns: r(&self.overruns),
             rejected_inputs: r(&self.rejected_inputs),
             hot_path_allocations: r(&self.hot_path_allocations),
+            pool_allocations: r(&self.pool_allocations),
             source_faults: r(&self.source_faults),
             publish_errors: r(&self.publish_errors),
             receive_errors: r(&self.receive_errors),
