@@ -13,14 +13,15 @@ pub enum MissingRightsPolicy {
     BestEffort,
 }
 
-/// Real-time settings of one thread. Defaults (bench): SCHED_FIFO priority 80, core 1,
+/// Real-time settings of one thread. Defaults (bench): SCHED_FIFO priority 80, not pinned,
 /// best-effort, memory locked, 256 KiB of stack prefaulted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RtConfig {
     /// SCHED_FIFO priority, 1..=99 (cyclictest's `-p`). Default 80.
     pub priority: u8,
-    /// CPU core to pin the thread to (cyclictest's `-a`); `None` = do not pin. Default 1.
+    /// CPU core to pin the thread to (cyclictest's `-a`); absent = not pinned (the default:
+    /// which core is isolated for real time is a deployment decision).
     pub core: Option<usize>,
     /// Refuse or run best-effort when a guarantee is missing. Default best-effort.
     pub on_missing_rights: MissingRightsPolicy,
@@ -35,7 +36,7 @@ impl Default for RtConfig {
     fn default() -> Self {
         Self {
             priority: 80,
-            core: Some(1),
+            core: None,
             on_missing_rights: MissingRightsPolicy::BestEffort,
             lock_memory: true,
             prefault_stack_bytes: 256 * 1024,

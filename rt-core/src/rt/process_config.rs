@@ -12,7 +12,7 @@
 //!
 //! [rt]                             # see RtConfig
 //! priority = 80
-//! core = 1
+//! core = 1                       # omit: not pinned
 //! on_missing_rights = "refuse"     # or "best-effort"
 //! lock_memory = true
 //! prefault_stack_bytes = 262144

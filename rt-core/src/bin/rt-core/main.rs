@@ -44,7 +44,7 @@ CONFIGURATION FILE (TOML, schema \"fes-rt-core/1\"; `--print-example-config` pri
     ipi_ticks = 20            fires every 20 ticks while the reference is > 0
   [rt]                        real-time settings of the loop thread
     priority = 80             SCHED_FIFO priority 1..=99
-    core = 1                  CPU core to pin to (omit: not pinned)
+    core = 1                  CPU core to pin to (default: not pinned)
     on_missing_rights = \"best-effort\"   or \"refuse\" (rig): without SCHED_FIFO rights,
                               a missing core or unlockable memory, refuse to start
     lock_memory = true        mlockall(MCL_CURRENT|MCL_FUTURE)

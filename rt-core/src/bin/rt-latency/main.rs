@@ -466,7 +466,7 @@ fn publish_references(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
     let mut seq = 0;
     while !stop.load(Ordering::Relaxed) {
         seq += 1;
-        let force = if start.elapsed().as_secs() % 2 == 0 {
+        let force = if start.elapsed().as_secs().is_multiple_of(2) {
             0.2
         } else {
             0.6
