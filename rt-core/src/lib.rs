@@ -23,4 +23,5 @@ pub mod dataset;
 pub mod ident;
 pub mod model;
 pub mod msg;
+pub mod num;
 pub mod rt;

@@ -1,0 +1,498 @@
+//! A complete Local Model Network described in its parameterisation: what the model file
+//! stores and what identification, analysis and `modify` work on.
+//!
+//! [`Lmn::validate`] checks every invariant and names the offending field with the model
+//! file's field names (`ts_s`, `units[2].eigenvalues[1]`, ...). [`Lmn::network`] builds the
+//! run-time [`Network`].
+
+use super::arx::{ArxUnit, MAX_ARX_ORDER, delta_to_shift, shift_poles};
+use super::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel, eigenvalue_in_region};
+use super::network::{MAX_DELAY, Network, NetworkError};
+use super::scheduling::{Scheduler, SchedulingSpec};
+use super::validity::ValidityFunctions;
+use nalgebra::Complex;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The local model structure and parameterisation (names used by the CLI and the file).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Structure {
+    /// State space, A, b, c, dx, dy free (11 per unit).
+    SsDirect,
+    /// State space, real eigensystem with local eigenvectors (eq. 5.5).
+    SsEigLocal,
+    /// State space, real eigensystem with common eigenvectors (eq. 5.6), gauge-fixed.
+    SsEigCommon,
+    /// ARX in shift form (eq. 2.20-2.24).
+    ArxShift,
+    /// ARX with delta-domain parameters (D.2.2), simulated in shift form.
+    ArxDelta,
+}
+
+impl Structure {
+    /// Every structure, in a fixed order.
+    pub const ALL: [Structure; 5] = [
+        Self::SsDirect,
+        Self::SsEigLocal,
+        Self::SsEigCommon,
+        Self::ArxShift,
+        Self::ArxDelta,
+    ];
+
+    /// The name used in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SsDirect => "ss-direct",
+            Self::SsEigLocal => "ss-eig-local",
+            Self::SsEigCommon => "ss-eig-common",
+            Self::ArxShift => "arx-shift",
+            Self::ArxDelta => "arx-delta",
+        }
+    }
+
+    /// True for the state-space structures.
+    pub fn is_state_space(self) -> bool {
+        matches!(self, Self::SsDirect | Self::SsEigLocal | Self::SsEigCommon)
+    }
+}
+
+impl core::fmt::Display for Structure {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl core::str::FromStr for Structure {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|x| x.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Self::ALL.iter().map(|x| x.name()).collect();
+                format!(
+                    "unknown structure {s:?} (expected one of {})",
+                    names.join(", ")
+                )
+            })
+    }
+}
+
+/// The per-unit parameters, in the structure's own parameterisation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LocalModelSet {
+    /// `ss-direct`.
+    SsDirect(Vec<SsLocalModel<f64>>),
+    /// `ss-eig-local`.
+    SsEigLocal(Vec<EigLocalUnit<f64>>),
+    /// `ss-eig-common` in the gauge-fixed modal coordinates (b of `reference_unit` = (1, 1)).
+    SsEigCommon {
+        /// Units.
+        units: Vec<EigCommonUnit<f64>>,
+        /// The unit r whose b is fixed at (1, 1).
+        reference_unit: usize,
+    },
+    /// `arx-shift`: [`ArxUnit`] in shift form.
+    ArxShift {
+        /// n = 1..=3.
+        order: usize,
+        /// Units.
+        units: Vec<ArxUnit<f64>>,
+    },
+    /// `arx-delta`: [`ArxUnit`] in delta form.
+    ArxDelta {
+        /// n = 1..=3.
+        order: usize,
+        /// Units.
+        units: Vec<ArxUnit<f64>>,
+    },
+}
+
+impl LocalModelSet {
+    /// The structure.
+    pub fn structure(&self) -> Structure {
+        match self {
+            Self::SsDirect(_) => Structure::SsDirect,
+            Self::SsEigLocal(_) => Structure::SsEigLocal,
+            Self::SsEigCommon { .. } => Structure::SsEigCommon,
+            Self::ArxShift { .. } => Structure::ArxShift,
+            Self::ArxDelta { .. } => Structure::ArxDelta,
+        }
+    }
+
+    /// Number of units.
+    pub fn len(&self) -> usize {
+        match self {
+            Self::SsDirect(u) => u.len(),
+            Self::SsEigLocal(u) => u.len(),
+            Self::SsEigCommon { units, .. } => units.len(),
+            Self::ArxShift { units, .. } | Self::ArxDelta { units, .. } => units.len(),
+        }
+    }
+
+    /// True when there are no units.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Where a model came from (free-form; the four error/timing keys have fixed names).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// Training MSPE (eq. B.8, one-step prediction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_mspe: Option<f64>,
+    /// Training MSSE (eq. B.8, free-run simulation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_msse: Option<f64>,
+    /// Test MSSE.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_msse: Option<f64>,
+    /// Wall-clock time of the fit in seconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit_seconds: Option<f64>,
+    /// Anything else: data set, seed, tool version, date, ...
+    #[serde(flatten)]
+    pub extra: BTreeMap<String, serde_json::Value>,
+}
+
+/// Why a model description is invalid. Every message names the field (file names).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LmnError {
+    /// A field has an invalid value.
+    #[error("{field}: {problem}")]
+    Invalid {
+        /// The field, e.g. `units[2].eigenvalues[1]`.
+        field: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A local model is unstable (some pole has |1 + Ts p| >= 1, Fig. D.4).
+    #[error(
+        "units[{unit}]: local model is unstable: max |1 + Ts p| = {radius:.6} >= 1 (poles {poles}); open it with the stability check disabled to repair it"
+    )]
+    Unstable {
+        /// The unit.
+        unit: usize,
+        /// max |1 + Ts p|.
+        radius: f64,
+        /// The poles, formatted.
+        poles: String,
+    },
+}
+
+fn invalid(field: impl Into<String>, problem: impl Into<String>) -> LmnError {
+    LmnError::Invalid {
+        field: field.into(),
+        problem: problem.into(),
+    }
+}
+
+/// Stability of one local model (delta domain, Fig. D.4).
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnitStability {
+    /// Unit index.
+    pub unit: usize,
+    /// Delta-domain poles p (for ARX: (z - 1)/Ts of the shift-domain poles z).
+    pub poles: Vec<Complex<f64>>,
+    /// max |1 + Ts p| (the shift-domain pole magnitude); < 1 is stable.
+    pub radius: f64,
+    /// radius < 1.
+    pub stable: bool,
+}
+
+/// Whether [`Lmn::validate`] requires every local model to be stable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stability {
+    /// Reject unstable local models and eigenvalues outside (-1/Ts, 0) (the default).
+    Require,
+    /// Accept them (analysis and repair must open an unstable model); see
+    /// [`Lmn::stability`].
+    Report,
+}
+
+/// A complete Local Model Network in its parameterisation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lmn {
+    /// Sampling period Ts in seconds.
+    pub ts: f64,
+    /// Input delay d in samples.
+    pub delay: usize,
+    /// The scheduling variable.
+    pub scheduling: SchedulingSpec,
+    /// The validity functions (knots and order).
+    pub validity: ValidityFunctions<f64>,
+    /// The local models.
+    pub local: LocalModelSet,
+    /// Offsets fixed at zero (thesis 6.5.3): every dx and dy must be 0.
+    pub zero_offsets: bool,
+    /// Newtons per normalised force unit.
+    pub force_scale_n: f64,
+    /// Where the model came from.
+    pub provenance: Provenance,
+}
+
+impl Lmn {
+    /// The structure.
+    pub fn structure(&self) -> Structure {
+        self.local.structure()
+    }
+
+    /// Number of units M.
+    pub fn units(&self) -> usize {
+        self.validity.units()
+    }
+
+    /// Checks every invariant (module docs); with [`Stability::Require`] also that every
+    /// local model is stable and every eigenvalue is in (-1/Ts, 0).
+    pub fn validate(&self, stability: Stability) -> Result<(), LmnError> {
+        if !(self.ts.is_finite() && self.ts > 0.0) {
+            return Err(invalid(
+                "ts_s",
+                format!("sampling period {} must be finite and > 0", self.ts),
+            ));
+        }
+        if self.delay > MAX_DELAY {
+            return Err(invalid(
+                "delay_samples",
+                format!("{} exceeds the maximum {MAX_DELAY}", self.delay),
+            ));
+        }
+        Scheduler::new(&self.scheduling, self.ts)
+            .map_err(|e| invalid("scheduling", e.to_string()))?;
+        if !(self.force_scale_n.is_finite() && self.force_scale_n > 0.0) {
+            return Err(invalid(
+                "force_scale_n",
+                format!("{} must be finite and > 0", self.force_scale_n),
+            ));
+        }
+        let m = self.validity.units();
+        if self.local.len() != m {
+            return Err(invalid(
+                "units",
+                format!(
+                    "{} units given but the knots ({}) and order ({}) define {m}",
+                    self.local.len(),
+                    self.validity.knots().len(),
+                    self.validity.order()
+                ),
+            ));
+        }
+        let ts = self.ts;
+        let finite = |i: usize, name: &str, vals: &[f64]| -> Result<(), LmnError> {
+            for (j, v) in vals.iter().enumerate() {
+                if !v.is_finite() {
+                    let field = if vals.len() == 1 {
+                        format!("units[{i}].{name}")
+                    } else {
+                        format!("units[{i}].{name}[{j}]")
+                    };
+                    return Err(invalid(field, format!("{v} is not a finite number")));
+                }
+            }
+            Ok(())
+        };
+        let zero = |i: usize, dx: &[f64], dy: f64| -> Result<(), LmnError> {
+            if self.zero_offsets {
+                if dx.iter().any(|v| *v != 0.0) {
+                    return Err(invalid(
+                        format!("units[{i}].dx"),
+                        "must be zero when zero_offsets is true",
+                    ));
+                }
+                if dy != 0.0 {
+                    return Err(invalid(
+                        format!("units[{i}].dy"),
+                        "must be zero when zero_offsets is true",
+                    ));
+                }
+            }
+            Ok(())
+        };
+        let eig_check = |i: usize, e: &[f64; 2]| -> Result<(), LmnError> {
+            finite(i, "eigenvalues", e)?;
+            if stability == Stability::Require {
+                for (j, v) in e.iter().enumerate() {
+                    if !eigenvalue_in_region(*v, ts) {
+                        return Err(invalid(
+                            format!("units[{i}].eigenvalues[{j}]"),
+                            format!(
+                                "eigenvalue {v} is outside the region (-1/Ts, 0) = ({}, 0)",
+                                -1.0 / ts
+                            ),
+                        ));
+                    }
+                }
+            }
+            Ok(())
+        };
+        let ss_common = |i: usize, b: &[f64; 2], c: &[f64; 2], dx: &[f64; 2], dy: f64| {
+            finite(i, "b", b)?;
+            finite(i, "c", c)?;
+            finite(i, "dx", dx)?;
+            finite(i, "dy", &[dy])?;
+            zero(i, dx, dy)
+        };
+        match &self.local {
+            LocalModelSet::SsDirect(units) => {
+                for (i, u) in units.iter().enumerate() {
+                    finite(i, "a", &[u.a[0][0], u.a[0][1], u.a[1][0], u.a[1][1]])?;
+                    ss_common(i, &u.b, &u.c, &u.dx, u.dy)?;
+                }
+            }
+            LocalModelSet::SsEigLocal(units) => {
+                for (i, u) in units.iter().enumerate() {
+                    eig_check(i, &u.eigenvalues)?;
+                    finite(i, "eigenvector_angles_rad", &u.eigenvector_angles)?;
+                    ss_common(i, &u.b, &u.c, &u.dx, u.dy)?;
+                    if u.to_local_model().is_none() {
+                        return Err(invalid(
+                            format!("units[{i}].eigenvector_angles_rad"),
+                            "the two eigenvectors are parallel (V is singular)",
+                        ));
+                    }
+                }
+            }
+            LocalModelSet::SsEigCommon {
+                units,
+                reference_unit,
+            } => {
+                for (i, u) in units.iter().enumerate() {
+                    eig_check(i, &u.eigenvalues)?;
+                    ss_common(i, &u.b, &u.c, &u.dx, u.dy)?;
+                }
+                let r = *reference_unit;
+                let Some(ru) = units.get(r) else {
+                    return Err(invalid(
+                        "reference_unit",
+                        format!("unit {r} does not exist ({m} units)"),
+                    ));
+                };
+                if ru.b != [1.0, 1.0] {
+                    return Err(invalid(
+                        format!("units[{r}].b"),
+                        format!(
+                            "the reference unit's b must be (1, 1) in the gauge-fixed form, found ({}, {})",
+                            ru.b[0], ru.b[1]
+                        ),
+                    ));
+                }
+            }
+            LocalModelSet::ArxShift { order, units } | LocalModelSet::ArxDelta { order, units } => {
+                if !(1..=MAX_ARX_ORDER).contains(order) {
+                    return Err(invalid(
+                        "units",
+                        format!("ARX order {order} is outside 1..={MAX_ARX_ORDER}"),
+                    ));
+                }
+                for (i, u) in units.iter().enumerate() {
+                    finite(i, "a", &u.a[..*order])?;
+                    finite(i, "b", &u.b[..*order])?;
+                    finite(i, "d", &[u.d])?;
+                    if self.zero_offsets && u.d != 0.0 {
+                        return Err(invalid(
+                            format!("units[{i}].d"),
+                            "must be zero when zero_offsets is true",
+                        ));
+                    }
+                }
+            }
+        }
+        if stability == Stability::Require {
+            for s in self.stability() {
+                if !s.stable {
+                    let poles: Vec<String> = s.poles.iter().map(|p| format!("{p:.4}")).collect();
+                    return Err(LmnError::Unstable {
+                        unit: s.unit,
+                        radius: s.radius,
+                        poles: poles.join(", "),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The state-space local models in direct form (`None` for ARX structures or parallel
+    /// eigenvectors).
+    pub fn ss_units(&self) -> Option<Vec<SsLocalModel<f64>>> {
+        match &self.local {
+            LocalModelSet::SsDirect(u) => Some(u.clone()),
+            LocalModelSet::SsEigLocal(u) => u.iter().map(|x| x.to_local_model()).collect(),
+            LocalModelSet::SsEigCommon { units, .. } => {
+                Some(units.iter().map(|x| x.to_local_model()).collect())
+            }
+            _ => None,
+        }
+    }
+
+    /// ARX order and shift-form units (delta form converted exactly); `None` for state space.
+    pub fn arx_shift_units(&self) -> Option<(usize, Vec<ArxUnit<f64>>)> {
+        match &self.local {
+            LocalModelSet::ArxShift { order, units } => Some((*order, units.clone())),
+            LocalModelSet::ArxDelta { order, units } => Some((
+                *order,
+                units
+                    .iter()
+                    .map(|u| delta_to_shift(u, *order, self.ts))
+                    .collect(),
+            )),
+            _ => None,
+        }
+    }
+
+    /// Per-unit stability (delta-domain poles and max |1 + Ts p|).
+    pub fn stability(&self) -> Vec<UnitStability> {
+        let ts = self.ts;
+        if let Some(units) = self.ss_units() {
+            units
+                .iter()
+                .enumerate()
+                .map(|(unit, m)| {
+                    let poles = m.poles().to_vec();
+                    let radius = m.stability_radius(ts);
+                    UnitStability {
+                        unit,
+                        poles,
+                        radius,
+                        stable: radius < 1.0,
+                    }
+                })
+                .collect()
+        } else if let Some((n, units)) = self.arx_shift_units() {
+            units
+                .iter()
+                .enumerate()
+                .map(|(unit, m)| {
+                    let z = shift_poles(m, n);
+                    let radius = z.iter().map(|z| z.norm()).fold(0.0, f64::max);
+                    let poles = z.iter().map(|z| (z - 1.0) / ts).collect();
+                    UnitStability {
+                        unit,
+                        poles,
+                        radius,
+                        stable: radius < 1.0,
+                    }
+                })
+                .collect()
+        } else {
+            Vec::new()
+        }
+    }
+
+    /// The run-time network (validates without the stability requirement first).
+    pub fn network(&self) -> Result<Network<f64>, LmnError> {
+        self.validate(Stability::Report)?;
+        let scheduler = Scheduler::new(&self.scheduling, self.ts)
+            .map_err(|e| invalid("scheduling", e.to_string()))?;
+        let net = if let Some(units) = self.ss_units() {
+            Network::state_space(self.ts, self.delay, self.validity, scheduler, &units)
+        } else if let Some((n, units)) = self.arx_shift_units() {
+            Network::arx(self.ts, self.delay, self.validity, scheduler, n, &units)
+        } else {
+            return Err(invalid("units", "eigenvectors are parallel"));
+        };
+        net.map_err(|e: NetworkError| invalid("units", e.to_string()))
+    }
+}
