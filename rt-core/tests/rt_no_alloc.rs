@@ -11,18 +11,20 @@ use rt_core::rt::alloc::CountingAllocator;
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::runner::{create_node, run_pattern_loop};
-use rt_core::rt::source::TestPattern;
+use rt_core::rt::source::{ControllerSource, TestPattern, TickSource};
 use rt_core::rt::telemetry::TelemetryChannel;
 use rt_core::rt::{MissingRightsPolicy, RtConfig};
+
+mod rt_common;
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 const TICKS: u64 = 400;
 
-#[test]
-fn the_loop_makes_no_heap_allocation_and_exactly_one_pool_allocation_per_publish() {
-    let prefix = format!("noalloc{}", std::process::id());
+/// Runs the real loop with `source` for [`TICKS`] ticks and checks the allocation counts.
+fn run_counting<S: TickSource + Send>(source: S, name: &str) {
+    let prefix = format!("noalloc{name}{}", std::process::id());
     let mut config = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 3 });
     config.ipc.prefix = prefix.clone();
     config.rt = RtConfig {
@@ -52,14 +54,7 @@ fn the_loop_makes_no_heap_allocation_and_exactly_one_pool_allocation_per_publish
     std::thread::scope(|s| {
         let rt = s.spawn(|| {
             let node = create_node("noalloc-loop").unwrap();
-            run_pattern_loop(
-                &node,
-                &config,
-                TestPattern::new(3).unwrap(),
-                &telemetry,
-                &stop,
-                |_| {},
-            )
+            run_pattern_loop(&node, &config, source, &telemetry, &stop, |_| {})
         });
         let deadline = Instant::now() + Duration::from_secs(20);
         while telemetry.counters.snapshot().ticks < TICKS {
@@ -95,4 +90,19 @@ fn the_loop_makes_no_heap_allocation_and_exactly_one_pool_allocation_per_publish
     assert!(received.iter().all(|t| t.validate().is_ok()));
     assert!(received.iter().any(|t| t.fires()));
     assert!(received.iter().filter(|t| t.ref_seq > 0).count() > 10);
+}
+
+#[test]
+fn the_loop_makes_no_heap_allocation_and_exactly_one_pool_allocation_per_publish() {
+    run_counting(TestPattern::new(3).unwrap(), "pattern");
+}
+
+#[test]
+fn so_does_the_loop_running_a_ten_unit_pattern_generator() {
+    let dir = rt_common::Scratch::new("noalloc");
+    let path = dir.path("controller.json");
+    rt_common::write_controller(&path, 10);
+    let source = ControllerSource::load(&path, Duration::from_millis(1)).unwrap();
+    assert_eq!(source.units(), 10);
+    run_counting(source, "controller");
 }

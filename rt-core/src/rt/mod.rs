@@ -34,4 +34,4 @@ pub use clock::{PeriodicClock, PeriodicSchedule, Wakeup, monotonic_ns};
 pub use config::{MissingRightsPolicy, RtConfig};
 pub use generator::{PatternLoop, PulseSettings};
 pub use realtime::{RtError, RtShortfall, RtStatus, enter_realtime};
-pub use source::{TestPattern, TickDecision, TickSource};
+pub use source::{ControllerSource, TestPattern, TickDecision, TickSource};

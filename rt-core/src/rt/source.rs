@@ -5,6 +5,14 @@
 //! -> LMN, Fig. 6.8) in production. A source is called exactly once per wake-up: after a
 //! stall it is *not* called for the skipped periods, so it can never emit a catch-up burst.
 
+use std::path::Path;
+use std::time::Duration;
+
+use crate::control::file::{Controller, ControllerFileError};
+use crate::control::pattern_generator::{
+    FeedbackMode, PatternGenerator, PatternGeneratorError, TickInput,
+};
+
 /// The decision of one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TickDecision {
@@ -50,6 +58,109 @@ pub trait TickSource {
     /// Shortest spacing between two pulses, in ticks, that this source guarantees (the
     /// thesis's shaper: a pulse is always followed by at least one empty sample, so 2).
     fn min_pulse_gap_ticks(&self) -> u32;
+}
+
+/// The thesis's pattern generator (LCN -> pulse shaper -> LMN, Fig. 6.8) as a tick source,
+/// built from a validated controller file (schema "fes-lcn/1").
+#[derive(Debug, Clone)]
+pub struct ControllerSource {
+    generator: PatternGenerator,
+    min_gap_ticks: u32,
+    units: usize,
+    mode: FeedbackMode,
+}
+
+/// The controller cannot run in this loop.
+#[derive(Debug, thiserror::Error)]
+pub enum ControllerSourceError {
+    /// The controller file is unreadable or invalid.
+    #[error(transparent)]
+    File(#[from] ControllerFileError),
+    /// The pattern generator cannot be built from it.
+    #[error(transparent)]
+    Generator(#[from] PatternGeneratorError),
+    /// The controller was designed for another sampling period than the loop's.
+    #[error(
+        "the controller's model samples at {model_ts_us} us but the loop period is \
+         {period_us} us (period_us must equal the model's Ts)"
+    )]
+    Period {
+        /// The model's sampling period, µs.
+        model_ts_us: f64,
+        /// The loop period, µs.
+        period_us: f64,
+    },
+}
+
+impl ControllerSource {
+    /// Reads and validates a controller file and checks that its model's sampling period is
+    /// the loop `period`.
+    pub fn load(path: &Path, period: Duration) -> Result<Self, ControllerSourceError> {
+        Self::from_controller(&Controller::load(path)?, period)
+    }
+
+    /// Builds the source from a validated controller.
+    pub fn from_controller(
+        controller: &Controller,
+        period: Duration,
+    ) -> Result<Self, ControllerSourceError> {
+        let model_ts = controller.network.ts();
+        let period_s = period.as_secs_f64();
+        if (model_ts - period_s).abs() > 1e-9 * period_s.max(model_ts) {
+            return Err(ControllerSourceError::Period {
+                model_ts_us: model_ts * 1e6,
+                period_us: period_s * 1e6,
+            });
+        }
+        let generator = controller.pattern_generator()?;
+        Ok(Self {
+            units: generator.network().units(),
+            mode: generator.mode(),
+            generator,
+            min_gap_ticks: controller.settings.shaper.min_gap.saturating_add(1),
+        })
+    }
+
+    /// Number of local models (units).
+    pub fn units(&self) -> usize {
+        self.units
+    }
+
+    /// The controller's feedback mode.
+    pub fn mode(&self) -> FeedbackMode {
+        self.mode
+    }
+
+    /// The wrapped pattern generator.
+    pub fn generator(&self) -> &PatternGenerator {
+        &self.generator
+    }
+}
+
+impl TickSource for ControllerSource {
+    #[inline]
+    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision {
+        let out = self.generator.tick(&TickInput {
+            reference,
+            measured_force,
+        });
+        TickDecision {
+            pulse: out.pulse,
+            u_cont: out.u_cont,
+            energy: out.energy,
+            model_force: out.model_force,
+            predicted_force: out.predicted_force,
+            phi: out.phi,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.generator.reset();
+    }
+
+    fn min_pulse_gap_ticks(&self) -> u32 {
+        self.min_gap_ticks
+    }
 }
 
 /// Invalid [`TestPattern`].

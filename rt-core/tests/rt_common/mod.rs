@@ -192,3 +192,20 @@ pub fn read_ticks(dir: &Scratch) -> Vec<TickRecord> {
     ))
     .unwrap()
 }
+
+#[path = "../control_support/mod.rs"]
+mod control_support;
+
+/// Designs a controller for the control tests' fast-muscle-like LMN with `units` units
+/// (thesis Table 6.1 rise times, xi = 1.2) through the control library, and writes it.
+pub fn write_controller(path: &Path, units: usize) -> rt_core::control::file::Controller {
+    use rt_core::control::file::{Controller, ControllerSettings};
+    let controller = Controller::design(
+        control_support::fast_muscle(units),
+        &control_support::table_6_1_specs(units),
+        ControllerSettings::default(),
+    )
+    .unwrap();
+    controller.save(path).unwrap();
+    controller
+}

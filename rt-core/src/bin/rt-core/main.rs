@@ -138,7 +138,7 @@ fn run(cli: &Cli) -> Result<(), Failure> {
         .as_deref()
         .ok_or_else(|| anyhow!("--config is required"))?;
     let config = RtCoreConfig::load(path).context("configuration")?;
-    let source = Source::load(&config.source, config.period())?;
+    let source = Source::load(&config.source, config.period(), config.feedback.enabled)?;
     info!(
         "config {}: period {} us, source {}, prefix {:?}",
         path.display(),
