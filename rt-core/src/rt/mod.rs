@@ -17,6 +17,7 @@
 pub mod alloc;
 pub mod clock;
 pub mod config;
+pub mod error_text;
 pub mod feedback;
 pub mod generator;
 pub mod histogram;

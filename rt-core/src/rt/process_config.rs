@@ -303,9 +303,12 @@ impl RtCoreConfig {
         })?;
         if let SourceConfig::Controller { path: controller } = &mut config.source
             && controller.is_relative()
-            && let Some(dir) = path.parent()
         {
-            *controller = dir.join(&*controller);
+            let dir = path.parent().unwrap_or(Path::new(""));
+            let joined = dir.join(&*controller);
+            // Absolute, so that the configuration can be written elsewhere and still point
+            // at the same file.
+            *controller = std::path::absolute(&joined).unwrap_or(joined);
         }
         Ok(config)
     }

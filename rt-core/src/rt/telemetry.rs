@@ -168,6 +168,8 @@ pub const TAG_COMPUTE: &str = "compute";
 pub const TAG_PUBLISH: &str = "publish";
 /// hlog tag of publish-to-receive latency (written by receivers).
 pub const TAG_IPC: &str = "ipc";
+/// hlog tag of a receiver's own receive cost: from its wake-up to the sample in hand.
+pub const TAG_RECEIVE: &str = "receive";
 
 /// The telemetry thread's state: cumulative and per-interval histograms.
 #[derive(Debug, Clone, Default)]

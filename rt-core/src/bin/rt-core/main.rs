@@ -120,7 +120,7 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
         Err(Failure::Other(e)) => {
-            error!("{e:#}");
+            error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
             ExitCode::from(1)
         }
     }
@@ -184,17 +184,27 @@ fn run(cli: &Cli) -> Result<(), Failure> {
             let report = telemetry_thread
                 .join()
                 .map_err(|_| anyhow!("the telemetry thread panicked"))??;
+            let us = |ns: u64| ns as f64 / 1000.0;
             info!(
-                "final timing: {} ticks, {} missed periods, {} hot-path allocations, \
-                 {} queue overflows; wake-up lateness p50/p99/p99.9/max = {}/{}/{}/{} ns",
+                "final timing: {} ticks, {} missed periods, {} hot-path heap allocations, \
+                 {} queue overflows; p50/p99/p99.9/max us: wake-up {:.1}/{:.1}/{:.1}/{:.1}, \
+                 compute {:.1}/{:.1}/{:.1}/{:.1}, publish {:.1}/{:.1}/{:.1}/{:.1}",
                 report.ticks,
                 report.misses,
                 report.hot_path_allocations,
                 report.queue_overflows,
-                report.wake.p50_ns,
-                report.wake.p99_ns,
-                report.wake.p999_ns,
-                report.wake.max_ns
+                us(report.wake.p50_ns),
+                us(report.wake.p99_ns),
+                us(report.wake.p999_ns),
+                us(report.wake.max_ns),
+                us(report.compute.p50_ns),
+                us(report.compute.p99_ns),
+                us(report.compute.p999_ns),
+                us(report.compute.max_ns),
+                us(report.publish.p50_ns),
+                us(report.publish.p99_ns),
+                us(report.publish.p999_ns),
+                us(report.publish.max_ns),
             );
             Ok(())
         };

@@ -34,7 +34,7 @@ use rt_core::rt::hlog::merge_by_tag;
 use rt_core::rt::probe::ProbeSummary;
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::runner::create_node;
-use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_IPC, TAG_PUBLISH, TAG_WAKE};
+use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
 use serde::Serialize;
 
 use cyclictest::CyclictestHistogram;
@@ -56,6 +56,10 @@ struct Cli {
     /// SCHED_FIFO priority of rt-core and cyclictest (the probe runs one below).
     #[arg(long, default_value_t = 80)]
     priority: u8,
+    /// Core for the probe (default: rt-core's core; it runs one priority below, so it
+    /// receives when rt-core sleeps, as a driver sharing the real-time core would).
+    #[arg(long)]
+    probe_core: Option<usize>,
     /// Tick period, µs.
     #[arg(long, default_value_t = 1000)]
     period_us: u64,
@@ -117,6 +121,7 @@ struct Results {
     compute_us: Percentiles,
     publish_us: Percentiles,
     ipc_us: Percentiles,
+    receive_us: Percentiles,
     cyclictest_us: Option<Percentiles>,
     ratio_p99: Option<f64>,
     ratio_p999: Option<f64>,
@@ -124,6 +129,7 @@ struct Results {
     cyclictest_over_period: u64,
     probe_received: u64,
     probe_lost: u64,
+    probe_core: usize,
     hot_path_allocations: u64,
     queue_overflows: u64,
     seconds: u64,
@@ -148,7 +154,7 @@ fn main() -> std::process::ExitCode {
     match run(&Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("{e:#}");
+            tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
             std::process::ExitCode::from(1)
         }
     }
@@ -299,7 +305,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             .arg("--priority")
             .arg((cli.priority - 1).to_string())
             .arg("--core")
-            .arg(cli.core.to_string())
+            .arg(cli.probe_core.unwrap_or(cli.core).to_string())
             .stdout(Stdio::piped())
             .spawn()
             .context("starting rt-probe")?,
@@ -365,6 +371,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let compute = tag(&core_hists, TAG_COMPUTE)?;
     let publish = tag(&core_hists, TAG_PUBLISH)?;
     let ipc = tag(&probe_hists, TAG_IPC)?;
+    let receive = tag(&probe_hists, TAG_RECEIVE)?;
 
     // cyclictest, after rt-core has exited.
     let (cyclic, cyclic_cmd) = if cli.no_cyclictest {
@@ -398,6 +405,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         compute_us: Percentiles::from_histogram(&compute),
         publish_us: Percentiles::from_histogram(&publish),
         ipc_us: Percentiles::from_histogram(&ipc),
+        receive_us: Percentiles::from_histogram(&receive),
         cyclictest_us: cyclic_p,
         ratio_p99: cyclic_p.map(|c| ratio(wake_p.p99, c.p99)),
         ratio_p999: cyclic_p.map(|c| ratio(wake_p.p999, c.p999)),
@@ -406,6 +414,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             .as_ref()
             .map_or(0, |h| h.at_least(cli.period_us as usize)),
         probe_received: summary.received,
+        probe_core: cli.probe_core.unwrap_or(cli.core),
         probe_lost: summary.lost,
         hot_path_allocations: rt_core_timing.hot_path_allocations,
         queue_overflows: rt_core_timing.queue_overflows,
@@ -502,6 +511,7 @@ fn print_table(r: &Results) {
     row("compute", &r.compute_us);
     row("publish (+notify)", &r.publish_us);
     row("ipc publish->receive", &r.ipc_us);
+    row("  of which receive", &r.receive_us);
     if let Some(c) = &r.cyclictest_us {
         row("cyclictest latency", c);
     }

@@ -2,7 +2,8 @@
 //!
 //! It sleeps on the stim-tick event listener (rt-core notifies it after every publish), takes
 //! every waiting StimTick, and records `receive time - t_publish_ns` into a bounded
-//! HdrHistogram (hlog tag `ipc`, one interval per second). It also checks every tick
+//! HdrHistogram (hlog tag `ipc`, one interval per second), and separately the receive cost
+//! alone, from its wake-up to the sample in hand (tag `receive`). It also checks every tick
 //! (validation, `seq` gaps), optionally records them all to CSV, keeps rt-core's last
 //! TimingReport, and exits after rt-core's final tick (or on SIGINT/SIGTERM, or when no tick
 //! came for the idle timeout), writing its JSON summary.
@@ -26,7 +27,7 @@ use rt_core::rt::hlog::HlogWriter;
 use rt_core::rt::probe::{ProbeSummary, RECORD_HEADER, RtCoreTiming, TickRecord};
 use rt_core::rt::runner::create_node;
 use rt_core::rt::signals::install_stop_handler;
-use rt_core::rt::telemetry::TAG_IPC;
+use rt_core::rt::telemetry::{TAG_IPC, TAG_RECEIVE};
 use rt_core::rt::{MissingRightsPolicy, RtConfig, enter_realtime};
 
 /// Measures StimTick publish-to-receive latency and checks the tick stream.
@@ -75,7 +76,7 @@ fn main() -> ExitCode {
             ExitCode::from(3)
         }
         Err(e) => {
-            tracing::error!("{e:#}");
+            tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
             ExitCode::from(1)
         }
     }
@@ -128,6 +129,8 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
 
     let mut ipc = LatencyHistogram::new();
     let mut interval = LatencyHistogram::new();
+    // Receive cost alone: from the listener's wake-up to the sample in hand.
+    let mut receive_interval = LatencyHistogram::new();
     let start_ns = monotonic_ns();
     let mut interval_start_ns = start_ns;
     let mut last_activity_ns = start_ns;
@@ -150,6 +153,7 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         listener
             .timed_wait(|_| {}, Duration::from_millis(50))
             .map_err(|e| anyhow::anyhow!("stim-tick listener: {e:?}"))?;
+        let t_woke_ns = monotonic_ns();
         while let Some(sample) = ticks
             .receive()
             .map_err(|e| anyhow::anyhow!("StimTick receive: {e:?}"))?
@@ -166,6 +170,7 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
             let latency = t_recv_ns.saturating_sub(tick.t_publish_ns);
             ipc.record(latency);
             interval.record(latency);
+            receive_interval.record(t_recv_ns.saturating_sub(t_woke_ns.max(tick.t_publish_ns)));
             if summary.first_seq == 0 {
                 summary.first_seq = tick.seq;
             } else if tick.seq > summary.last_seq + 1 {
@@ -196,7 +201,22 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         if let Some(log) = &mut hlog
             && now - interval_start_ns >= NS_PER_S
         {
-            write_interval(log, &mut interval, start_ns, interval_start_ns, now)?;
+            write_interval(
+                log,
+                &mut interval,
+                TAG_IPC,
+                start_ns,
+                interval_start_ns,
+                now,
+            )?;
+            write_interval(
+                log,
+                &mut receive_interval,
+                TAG_RECEIVE,
+                start_ns,
+                interval_start_ns,
+                now,
+            )?;
             interval_start_ns = now;
         }
         let final_done = final_seen_ns
@@ -207,12 +227,22 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
     }
 
     if let Some(log) = &mut hlog {
+        let now = monotonic_ns();
         write_interval(
             log,
             &mut interval,
+            TAG_IPC,
             start_ns,
             interval_start_ns,
-            monotonic_ns(),
+            now,
+        )?;
+        write_interval(
+            log,
+            &mut receive_interval,
+            TAG_RECEIVE,
+            start_ns,
+            interval_start_ns,
+            now,
         )?;
     }
     summary.ipc_ns = ipc.summary().into();
@@ -245,13 +275,14 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
 fn write_interval(
     log: &mut HlogWriter,
     interval: &mut LatencyHistogram,
+    tag: &str,
     start_ns: u64,
     from_ns: u64,
     to_ns: u64,
 ) -> anyhow::Result<()> {
     log.write(
         interval,
-        TAG_IPC,
+        tag,
         Duration::from_nanos(from_ns - start_ns),
         Duration::from_nanos(to_ns - from_ns),
     )?;
