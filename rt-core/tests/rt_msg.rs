@@ -46,11 +46,12 @@ fn layouts_are_pinned() {
     assert_eq!(size_of::<LatencySummary>(), 40);
     assert_eq!(
         (size_of::<TimingReport>(), align_of::<TimingReport>()),
-        (232, 8)
+        (272, 8)
     );
     assert_eq!(offset_of!(TimingReport, wake), 64);
-    assert_eq!(offset_of!(TimingReport, ipc), 184);
-    assert_eq!(offset_of!(TimingReport, source), 224);
+    assert_eq!(offset_of!(TimingReport, input), 104);
+    assert_eq!(offset_of!(TimingReport, ipc), 224);
+    assert_eq!(offset_of!(TimingReport, source), 264);
 }
 
 #[test]
@@ -456,6 +457,7 @@ fn timing_report_validation_table() {
         hot_path_allocations: 0,
         rejected_inputs: 0,
         wake: s,
+        input: s,
         compute: s,
         publish: s,
         ipc: LatencySummary::default(),

@@ -11,7 +11,7 @@ use rt_core::msg::{Contract, TimingSource};
 use rt_core::rt::histogram::LatencyHistogram;
 use rt_core::rt::hlog::{HlogWriter, merge_by_tag, read_intervals};
 use rt_core::rt::telemetry::{
-    TAG_COMPUTE, TAG_PUBLISH, TAG_WAKE, TelemetryChannel, TickTiming, TimingAggregator,
+    TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE, TelemetryChannel, TickTiming, TimingAggregator,
 };
 
 /// HdrHistogram with 3 significant digits: any reported value is within 0.1 % of the truth.
@@ -80,6 +80,7 @@ fn an_interval_log_reads_back_with_hdrhistograms_reader_and_the_counts_match() {
             channel.push(TickTiming {
                 grid_ns: k,
                 lateness_ns: 10_000 + k,
+                input_ns: 700,
                 compute_ns: 2_000 + i as u64,
                 publish_ns: 500,
             });
@@ -114,14 +115,14 @@ fn an_interval_log_reads_back_with_hdrhistograms_reader_and_the_counts_match() {
     }
     let mut expected = Vec::new();
     for (i, &n) in per_interval.iter().enumerate() {
-        for tag in [TAG_WAKE, TAG_COMPUTE, TAG_PUBLISH] {
+        for tag in [TAG_WAKE, TAG_INPUT, TAG_COMPUTE, TAG_PUBLISH] {
             expected.push((tag.to_owned(), i as u64, n));
         }
     }
     assert_eq!(counts, expected);
 
     // Our reader agrees, and the merged distributions are the recorded ones.
-    assert_eq!(read_intervals(&path).unwrap().len(), 9);
+    assert_eq!(read_intervals(&path).unwrap().len(), 12);
     let merged = merge_by_tag(&path).unwrap();
     let total: u64 = per_interval.iter().sum();
     assert_eq!(merged[TAG_WAKE].count(), total);

@@ -69,6 +69,7 @@ impl LatencySummary {
         } else {
             Err(ValidationError::Inconsistent(match field {
                 "wake" => "wake percentiles not ordered (or non-zero with count 0)",
+                "input" => "input percentiles not ordered (or non-zero with count 0)",
                 "compute" => "compute percentiles not ordered (or non-zero with count 0)",
                 "publish" => "publish percentiles not ordered (or non-zero with count 0)",
                 _ => "ipc percentiles not ordered (or non-zero with count 0)",
@@ -102,7 +103,10 @@ pub struct TimingReport {
     pub rejected_inputs: u64,
     /// Wake-up lateness: wake time minus deadline.
     pub wake: LatencySummary,
-    /// Compute time: wake to decision made.
+    /// Input time: wake to inputs taken (references and force samples received, checked).
+    pub input: LatencySummary,
+    /// Compute time: inputs taken to decision made (the tick source, e.g. the pattern
+    /// generator).
     pub compute: LatencySummary,
     /// Publish time: decision made to sample sent (and listeners notified).
     pub publish: LatencySummary,
@@ -152,6 +156,7 @@ impl Contract for TimingReport {
             ));
         }
         self.wake.validate("wake")?;
+        self.input.validate("input")?;
         self.compute.validate("compute")?;
         self.publish.validate("publish")?;
         self.ipc.validate("ipc")

@@ -51,6 +51,8 @@ pub struct RtCoreTiming {
     pub rejected_inputs: u64,
     /// Wake-up lateness.
     pub wake_ns: PercentilesNs,
+    /// Input time.
+    pub input_ns: PercentilesNs,
     /// Compute time.
     pub compute_ns: PercentilesNs,
     /// Publish time.
@@ -69,6 +71,7 @@ impl From<&TimingReport> for RtCoreTiming {
             hot_path_allocations: r.hot_path_allocations,
             rejected_inputs: r.rejected_inputs,
             wake_ns: r.wake.into(),
+            input_ns: r.input.into(),
             compute_ns: r.compute.into(),
             publish_ns: r.publish.into(),
             flags: r.flags,

@@ -1,8 +1,9 @@
 //! [`enter_realtime`]: make the calling thread a real-time thread, once, at its start.
 //!
-//! Steps, in order: pin to the configured core (`core_affinity`), SCHED_FIFO at the
-//! configured priority (`thread-priority`), `mlockall(MCL_CURRENT | MCL_FUTURE)`, prefault
-//! the stack. Every step that fails is recorded as an [`RtShortfall`]; the result says in one
+//! Steps, in order: pin to the configured core (`core_affinity`),
+//! `mlockall(MCL_CURRENT | MCL_FUTURE)` (still at normal priority: faulting in the whole
+//! process must not hold up other real-time work on the core), SCHED_FIFO at the configured
+//! priority (`thread-priority`), prefault the stack. Every step that fails is recorded as an [`RtShortfall`]; the result says in one
 //! line what was achieved. With [`MissingRightsPolicy::Refuse`] any shortfall is an error
 //! (and the thread's scheduling is put back to normal); with
 //! [`MissingRightsPolicy::BestEffort`] the thread carries on with what it got.
@@ -168,14 +169,6 @@ pub fn enter_realtime(config: &RtConfig) -> Result<RtStatus, RtError> {
         Some(core) => pin_to_core(core).map_err(|s| shortfalls.push(s)).ok(),
     };
 
-    let fifo_priority = match set_fifo(config.priority) {
-        Ok(()) => Some(config.priority),
-        Err(s) => {
-            shortfalls.push(s);
-            None
-        }
-    };
-
     let memory_locked = if config.lock_memory {
         match lock_memory() {
             Ok(()) => true,
@@ -186,6 +179,14 @@ pub fn enter_realtime(config: &RtConfig) -> Result<RtStatus, RtError> {
         }
     } else {
         false
+    };
+
+    let fifo_priority = match set_fifo(config.priority) {
+        Ok(()) => Some(config.priority),
+        Err(s) => {
+            shortfalls.push(s);
+            None
+        }
     };
 
     prefault_stack(config.prefault_stack_bytes);

@@ -219,6 +219,7 @@ pub fn run_pattern_loop<S: TickSource>(
             }
         }
 
+        let t_inputs = monotonic_ns();
         let (tick, events) = generator.step(&wake);
         let t_decided = monotonic_ns();
         if !publish(&publisher, tick) {
@@ -251,7 +252,8 @@ pub fn run_pattern_loop<S: TickSource>(
         telemetry.push(TickTiming {
             grid_ns: wake.grid_ns,
             lateness_ns: wake.lateness_ns,
-            compute_ns: t_decided.saturating_sub(wake.wake_ns),
+            input_ns: t_inputs.saturating_sub(wake.wake_ns),
+            compute_ns: t_decided.saturating_sub(t_inputs),
             publish_ns: t_done.saturating_sub(t_decided),
         });
     }

@@ -22,7 +22,9 @@ pub struct TickTiming {
     pub grid_ns: u64,
     /// Wake-up lateness (wake minus deadline).
     pub lateness_ns: u64,
-    /// Wake to decision made.
+    /// Wake to inputs taken (references and force samples received and checked).
+    pub input_ns: u64,
+    /// Inputs taken to decision made (the tick source).
     pub compute_ns: u64,
     /// Decision made to sample sent (and listeners notified).
     pub publish_ns: u64,
@@ -163,6 +165,8 @@ impl TelemetryChannel {
 /// hlog tags of the three loop-side quantities.
 pub const TAG_WAKE: &str = "wake";
 /// See [`TAG_WAKE`].
+pub const TAG_INPUT: &str = "input";
+/// See [`TAG_WAKE`].
 pub const TAG_COMPUTE: &str = "compute";
 /// See [`TAG_WAKE`].
 pub const TAG_PUBLISH: &str = "publish";
@@ -175,9 +179,11 @@ pub const TAG_RECEIVE: &str = "receive";
 #[derive(Debug, Clone, Default)]
 pub struct TimingAggregator {
     wake: LatencyHistogram,
+    input: LatencyHistogram,
     compute: LatencyHistogram,
     publish: LatencyHistogram,
     interval_wake: LatencyHistogram,
+    interval_input: LatencyHistogram,
     interval_compute: LatencyHistogram,
     interval_publish: LatencyHistogram,
 }
@@ -191,9 +197,11 @@ impl TimingAggregator {
     /// Records one tick.
     pub fn record(&mut self, t: &TickTiming) {
         self.wake.record(t.lateness_ns);
+        self.input.record(t.input_ns);
         self.compute.record(t.compute_ns);
         self.publish.record(t.publish_ns);
         self.interval_wake.record(t.lateness_ns);
+        self.interval_input.record(t.input_ns);
         self.interval_compute.record(t.compute_ns);
         self.interval_publish.record(t.publish_ns);
     }
@@ -213,6 +221,11 @@ impl TimingAggregator {
         &self.wake
     }
 
+    /// Cumulative input time.
+    pub fn input(&self) -> &LatencyHistogram {
+        &self.input
+    }
+
     /// Cumulative compute time.
     pub fn compute(&self) -> &LatencyHistogram {
         &self.compute
@@ -223,8 +236,8 @@ impl TimingAggregator {
         &self.publish
     }
 
-    /// Writes the current interval (tags [`TAG_WAKE`], [`TAG_COMPUTE`], [`TAG_PUBLISH`]) and
-    /// starts a new one.
+    /// Writes the current interval (tags [`TAG_WAKE`], [`TAG_INPUT`], [`TAG_COMPUTE`],
+    /// [`TAG_PUBLISH`]) and starts a new one.
     pub fn write_interval(
         &mut self,
         log: &mut HlogWriter,
@@ -232,9 +245,11 @@ impl TimingAggregator {
         duration: Duration,
     ) -> Result<(), HlogError> {
         log.write(&self.interval_wake, TAG_WAKE, start, duration)?;
+        log.write(&self.interval_input, TAG_INPUT, start, duration)?;
         log.write(&self.interval_compute, TAG_COMPUTE, start, duration)?;
         log.write(&self.interval_publish, TAG_PUBLISH, start, duration)?;
         self.interval_wake.reset();
+        self.interval_input.reset();
         self.interval_compute.reset();
         self.interval_publish.reset();
         Ok(())
@@ -260,6 +275,7 @@ impl TimingAggregator {
             hot_path_allocations: counters.hot_path_allocations,
             rejected_inputs: counters.rejected_inputs,
             wake: self.wake.summary(),
+            input: self.input.summary(),
             compute: self.compute.summary(),
             publish: self.publish.summary(),
             ipc: LatencySummary::default(),

@@ -166,7 +166,9 @@ pub fn start_probe(dir: &Scratch, prefix: &str) -> Proc {
         .arg(dir.path("probe.json"))
         .arg("--hlog")
         .arg(dir.path("probe.hlog"))
-        .args(["--priority", "50", "--idle-timeout-ms", "5000"])
+        // Above rt-core's 60: tests run in parallel, and a probe that falls 64 ticks behind
+        // loses ticks (safe overflow), which the tests would report as gaps.
+        .args(["--priority", "70", "--idle-timeout-ms", "5000"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()

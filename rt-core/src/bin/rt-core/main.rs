@@ -188,7 +188,7 @@ fn run(cli: &Cli) -> Result<(), Failure> {
             info!(
                 "final timing: {} ticks, {} missed periods, {} hot-path heap allocations, \
                  {} queue overflows; p50/p99/p99.9/max us: wake-up {:.1}/{:.1}/{:.1}/{:.1}, \
-                 compute {:.1}/{:.1}/{:.1}/{:.1}, publish {:.1}/{:.1}/{:.1}/{:.1}",
+                 input {:.1}/{:.1}/{:.1}/{:.1}, compute {:.1}/{:.1}/{:.1}/{:.1}, publish {:.1}/{:.1}/{:.1}/{:.1}",
                 report.ticks,
                 report.misses,
                 report.hot_path_allocations,
@@ -197,6 +197,10 @@ fn run(cli: &Cli) -> Result<(), Failure> {
                 us(report.wake.p99_ns),
                 us(report.wake.p999_ns),
                 us(report.wake.max_ns),
+                us(report.input.p50_ns),
+                us(report.input.p99_ns),
+                us(report.input.p999_ns),
+                us(report.input.max_ns),
                 us(report.compute.p50_ns),
                 us(report.compute.p99_ns),
                 us(report.compute.p999_ns),

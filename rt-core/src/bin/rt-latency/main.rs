@@ -5,7 +5,7 @@
 //! 2. `rt-probe` (a subscriber process, same core, one priority below) is started; then the
 //!    real `rt-core` binary runs for N seconds with the same period, priority and core,
 //!    while a reference publisher (a supervisor stand-in) steps the reference every second.
-//!    rt-core writes wake-up lateness, compute and publish times to `rt-core.hlog`; the probe
+//!    rt-core writes wake-up lateness, input, compute and publish times to `rt-core.hlog`; the probe
 //!    writes publish-to-receive latency to `rt-probe.hlog`.
 //! 3. After rt-core has exited, `cyclictest` runs with the same period, priority and core for
 //!    N seconds (never concurrently on the same core).
@@ -34,7 +34,7 @@ use rt_core::rt::hlog::merge_by_tag;
 use rt_core::rt::probe::ProbeSummary;
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::runner::create_node;
-use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
+use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
 use serde::Serialize;
 
 use cyclictest::CyclictestHistogram;
@@ -117,7 +117,9 @@ impl Percentiles {
 struct Results {
     ticks: u64,
     misses: u64,
+    overruns: u64,
     wake_us: Percentiles,
+    input_us: Percentiles,
     compute_us: Percentiles,
     publish_us: Percentiles,
     ipc_us: Percentiles,
@@ -368,6 +370,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             .ok_or_else(|| anyhow!("no '{t}' intervals in the interval log"))
     };
     let wake = tag(&core_hists, TAG_WAKE)?;
+    let input = tag(&core_hists, TAG_INPUT)?;
     let compute = tag(&core_hists, TAG_COMPUTE)?;
     let publish = tag(&core_hists, TAG_PUBLISH)?;
     let ipc = tag(&probe_hists, TAG_IPC)?;
@@ -401,7 +404,9 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let results = Results {
         ticks: rt_core_timing.ticks,
         misses: rt_core_timing.misses,
+        overruns: rt_core_timing.overruns,
         wake_us: wake_p,
+        input_us: Percentiles::from_histogram(&input),
         compute_us: Percentiles::from_histogram(&compute),
         publish_us: Percentiles::from_histogram(&publish),
         ipc_us: Percentiles::from_histogram(&ipc),
@@ -508,7 +513,8 @@ fn print_table(r: &Results) {
         );
     };
     row("wake-up lateness", &r.wake_us);
-    row("compute", &r.compute_us);
+    row("input (receive references)", &r.input_us);
+    row("compute (tick source)", &r.compute_us);
     row("publish (+notify)", &r.publish_us);
     row("ipc publish->receive", &r.ipc_us);
     row("  of which receive", &r.receive_us);
@@ -516,9 +522,10 @@ fn print_table(r: &Results) {
         row("cyclictest latency", c);
     }
     println!(
-        "ticks {}, missed periods {}, probe received {} (lost {}), hot-path heap allocations {}, telemetry overflows {}",
+        "ticks {}, missed periods {} in {} late wake-ups (>= 1 period late), probe received {} (lost {}), hot-path heap allocations {}, telemetry overflows {}",
         r.ticks,
         r.misses,
+        r.overruns,
         r.probe_received,
         r.probe_lost,
         r.hot_path_allocations,
