@@ -22,6 +22,7 @@ fn a_minimal_file_gets_the_documented_defaults() {
             on_missing_rights: MissingRightsPolicy::BestEffort,
             lock_memory: true,
             prefault_stack_bytes: 256 * 1024,
+            cpu_dma_latency_us: Some(0),
         }
     );
     assert_eq!(

@@ -33,6 +33,7 @@ fn run_counting<S: TickSource + Send>(source: S, name: &str) {
         on_missing_rights: MissingRightsPolicy::BestEffort,
         lock_memory: false,
         prefault_stack_bytes: 64 * 1024,
+        cpu_dma_latency_us: None,
     };
 
     // Receiver side first, so that every connection exists before the loop starts.

@@ -49,6 +49,7 @@ fn config(core: Option<usize>, policy: MissingRightsPolicy) -> RtConfig {
         on_missing_rights: policy,
         lock_memory: true,
         prefault_stack_bytes: 64 * 1024,
+        cpu_dma_latency_us: None,
     }
 }
 
@@ -56,7 +57,11 @@ fn config(core: Option<usize>, policy: MissingRightsPolicy) -> RtConfig {
 fn with_the_rights_the_thread_gets_sched_fifo_its_core_and_locked_memory() {
     let last_core = *affinity().last().unwrap();
     std::thread::spawn(move || {
-        let status = enter_realtime(&config(Some(last_core), MissingRightsPolicy::Refuse)).unwrap();
+        let status = enter_realtime(&RtConfig {
+            cpu_dma_latency_us: Some(0),
+            ..config(Some(last_core), MissingRightsPolicy::Refuse)
+        })
+        .unwrap();
         assert!(!status.is_degraded(), "{status}");
         assert_eq!(status.fifo_priority, Some(30));
         assert_eq!(status.core, Some(last_core));
@@ -64,6 +69,15 @@ fn with_the_rights_the_thread_gets_sched_fifo_its_core_and_locked_memory() {
         assert_eq!(policy_and_priority(), (libc::SCHED_FIFO, 30));
         assert_eq!(affinity(), vec![last_core]);
         assert!(locked_kib() > 0);
+        // The PM QoS device reads back the system-wide limit in force: ours.
+        assert_eq!(status.cpu_dma_latency_us, Some(0));
+        let mut current = [0u8; 4];
+        use std::io::Read;
+        std::fs::File::open("/dev/cpu_dma_latency")
+            .unwrap()
+            .read_exact(&mut current)
+            .unwrap();
+        assert_eq!(i32::from_ne_bytes(current), 0);
         let line = status.to_string();
         assert!(line.starts_with("real-time: SCHED_FIFO 30, core"), "{line}");
         assert!(!line.contains('\n'));

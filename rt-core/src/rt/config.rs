@@ -14,7 +14,8 @@ pub enum MissingRightsPolicy {
 }
 
 /// Real-time settings of one thread. Defaults (bench): SCHED_FIFO priority 80, not pinned,
-/// best-effort, memory locked, 256 KiB of stack prefaulted.
+/// best-effort, memory locked, 256 KiB of stack prefaulted, CPU wake-up latency limited to
+/// 0 µs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RtConfig {
@@ -30,6 +31,11 @@ pub struct RtConfig {
     /// Bytes of stack to touch at start so the loop never page-faults on it. Default 256 KiB;
     /// at most [`RtConfig::MAX_PREFAULT_STACK_BYTES`].
     pub prefault_stack_bytes: usize,
+    /// PM QoS limit on CPU wake-up (exit) latency for the life of the process, µs, written to
+    /// `/dev/cpu_dma_latency` (as cyclictest does): 0 keeps the CPUs out of deep idle states
+    /// so a timer wake-up is not delayed by leaving them. Absent = leave the system's setting.
+    /// Default 0.
+    pub cpu_dma_latency_us: Option<u32>,
 }
 
 impl Default for RtConfig {
@@ -40,6 +46,7 @@ impl Default for RtConfig {
             on_missing_rights: MissingRightsPolicy::BestEffort,
             lock_memory: true,
             prefault_stack_bytes: 256 * 1024,
+            cpu_dma_latency_us: Some(0),
         }
     }
 }

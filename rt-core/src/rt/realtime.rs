@@ -46,6 +46,14 @@ pub enum RtShortfall {
         /// errno of `mlockall`.
         errno: i32,
     },
+    /// The CPU wake-up latency limit could not be set (no `/dev/cpu_dma_latency`, or no
+    /// permission to open it: root or a udev rule is needed).
+    WakeLatencyLimitFailed {
+        /// Requested limit, µs.
+        limit_us: u32,
+        /// errno of `open`/`write`.
+        errno: i32,
+    },
 }
 
 impl fmt::Display for RtShortfall {
@@ -67,6 +75,11 @@ impl fmt::Display for RtShortfall {
                 "memory not locked (mlockall: {}: needs CAP_IPC_LOCK or RLIMIT_MEMLOCK=unlimited)",
                 errno_name(errno)
             ),
+            Self::WakeLatencyLimitFailed { limit_us, errno } => write!(
+                f,
+                "CPU wake-up latency not limited to {limit_us} us (/dev/cpu_dma_latency: {})",
+                errno_name(errno)
+            ),
         }
     }
 }
@@ -77,6 +90,8 @@ fn errno_name(errno: i32) -> String {
         libc::ENOMEM => "ENOMEM".to_owned(),
         libc::EINVAL => "EINVAL".to_owned(),
         libc::EAGAIN => "EAGAIN".to_owned(),
+        libc::ENOENT => "ENOENT".to_owned(),
+        libc::EACCES => "EACCES".to_owned(),
         other => format!("errno {other}"),
     }
 }
@@ -92,6 +107,8 @@ pub struct RtStatus {
     pub memory_locked: bool,
     /// Bytes of stack prefaulted.
     pub stack_prefaulted_bytes: usize,
+    /// CPU wake-up latency limit in force for the process, µs.
+    pub cpu_dma_latency_us: Option<u32>,
     /// Guarantees that could not be had (empty: fully real-time).
     pub shortfalls: Vec<RtShortfall>,
     /// The policy that applied.
@@ -143,7 +160,11 @@ impl fmt::Display for RtStatus {
             f,
             ", {} KiB stack prefaulted",
             self.stack_prefaulted_bytes / 1024
-        )
+        )?;
+        match self.cpu_dma_latency_us {
+            Some(us) => write!(f, ", CPU wake-up latency <= {us} us"),
+            None => Ok(()),
+        }
     }
 }
 
@@ -191,11 +212,23 @@ pub fn enter_realtime(config: &RtConfig) -> Result<RtStatus, RtError> {
 
     prefault_stack(config.prefault_stack_bytes);
 
+    let cpu_dma_latency_us = match config.cpu_dma_latency_us {
+        None => None,
+        Some(limit_us) => match limit_wake_latency(limit_us) {
+            Ok(()) => Some(limit_us),
+            Err(s) => {
+                shortfalls.push(s);
+                None
+            }
+        },
+    };
+
     let status = RtStatus {
         fifo_priority,
         core,
         memory_locked,
         stack_prefaulted_bytes: config.prefault_stack_bytes,
+        cpu_dma_latency_us,
         shortfalls,
         policy: config.on_missing_rights,
     };
@@ -250,6 +283,36 @@ fn lock_memory() -> Result<(), RtShortfall> {
     use nix::sys::mman::{MlockAllFlags, mlockall};
     mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE)
         .map_err(|e| RtShortfall::MemoryLockFailed { errno: e as i32 })
+}
+
+/// The open `/dev/cpu_dma_latency` request: the limit holds while the file stays open, so it
+/// is kept for the life of the process (the kernel drops it when the process exits).
+static WAKE_LATENCY_REQUEST: std::sync::Mutex<Option<(std::fs::File, u32)>> =
+    std::sync::Mutex::new(None);
+
+/// Requests a CPU wake-up latency of at most `limit_us` µs (PM QoS) for the life of the
+/// process. A second call with a different limit replaces the first.
+fn limit_wake_latency(limit_us: u32) -> Result<(), RtShortfall> {
+    use std::io::Write;
+    let fail = |e: std::io::Error| RtShortfall::WakeLatencyLimitFailed {
+        limit_us,
+        errno: e.raw_os_error().unwrap_or(libc::EIO),
+    };
+    let mut held = WAKE_LATENCY_REQUEST
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if matches!(&*held, Some((_, l)) if *l == limit_us) {
+        return Ok(());
+    }
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")
+        .map_err(fail)?;
+    // The interface takes a native-endian 32-bit value.
+    file.write_all(&(limit_us as i32).to_ne_bytes())
+        .map_err(fail)?;
+    *held = Some((file, limit_us));
+    Ok(())
 }
 
 /// Touches `bytes` of stack below the caller so that the pages are resident (and, after

@@ -56,6 +56,7 @@ pub fn config(prefix: &str, ipi_ticks: u32) -> RtCoreConfig {
         on_missing_rights: MissingRightsPolicy::BestEffort,
         lock_memory: true,
         prefault_stack_bytes: 128 * 1024,
+        cpu_dma_latency_us: Some(0),
     };
     c.telemetry.report_period_ms = 100;
     c

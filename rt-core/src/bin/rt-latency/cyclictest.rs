@@ -63,6 +63,18 @@ impl CyclictestHistogram {
         })
     }
 
+    /// Adds another run's counts (same bucket width; the longer histogram wins).
+    pub fn merge(&mut self, other: &CyclictestHistogram) {
+        if self.counts.len() < other.counts.len() {
+            self.counts.resize(other.counts.len(), 0);
+        }
+        for (mine, theirs) in self.counts.iter_mut().zip(&other.counts) {
+            *mine += theirs;
+        }
+        self.overflows += other.overflows;
+        self.max_us = self.max_us.max(other.max_us);
+    }
+
     /// Total samples (including overflows).
     pub fn total(&self) -> u64 {
         self.counts.iter().sum::<u64>() + self.overflows
@@ -175,6 +187,19 @@ mod tests {
         assert_eq!(h.quantile_us(0.99), 4);
         assert_eq!(h.quantile_us(0.999), 9);
         assert_eq!(h.at_least(3), 20);
+    }
+
+    #[test]
+    fn merged_runs_add_their_counts() {
+        let mut a = CyclictestHistogram::parse(SAMPLE).unwrap();
+        let b = CyclictestHistogram {
+            counts: vec![1, 0, 0, 0, 0, 0, 3],
+            overflows: 2,
+            max_us: 40,
+        };
+        a.merge(&b);
+        assert_eq!(a.counts, vec![1, 10, 70, 15, 4, 0, 3]);
+        assert_eq!((a.overflows, a.max_us, a.total()), (3, 40, 106));
     }
 
     #[test]

@@ -80,6 +80,10 @@ struct Cli {
     /// Skip the cyclictest comparison.
     #[arg(long)]
     no_cyclictest: bool,
+    /// Alternate rt-core and cyclictest in this many rounds (each `seconds / rounds` long),
+    /// so that both see the same background on a shared machine. Default: 10 s rounds.
+    #[arg(long)]
+    rounds: Option<u64>,
 }
 
 /// p50 / p99 / p99.9 / max in microseconds.
@@ -135,6 +139,7 @@ struct Results {
     hot_path_allocations: u64,
     queue_overflows: u64,
     seconds: u64,
+    rounds: u64,
     period_us: u64,
     priority: u8,
     core: usize,
@@ -243,7 +248,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let rt_core_bin = sibling_binary("rt-core")?;
     let probe_bin = sibling_binary("rt-probe")?;
 
-    // rt-core configuration.
+    // rt-core configuration (per round: its own prefix and interval log).
     let mut config = match &cli.config {
         Some(path) => RtCoreConfig::load(path).context("--config")?,
         None => RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 20 }),
@@ -253,15 +258,11 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     config.rt.core = Some(cli.core);
     config.rt.on_missing_rights = MissingRightsPolicy::Refuse;
     config.rt.lock_memory = true;
-    config.telemetry.hlog = Some(std::path::absolute(out("rt-core.hlog"))?);
     config.telemetry.report_period_ms = 1000;
-    config.ipc.prefix = format!("rtlatency{}", std::process::id());
     config.ipc.notify = true;
     config.validate().context("rt-core configuration")?;
-    let config_path = out("rt-core.toml");
-    std::fs::write(&config_path, config.to_toml())?;
 
-    // Background load.
+    // Background load, kept for every round of both measurements.
     let mut load_desc = None;
     let _load = if cli.load {
         let other = cores
@@ -294,16 +295,171 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         None
     };
 
-    // The probe, then rt-core.
+    // Rounds: rt-core, then cyclictest, alternating, so that both see the same background.
+    let rounds = cli
+        .rounds
+        .unwrap_or(cli.seconds.div_ceil(10))
+        .clamp(1, cli.seconds);
+    let mut total = RoundTotals::default();
+    let mut cyclic: Option<CyclictestHistogram> = None;
+    let mut cyclic_cmd = None;
+    for round in 0..rounds {
+        let seconds =
+            cli.seconds / rounds + u64::from(round + 1 == rounds) * (cli.seconds % rounds);
+        tracing::info!("round {}/{rounds}: rt-core for {seconds} s", round + 1);
+        total.add(measure_rt_core(
+            cli,
+            &config,
+            round,
+            seconds,
+            &rt_core_bin,
+            &probe_bin,
+        )?);
+        if !cli.no_cyclictest {
+            let args = cyclictest::command_line(
+                cli.priority,
+                cli.core,
+                cli.period_us,
+                seconds,
+                cli.hist_max_us,
+            );
+            tracing::info!("round {}/{rounds}: {}", round + 1, args.join(" "));
+            let text = cyclictest::run(&args)?;
+            std::fs::write(out(&format!("cyclictest-{round}.txt")), &text)?;
+            let h = CyclictestHistogram::parse(&text)?;
+            match &mut cyclic {
+                Some(all) => all.merge(&h),
+                None => cyclic = Some(h),
+            }
+            cyclic_cmd = Some(args.join(" "));
+        }
+    }
+    drop(_load);
+    let RoundTotals {
+        wake,
+        input,
+        compute,
+        publish,
+        ipc,
+        receive,
+        ticks,
+        misses,
+        overruns,
+        hot_path_allocations,
+        queue_overflows,
+        received,
+        lost,
+    } = total;
+
+    let wake_p = Percentiles::from_histogram(&wake);
+    let cyclic_p = cyclic.as_ref().map(Percentiles::from_cyclictest);
+    // cyclictest truncates to whole µs: compare against the middle of its bucket.
+    let ratio = |ours: f64, theirs: f64| ours / (theirs + 0.5);
+    let results = Results {
+        ticks,
+        misses,
+        overruns,
+        wake_us: wake_p,
+        input_us: Percentiles::from_histogram(&input),
+        compute_us: Percentiles::from_histogram(&compute),
+        publish_us: Percentiles::from_histogram(&publish),
+        ipc_us: Percentiles::from_histogram(&ipc),
+        receive_us: Percentiles::from_histogram(&receive),
+        cyclictest_us: cyclic_p,
+        ratio_p99: cyclic_p.map(|c| ratio(wake_p.p99, c.p99)),
+        ratio_p999: cyclic_p.map(|c| ratio(wake_p.p999, c.p999)),
+        cyclictest_samples: cyclic.as_ref().map_or(0, CyclictestHistogram::total),
+        cyclictest_over_period: cyclic
+            .as_ref()
+            .map_or(0, |h| h.at_least(cli.period_us as usize)),
+        probe_received: received,
+        probe_core: cli.probe_core.unwrap_or(cli.core),
+        probe_lost: lost,
+        hot_path_allocations,
+        queue_overflows,
+        seconds: cli.seconds,
+        rounds,
+        period_us: cli.period_us,
+        priority: cli.priority,
+        core: cli.core,
+        load: load_desc,
+        cyclictest_command: cyclic_cmd,
+        kernel: read_trim("/proc/sys/kernel/osrelease"),
+        sched_rt_runtime_us: read_trim("/proc/sys/kernel/sched_rt_runtime_us"),
+    };
+    print_table(&results);
+    if let Some(path) = &cli.json {
+        std::fs::write(path, serde_json::to_string_pretty(&results)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// What one or more rounds of the rt-core measurement gave.
+#[derive(Default)]
+struct RoundTotals {
+    wake: LatencyHistogram,
+    input: LatencyHistogram,
+    compute: LatencyHistogram,
+    publish: LatencyHistogram,
+    ipc: LatencyHistogram,
+    receive: LatencyHistogram,
+    ticks: u64,
+    misses: u64,
+    overruns: u64,
+    hot_path_allocations: u64,
+    queue_overflows: u64,
+    received: u64,
+    lost: u64,
+}
+
+impl RoundTotals {
+    fn add(&mut self, r: RoundTotals) {
+        self.wake.add(&r.wake);
+        self.input.add(&r.input);
+        self.compute.add(&r.compute);
+        self.publish.add(&r.publish);
+        self.ipc.add(&r.ipc);
+        self.receive.add(&r.receive);
+        self.ticks += r.ticks;
+        self.misses += r.misses;
+        self.overruns += r.overruns;
+        self.hot_path_allocations += r.hot_path_allocations;
+        self.queue_overflows += r.queue_overflows;
+        self.received += r.received;
+        self.lost += r.lost;
+    }
+}
+
+/// One round: the probe, then the real rt-core process for `seconds`, with a reference
+/// publisher; returns the merged interval logs and the counters.
+fn measure_rt_core(
+    cli: &Cli,
+    base: &RtCoreConfig,
+    round: u64,
+    seconds: u64,
+    rt_core_bin: &std::path::Path,
+    probe_bin: &std::path::Path,
+) -> anyhow::Result<RoundTotals> {
+    let out = |name: &str| cli.out_dir.join(name);
+    let mut config = base.clone();
+    let core_hlog = std::path::absolute(out(&format!("rt-core-{round}.hlog")))?;
+    config.telemetry.hlog = Some(core_hlog.clone());
+    config.ipc.prefix = format!("rtlatency{}r{round}", std::process::id());
+    let config_path = out(&format!("rt-core-{round}.toml"));
+    std::fs::write(&config_path, config.to_toml())?;
+    let probe_hlog = out(&format!("rt-probe-{round}.hlog"));
+    let probe_summary = out(&format!("probe-{round}.json"));
+
     let mut probe = Guarded {
         name: "rt-probe",
-        child: Command::new(&probe_bin)
+        child: Command::new(probe_bin)
             .arg("--prefix")
             .arg(&config.ipc.prefix)
             .arg("--hlog")
-            .arg(out("rt-probe.hlog"))
+            .arg(&probe_hlog)
             .arg("--summary")
-            .arg(out("probe.json"))
+            .arg(&probe_summary)
             .arg("--priority")
             .arg((cli.priority - 1).to_string())
             .arg("--core")
@@ -321,15 +477,13 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         let result = (|| -> anyhow::Result<()> {
             let mut rt_core = Guarded {
                 name: "rt-core",
-                child: Command::new(&rt_core_bin)
+                child: Command::new(rt_core_bin)
                     .arg("--config")
                     .arg(&config_path)
                     .spawn()
                     .context("starting rt-core")?,
             };
-            tracing::info!("measuring rt-core for {} s", cli.seconds);
-            let end =
-                Instant::now() + Duration::from_secs(cli.seconds) + Duration::from_millis(200);
+            let end = Instant::now() + Duration::from_secs(seconds) + Duration::from_millis(200);
             while Instant::now() < end {
                 if let Some(status) = rt_core.child.try_wait()? {
                     bail!("rt-core exited early ({status}); see its log above");
@@ -355,89 +509,34 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         bail!("rt-probe ended with {probe_status}");
     }
     let summary: ProbeSummary = serde_json::from_slice(
-        &std::fs::read(out("probe.json")).context("reading the probe summary")?,
+        &std::fs::read(&probe_summary).context("reading the probe summary")?,
     )
     .context("parsing the probe summary")?;
-    let rt_core_timing = summary
+    let timing = summary
         .rt_core
         .ok_or_else(|| anyhow!("the probe received no TimingReport from rt-core"))?;
-
-    let core_hists = merge_by_tag(&out("rt-core.hlog"))?;
-    let probe_hists = merge_by_tag(&out("rt-probe.hlog"))?;
+    let core_hists = merge_by_tag(&core_hlog)?;
+    let probe_hists = merge_by_tag(&probe_hlog)?;
     let tag = |m: &std::collections::BTreeMap<String, LatencyHistogram>, t: &str| {
         m.get(t)
             .cloned()
             .ok_or_else(|| anyhow!("no '{t}' intervals in the interval log"))
     };
-    let wake = tag(&core_hists, TAG_WAKE)?;
-    let input = tag(&core_hists, TAG_INPUT)?;
-    let compute = tag(&core_hists, TAG_COMPUTE)?;
-    let publish = tag(&core_hists, TAG_PUBLISH)?;
-    let ipc = tag(&probe_hists, TAG_IPC)?;
-    let receive = tag(&probe_hists, TAG_RECEIVE)?;
-
-    // cyclictest, after rt-core has exited.
-    let (cyclic, cyclic_cmd) = if cli.no_cyclictest {
-        (None, None)
-    } else {
-        let args = cyclictest::command_line(
-            cli.priority,
-            cli.core,
-            cli.period_us,
-            cli.seconds,
-            cli.hist_max_us,
-        );
-        tracing::info!("running {}", args.join(" "));
-        let text = cyclictest::run(&args)?;
-        std::fs::write(out("cyclictest.txt"), &text)?;
-        (
-            Some(CyclictestHistogram::parse(&text)?),
-            Some(args.join(" ")),
-        )
-    };
-    drop(_load);
-
-    let wake_p = Percentiles::from_histogram(&wake);
-    let cyclic_p = cyclic.as_ref().map(Percentiles::from_cyclictest);
-    // cyclictest truncates to whole µs: compare against the middle of its bucket.
-    let ratio = |ours: f64, theirs: f64| ours / (theirs + 0.5);
-    let results = Results {
-        ticks: rt_core_timing.ticks,
-        misses: rt_core_timing.misses,
-        overruns: rt_core_timing.overruns,
-        wake_us: wake_p,
-        input_us: Percentiles::from_histogram(&input),
-        compute_us: Percentiles::from_histogram(&compute),
-        publish_us: Percentiles::from_histogram(&publish),
-        ipc_us: Percentiles::from_histogram(&ipc),
-        receive_us: Percentiles::from_histogram(&receive),
-        cyclictest_us: cyclic_p,
-        ratio_p99: cyclic_p.map(|c| ratio(wake_p.p99, c.p99)),
-        ratio_p999: cyclic_p.map(|c| ratio(wake_p.p999, c.p999)),
-        cyclictest_samples: cyclic.as_ref().map_or(0, CyclictestHistogram::total),
-        cyclictest_over_period: cyclic
-            .as_ref()
-            .map_or(0, |h| h.at_least(cli.period_us as usize)),
-        probe_received: summary.received,
-        probe_core: cli.probe_core.unwrap_or(cli.core),
-        probe_lost: summary.lost,
-        hot_path_allocations: rt_core_timing.hot_path_allocations,
-        queue_overflows: rt_core_timing.queue_overflows,
-        seconds: cli.seconds,
-        period_us: cli.period_us,
-        priority: cli.priority,
-        core: cli.core,
-        load: load_desc,
-        cyclictest_command: cyclic_cmd,
-        kernel: read_trim("/proc/sys/kernel/osrelease"),
-        sched_rt_runtime_us: read_trim("/proc/sys/kernel/sched_rt_runtime_us"),
-    };
-    print_table(&results);
-    if let Some(path) = &cli.json {
-        std::fs::write(path, serde_json::to_string_pretty(&results)?)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
+    Ok(RoundTotals {
+        wake: tag(&core_hists, TAG_WAKE)?,
+        input: tag(&core_hists, TAG_INPUT)?,
+        compute: tag(&core_hists, TAG_COMPUTE)?,
+        publish: tag(&core_hists, TAG_PUBLISH)?,
+        ipc: tag(&probe_hists, TAG_IPC)?,
+        receive: tag(&probe_hists, TAG_RECEIVE)?,
+        ticks: timing.ticks,
+        misses: timing.misses,
+        overruns: timing.overruns,
+        hot_path_allocations: timing.hot_path_allocations,
+        queue_overflows: timing.queue_overflows,
+        received: summary.received,
+        lost: summary.lost,
+    })
 }
 
 fn read_trim(path: &str) -> String {
@@ -495,8 +594,9 @@ fn publish_references(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
 
 fn print_table(r: &Results) {
     println!(
-        "rt-latency: {} s, period {} us, SCHED_FIFO {} on core {}, load: {}",
+        "rt-latency: {} s in {} round(s), period {} us, SCHED_FIFO {} on core {}, load: {}",
         r.seconds,
+        r.rounds,
         r.period_us,
         r.priority,
         r.core,

@@ -92,6 +92,7 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
             on_missing_rights: MissingRightsPolicy::BestEffort,
             lock_memory: true,
             prefault_stack_bytes: 64 * 1024,
+            cpu_dma_latency_us: None,
         })
         .context("real-time settings")?;
         tracing::info!("{status}");
