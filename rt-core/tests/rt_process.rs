@@ -12,7 +12,7 @@ use rt_common::*;
 use rt_core::control::file::Controller;
 use rt_core::control::pattern_generator::TickInput;
 use rt_core::msg::service::open_pubsub;
-use rt_core::msg::{Reference, StimTick, TimingReport};
+use rt_core::msg::{Contract, ForceSample, Reference, StimTick, TimingReport};
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::hlog::merge_by_tag;
 use rt_core::rt::process_config::SourceConfig;
@@ -164,6 +164,90 @@ fn the_pattern_generator_runs_from_a_controller_file_exactly_as_offline() {
     assert!(ticks.iter().filter(|t| t.fires()).count() > 10);
     assert!(ticks.iter().any(|t| t.model_force > 0.1));
     assert_replay_matches(&controller, &ticks);
+}
+
+/// Publishes a ForceSample (normalised `force`) every ms for `duration`.
+fn feed_forces(prefix: &str, force: f64, duration: Duration) {
+    let node = create_node("test-force").unwrap();
+    let publisher = open_pubsub::<ForceSample>(&node, prefix)
+        .unwrap()
+        .publisher_builder()
+        .create()
+        .unwrap();
+    let end = std::time::Instant::now() + duration;
+    let mut seq = 0;
+    while std::time::Instant::now() < end {
+        seq += 1;
+        let sample = ForceSample {
+            seq,
+            t_ns: monotonic_ns(),
+            stim_seq: 0,
+            force_n: force * 20.0,
+            force,
+        };
+        publisher.send_copy(sample).unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+#[test]
+fn in_feedback_mode_fresh_force_samples_reach_the_generator_and_stale_ones_do_not() {
+    let dir = Scratch::new("feedback");
+    let prefix = prefix("feedback");
+    write_measured_controller(&dir.path("controller.json"), 4);
+    let mut config = config(&prefix, 2);
+    config.source = SourceConfig::Controller {
+        path: dir.path("controller.json"),
+    };
+    config.feedback.enabled = true;
+    config.feedback.max_age_ms = 5;
+    let path = write_config(&dir, &config);
+    let probe = start_probe(&dir, &prefix);
+    let stop = AtomicBool::new(false);
+    let (forces_from, forces_to) = std::thread::scope(|s| {
+        s.spawn(|| feed_references(&prefix, 0.4, &stop));
+        let rt = start_rt_core(&path, false);
+        std::thread::sleep(Duration::from_millis(300));
+        let from = monotonic_ns();
+        feed_forces(&prefix, 0.3, Duration::from_millis(400));
+        let to = monotonic_ns();
+        std::thread::sleep(Duration::from_millis(300));
+        rt.signal(Signal::SIGINT);
+        let (status, stderr) = rt.finish(Duration::from_secs(10));
+        stop.store(true, Ordering::Relaxed);
+        assert!(status.success(), "SIGINT stops cleanly too: {stderr}");
+        assert!(stderr.contains("MeasuredForce mode"), "{stderr}");
+        (from, to)
+    });
+    let _ = probe.finish(Duration::from_secs(10));
+    let ticks: Vec<StimTick> = read_ticks(&dir)
+        .iter()
+        .map(|r| r.tick)
+        .filter(|t| !t.has(StimTick::FLAG_FINAL))
+        .collect();
+    let fed = |t: &StimTick| t.has(StimTick::FLAG_FEEDBACK);
+    // No sample before the feed started, none older than 5 ms used after it stopped.
+    assert!(
+        ticks
+            .iter()
+            .filter(|t| t.t_wake_ns < forces_from)
+            .all(|t| !fed(t))
+    );
+    assert!(
+        ticks
+            .iter()
+            .filter(|t| t.t_wake_ns > forces_to + 6 * MS)
+            .all(|t| !fed(t))
+    );
+    // While samples flowed every ~1 ms, nearly every tick used one.
+    let during: Vec<&StimTick> = ticks
+        .iter()
+        .filter(|t| t.t_wake_ns > forces_from + 20 * MS && t.t_wake_ns < forces_to)
+        .collect();
+    assert!(during.len() > 200);
+    let used = during.iter().filter(|t| fed(t)).count();
+    assert!(used * 10 >= during.len() * 9, "{used} of {}", during.len());
+    assert!(ticks.iter().all(|t| t.validate().is_ok()));
 }
 
 #[test]

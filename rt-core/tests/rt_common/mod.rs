@@ -202,11 +202,41 @@ mod control_support;
 /// Designs a controller for the control tests' fast-muscle-like LMN with `units` units
 /// (thesis Table 6.1 rise times, xi = 1.2) through the control library, and writes it.
 pub fn write_controller(path: &Path, units: usize) -> rt_core::control::file::Controller {
-    use rt_core::control::file::{Controller, ControllerSettings};
+    write_controller_with(
+        path,
+        units,
+        rt_core::control::file::ControllerSettings::default(),
+    )
+}
+
+/// [`write_controller`] for the measured-force mode (estimator poles from a 5 ms rise time,
+/// xi = 1.2, as in the control library's benchmark).
+pub fn write_measured_controller(path: &Path, units: usize) -> rt_core::control::file::Controller {
+    use rt_core::control::design::EstimatorPoles;
+    use rt_core::control::file::ControllerSettings;
+    use rt_core::control::pattern_generator::FeedbackMode;
+    let [p1, p2] = rt_core::control::poles::dominant_pair(0.005, 1.2, control_support::TS).unwrap();
+    write_controller_with(
+        path,
+        units,
+        ControllerSettings {
+            mode: FeedbackMode::MeasuredForce,
+            estimator_poles: Some(EstimatorPoles { p1, p2 }),
+            ..ControllerSettings::default()
+        },
+    )
+}
+
+fn write_controller_with(
+    path: &Path,
+    units: usize,
+    settings: rt_core::control::file::ControllerSettings,
+) -> rt_core::control::file::Controller {
+    use rt_core::control::file::Controller;
     let controller = Controller::design(
         control_support::fast_muscle(units),
         &control_support::table_6_1_specs(units),
-        ControllerSettings::default(),
+        settings,
     )
     .unwrap();
     controller.save(path).unwrap();
