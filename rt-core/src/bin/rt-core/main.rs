@@ -46,9 +46,12 @@ CONFIGURATION FILE (TOML, schema \"fes-rt-core/1\"; `--print-example-config` pri
     priority = 80             SCHED_FIFO priority 1..=99
     core = 1                  CPU core to pin to (default: not pinned)
     on_missing_rights = \"best-effort\"   or \"refuse\" (rig): without SCHED_FIFO rights,
-                              a missing core or unlockable memory, refuse to start
+                              a missing core, unlockable memory or wake-up latency
+                              limit, refuse to start
     lock_memory = true        mlockall(MCL_CURRENT|MCL_FUTURE)
     prefault_stack_bytes = 262144
+    cpu_dma_latency_us = 0    PM QoS wake-up latency limit (/dev/cpu_dma_latency);
+                              omit to leave the system's setting
   [reference]
     stale_after_ms = 100      a Reference older than this is stale ...
     stale_ramp_per_s = 2.0    ... and the target ramps to 0 at this rate (per second)
