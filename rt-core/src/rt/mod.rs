@@ -7,8 +7,9 @@
 //!   periods, keep the phase, no catch-up).
 //! - [`telemetry`], [`histogram`], [`hlog`]: per-tick timing through a preallocated lock-free
 //!   queue into bounded HdrHistograms and HdrHistogram interval logs.
-//! - [`alloc`]: a counting global allocator proving the real-time thread allocates nothing.
-//! - [`source`], [`reference`], [`feedback`], [`generator`]: the pattern generator's tick
+//! - [`alloc`]: a counting global allocator proving the real-time thread takes nothing from
+//!   the heap.
+//! - [`source`], [`reference`](mod@reference), [`feedback`], [`generator`]: the pattern generator's tick
 //!   without I/O ([`PatternLoop`] around a [`TickSource`]).
 //! - [`process_config`], [`runner`], [`signals`]: the rt-core process (configuration file,
 //!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM).
