@@ -13,7 +13,10 @@ pub struct Pulse {
 
 impl Pulse {
     /// The thesis protocol's supramaximal pulse (5.1): 200 us; the amplitude is nominal.
-    pub const SUPRAMAXIMAL: Pulse = Pulse { amplitude_ma: 20.0, width_us: 200.0 };
+    pub const SUPRAMAXIMAL: Pulse = Pulse {
+        amplitude_ma: 20.0,
+        width_us: 200.0,
+    };
 }
 
 /// A muscle advanced in fixed steps of [`MusclePlant::ts`] seconds.
@@ -29,4 +32,16 @@ pub trait MusclePlant: Send {
     fn step(&mut self, pulse: Option<Pulse>) -> f64;
     /// Returns the muscle to rest (no force, no stimulation history).
     fn reset(&mut self);
+    /// The value of a record's first sample (`t = 0`, before any `step`). A muscle at rest
+    /// has zero force; a force sensor adds its offset and noise.
+    fn initial_force(&mut self) -> f64 {
+        0.0
+    }
+    /// Lets `seconds` pass without stimulation (the thesis rests 30 s between records).
+    /// Without slow state (fatigue) this is a [`MusclePlant::reset`]; a fatiguing muscle
+    /// recovers only partially.
+    fn rest(&mut self, seconds: f64) {
+        let _ = seconds;
+        self.reset();
+    }
 }
