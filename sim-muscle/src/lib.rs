@@ -18,11 +18,15 @@
 #![deny(missing_docs)]
 
 pub mod ding;
+pub mod lmn_plant;
 pub mod metrics;
 pub mod muscle;
 pub mod pattern;
 pub mod plant;
+pub mod plot;
 pub mod preset;
+pub mod protocol;
+pub mod recorder;
 pub mod sensor;
 pub mod simulate;
 pub mod stimulator;

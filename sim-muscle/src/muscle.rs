@@ -1,7 +1,7 @@
 //! The Ding muscle as a sampled plant: pulses at sample starts, an electromechanical
 //! delay, force in newtons at sample ends ([`MusclePlant`] timing convention).
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 
 use serde::{Deserialize, Serialize};
 
@@ -48,6 +48,67 @@ impl MuscleConfig {
         }
     }
 
+    /// Sets the model parameter `name` (as in the papers: `tauc`, `r0`, `km`, `a`,
+    /// `tau1`, `tau2`; with fatigue on also `alpha_a`, `alpha_km`, `alpha_tau1`,
+    /// `tau_fat`; SI units) and re-validates.
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), ParamError> {
+        let slot = match (self.ding.get_mut(name), self.fatigue.as_mut()) {
+            (Some(slot), _) => slot,
+            (None, Some(f)) => match f.get_mut(name) {
+                Some(slot) => slot,
+                None => return Err(self.unknown(name)),
+            },
+            (None, None) => return Err(self.unknown(name)),
+        };
+        *slot = value;
+        self.validate()
+    }
+
+    fn unknown(&self, name: &str) -> ParamError {
+        let mut known: Vec<String> = DingParams::NAMES
+            .iter()
+            .map(|(n, u)| format!("{n} [{u}]"))
+            .collect();
+        let fatigue: Vec<String> = FatigueParams::NAMES
+            .iter()
+            .map(|(n, u)| format!("{n} [{u}]"))
+            .collect();
+        if self.fatigue.is_some() {
+            known.extend(fatigue);
+        } else if FatigueParams::NAMES.iter().any(|(n, _)| *n == name) {
+            return ParamError::Unknown {
+                name: name.to_string(),
+                known: format!("{} (fatigue coefficients need --fatigue)", known.join(", ")),
+            };
+        }
+        ParamError::Unknown {
+            name: name.to_string(),
+            known: known.join(", "),
+        }
+    }
+
+    /// Every model number by name, SI units, for a data set's `parameters`.
+    pub fn parameters(&self) -> BTreeMap<String, f64> {
+        let mut m: BTreeMap<String, f64> = self
+            .ding
+            .entries()
+            .iter()
+            .map(|&(n, v)| (n.to_string(), v))
+            .collect();
+        if let Some(f) = &self.fatigue {
+            m.extend(f.entries().iter().map(|&(n, v)| (n.to_string(), v)));
+        }
+        if let Some(p) = &self.pulse_width {
+            m.insert("pd0_us".into(), p.pd0_us);
+            m.insert("pdt_us".into(), p.pdt_us);
+            m.insert("ref_us".into(), p.ref_us);
+        }
+        m.insert("emd_s".into(), self.emd_s);
+        m.insert("ts_s".into(), self.ts_s);
+        m.insert("max_substep_s".into(), self.max_substep_s);
+        m
+    }
+
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ParamError> {
         self.ding.validate()?;
@@ -70,25 +131,28 @@ impl MuscleConfig {
     }
 }
 
-/// The muscle's maximal force, N: the peak of a 1 s, 100 Hz train from rest (the top of
+/// A muscle's maximal force, N: the peak of a 1 s, 100 Hz train from rest (the top of
 /// the protocols' frequency range, where both presets' force-frequency curves have
-/// flattened). Scales the default sensor noise and offset.
+/// flattened). Scales the default sensor noise and offset. The plant is reset first and
+/// left wherever the train leaves it.
+pub fn max_force(plant: &mut dyn MusclePlant) -> f64 {
+    plant.reset();
+    let n = (1.0 / plant.ts()).round().max(2.0) as usize;
+    let hz = 100f64.min(1.0 / plant.ts());
+    let train = crate::pattern::constant_train(hz, 0, n, plant.ts()).unwrap_or_default();
+    let pattern = crate::pattern::from_samples(&train, n);
+    let force = crate::simulate::simulate(plant, &pattern, Pulse::SUPRAMAXIMAL);
+    force.into_iter().fold(0.0, f64::max)
+}
+
+/// [`max_force`] of the Ding muscle with parameters `ding` (no delay, 1 ms sampling).
 pub fn max_force_n(ding: &DingParams) -> Result<f64, ParamError> {
     let config = MuscleConfig {
         ding: *ding,
         emd_s: 0.0,
         ..MuscleConfig::preset(Preset::Fast)
     };
-    let mut muscle = Muscle::new(config)?;
-    let train = crate::pattern::constant_train(100.0, 0, 1000, config.ts_s).map_err(|_| {
-        ParamError::NotFinite {
-            name: "ts",
-            value: config.ts_s,
-        }
-    })?;
-    let pattern = crate::pattern::from_samples(&train, 1000);
-    let force = crate::simulate::simulate(&mut muscle, &pattern, Pulse::SUPRAMAXIMAL);
-    Ok(force.into_iter().fold(0.0, f64::max))
+    Ok(max_force(&mut Muscle::new(config)?))
 }
 
 /// A pulse waiting out the electromechanical delay.
@@ -120,15 +184,15 @@ impl Muscle {
     pub fn new(config: MuscleConfig) -> Result<Self, ParamError> {
         config.validate()?;
         let model = DingModel::new(config.ding, config.fatigue, config.max_substep_s)?;
+        // emd / ts split into whole samples and a fraction; a fraction within 1e-9 of a
+        // whole sample counts as whole (7e-3 / 1e-3 is not exactly 7 in floating point).
         let delay = config.emd_s / config.ts_s;
-        let mut whole = (delay + 1e-9).floor();
-        let mut frac = delay - whole;
-        if frac < 1e-9 {
-            frac = 0.0;
-        }
-        if whole < 0.0 {
-            whole = 0.0;
-        }
+        let whole = (delay + 1e-9).floor();
+        let frac = if delay - whole < 1e-9 {
+            0.0
+        } else {
+            delay - whole
+        };
         Ok(Self {
             config,
             model,
@@ -152,7 +216,11 @@ impl Muscle {
     /// Activation gain of a delivered pulse: 0 without charge, else the pulse-width
     /// variant's gain, else 1 (supramaximal).
     fn gain(&self, pulse: &Pulse) -> f64 {
-        if !(pulse.amplitude_ma > 0.0) || !(pulse.width_us > 0.0) {
+        if pulse.amplitude_ma.is_nan()
+            || pulse.amplitude_ma <= 0.0
+            || pulse.width_us.is_nan()
+            || pulse.width_us <= 0.0
+        {
             return 0.0;
         }
         match &self.config.pulse_width {

@@ -45,3 +45,22 @@ pub trait MusclePlant: Send {
         self.reset();
     }
 }
+
+/// A boxed plant is a plant, so tools can choose the muscle at run time.
+impl<P: MusclePlant + ?Sized> MusclePlant for Box<P> {
+    fn ts(&self) -> f64 {
+        (**self).ts()
+    }
+    fn step(&mut self, pulse: Option<Pulse>) -> f64 {
+        (**self).step(pulse)
+    }
+    fn reset(&mut self) {
+        (**self).reset()
+    }
+    fn initial_force(&mut self) -> f64 {
+        (**self).initial_force()
+    }
+    fn rest(&mut self, seconds: f64) {
+        (**self).rest(seconds)
+    }
+}

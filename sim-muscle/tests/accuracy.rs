@@ -373,3 +373,30 @@ fn rk4_converges_with_fourth_order() {
     println!("error ratio 1 ms / 0.5 ms substeps: {ratio:.2}");
     assert!((11.0..22.0).contains(&ratio), "ratio {ratio}");
 }
+
+/// Rest with fatigue: once the force has decayed, the fatigued A, Km and tau1 recover
+/// towards their rested values as exp(-t / tau_fat) (closed form of the fatigue
+/// equations with F = 0): compare a 30 s rest with the deficit after the train.
+#[test]
+fn fatigue_recovers_with_tau_fat() {
+    let mut cfg = no_emd(Preset::Slow);
+    let fatigue = FatigueParams::for_muscle(&cfg.ding);
+    cfg.fatigue = Some(fatigue);
+    let mut m = Muscle::new(cfg).expect("valid");
+    simulate(
+        &mut m,
+        &from_samples(&constant_train(40.0, 0, 5000, 1e-3).expect("train"), 5000),
+        Pulse::SUPRAMAXIMAL,
+    );
+    // Let the force decay (2 s), then read the deficit and rest 30 s more.
+    m.rest(2.0);
+    let (a0, km0, t0) = m.model().current_a_km_tau1();
+    m.rest(30.0);
+    let (a1, km1, t1) = m.model().current_a_km_tau1();
+    let w = (-30.0 / fatigue.tau_fat).exp();
+    let p = cfg.ding;
+    assert!(p.a - a0 > 100.0, "the train fatigued the muscle");
+    assert!(((a1 - p.a) - (a0 - p.a) * w).abs() < 1e-6 * p.a);
+    assert!(((km1 - p.km) - (km0 - p.km) * w).abs() < 1e-9);
+    assert!(((t1 - p.tau1) - (t0 - p.tau1) * w).abs() < 1e-9);
+}
