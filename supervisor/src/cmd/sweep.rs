@@ -1,0 +1,8 @@
+//! `supervisor sweep` (being written).
+/// Arguments.
+#[derive(Debug, clap::Args)]
+pub struct Args {}
+/// Runs it.
+pub fn run(_: Args) -> anyhow::Result<()> {
+    anyhow::bail!("not yet")
+}
