@@ -34,6 +34,7 @@ pub mod records;
 pub mod regression;
 pub mod resample;
 pub mod start;
+pub mod sweep;
 
 pub use identify::{Hooks, IdentOptions, Identified, Mode, Progress, SchedulingKind, identify};
 pub use metrics::Metrics;
