@@ -8,7 +8,7 @@
 //! - **Input (pulse-preserving, 5.2.2 a/b).** Each pulse moves to the nearest coarse sample
 //!   (a pulse exactly half-way goes to the later one). Pulses are placed in time order; a
 //!   pulse whose nearest coarse sample is taken moves to the nearest *free* coarse sample
-//!   (distance measured in base samples, ties to the earlier), so the pulse count never
+//!   (distance measured in base samples, ties to the later), so the pulse count never
 //!   changes. The displacement is bounded: no pulse moves more than [`MAX_PULSE_SHIFT`]
 //!   coarse samples beyond its nearest one, otherwise the record is refused as too dense
 //!   for that period. The largest displacement is reported ([`PulseShift`]).
@@ -86,12 +86,12 @@ pub fn downsample_pulses(
         shift.pulses += 1;
         let nearest = ((k + factor / 2) / factor).min(nc - 1);
         let dist = |j: usize| (j * factor).abs_diff(k);
-        // Candidates within the bound, nearest first (ties: earlier first).
+        // Candidates within the bound, nearest first (ties: the later one, as the rounding).
         let lo = nearest.saturating_sub(MAX_PULSE_SHIFT);
         let hi = (nearest + MAX_PULSE_SHIFT).min(nc - 1);
         let best = (lo..=hi)
             .filter(|&j| out[j] == 0.0)
-            .min_by_key(|&j| (dist(j), j))
+            .min_by_key(|&j| (dist(j), core::cmp::Reverse(j)))
             .ok_or(ResampleError::TooDense { sample: k, factor })?;
         if best != nearest {
             shift.collisions += 1;
