@@ -37,7 +37,11 @@ fn pulse_trains(n_records: usize, seed: u64) -> Vec<Vec<f64>> {
             let mut k = 10;
             while k <= 10 + len {
                 u[k] = 1.0;
-                k += if r % 5 == 4 { 25 } else { rng.random_range(1..=70usize) };
+                k += if r % 5 == 4 {
+                    25
+                } else {
+                    rng.random_range(1..=70usize)
+                };
             }
             u
         })
@@ -92,7 +96,12 @@ fn arx_truth(scheduling: SchedulingSpec) -> Lmn {
             }
         })
         .collect();
-    lmn(LocalModelSet::ArxShift { order: 2, units }, 3, false, scheduling)
+    lmn(
+        LocalModelSet::ArxShift { order: 2, units },
+        3,
+        false,
+        scheduling,
+    )
 }
 
 /// A 3-unit common-eigenvector network (modal gauge, reference unit 1).
@@ -102,14 +111,30 @@ fn ss_truth(zero_offsets: bool) -> Lmn {
             let f = i as f64;
             EigCommonUnit {
                 eigenvalues: [-120.0 + 20.0 * f, -22.0 + 3.0 * f],
-                b: if i == 1 { [1.0, 1.0] } else { [1.0 + 0.3 * f, 0.9 + 0.1 * f] },
+                b: if i == 1 {
+                    [1.0, 1.0]
+                } else {
+                    [1.0 + 0.3 * f, 0.9 + 0.1 * f]
+                },
                 c: [-30.0 - 5.0 * f, 32.0 + 8.0 * f],
-                dx: if zero_offsets { [0.0; 2] } else { [0.01 * f, 0.0] },
+                dx: if zero_offsets {
+                    [0.0; 2]
+                } else {
+                    [0.01 * f, 0.0]
+                },
                 dy: if zero_offsets { 0.0 } else { 0.002 * f },
             }
         })
         .collect();
-    lmn(LocalModelSet::SsEigCommon { units, reference_unit: 1 }, 3, zero_offsets, SchedulingSpec::default())
+    lmn(
+        LocalModelSet::SsEigCommon {
+            units,
+            reference_unit: 1,
+        },
+        3,
+        zero_offsets,
+        SchedulingSpec::default(),
+    )
 }
 
 /// Noise-free data from a known ARX network: global least squares returns its parameters
@@ -130,27 +155,46 @@ fn global_least_squares_recovers_a_known_arx_network() {
         let mut template = truth.clone();
         if let LocalModelSet::ArxShift { units, .. } = &mut template.local {
             for u in units.iter_mut() {
-                *u = ArxUnit { a: [-1.6, 0.64, 0.0], b: [0.01, 0.0, 0.0], d: 0.0 };
+                *u = ArxUnit {
+                    a: [-1.6, 0.64, 0.0],
+                    b: [0.01, 0.0, 0.0],
+                    d: 0.0,
+                };
             }
         }
         let (theta, fallback) = fit_prediction(&template, &data, Learning::Global).expect("fit");
         assert!(fallback.is_empty());
         let layout = ParamLayout::new(&truth);
         let want = layout.theta(&truth).expect("theta");
-        let problem = Problem::new(ThetaMap { template: &truth, layout: &layout }, &data, Horizon::Prediction);
+        let problem = Problem::new(
+            ThetaMap {
+                template: &truth,
+                layout: &layout,
+            },
+            &data,
+            Horizon::Prediction,
+        );
         let cols: Vec<usize> = (0..want.len()).collect();
         let (_, j) = problem.jacobian(&want, &cols).expect("jacobian");
         let jn = j.norm();
         let rank = j.svd(false, false).rank(1e-9 * jn);
         if sched == SchedulingSpec::Output {
-            assert_eq!(rank, want.len() - 2, "output scheduling: rank of the regression");
+            assert_eq!(
+                rank,
+                want.len() - 2,
+                "output scheduling: rank of the regression"
+            );
             let r = problem.residuals(&theta).expect("residuals");
             let worst = r.iter().fold(0.0f64, |a, v| a.max(v.abs()));
             assert!(worst < 1e-10, "predictions differ by {worst:.3e}");
         } else {
             assert_eq!(rank, want.len());
             for (i, (a, b)) in theta.iter().zip(&want).enumerate() {
-                assert!((a - b).abs() < 1e-7 * (1.0 + b.abs()), "{}: {a} vs {b}", layout.names()[i]);
+                assert!(
+                    (a - b).abs() < 1e-7 * (1.0 + b.abs()),
+                    "{}: {a} vs {b}",
+                    layout.names()[i]
+                );
             }
         }
     }
@@ -193,7 +237,11 @@ fn local_learning_solves_the_hand_built_weighted_normal_equations() {
         }
         let th = DVector::from_column_slice(&theta[layout.unit_range(m)]);
         let res = &ata * &th - &aty;
-        assert!(res.norm() < 1e-9 * aty.norm(), "unit {m}: |A'W(A theta - y)| = {:.3e}", res.norm());
+        assert!(
+            res.norm() < 1e-9 * aty.norm(),
+            "unit {m}: |A'W(A theta - y)| = {:.3e}",
+            res.norm()
+        );
     }
 }
 
@@ -213,9 +261,19 @@ fn validity_weights_match_an_independent_prefilter_loop() {
             let sum: f64 = (0..3).map(|i| w[i][ri][k]).sum();
             assert!((sum - 1.0).abs() < 1e-12);
             for i in 0..3 {
-                assert!((w[i][ri][k] - a.get(i)).abs() < 1e-12, "record {ri} sample {k} unit {i}");
+                assert!(
+                    (w[i][ri][k] - a.get(i)).abs() < 1e-12,
+                    "record {ri} sample {k} unit {i}"
+                );
             }
-            pf.advance(&mut st, if k >= truth.delay { r.u[k - truth.delay] } else { 0.0 });
+            pf.advance(
+                &mut st,
+                if k >= truth.delay {
+                    r.u[k - truth.delay]
+                } else {
+                    0.0
+                },
+            );
         }
     }
 }
@@ -241,21 +299,51 @@ fn levenberg_marquardt_recovers_a_known_network() {
     let fixed = fix_gauge(&mut gauged, 1);
     let layout = ParamLayout::new(&gauged);
     let theta0 = layout.theta(&gauged).expect("theta");
-    let problem = Problem::new(ThetaMap { template: &gauged, layout: &layout }, &data, Horizon::Simulation);
+    let problem = Problem::new(
+        ThetaMap {
+            template: &gauged,
+            layout: &layout,
+        },
+        &data,
+        Horizon::Simulation,
+    );
     let free: Vec<usize> = (0..theta0.len()).filter(|i| !fixed.contains(i)).collect();
-    let opts = LmOptions { max_iter: 300, window_tol: 0.0, ..LmOptions::default() };
+    let opts = LmOptions {
+        max_iter: 300,
+        window_tol: 0.0,
+        ..LmOptions::default()
+    };
     let rep = levenberg_marquardt(&problem, &theta0, &free, &opts, &mut |_, _| {}).expect("lm");
     let n = data.base_samples() as f64;
-    assert!(rep.initial_cost / n > 1e-6, "the start must be wrong: {}", rep.initial_cost / n);
-    assert!(rep.cost / n < 1e-18, "training MSE {} after {} iterations ({})", rep.cost / n, rep.iterations, rep.stop);
-    let fitted = layout.apply(&gauged, &rep.p).expect("apply").network().expect("network");
+    assert!(
+        rep.initial_cost / n > 1e-6,
+        "the start must be wrong: {}",
+        rep.initial_cost / n
+    );
+    assert!(
+        rep.cost / n < 1e-18,
+        "training MSE {} after {} iterations ({})",
+        rep.cost / n,
+        rep.iterations,
+        rep.stop
+    );
+    let fitted = layout
+        .apply(&gauged, &rep.p)
+        .expect("apply")
+        .network()
+        .expect("network");
     let net = truth.network().expect("truth");
     for r in &recs.test {
         let (mut a, mut b) = (vec![0.0; r.u.len()], vec![0.0; r.u.len()]);
         simulate(&fitted, &r.u, &mut a).expect("fitted");
         simulate(&net, &r.u, &mut b).expect("truth");
         for k in 0..a.len() {
-            assert!((a[k] - b[k]).abs() < 1e-7, "test output differs at {k}: {} vs {}", a[k], b[k]);
+            assert!(
+                (a[k] - b[k]).abs() < 1e-7,
+                "test output differs at {k}: {} vs {}",
+                a[k],
+                b[k]
+            );
         }
     }
 }
@@ -276,7 +364,10 @@ fn identify_reaches_the_noise_floor_on_data_from_a_known_network() {
         };
         let r = identify(&recs, &opts, &Hooks::silent()).expect("identify");
         let s2 = sigma * sigma;
-        for (what, v) in [("train", r.metrics.train_msse), ("test", r.metrics.test_msse)] {
+        for (what, v) in [
+            ("train", r.metrics.train_msse),
+            ("test", r.metrics.test_msse),
+        ] {
             assert!(
                 v < 1.15 * s2 && v > 0.85 * s2,
                 "zero offsets {zero_offsets}: {what} MSSE {v:.4e} vs noise {s2:.4e} ({} iterations)",
@@ -293,7 +384,9 @@ fn identify_reaches_the_noise_floor_on_data_from_a_known_network() {
 #[test]
 fn gauge_fixing_keeps_the_output_and_regularises_the_hessian() {
     let common = ss_truth(false);
-    let LocalModelSet::SsEigCommon { units, .. } = &common.local else { unreachable!() };
+    let LocalModelSet::SsEigCommon { units, .. } = &common.local else {
+        unreachable!()
+    };
     let local: Vec<EigLocalUnit> = units
         .iter()
         .enumerate()
@@ -306,11 +399,24 @@ fn gauge_fixing_keeps_the_output_and_regularises_the_hessian() {
             dy: u.dy,
         })
         .collect();
-    let direct: Vec<SsLocalModel> = local.iter().map(|u| u.to_local_model().expect("angles")).collect();
+    let direct: Vec<SsLocalModel> = local
+        .iter()
+        .map(|u| u.to_local_model().expect("angles"))
+        .collect();
     let models = [
         common.clone(),
-        lmn(LocalModelSet::SsEigLocal(local), 3, false, SchedulingSpec::default()),
-        lmn(LocalModelSet::SsDirect(direct), 3, false, SchedulingSpec::default()),
+        lmn(
+            LocalModelSet::SsEigLocal(local),
+            3,
+            false,
+            SchedulingSpec::default(),
+        ),
+        lmn(
+            LocalModelSet::SsDirect(direct),
+            3,
+            false,
+            SchedulingSpec::default(),
+        ),
     ];
     let recs = records_of(&common, 4, 1, 0.002, 2);
     let data = ModelData::new(&recs.train, 1).expect("data");
@@ -325,19 +431,40 @@ fn gauge_fixing_keeps_the_output_and_regularises_the_hessian() {
             simulate(&a, &r.u, &mut ya).expect("sim");
             simulate(&b, &r.u, &mut yb).expect("sim");
             for k in 0..ya.len() {
-                assert!((ya[k] - yb[k]).abs() < 1e-9, "{}: output changed at {k}", m.structure());
+                assert!(
+                    (ya[k] - yb[k]).abs() < 1e-9,
+                    "{}: output changed at {k}",
+                    m.structure()
+                );
             }
         }
         let unit = g.ss_units().expect("ss")[1];
-        assert!(unit.dx[0].abs() < 1e-12 && unit.dx[1].abs() < 1e-12, "{}: dx_r", m.structure());
+        assert!(
+            unit.dx[0].abs() < 1e-12 && unit.dx[1].abs() < 1e-12,
+            "{}: dx_r",
+            m.structure()
+        );
         match m.structure() {
             Structure::SsDirect => {
                 assert!(unit.a[0][0].abs() < 1e-9 && (unit.a[0][1] - 1.0).abs() < 1e-9);
                 assert!(unit.b[0].abs() < 1e-12 && (unit.b[1] - 1.0).abs() < 1e-12);
-                assert_eq!(fixed_names, ["units[1].a00", "units[1].a01", "units[1].b0", "units[1].b1", "units[1].dx0", "units[1].dx1"]);
+                assert_eq!(
+                    fixed_names,
+                    [
+                        "units[1].a00",
+                        "units[1].a01",
+                        "units[1].b0",
+                        "units[1].b1",
+                        "units[1].dx0",
+                        "units[1].dx1"
+                    ]
+                );
             }
             Structure::SsEigLocal => {
-                assert!((unit.a[0][1]).abs() < 1e-9 && (unit.a[1][0]).abs() < 1e-9, "V_r = I");
+                assert!(
+                    (unit.a[0][1]).abs() < 1e-9 && (unit.a[1][0]).abs() < 1e-9,
+                    "V_r = I"
+                );
                 assert!((unit.b[0] - 1.0).abs() < 1e-12 && (unit.b[1] - 1.0).abs() < 1e-12);
                 assert_eq!(fixed_names.len(), 6);
             }
@@ -347,7 +474,14 @@ fn gauge_fixing_keeps_the_output_and_regularises_the_hessian() {
         // non-modal structures, T); over the free ones: regular.
         let layout = ParamLayout::new(&g);
         let theta = layout.theta(&g).expect("theta");
-        let problem = Problem::new(ThetaMap { template: &g, layout: &layout }, &data, Horizon::Simulation);
+        let problem = Problem::new(
+            ThetaMap {
+                template: &g,
+                layout: &layout,
+            },
+            &data,
+            Horizon::Simulation,
+        );
         let min_eig = |cols: &[usize]| {
             let h = problem.normal(&theta, cols).expect("normal").h;
             let d: Vec<f64> = (0..cols.len()).map(|k| h[(k, k)].sqrt()).collect();
@@ -357,8 +491,16 @@ fn gauge_fixing_keeps_the_output_and_regularises_the_hessian() {
         let all: Vec<usize> = (0..theta.len()).collect();
         let free: Vec<usize> = all.iter().copied().filter(|i| !fixed.contains(i)).collect();
         let (e_all, e_free) = (min_eig(&all), min_eig(&free));
-        assert!(e_all < 1e-10, "{}: smallest scaled eigenvalue with the gauge free {e_all:.3e}", m.structure());
-        assert!(e_free > 1e3 * e_all.abs().max(1e-14), "{}: with the gauge fixed {e_free:.3e}", m.structure());
+        assert!(
+            e_all < 1e-10,
+            "{}: smallest scaled eigenvalue with the gauge free {e_all:.3e}",
+            m.structure()
+        );
+        assert!(
+            e_free > 1e3 * e_all.abs().max(1e-14),
+            "{}: with the gauge fixed {e_free:.3e}",
+            m.structure()
+        );
     }
 }
 
@@ -368,16 +510,34 @@ fn gauge_fixing_keeps_the_output_and_regularises_the_hessian() {
 #[test]
 fn knot_optimisation_improves_the_fit_and_keeps_knots_ordered() {
     let mut truth = ss_truth(false);
-    let LocalModelSet::SsEigCommon { units, .. } = &truth.local else { unreachable!() };
+    let LocalModelSet::SsEigCommon { units, .. } = &truth.local else {
+        unreachable!()
+    };
     let mut five = units.clone();
     five.push(units[2]);
     five.push(units[0]);
-    truth.local = LocalModelSet::SsEigCommon { units: five, reference_unit: 1 };
-    truth.validity = ValidityFunctions::from_knots(&[0.0, 0.0, 0.0, 0.12, 0.3, 1.0, 1.0, 1.0], 3).expect("knots");
+    truth.local = LocalModelSet::SsEigCommon {
+        units: five,
+        reference_unit: 1,
+    };
+    truth.validity = ValidityFunctions::from_knots(&[0.0, 0.0, 0.0, 0.12, 0.3, 1.0, 1.0, 1.0], 3)
+        .expect("knots");
     let recs = records_of(&truth, 12, 4, 0.002, 31);
-    let base = IdentOptions { units: 5, max_iter: 60, ..IdentOptions::default() };
+    let base = IdentOptions {
+        units: 5,
+        max_iter: 60,
+        ..IdentOptions::default()
+    };
     let plain = identify(&recs, &base, &Hooks::silent()).expect("uniform");
-    let opt = identify(&recs, &IdentOptions { optimise_knots: true, ..base }, &Hooks::silent()).expect("knots");
+    let opt = identify(
+        &recs,
+        &IdentOptions {
+            optimise_knots: true,
+            ..base
+        },
+        &Hooks::silent(),
+    )
+    .expect("knots");
     assert!(
         opt.metrics.train_msse < plain.metrics.train_msse,
         "optimised {} vs uniform {}",
@@ -385,7 +545,11 @@ fn knot_optimisation_improves_the_fit_and_keeps_knots_ordered() {
         plain.metrics.train_msse
     );
     let k = opt.lmn.validity.knots();
-    assert!(k.windows(2).all(|w| w[0] < w[1] || w[0] == w[1] && (w[0] == 0.0 || w[0] == 1.0)), "{k:?}");
+    assert!(
+        k.windows(2)
+            .all(|w| w[0] < w[1] || w[0] == w[1] && (w[0] == 0.0 || w[0] == 1.0)),
+        "{k:?}"
+    );
     assert_eq!((k[0], k[k.len() - 1]), (0.0, 1.0));
 }
 
@@ -396,20 +560,71 @@ fn bad_options_are_refused() {
     let truth = ss_truth(false);
     let recs = records_of(&truth, 2, 1, 0.0, 1);
     let cases = [
-        (IdentOptions { units: 0, ..IdentOptions::default() }, "units"),
-        (IdentOptions { units: 17, ..IdentOptions::default() }, "units"),
-        (IdentOptions { mode: Mode::Prediction, ..IdentOptions::default() }, "prediction mode needs an ARX structure"),
-        (IdentOptions { starts: 0, ..IdentOptions::default() }, "starts"),
-        (IdentOptions { arx_order: 4, structure: Structure::ArxDelta, ..IdentOptions::default() }, "order"),
-        (IdentOptions { range: (1.0, 0.0), ..IdentOptions::default() }, "range"),
-        (IdentOptions { prior: f64::NAN, ..IdentOptions::default() }, "prior"),
         (
-            IdentOptions { structure: Structure::ArxShift, mode: Mode::Prediction, optimise_knots: true, scheduling: SchedulingKind::Output, ..IdentOptions::default() },
+            IdentOptions {
+                units: 0,
+                ..IdentOptions::default()
+            },
+            "units",
+        ),
+        (
+            IdentOptions {
+                units: 17,
+                ..IdentOptions::default()
+            },
+            "units",
+        ),
+        (
+            IdentOptions {
+                mode: Mode::Prediction,
+                ..IdentOptions::default()
+            },
+            "prediction mode needs an ARX structure",
+        ),
+        (
+            IdentOptions {
+                starts: 0,
+                ..IdentOptions::default()
+            },
+            "starts",
+        ),
+        (
+            IdentOptions {
+                arx_order: 4,
+                structure: Structure::ArxDelta,
+                ..IdentOptions::default()
+            },
+            "order",
+        ),
+        (
+            IdentOptions {
+                range: (1.0, 0.0),
+                ..IdentOptions::default()
+            },
+            "range",
+        ),
+        (
+            IdentOptions {
+                prior: f64::NAN,
+                ..IdentOptions::default()
+            },
+            "prior",
+        ),
+        (
+            IdentOptions {
+                structure: Structure::ArxShift,
+                mode: Mode::Prediction,
+                optimise_knots: true,
+                scheduling: SchedulingKind::Output,
+                ..IdentOptions::default()
+            },
             "knot optimisation",
         ),
     ];
     for (o, want) in cases {
-        let e = identify(&recs, &o, &Hooks::silent()).expect_err("must fail").to_string();
+        let e = identify(&recs, &o, &Hooks::silent())
+            .expect_err("must fail")
+            .to_string();
         assert!(e.contains(want), "{e:?} should mention {want:?}");
     }
 }

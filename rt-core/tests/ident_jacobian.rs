@@ -22,18 +22,31 @@ fn records() -> Vec<IdentRecord> {
             let u: Vec<f64> = (0..n)
                 .map(|k| {
                     let ipi = 6 + (k / 60 + r) % 5 * 7;
-                    if (20..320).contains(&k) && k % ipi == 0 { 1.0 } else { 0.0 }
+                    if (20..320).contains(&k) && k % ipi == 0 {
+                        1.0
+                    } else {
+                        0.0
+                    }
                 })
                 .collect();
             let y: Vec<f64> = (0..n)
-                .map(|k| 0.3 * (1.0 - (-(k as f64) / 80.0).exp()) * (1.0 + 0.2 * (k as f64 / 30.0).sin()))
+                .map(|k| {
+                    0.3 * (1.0 - (-(k as f64) / 80.0).exp()) * (1.0 + 0.2 * (k as f64 / 30.0).sin())
+                })
                 .collect();
             IdentRecord::new(format!("r{r}"), u, y).expect("valid record")
         })
         .collect()
 }
 
-fn lmn(local: LocalModelSet, m: usize, zero_offsets: bool, scheduling: SchedulingSpec, ts: f64, delay: usize) -> Lmn {
+fn lmn(
+    local: LocalModelSet,
+    m: usize,
+    zero_offsets: bool,
+    scheduling: SchedulingSpec,
+    ts: f64,
+    delay: usize,
+) -> Lmn {
     Lmn {
         ts,
         delay,
@@ -54,7 +67,11 @@ fn models(scheduling: SchedulingSpec) -> Vec<Lmn> {
             let f = i as f64;
             EigCommonUnit {
                 eigenvalues: [-180.0 + 30.0 * f, -25.0 + 4.0 * f],
-                b: if i == 1 { [1.0, 1.0] } else { [1.3 - 0.2 * f, 0.7 + 0.1 * f] },
+                b: if i == 1 {
+                    [1.0, 1.0]
+                } else {
+                    [1.3 - 0.2 * f, 0.7 + 0.1 * f]
+                },
                 c: [40.0 + 5.0 * f, -38.0],
                 dx: [0.02 * f, -0.01],
                 dy: 0.003 * f,
@@ -78,7 +95,10 @@ fn models(scheduling: SchedulingSpec) -> Vec<Lmn> {
             dy: u.dy,
         })
         .collect();
-    let direct: Vec<SsLocalModel> = local.iter().map(|u| u.to_local_model().expect("angles")).collect();
+    let direct: Vec<SsLocalModel> = local
+        .iter()
+        .map(|u| u.to_local_model().expect("angles"))
+        .collect();
     let arx: Vec<ArxUnit> = (0..4)
         .map(|i| ArxUnit {
             a: [-1.90 + 0.02 * i as f64, 0.905 - 0.02 * i as f64, 0.0],
@@ -99,10 +119,50 @@ fn models(scheduling: SchedulingSpec) -> Vec<Lmn> {
     vec![
         lmn(LocalModelSet::SsDirect(direct), 4, false, s, ts, 7),
         lmn(LocalModelSet::SsEigLocal(local), 4, false, s, ts, 7),
-        lmn(LocalModelSet::SsEigCommon { units: common, reference_unit: 1 }, 4, false, s, ts, 7),
-        lmn(LocalModelSet::SsEigCommon { units: common_zero, reference_unit: 1 }, 4, true, s, ts, 7),
-        lmn(LocalModelSet::ArxShift { order: 2, units: arx }, 4, false, s, ts, 7),
-        lmn(LocalModelSet::ArxDelta { order: 2, units: arx_delta }, 4, false, s, ts, 7),
+        lmn(
+            LocalModelSet::SsEigCommon {
+                units: common,
+                reference_unit: 1,
+            },
+            4,
+            false,
+            s,
+            ts,
+            7,
+        ),
+        lmn(
+            LocalModelSet::SsEigCommon {
+                units: common_zero,
+                reference_unit: 1,
+            },
+            4,
+            true,
+            s,
+            ts,
+            7,
+        ),
+        lmn(
+            LocalModelSet::ArxShift {
+                order: 2,
+                units: arx,
+            },
+            4,
+            false,
+            s,
+            ts,
+            7,
+        ),
+        lmn(
+            LocalModelSet::ArxDelta {
+                order: 2,
+                units: arx_delta,
+            },
+            4,
+            false,
+            s,
+            ts,
+            7,
+        ),
     ]
 }
 
@@ -122,11 +182,17 @@ fn fd_jacobian<M: ParamMap>(problem: &Problem<'_, M>, p: &[f64], col_norm: &[f64
         pm[i] -= h;
         let rp = problem.residuals(&pp).expect("residuals +h");
         let rm = problem.residuals(&pm).expect("residuals -h");
-        (0..r0.len()).map(|k| (rp[k] - rm[k]) / (2.0 * h)).collect::<Vec<f64>>()
+        (0..r0.len())
+            .map(|k| (rp[k] - rm[k]) / (2.0 * h))
+            .collect::<Vec<f64>>()
     };
     let mut j = DMatrix::zeros(r0.len(), p.len());
     for i in 0..p.len() {
-        let s_i = if col_norm[i] > 0.0 { 1e-2 * rn / col_norm[i] } else { 1.0 };
+        let s_i = if col_norm[i] > 0.0 {
+            1e-2 * rn / col_norm[i]
+        } else {
+            1.0
+        };
         let h = 1e-5 * p[i].abs().max(s_i);
         let (d1, d2) = (central(i, h), central(i, h / 2.0));
         for k in 0..r0.len() {
@@ -144,7 +210,10 @@ fn check<M: ParamMap>(what: &str, problem: &Problem<'_, M>, p: &[f64], names: &[
     let r0 = problem.residuals(p).expect("residuals");
     assert_eq!(r.len(), r0.len());
     for k in 0..r0.len() {
-        assert!((r[k] - r0[k]).abs() <= 1e-12 * (1.0 + r0[k].abs()), "{what}: residual {k}");
+        assert!(
+            (r[k] - r0[k]).abs() <= 1e-12 * (1.0 + r0[k].abs()),
+            "{what}: residual {k}"
+        );
     }
     let norms: Vec<f64> = (0..p.len()).map(|i| jd.column(i).norm()).collect();
     let jf = fd_jacobian(problem, p, &norms);
@@ -162,13 +231,19 @@ fn check<M: ParamMap>(what: &str, problem: &Problem<'_, M>, p: &[f64], names: &[
     // The normal equations agree with the stacked Jacobian.
     let nrm = problem.normal(p, &cols).expect("normal");
     let h = jd.transpose() * &jd;
-    assert!((&nrm.h - &h).norm() <= 1e-10 * (1.0 + nrm.h.norm()), "{what}: J'J");
+    assert!(
+        (&nrm.h - &h).norm() <= 1e-10 * (1.0 + nrm.h.norm()),
+        "{what}: J'J"
+    );
 }
 
 #[test]
 fn dual_jacobian_matches_finite_differences_for_every_structure() {
     let recs = records();
-    for (sched_name, sched) in [("input", SchedulingSpec::default()), ("output", SchedulingSpec::Output)] {
+    for (sched_name, sched) in [
+        ("input", SchedulingSpec::default()),
+        ("output", SchedulingSpec::Output),
+    ] {
         let data = ModelData::new(&recs, 1).expect("factor 1");
         for m in models(sched) {
             let layout = ParamLayout::new(&m);
@@ -179,8 +254,21 @@ fn dual_jacobian_matches_finite_differences_for_every_structure() {
                 &[Horizon::Simulation, Horizon::Prediction]
             };
             for &h in horizons {
-                let problem = Problem::new(ThetaMap { template: &m, layout: &layout }, &data, h);
-                let what = format!("{} {}{} {:?}", m.structure(), sched_name, if m.zero_offsets { " zero offsets" } else { "" }, h);
+                let problem = Problem::new(
+                    ThetaMap {
+                        template: &m,
+                        layout: &layout,
+                    },
+                    &data,
+                    h,
+                );
+                let what = format!(
+                    "{} {}{} {:?}",
+                    m.structure(),
+                    sched_name,
+                    if m.zero_offsets { " zero offsets" } else { "" },
+                    h
+                );
                 check(&what, &problem, &theta, layout.names());
             }
         }
@@ -193,14 +281,34 @@ fn dual_jacobian_matches_finite_differences_for_every_structure() {
 fn dual_jacobian_through_down_sampling_and_interpolation() {
     let recs = records();
     let data = ModelData::new(&recs, 5).expect("factor 5");
-    let m = models(SchedulingSpec::Input { gain: 5000.0, natural_frequency_rad_s: 50.0, damping: 1.0 })
-        .remove(4);
-    let m = Lmn { ts: 5e-3, delay: 2, ..m };
+    let m = models(SchedulingSpec::Input {
+        gain: 5000.0,
+        natural_frequency_rad_s: 50.0,
+        damping: 1.0,
+    })
+    .remove(4);
+    let m = Lmn {
+        ts: 5e-3,
+        delay: 2,
+        ..m
+    };
     let layout = ParamLayout::new(&m);
     let theta = layout.theta(&m).expect("theta");
     for h in [Horizon::Simulation, Horizon::Prediction] {
-        let problem = Problem::new(ThetaMap { template: &m, layout: &layout }, &data, h);
-        check(&format!("arx-shift 5 ms {h:?}"), &problem, &theta, layout.names());
+        let problem = Problem::new(
+            ThetaMap {
+                template: &m,
+                layout: &layout,
+            },
+            &data,
+            h,
+        );
+        check(
+            &format!("arx-shift 5 ms {h:?}"),
+            &problem,
+            &theta,
+            layout.names(),
+        );
     }
 }
 
@@ -213,14 +321,25 @@ fn knot_jacobian_matches_finite_differences() {
     for sched in [SchedulingSpec::default(), SchedulingSpec::Output] {
         let mut m = models(sched).remove(2);
         // 6 units, non-uniform interior knots.
-        let LocalModelSet::SsEigCommon { units, .. } = &m.local else { unreachable!() };
+        let LocalModelSet::SsEigCommon { units, .. } = &m.local else {
+            unreachable!()
+        };
         let mut six = units.clone();
         six.extend_from_slice(&units[..2]);
-        m.local = LocalModelSet::SsEigCommon { units: six, reference_unit: 1 };
-        m.validity = ValidityFunctions::from_knots(&[0.0, 0.0, 0.0, 0.2, 0.45, 0.6, 1.0, 1.0, 1.0], 3).expect("knots");
+        m.local = LocalModelSet::SsEigCommon {
+            units: six,
+            reference_unit: 1,
+        };
+        m.validity =
+            ValidityFunctions::from_knots(&[0.0, 0.0, 0.0, 0.2, 0.45, 0.6, 1.0, 1.0, 1.0], 3)
+                .expect("knots");
         let layout = ParamLayout::new(&m);
         let theta = layout.theta(&m).expect("theta");
-        let map = KnotMap { template: &m, layout: &layout, theta: &theta };
+        let map = KnotMap {
+            template: &m,
+            layout: &layout,
+            theta: &theta,
+        };
         let s = map.params().expect("distinct knots");
         assert_eq!(s.len(), 3);
         // The parameterisation reproduces the knots.
@@ -231,6 +350,3 @@ fn knot_jacobian_matches_finite_differences() {
         check("knots", &problem, &s, &[]);
     }
 }
-
-
-

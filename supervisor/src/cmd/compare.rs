@@ -55,7 +55,8 @@ pub fn table(rows: &[CompareRow]) -> String {
                 b.units.to_string(),
                 e3(b.train_msse),
                 e3(b.test_msse),
-                b.train_mspe.map_or("-".into(), |v| format!("{:.4}", v * 1e3)),
+                b.train_mspe
+                    .map_or("-".into(), |v| format!("{:.4}", v * 1e3)),
             ),
             None => ("-".into(), "diverges".into(), "diverges".into(), "-".into()),
         };

@@ -91,7 +91,8 @@ fn fmt_diverging(v: Option<f64>) -> String {
 /// Grouped bars per size (train MSPE where defined, train MSSE, test MSSE) on a log scale,
 /// the best size marked with *; a diverging fit is drawn as a pale full-height bar.
 pub fn plot(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Result<()> {
-    draw(rows, best, title, out).map_err(|m| anyhow::anyhow!("{}: drawing failed: {m}", out.display()))
+    draw(rows, best, title, out)
+        .map_err(|m| anyhow::anyhow!("{}: drawing failed: {m}", out.display()))
 }
 
 fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Result<(), String> {
@@ -166,7 +167,10 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
                     Some(v) => (v, colour.filled()),
                     None => (hi, colour.mix(0.25).filled()),
                 };
-                Rectangle::new([(bar_x(u, s as f64), lo), (bar_x(u, s as f64 + 1.0), top)], style)
+                Rectangle::new(
+                    [(bar_x(u, s as f64), lo), (bar_x(u, s as f64 + 1.0), top)],
+                    style,
+                )
             }))
             .map_err(|x| e(&x))?
             .label(name)
@@ -238,8 +242,11 @@ pub fn run(args: Args) -> Result<()> {
             file::save(m, &p).with_context(|| format!("cannot write {}", p.display()))?;
         }
         let md = dir.join("sweep.md");
-        std::fs::write(&md, format!("# {structure} on {}\n\n{text}", args.data.display()))
-            .with_context(|| format!("cannot write {}", md.display()))?;
+        std::fs::write(
+            &md,
+            format!("# {structure} on {}\n\n{text}", args.data.display()),
+        )
+        .with_context(|| format!("cannot write {}", md.display()))?;
         let js = dir.join("sweep.json");
         let json = serde_json::json!({
             "data_set": args.data.display().to_string(),
