@@ -207,7 +207,7 @@ pub struct Normal {
 }
 
 /// A Gaussian prior on the parameters: the cost gains sum_i w_i (p_i - center_i)^2
-/// ([`super::identify`] uses it to keep units the data barely reach near the start,
+/// ([`super::identify`](mod@super::identify) uses it to keep units the data barely reach near the start,
 /// pitfall (d)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Prior {

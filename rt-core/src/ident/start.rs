@@ -6,7 +6,7 @@
 //! (delta: (e^{s Ts} - 1)/Ts, inside (-1/Ts, 0) for every s < 0; shift: e^{s Ts}). The
 //! parameters that enter the output linearly for fixed poles (c and d^y of a state-space
 //! unit with b = (1, 1); b and d of an ARX unit) are then solved exactly by least squares
-//! (see [`super::identify`]). A Local Model Network starts from a linear fit copied into every
+//! (see [`super::identify`](mod@super::identify)). A Local Model Network starts from a linear fit copied into every
 //! unit (the network output equals the linear model's, since the validity functions sum to
 //! one).
 
