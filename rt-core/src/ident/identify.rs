@@ -267,7 +267,7 @@ pub struct Identified {
     pub final_iterations: usize,
     /// Why the final LM run stopped (simulation mode).
     pub stop: Option<StopReason>,
-    /// Training MSSE reached from each network start.
+    /// Training MSSE (data only, without the prior) reached from each network start.
     pub start_msse: Vec<f64>,
     /// Wall-clock seconds (from [`Hooks::clock`]).
     pub seconds: f64,
@@ -744,7 +744,7 @@ impl Run<'_> {
             let prior = self.prior(map.clone(), &theta, &fixed)?;
             let prior_kept = prior.clone();
             let rep = self.lm(map, &theta, &fixed, o.max_iter, prior)?;
-            start_msse.push(rep.cost / self.n_rows);
+            start_msse.push(self.cost_of(template, &layout, &rep.p) / self.n_rows);
             if best.as_ref().is_none_or(|(b, _)| rep.cost < b.cost) {
                 best = Some((rep, i));
                 fixed_best = fixed;

@@ -14,10 +14,11 @@
 //!
 //! Rows can be weighted (gamma_i of eq. B.2; local learning, eq. 2.35).
 //!
-//! **Exact Jacobians.** The parameters are seeded `N` at a time as [`Dual<N>`] variables and
-//! the network's own step code is run (no finite differences, unlike the thesis's B.3.1):
-//! one pass per block of `N` columns. Records are processed in parallel (rayon), so both
-//! cores work; each record's block Jacobian is reduced to J'J and J'r on the spot.
+//! **Exact Jacobians.** The parameters are seeded `N` at a time ([`DUAL_WIDTH`]) as
+//! [`Dual<N>`] variables and the network's own step code is run (no finite differences,
+//! unlike the thesis's B.3.1): one pass per block of `N` columns. Records are processed in
+//! parallel (rayon), so both cores work; each record's block Jacobian is reduced to J'J
+//! and J'r on the spot.
 
 use super::records::IdentRecord;
 use super::resample::{
@@ -64,6 +65,12 @@ pub trait ParamMap: Sync {
         vec![(f64::NEG_INFINITY, f64::INFINITY); self.len()]
     }
 }
+
+/// Parameters seeded per dual pass. Measured on the 4- and 6-unit common-eigenvector
+/// Jacobians of the fast data set (`benches/ident_fit.rs`): 8 was fastest among 4, 6, 8, 12,
+/// 16, 24 and 36; wider duals make every copy of the interpolated local model larger and
+/// cost more per column than the passes they save.
+pub const DUAL_WIDTH: usize = 8;
 
 /// Bound on the eigenvalue parameters eta: |eta| <= 12 keeps e = -(1/Ts) sigmoid(eta) within
 /// [-0.999994/Ts, -6.1e-6/Ts] (at 1 ms: time constants from 1 ms to 160 s), far outside
@@ -354,17 +361,17 @@ impl<'a, M: ParamMap> Problem<'a, M> {
     }
 
     /// Runs `f(r_i, J_i)` on every record's residuals and Jacobian (columns `cols`), in
-    /// parallel, choosing the dual width for the number of columns.
+    /// parallel. Columns are seeded 8 at a time ([`DUAL_WIDTH`]; 4 for tiny problems).
     fn per_record<T: Send>(
         &self,
         p: &[f64],
         cols: &[usize],
         f: impl Fn(DVector<f64>, DMatrix<f64>) -> T + Sync,
     ) -> Result<Vec<T>, ProblemError> {
-        match cols.len() {
-            0..=4 => self.per_record_n::<4, T>(p, cols, &f),
-            5..=8 => self.per_record_n::<8, T>(p, cols, &f),
-            _ => self.per_record_n::<8, T>(p, cols, &f),
+        if cols.len() <= 4 {
+            self.per_record_n::<4, T>(p, cols, &f)
+        } else {
+            self.per_record_n::<DUAL_WIDTH, T>(p, cols, &f)
         }
     }
 

@@ -19,7 +19,7 @@
 use super::IdentError;
 use super::lsq::{self, DEFAULT_RCOND};
 use super::metrics::validity_weights;
-use super::problem::{Horizon, ModelData, Problem, ProblemError, ThetaMap};
+use super::problem::{Horizon, ModelData, Problem, ThetaMap};
 use crate::model::lmn::{Lmn, LocalModelSet};
 use crate::model::params::ParamLayout;
 use crate::model::validity::ValidityFunctions;
@@ -120,10 +120,4 @@ pub fn fit_prediction(
 /// The first unit of a local model set as a one-unit set.
 fn first_unit(set: &LocalModelSet) -> LocalModelSet {
     super::start::replicate(set, 1, 0)
-}
-
-/// Returns a copy of `template` with theta applied.
-pub fn with_theta(template: &Lmn, theta: &[f64]) -> Result<Lmn, ProblemError> {
-    let layout = ParamLayout::new(template);
-    Ok(layout.apply(template, theta)?)
 }

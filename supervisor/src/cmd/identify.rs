@@ -210,7 +210,8 @@ pub fn run(args: Args) -> Result<()> {
     let fb = Feedback::new("", args.fit.verbose);
     let result = fb.with_hooks(|h| identify(&records, &opts, h));
     fb.finish();
-    let result = result.context("identification failed")?;
+    let mut result = result.context("identification failed")?;
+    super::stamp_tool(&mut result.lmn, "identify");
     file::save(&result.lmn, &args.out)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     print_summary(&result);

@@ -180,3 +180,14 @@ pub fn fmt_err(v: Option<f64>) -> String {
         Some(x) => format!("{x:.3e}"),
     }
 }
+
+/// Records the command that made a model in its provenance (`tool`).
+pub fn stamp_tool(lmn: &mut rt_core::model::Lmn, command: &str) {
+    lmn.provenance.extra.insert(
+        "tool".into(),
+        serde_json::json!(format!(
+            "supervisor {command} {}",
+            env!("CARGO_PKG_VERSION")
+        )),
+    );
+}

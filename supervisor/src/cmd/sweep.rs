@@ -239,7 +239,9 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(dir) = &args.out {
         for (r, m) in sw.rows.iter().zip(&sw.models) {
             let p = dir.join(format!("units_{}.lmn.json", r.units));
-            file::save(m, &p).with_context(|| format!("cannot write {}", p.display()))?;
+            let mut m = m.clone();
+            super::stamp_tool(&mut m, "sweep");
+            file::save(&m, &p).with_context(|| format!("cannot write {}", p.display()))?;
         }
         let md = dir.join("sweep.md");
         std::fs::write(
