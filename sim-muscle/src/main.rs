@@ -55,7 +55,24 @@ enum Command {
     /// Plot records of a data set as a PNG (pulses on top, force below).
     #[command(long_about = PLOT_HELP)]
     Plot(PlotArgs),
+    /// Run the virtual stimulator with this muscle on a CAN bus (FORCE every 1 ms).
+    #[command(long_about = STIMULATOR_HELP, allow_negative_numbers = true)]
+    Stimulator(StimulatorCmd),
 }
+
+const STIMULATOR_HELP: &str = "\
+Run the virtual stimulator on a CAN interface: the stimulator side of the FES protocol
+(docs/can-protocol.md, fes-can/dbc/fes.dbc) driving this muscle. NMT state machine,
+CONFIG in pre-operational only, its own interlocks (minimum IPI, rate window, amplitude
+and width ceilings, CRC and alive counter), EMCY on every rejection, a host-heartbeat
+watchdog that stops output and waits for an explicit NMT start, FORCE every 1 ms and
+STATUS every 10 ms. Stops on SIGINT/SIGTERM with output off and a final STATUS.
+
+Without a kernel CAN driver, run it inside the vcan harness (docs/vcan.md):
+  vcan-run -- sim-muscle stimulator --iface vcan0 --preset fast
+
+Example (fatiguing fast muscle, measured force with the default sensor noise):
+  sim-muscle stimulator --iface vcan0 --preset fast --fatigue --measured";
 
 const SIMULATE_HELP: &str = "\
 Simulate one stimulation pattern and print CSV `t_ms,force_n` on stdout, one line per
@@ -193,7 +210,7 @@ struct SimulateArgs {
     duration_ms: u32,
     /// Pulse width, us. Turns on the pulse-width variant (Ding et al. 2007): widths
     /// below 200 us recruit fewer motor units; 200 us gives the base model.
-    #[arg(long, value_name = "US")]
+    #[arg(long, value_name = "US", conflicts_with = "model")]
     pulse_width_us: Option<f64>,
     /// Print the measured force (sensor offset, noise, low-pass) instead of the true one.
     #[arg(long)]
@@ -410,6 +427,11 @@ fn sensor_config(
 
 fn simulate_cmd(args: SimulateArgs) -> Result<()> {
     let ts_s = 1e-3;
+    let s = &args.sensor;
+    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
+    {
+        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
+    }
     if let Some(w) = args.pulse_width_us
         && !(w.is_finite() && w > 0.0)
     {
@@ -565,12 +587,50 @@ fn plot_cmd(args: PlotArgs) -> Result<()> {
     Ok(())
 }
 
+#[derive(Args)]
+struct StimulatorCmd {
+    #[command(flatten)]
+    muscle: MuscleArgs,
+    /// Publish the force as a force sensor measures it (offset, noise, low-pass) instead
+    /// of the exact model force.
+    #[arg(long)]
+    measured: bool,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    stimulator: sim_muscle::stimulator::StimulatorArgs,
+}
+
+fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
+    let ts_s = 1e-3;
+    let s = &args.sensor;
+    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
+    {
+        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
+    }
+    let mut chosen = choose_plant(&args.muscle, ts_s, |_| Ok(()))?;
+    let plant: Box<dyn MusclePlant> = if args.measured {
+        let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
+        Box::new(Measured::new(
+            chosen.plant,
+            ForceSensor::new(sensor, ts_s).context("sensor settings")?,
+        ))
+    } else {
+        chosen.plant
+    };
+    sim_muscle::stimulator::run(args.stimulator, plant)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => simulate_cmd(a),
         Command::Record(a) => record_cmd(a),
         Command::Plot(a) => plot_cmd(a),
+        Command::Stimulator(a) => stimulator_cmd(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -225,47 +225,47 @@ impl ProtocolConfig {
         if !(self.rest_s.is_finite() && self.rest_s >= 0.0) {
             return bad("--rest-s", format!("{} is not a rest >= 0 s", self.rest_s));
         }
-        if self.kind == ProtocolKind::Rich {
-            let max_hz = 1e3 / self.ts_ms;
-            if !(self.rich_min_hz.is_finite() && self.rich_min_hz > 0.0) {
-                return bad(
-                    "--rich-min-hz",
-                    format!("{} is not a frequency > 0 Hz", self.rich_min_hz),
-                );
-            }
-            if !(self.rich_max_hz.is_finite() && self.rich_max_hz <= max_hz) {
-                return bad(
-                    "--rich-max-hz",
-                    format!(
-                        "{} Hz is above one pulse per sample ({max_hz} Hz)",
-                        self.rich_max_hz
-                    ),
-                );
-            }
-            if self.rich_min_hz > self.rich_max_hz {
-                return bad(
-                    "--rich-min-hz",
-                    format!(
-                        "frequency range inverted: {} Hz > {} Hz",
-                        self.rich_min_hz, self.rich_max_hz
-                    ),
-                );
-            }
-            if self.doublet_min_ms == 0 || self.ts_ms > f64::from(self.doublet_min_ms) {
-                return bad(
-                    "--doublet-min-ms",
-                    format!("{} ms is shorter than a sample", self.doublet_min_ms),
-                );
-            }
-            if self.doublet_min_ms > self.doublet_max_ms {
-                return bad(
-                    "--doublet-min-ms",
-                    format!(
-                        "doublet IPI range inverted: {} ms > {} ms",
-                        self.doublet_min_ms, self.doublet_max_ms
-                    ),
-                );
-            }
+        // The rich-protocol settings are checked even for the thesis protocol: they are
+        // stored in the data set either way.
+        let max_hz = 1e3 / self.ts_ms;
+        if !(self.rich_min_hz.is_finite() && self.rich_min_hz > 0.0) {
+            return bad(
+                "--rich-min-hz",
+                format!("{} is not a frequency > 0 Hz", self.rich_min_hz),
+            );
+        }
+        if !(self.rich_max_hz.is_finite() && self.rich_max_hz <= max_hz) {
+            return bad(
+                "--rich-max-hz",
+                format!(
+                    "{} Hz is not a frequency up to one pulse per sample ({max_hz} Hz)",
+                    self.rich_max_hz
+                ),
+            );
+        }
+        if self.rich_min_hz > self.rich_max_hz {
+            return bad(
+                "--rich-min-hz",
+                format!(
+                    "frequency range inverted: {} Hz > {} Hz",
+                    self.rich_min_hz, self.rich_max_hz
+                ),
+            );
+        }
+        if self.doublet_min_ms == 0 || self.ts_ms > f64::from(self.doublet_min_ms) {
+            return bad(
+                "--doublet-min-ms",
+                format!("{} ms is shorter than a sample", self.doublet_min_ms),
+            );
+        }
+        if self.doublet_min_ms > self.doublet_max_ms {
+            return bad(
+                "--doublet-min-ms",
+                format!(
+                    "doublet IPI range inverted: {} ms > {} ms",
+                    self.doublet_min_ms, self.doublet_max_ms
+                ),
+            );
         }
         Ok(())
     }

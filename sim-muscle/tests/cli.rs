@@ -144,6 +144,33 @@ fn simulate_options() {
     assert!(peak(&tired, 18000) < 0.9 * peak(&tired, 0));
 }
 
+/// `--measured` adds the sensor: seeded (same seed, same output), offset and noise as
+/// given: offset 50 N, noise 0.5 N (the one pulse, at the last sample, shows no force),
+/// so the samples average 50 N within 4 standard errors and scatter by 0.5 N within 20 %.
+#[test]
+fn simulate_measured() {
+    let args = [
+        "simulate",
+        "--preset",
+        "fast",
+        "--pulses",
+        "99",
+        "--duration-ms",
+        "100",
+        "--measured",
+    ];
+    let noisy = [&args[..], &["--offset-n", "50", "--noise-std-n", "0.5"]].concat();
+    let a = run_ok(&[&noisy[..], &["--seed", "9"]].concat());
+    assert_eq!(a, run_ok(&[&noisy[..], &["--seed", "9"]].concat()));
+    let rows = parse_force(&a);
+    let n = rows.len() as f64;
+    let mean = rows.iter().map(|r| r.1).sum::<f64>() / n;
+    let sd = (rows.iter().map(|r| (r.1 - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    assert!((mean - 50.0).abs() < 4.0 * 0.5 / n.sqrt(), "mean {mean}");
+    assert!((sd / 0.5 - 1.0).abs() < 0.2, "sd {sd}");
+    assert_ne!(run_ok(&[&noisy[..], &["--seed", "10"]].concat()), a);
+}
+
 /// Reads `dir` back and checks it against the thesis protocol (5.1) for `preset`.
 fn check_thesis_dataset(dir: &std::path::Path, preset: Preset, records: usize, samples: usize) {
     let ds = DataSet::read(dir).expect("the data set reads back");
@@ -446,6 +473,10 @@ fn bad_flags_fail_clearly_and_write_nothing() {
         (
             [&sim[..], &["--pulses", "0,50", "--repeat-ms", "20"]].concat(),
             "--repeat-ms 20",
+        ),
+        (
+            [&sim[..], &["--pulses", "0", "--noise-std-n", "1"]].concat(),
+            "add --measured",
         ),
         (
             vec![

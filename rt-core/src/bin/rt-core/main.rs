@@ -1,5 +1,264 @@
-//! `rt-core`: the 1 ms real-time pattern generator process (to be written).
-fn main() {
-    eprintln!("rt-core: the real-time pattern generator is not built yet");
-    std::process::exit(2);
+//! `rt-core`: the 1 ms real-time pattern generator process.
+//!
+//! A thin shell around [`rt_core::rt::runner`]: it reads and validates the configuration and
+//! the controller, creates the iceoryx2 node, starts the telemetry thread and ONE real-time
+//! thread, and on SIGINT/SIGTERM stops them cleanly (final StimTick, histograms flushed,
+//! iceoryx2 resources released, exit 0).
+
+mod source;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::SystemTime;
+
+use anyhow::{Context, anyhow};
+use clap::Parser;
+use rt_core::rt::alloc::CountingAllocator;
+use rt_core::rt::hlog::HlogWriter;
+use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
+use rt_core::rt::realtime::RtError;
+use rt_core::rt::runner::{
+    RunError, TelemetrySettings, create_node, run_pattern_loop, run_telemetry,
+};
+use rt_core::rt::signals::install_stop_handler;
+use rt_core::rt::telemetry::TelemetryChannel;
+use tracing::{error, info, warn};
+
+use source::Source;
+
+/// Counts the real-time thread's allocations (reported as `hot_path_allocations`).
+#[global_allocator]
+static ALLOCATOR: CountingAllocator = CountingAllocator;
+
+const AFTER_HELP: &str = "\
+CONFIGURATION FILE (TOML, schema \"fes-rt-core/1\"; `--print-example-config` prints one):
+  schema = \"fes-rt-core/1\"   required
+  period_us = 1000            tick period in us (100..=1000000)
+  [source]                    required: what runs every tick
+    kind = \"controller\"       the thesis's pattern generator (LCN -> shaper -> LMN)
+    path = \"ctrl.json\"        controller file (schema fes-lcn/1), relative to this file
+    -- or --
+    kind = \"test-pattern\"     bench source without a model:
+    ipi_ticks = 20            fires every 20 ticks while the reference is > 0
+  [rt]                        real-time settings of the loop thread
+    priority = 80             SCHED_FIFO priority 1..=99
+    core = 1                  CPU core to pin to (default: not pinned)
+    on_missing_rights = \"best-effort\"   or \"refuse\" (rig): without SCHED_FIFO rights,
+                              a missing core, unlockable memory or wake-up latency
+                              limit, refuse to start
+    lock_memory = true        mlockall(MCL_CURRENT|MCL_FUTURE)
+    prefault_stack_bytes = 262144
+    cpu_dma_latency_us = 0    PM QoS wake-up latency limit (/dev/cpu_dma_latency);
+                              omit to leave the system's setting
+  [reference]
+    stale_after_ms = 100      a Reference older than this is stale ...
+    stale_ramp_per_s = 2.0    ... and the target ramps to 0 at this rate (per second)
+  [feedback]
+    enabled = false           pass measured force (ForceSample) to the generator
+    max_age_ms = 5            oldest sample used
+  [pulse]
+    channel = 0               stimulator channel 0..=15
+    amplitude_ua = 20000      pulse amplitude (uA)
+    width_us = 200            pulse width (us)
+  [telemetry]
+    hlog = \"rt-core.hlog\"     HdrHistogram interval log (optional)
+    report_period_ms = 1000   TimingReport / hlog interval period
+    queue_capacity = 8192     tick records buffered for the telemetry thread
+  [ipc]
+    prefix = \"fes\"            iceoryx2 service-name prefix (<prefix>/stim_tick, ...)
+    notify = true             notify <prefix>/stim_tick_event after each StimTick
+
+EXIT STATUS: 0 stopped cleanly by SIGINT/SIGTERM; 1 bad configuration or run-time error;
+2 refused to start (real-time guarantee missing with on_missing_rights = \"refuse\").";
+
+/// The 1 ms real-time pattern generator: publishes a StimTick every period on iceoryx2.
+#[derive(Debug, Parser)]
+#[command(name = "rt-core", version, after_help = AFTER_HELP)]
+struct Cli {
+    /// Configuration file (TOML, schema "fes-rt-core/1"; described below).
+    #[arg(
+        long,
+        value_name = "FILE",
+        required_unless_present = "print_example_config"
+    )]
+    config: Option<PathBuf>,
+    /// Validate the configuration and the controller file, print a summary, and exit.
+    #[arg(long)]
+    check: bool,
+    /// Print an example configuration (every default, a test-pattern source) and exit.
+    #[arg(long, conflicts_with_all = ["config", "check"])]
+    print_example_config: bool,
+}
+
+/// Why the process did not run to a clean stop.
+enum Failure {
+    /// Real time refused: exit 2.
+    Refused(String),
+    /// Anything else: exit 1.
+    Other(anyhow::Error),
+}
+
+impl From<anyhow::Error> for Failure {
+    fn from(e: anyhow::Error) -> Self {
+        Failure::Other(e)
+    }
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure::Refused(line)) => {
+            error!("{line}");
+            ExitCode::from(2)
+        }
+        Err(Failure::Other(e)) => {
+            error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn run(cli: &Cli) -> Result<(), Failure> {
+    if cli.print_example_config {
+        let mut example = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 20 });
+        example.telemetry.hlog = Some(PathBuf::from("rt-core.hlog"));
+        print!("{}", example.to_toml());
+        return Ok(());
+    }
+    let path = cli
+        .config
+        .as_deref()
+        .ok_or_else(|| anyhow!("--config is required"))?;
+    let config = RtCoreConfig::load(path).context("configuration")?;
+    let source = Source::load(&config.source, config.period(), config.feedback.enabled)?;
+    info!(
+        "config {}: period {} us, source {}, prefix {:?}",
+        path.display(),
+        config.period_us,
+        source.describe(),
+        config.ipc.prefix
+    );
+    if cli.check {
+        println!("{}: ok", path.display());
+        return Ok(());
+    }
+
+    let stop = install_stop_handler().context("installing SIGINT/SIGTERM handlers")?;
+    let hlog = match &config.telemetry.hlog {
+        Some(p) => Some(
+            HlogWriter::create(p, "rt-core timing", SystemTime::now()).context("telemetry.hlog")?,
+        ),
+        None => None,
+    };
+    let node = create_node("rt-core").map_err(anyhow::Error::from)?;
+    let telemetry = TelemetryChannel::new(config.telemetry.queue_capacity);
+    let telemetry_stop = AtomicBool::new(false);
+    let telemetry_settings = TelemetrySettings::for_rt_core(&config);
+
+    std::thread::scope(|scope| -> Result<(), Failure> {
+        let (telemetry_ready_tx, telemetry_ready_rx) = mpsc::channel();
+        let telemetry_thread = std::thread::Builder::new()
+            .name("rt-core-telemetry".to_owned())
+            .spawn_scoped(scope, || {
+                run_telemetry(
+                    &telemetry_settings,
+                    hlog,
+                    &telemetry,
+                    &telemetry_stop,
+                    move || {
+                        let _ = telemetry_ready_tx.send(());
+                    },
+                )
+            })
+            .context("spawning the telemetry thread")?;
+        let stop_telemetry = || -> anyhow::Result<()> {
+            telemetry_stop.store(true, Ordering::Relaxed);
+            let report = telemetry_thread
+                .join()
+                .map_err(|_| anyhow!("the telemetry thread panicked"))??;
+            let us = |ns: u64| ns as f64 / 1000.0;
+            info!(
+                "final timing: {} ticks, {} missed periods, {} hot-path heap allocations, \
+                 {} queue overflows; p50/p99/p99.9/max us: wake-up {:.1}/{:.1}/{:.1}/{:.1}, \
+                 input {:.1}/{:.1}/{:.1}/{:.1}, compute {:.1}/{:.1}/{:.1}/{:.1}, publish {:.1}/{:.1}/{:.1}/{:.1}",
+                report.ticks,
+                report.misses,
+                report.hot_path_allocations,
+                report.queue_overflows,
+                us(report.wake.p50_ns),
+                us(report.wake.p99_ns),
+                us(report.wake.p999_ns),
+                us(report.wake.max_ns),
+                us(report.input.p50_ns),
+                us(report.input.p99_ns),
+                us(report.input.p999_ns),
+                us(report.input.max_ns),
+                us(report.compute.p50_ns),
+                us(report.compute.p99_ns),
+                us(report.compute.p999_ns),
+                us(report.compute.max_ns),
+                us(report.publish.p50_ns),
+                us(report.publish.p99_ns),
+                us(report.publish.p999_ns),
+                us(report.publish.max_ns),
+            );
+            Ok(())
+        };
+        if telemetry_ready_rx.recv().is_err() {
+            // The sender was dropped without signalling: the thread failed; report why.
+            return Err(stop_telemetry()
+                .err()
+                .unwrap_or_else(|| anyhow!("the telemetry thread stopped early"))
+                .into());
+        }
+
+        let rt_thread = std::thread::Builder::new()
+            .name("rt-core-loop".to_owned())
+            .stack_size(config.rt.thread_stack_bytes())
+            .spawn_scoped(scope, || {
+                let node = node;
+                run_pattern_loop(&node, &config, source, &telemetry, stop, |status| {
+                    if status.is_degraded() {
+                        warn!("{status}");
+                    } else {
+                        info!("{status}");
+                    }
+                    info!("running; SIGINT or SIGTERM stops");
+                })
+            })
+            .context("spawning the real-time thread")?;
+        let outcome = rt_thread
+            .join()
+            .map_err(|_| anyhow!("the real-time thread panicked"))?;
+        let telemetry_result = stop_telemetry();
+        match outcome {
+            Ok(outcome) => {
+                info!(
+                    "stopped: final tick seq {} published{}",
+                    outcome.final_seq,
+                    if outcome.allocations_counted {
+                        ""
+                    } else {
+                        " (allocations not counted)"
+                    }
+                );
+                telemetry_result.map_err(Failure::Other)
+            }
+            Err(RunError::Realtime(RtError::Refused(status))) => {
+                Err(Failure::Refused(format!("refused to start: {status}")))
+            }
+            Err(e) => Err(Failure::Other(e.into())),
+        }
+    })
 }

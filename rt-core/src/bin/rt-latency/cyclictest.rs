@@ -1,0 +1,210 @@
+//! Running `cyclictest` (rt-tests) and reading its histogram output.
+//!
+//! With `-h <max_us> -q`, cyclictest prints one line `<latency_us> <count>` per microsecond
+//! bucket (latencies truncated to whole microseconds), then summary comments such as
+//! `# Max Latencies: 00045` and `# Histogram Overflows: 00000`.
+
+use std::process::Command;
+
+use anyhow::{Context, bail};
+
+/// cyclictest's result.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CyclictestHistogram {
+    /// `counts[b]` = samples with latency in [b, b+1) µs.
+    pub counts: Vec<u64>,
+    /// Samples above the histogram range.
+    pub overflows: u64,
+    /// Largest latency, µs, from `# Max Latencies`.
+    pub max_us: u64,
+}
+
+impl CyclictestHistogram {
+    /// Parses cyclictest's `-h ... -q` output for one thread.
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        let mut counts = Vec::new();
+        let mut overflows = None;
+        let mut max_us = None;
+        for line in text.lines() {
+            let line = line.trim();
+            if let Some(rest) = line.strip_prefix('#') {
+                let rest = rest.trim();
+                if let Some(v) = rest.strip_prefix("Max Latencies:") {
+                    max_us = Some(first_number(v).context("# Max Latencies")?);
+                } else if let Some(v) = rest.strip_prefix("Histogram Overflows:") {
+                    overflows = Some(first_number(v).context("# Histogram Overflows")?);
+                }
+                continue;
+            }
+            let mut fields = line.split_whitespace();
+            let (Some(bucket), Some(count)) = (fields.next(), fields.next()) else {
+                continue;
+            };
+            let (Ok(bucket), Ok(count)) = (bucket.parse::<usize>(), count.parse::<u64>()) else {
+                continue;
+            };
+            if bucket != counts.len() {
+                bail!("cyclictest histogram: bucket {bucket} out of sequence");
+            }
+            counts.push(count);
+        }
+        let (Some(overflows), Some(max_us)) = (overflows, max_us) else {
+            bail!(
+                "cyclictest output lacks '# Max Latencies' / '# Histogram Overflows' (was -h given?)"
+            );
+        };
+        if counts.is_empty() {
+            bail!("cyclictest output has no histogram lines");
+        }
+        Ok(Self {
+            counts,
+            overflows,
+            max_us,
+        })
+    }
+
+    /// Adds another run's counts (same bucket width; the longer histogram wins).
+    pub fn merge(&mut self, other: &CyclictestHistogram) {
+        if self.counts.len() < other.counts.len() {
+            self.counts.resize(other.counts.len(), 0);
+        }
+        for (mine, theirs) in self.counts.iter_mut().zip(&other.counts) {
+            *mine += theirs;
+        }
+        self.overflows += other.overflows;
+        self.max_us = self.max_us.max(other.max_us);
+    }
+
+    /// Total samples (including overflows).
+    pub fn total(&self) -> u64 {
+        self.counts.iter().sum::<u64>() + self.overflows
+    }
+
+    /// Samples with latency >= `us`.
+    pub fn at_least(&self, us: usize) -> u64 {
+        self.counts.iter().skip(us).sum::<u64>() + self.overflows
+    }
+
+    /// The bucket (µs, truncated) holding quantile `q`; a quantile among the overflows
+    /// reports the maximum.
+    pub fn quantile_us(&self, q: f64) -> u64 {
+        let total = self.total();
+        if total == 0 {
+            return 0;
+        }
+        let rank = ((q * total as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for (bucket, &count) in self.counts.iter().enumerate() {
+            seen += count;
+            if seen >= rank {
+                return bucket as u64;
+            }
+        }
+        self.max_us
+    }
+}
+
+fn first_number(text: &str) -> anyhow::Result<u64> {
+    text.split_whitespace()
+        .next()
+        .context("no value")?
+        .parse()
+        .context("not a number")
+}
+
+/// The exact command run for the comparison.
+pub fn command_line(
+    priority: u8,
+    core: usize,
+    period_us: u64,
+    seconds: u64,
+    max_us: u64,
+) -> Vec<String> {
+    [
+        "cyclictest".to_owned(),
+        "-m".to_owned(),
+        "-t1".to_owned(),
+        "-p".to_owned(),
+        priority.to_string(),
+        "-a".to_owned(),
+        core.to_string(),
+        "-i".to_owned(),
+        period_us.to_string(),
+        "-D".to_owned(),
+        format!("{seconds}s"),
+        "-h".to_owned(),
+        max_us.to_string(),
+        "-q".to_owned(),
+    ]
+    .into()
+}
+
+/// Runs cyclictest and returns its raw output.
+pub fn run(args: &[String]) -> anyhow::Result<String> {
+    let out = Command::new(&args[0])
+        .args(&args[1..])
+        .output()
+        .with_context(|| format!("running {} (install rt-tests: scripts/setup)", args[0]))?;
+    if !out.status.success() {
+        bail!(
+            "cyclictest failed ({}): {}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SAMPLE: &str = "\
+# /dev/cpu_dma_latency set to 0us
+# Histogram
+000000 000000
+000001 000010
+000002 000070
+000003 000015
+000004 000004
+# Total: 000000100
+# Min Latencies: 00001
+# Avg Latencies: 00002
+# Max Latencies: 00009
+# Histogram Overflows: 00001
+# Histogram Overflow at cycle number:
+# Thread 0: 00042
+";
+
+    #[test]
+    fn parses_the_histogram_and_its_summary() {
+        let h = CyclictestHistogram::parse(SAMPLE).unwrap();
+        assert_eq!(h.counts, vec![0, 10, 70, 15, 4]);
+        assert_eq!((h.overflows, h.max_us, h.total()), (1, 9, 100));
+        // Ranks by hand: 50th sample is in bucket 2 (10 < 50 <= 80), 99th in bucket 4
+        // (95 < 99 <= 99), 100th (p99.9 -> rank 100) is the overflow: the maximum.
+        assert_eq!(h.quantile_us(0.5), 2);
+        assert_eq!(h.quantile_us(0.99), 4);
+        assert_eq!(h.quantile_us(0.999), 9);
+        assert_eq!(h.at_least(3), 20);
+    }
+
+    #[test]
+    fn merged_runs_add_their_counts() {
+        let mut a = CyclictestHistogram::parse(SAMPLE).unwrap();
+        let b = CyclictestHistogram {
+            counts: vec![1, 0, 0, 0, 0, 0, 3],
+            overflows: 2,
+            max_us: 40,
+        };
+        a.merge(&b);
+        assert_eq!(a.counts, vec![1, 10, 70, 15, 4, 0, 3]);
+        assert_eq!((a.overflows, a.max_us, a.total()), (3, 40, 106));
+    }
+
+    #[test]
+    fn output_without_a_histogram_is_an_error() {
+        assert!(CyclictestHistogram::parse("# Max Latencies: 00010\n").is_err());
+        assert!(CyclictestHistogram::parse("000000 1\n000001 2\n").is_err());
+    }
+}

@@ -1,0 +1,640 @@
+//! `rt-latency`: measures the real rt-core process against cyclictest on this machine.
+//!
+//! 1. Optional background load on another core (`stress-ng --cpu 1 --taskset <other>`),
+//!    kept running for both measurements.
+//! 2. `rt-probe` (a subscriber process, same core, one priority below) is started; then the
+//!    real `rt-core` binary runs for N seconds with the same period, priority and core,
+//!    while a reference publisher (a supervisor stand-in) steps the reference every second.
+//!    rt-core writes wake-up lateness, input, compute and publish times to `rt-core.hlog`; the probe
+//!    writes publish-to-receive latency to `rt-probe.hlog`.
+//! 3. After rt-core has exited, `cyclictest` runs with the same period, priority and core for
+//!    N seconds (never concurrently on the same core).
+//! 4. One table (p50 / p99 / p99.9 / max), tick and miss counts, and the ratios of our
+//!    wake-up lateness to cyclictest's; `--json` writes the same as JSON.
+
+mod cyclictest;
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, anyhow, bail};
+use clap::Parser;
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use rt_core::msg::Reference;
+use rt_core::msg::service::open_pubsub;
+use rt_core::rt::MissingRightsPolicy;
+use rt_core::rt::clock::monotonic_ns;
+use rt_core::rt::histogram::LatencyHistogram;
+use rt_core::rt::hlog::merge_by_tag;
+use rt_core::rt::probe::ProbeSummary;
+use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
+use rt_core::rt::runner::create_node;
+use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
+use serde::Serialize;
+
+use cyclictest::CyclictestHistogram;
+
+/// Runs the real rt-core loop for N seconds with a subscriber process measuring IPC latency,
+/// then cyclictest with the same period, priority and core, and compares them.
+#[derive(Debug, Parser)]
+#[command(name = "rt-latency", version)]
+struct Cli {
+    /// Duration of each measurement (rt-core, then cyclictest), seconds.
+    #[arg(long, default_value_t = 10)]
+    seconds: u64,
+    /// Load another core with `stress-ng --cpu 1 --taskset <other core>` during both runs.
+    #[arg(long)]
+    load: bool,
+    /// Core for rt-core, the probe and cyclictest.
+    #[arg(long, default_value_t = 1)]
+    core: usize,
+    /// SCHED_FIFO priority of rt-core and cyclictest (the probe runs one below).
+    #[arg(long, default_value_t = 80)]
+    priority: u8,
+    /// Core for the probe (default: rt-core's core; it runs one priority below, so it
+    /// receives when rt-core sleeps, as a driver sharing the real-time core would).
+    #[arg(long)]
+    probe_core: Option<usize>,
+    /// Tick period, µs.
+    #[arg(long, default_value_t = 1000)]
+    period_us: u64,
+    /// Base rt-core configuration (e.g. with a controller source); period, rt, telemetry and
+    /// ipc settings are overridden. Default: a test-pattern source firing every 20 ticks.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Write the results as JSON.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Directory for the configuration, the .hlog files, the probe summary and cyclictest's
+    /// output.
+    #[arg(long, value_name = "DIR", default_value = "rt-latency-out")]
+    out_dir: PathBuf,
+    /// Largest latency cyclictest's histogram resolves, µs.
+    #[arg(long, default_value_t = 5000)]
+    hist_max_us: u64,
+    /// Skip the cyclictest comparison.
+    #[arg(long)]
+    no_cyclictest: bool,
+    /// Alternate rt-core and cyclictest in this many rounds (each `seconds / rounds` long),
+    /// so that both see the same background on a shared machine. Default: 10 s rounds.
+    #[arg(long)]
+    rounds: Option<u64>,
+}
+
+/// p50 / p99 / p99.9 / max in microseconds.
+#[derive(Debug, Clone, Copy, Serialize)]
+struct Percentiles {
+    p50: f64,
+    p99: f64,
+    p999: f64,
+    max: f64,
+}
+
+impl Percentiles {
+    fn from_histogram(h: &LatencyHistogram) -> Self {
+        let us = |ns: u64| ns as f64 / 1000.0;
+        Self {
+            p50: us(h.quantile_ns(0.5)),
+            p99: us(h.quantile_ns(0.99)),
+            p999: us(h.quantile_ns(0.999)),
+            max: us(h.max_ns()),
+        }
+    }
+
+    fn from_cyclictest(h: &CyclictestHistogram) -> Self {
+        Self {
+            p50: h.quantile_us(0.5) as f64,
+            p99: h.quantile_us(0.99) as f64,
+            p999: h.quantile_us(0.999) as f64,
+            max: h.max_us as f64,
+        }
+    }
+}
+
+/// The JSON document (`--json`).
+#[derive(Debug, Serialize)]
+struct Results {
+    ticks: u64,
+    misses: u64,
+    overruns: u64,
+    wake_us: Percentiles,
+    input_us: Percentiles,
+    compute_us: Percentiles,
+    publish_us: Percentiles,
+    ipc_us: Percentiles,
+    receive_us: Percentiles,
+    cyclictest_us: Option<Percentiles>,
+    ratio_p99: Option<f64>,
+    ratio_p999: Option<f64>,
+    cyclictest_samples: u64,
+    cyclictest_over_period: u64,
+    probe_received: u64,
+    probe_lost: u64,
+    probe_core: usize,
+    hot_path_allocations: u64,
+    queue_overflows: u64,
+    seconds: u64,
+    rounds: u64,
+    period_us: u64,
+    priority: u8,
+    core: usize,
+    load: Option<String>,
+    cyclictest_command: Option<String>,
+    kernel: String,
+    sched_rt_runtime_us: String,
+}
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+    match run(&Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
+            std::process::ExitCode::from(1)
+        }
+    }
+}
+
+/// A child process that is stopped (SIGTERM, then SIGKILL) when dropped.
+struct Guarded {
+    name: &'static str,
+    child: Child,
+}
+
+impl Guarded {
+    fn pid(&self) -> Pid {
+        Pid::from_raw(self.child.id() as i32)
+    }
+
+    /// Sends SIGTERM and waits up to `timeout` for the exit status.
+    fn terminate(&mut self, timeout: Duration) -> anyhow::Result<std::process::ExitStatus> {
+        if let Some(status) = self.child.try_wait()? {
+            return Ok(status);
+        }
+        kill(self.pid(), Signal::SIGTERM).with_context(|| format!("SIGTERM to {}", self.name))?;
+        self.wait(timeout)
+    }
+
+    /// Waits up to `timeout` for the process to exit by itself.
+    fn wait(&mut self, timeout: Duration) -> anyhow::Result<std::process::ExitStatus> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(status) = self.child.try_wait()? {
+                return Ok(status);
+            }
+            if Instant::now() > deadline {
+                bail!("{} did not exit within {:?}", self.name, timeout);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Guarded {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = kill(self.pid(), Signal::SIGTERM);
+            std::thread::sleep(Duration::from_millis(200));
+            if let Ok(None) = self.child.try_wait() {
+                let _ = self.child.kill();
+            }
+            let _ = self.child.wait();
+        }
+    }
+}
+
+fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
+    let me = std::env::current_exe().context("locating rt-latency")?;
+    let path = me.with_file_name(name);
+    if !path.exists() {
+        bail!(
+            "{} not found next to rt-latency (build it: cargo build -p rt-core --release)",
+            path.display()
+        );
+    }
+    Ok(path)
+}
+
+fn run(cli: &Cli) -> anyhow::Result<()> {
+    if cli.seconds == 0 {
+        bail!("--seconds must be at least 1");
+    }
+    if !(2..=99).contains(&cli.priority) {
+        bail!("--priority must be in 2..=99 (the probe runs one below)");
+    }
+    let cores = core_affinity::get_core_ids().unwrap_or_default();
+    if !cores.iter().any(|c| c.id == cli.core) {
+        bail!(
+            "core {} is not available here ({} core(s))",
+            cli.core,
+            cores.len()
+        );
+    }
+    std::fs::create_dir_all(&cli.out_dir)
+        .with_context(|| format!("creating {}", cli.out_dir.display()))?;
+    let out = |name: &str| cli.out_dir.join(name);
+    let rt_core_bin = sibling_binary("rt-core")?;
+    let probe_bin = sibling_binary("rt-probe")?;
+
+    // rt-core configuration (per round: its own prefix and interval log).
+    let mut config = match &cli.config {
+        Some(path) => RtCoreConfig::load(path).context("--config")?,
+        None => RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 20 }),
+    };
+    config.period_us = cli.period_us;
+    config.rt.priority = cli.priority;
+    config.rt.core = Some(cli.core);
+    config.rt.on_missing_rights = MissingRightsPolicy::Refuse;
+    config.rt.lock_memory = true;
+    config.telemetry.report_period_ms = 1000;
+    config.ipc.notify = true;
+    config.validate().context("rt-core configuration")?;
+
+    // Background load, kept for every round of both measurements.
+    let mut load_desc = None;
+    let _load = if cli.load {
+        let other = cores
+            .iter()
+            .map(|c| c.id)
+            .find(|&c| c != cli.core)
+            .ok_or_else(|| anyhow!("--load needs a second core"))?;
+        let timeout = 3 * cli.seconds + 60;
+        let child = Command::new("stress-ng")
+            .args([
+                "--cpu",
+                "1",
+                "--taskset",
+                &other.to_string(),
+                "--timeout",
+                &format!("{timeout}s"),
+                "-q",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .context("starting stress-ng (install it: scripts/setup)")?;
+        load_desc = Some(format!("stress-ng --cpu 1 --taskset {other}"));
+        std::thread::sleep(Duration::from_millis(500));
+        Some(Guarded {
+            name: "stress-ng",
+            child,
+        })
+    } else {
+        None
+    };
+
+    // Rounds: rt-core, then cyclictest, alternating, so that both see the same background.
+    let rounds = cli
+        .rounds
+        .unwrap_or(cli.seconds.div_ceil(10))
+        .clamp(1, cli.seconds);
+    let mut total = RoundTotals::default();
+    let mut cyclic: Option<CyclictestHistogram> = None;
+    let mut cyclic_cmd = None;
+    for round in 0..rounds {
+        let seconds =
+            cli.seconds / rounds + u64::from(round + 1 == rounds) * (cli.seconds % rounds);
+        tracing::info!("round {}/{rounds}: rt-core for {seconds} s", round + 1);
+        total.add(measure_rt_core(
+            cli,
+            &config,
+            round,
+            seconds,
+            &rt_core_bin,
+            &probe_bin,
+        )?);
+        if !cli.no_cyclictest {
+            let args = cyclictest::command_line(
+                cli.priority,
+                cli.core,
+                cli.period_us,
+                seconds,
+                cli.hist_max_us,
+            );
+            tracing::info!("round {}/{rounds}: {}", round + 1, args.join(" "));
+            let text = cyclictest::run(&args)?;
+            std::fs::write(out(&format!("cyclictest-{round}.txt")), &text)?;
+            let h = CyclictestHistogram::parse(&text)?;
+            match &mut cyclic {
+                Some(all) => all.merge(&h),
+                None => cyclic = Some(h),
+            }
+            cyclic_cmd = Some(args.join(" "));
+        }
+    }
+    drop(_load);
+    let RoundTotals {
+        wake,
+        input,
+        compute,
+        publish,
+        ipc,
+        receive,
+        ticks,
+        misses,
+        overruns,
+        hot_path_allocations,
+        queue_overflows,
+        received,
+        lost,
+    } = total;
+
+    let wake_p = Percentiles::from_histogram(&wake);
+    let cyclic_p = cyclic.as_ref().map(Percentiles::from_cyclictest);
+    // cyclictest truncates to whole µs: compare against the middle of its bucket.
+    let ratio = |ours: f64, theirs: f64| ours / (theirs + 0.5);
+    let results = Results {
+        ticks,
+        misses,
+        overruns,
+        wake_us: wake_p,
+        input_us: Percentiles::from_histogram(&input),
+        compute_us: Percentiles::from_histogram(&compute),
+        publish_us: Percentiles::from_histogram(&publish),
+        ipc_us: Percentiles::from_histogram(&ipc),
+        receive_us: Percentiles::from_histogram(&receive),
+        cyclictest_us: cyclic_p,
+        ratio_p99: cyclic_p.map(|c| ratio(wake_p.p99, c.p99)),
+        ratio_p999: cyclic_p.map(|c| ratio(wake_p.p999, c.p999)),
+        cyclictest_samples: cyclic.as_ref().map_or(0, CyclictestHistogram::total),
+        cyclictest_over_period: cyclic
+            .as_ref()
+            .map_or(0, |h| h.at_least(cli.period_us as usize)),
+        probe_received: received,
+        probe_core: cli.probe_core.unwrap_or(cli.core),
+        probe_lost: lost,
+        hot_path_allocations,
+        queue_overflows,
+        seconds: cli.seconds,
+        rounds,
+        period_us: cli.period_us,
+        priority: cli.priority,
+        core: cli.core,
+        load: load_desc,
+        cyclictest_command: cyclic_cmd,
+        kernel: read_trim("/proc/sys/kernel/osrelease"),
+        sched_rt_runtime_us: read_trim("/proc/sys/kernel/sched_rt_runtime_us"),
+    };
+    print_table(&results);
+    if let Some(path) = &cli.json {
+        std::fs::write(path, serde_json::to_string_pretty(&results)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// What one or more rounds of the rt-core measurement gave.
+#[derive(Default)]
+struct RoundTotals {
+    wake: LatencyHistogram,
+    input: LatencyHistogram,
+    compute: LatencyHistogram,
+    publish: LatencyHistogram,
+    ipc: LatencyHistogram,
+    receive: LatencyHistogram,
+    ticks: u64,
+    misses: u64,
+    overruns: u64,
+    hot_path_allocations: u64,
+    queue_overflows: u64,
+    received: u64,
+    lost: u64,
+}
+
+impl RoundTotals {
+    fn add(&mut self, r: RoundTotals) {
+        self.wake.add(&r.wake);
+        self.input.add(&r.input);
+        self.compute.add(&r.compute);
+        self.publish.add(&r.publish);
+        self.ipc.add(&r.ipc);
+        self.receive.add(&r.receive);
+        self.ticks += r.ticks;
+        self.misses += r.misses;
+        self.overruns += r.overruns;
+        self.hot_path_allocations += r.hot_path_allocations;
+        self.queue_overflows += r.queue_overflows;
+        self.received += r.received;
+        self.lost += r.lost;
+    }
+}
+
+/// One round: the probe, then the real rt-core process for `seconds`, with a reference
+/// publisher; returns the merged interval logs and the counters.
+fn measure_rt_core(
+    cli: &Cli,
+    base: &RtCoreConfig,
+    round: u64,
+    seconds: u64,
+    rt_core_bin: &std::path::Path,
+    probe_bin: &std::path::Path,
+) -> anyhow::Result<RoundTotals> {
+    let out = |name: &str| cli.out_dir.join(name);
+    let mut config = base.clone();
+    let core_hlog = std::path::absolute(out(&format!("rt-core-{round}.hlog")))?;
+    config.telemetry.hlog = Some(core_hlog.clone());
+    config.ipc.prefix = format!("rtlatency{}r{round}", std::process::id());
+    let config_path = out(&format!("rt-core-{round}.toml"));
+    std::fs::write(&config_path, config.to_toml())?;
+    let probe_hlog = out(&format!("rt-probe-{round}.hlog"));
+    let probe_summary = out(&format!("probe-{round}.json"));
+
+    let mut probe = Guarded {
+        name: "rt-probe",
+        child: Command::new(probe_bin)
+            .arg("--prefix")
+            .arg(&config.ipc.prefix)
+            .arg("--hlog")
+            .arg(&probe_hlog)
+            .arg("--summary")
+            .arg(&probe_summary)
+            .arg("--priority")
+            .arg((cli.priority - 1).to_string())
+            .arg("--core")
+            .arg(cli.probe_core.unwrap_or(cli.core).to_string())
+            .stdout(Stdio::piped())
+            .spawn()
+            .context("starting rt-probe")?,
+    };
+    wait_for_ready(&mut probe)?;
+
+    let stop_references = AtomicBool::new(false);
+    let prefix = config.ipc.prefix.clone();
+    let measured = std::thread::scope(|s| -> anyhow::Result<()> {
+        let publisher = s.spawn(|| publish_references(&prefix, &stop_references));
+        let result = (|| -> anyhow::Result<()> {
+            let mut rt_core = Guarded {
+                name: "rt-core",
+                child: Command::new(rt_core_bin)
+                    .arg("--config")
+                    .arg(&config_path)
+                    .spawn()
+                    .context("starting rt-core")?,
+            };
+            let end = Instant::now() + Duration::from_secs(seconds) + Duration::from_millis(200);
+            while Instant::now() < end {
+                if let Some(status) = rt_core.child.try_wait()? {
+                    bail!("rt-core exited early ({status}); see its log above");
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let status = rt_core.terminate(Duration::from_secs(10))?;
+            if !status.success() {
+                bail!("rt-core ended with {status}");
+            }
+            Ok(())
+        })();
+        stop_references.store(true, Ordering::Relaxed);
+        publisher
+            .join()
+            .map_err(|_| anyhow!("reference publisher panicked"))??;
+        result
+    });
+    let probe_status = probe.wait(Duration::from_secs(10));
+    measured?;
+    let probe_status = probe_status?;
+    if !probe_status.success() {
+        bail!("rt-probe ended with {probe_status}");
+    }
+    let summary: ProbeSummary = serde_json::from_slice(
+        &std::fs::read(&probe_summary).context("reading the probe summary")?,
+    )
+    .context("parsing the probe summary")?;
+    let timing = summary
+        .rt_core
+        .ok_or_else(|| anyhow!("the probe received no TimingReport from rt-core"))?;
+    let core_hists = merge_by_tag(&core_hlog)?;
+    let probe_hists = merge_by_tag(&probe_hlog)?;
+    let tag = |m: &std::collections::BTreeMap<String, LatencyHistogram>, t: &str| {
+        m.get(t)
+            .cloned()
+            .ok_or_else(|| anyhow!("no '{t}' intervals in the interval log"))
+    };
+    Ok(RoundTotals {
+        wake: tag(&core_hists, TAG_WAKE)?,
+        input: tag(&core_hists, TAG_INPUT)?,
+        compute: tag(&core_hists, TAG_COMPUTE)?,
+        publish: tag(&core_hists, TAG_PUBLISH)?,
+        ipc: tag(&probe_hists, TAG_IPC)?,
+        receive: tag(&probe_hists, TAG_RECEIVE)?,
+        ticks: timing.ticks,
+        misses: timing.misses,
+        overruns: timing.overruns,
+        hot_path_allocations: timing.hot_path_allocations,
+        queue_overflows: timing.queue_overflows,
+        received: summary.received,
+        lost: summary.lost,
+    })
+}
+
+fn read_trim(path: &str) -> String {
+    std::fs::read_to_string(path)
+        .map(|s| s.trim().to_owned())
+        .unwrap_or_else(|_| "unknown".to_owned())
+}
+
+/// Waits for the probe's `ready` line (it has subscribed).
+fn wait_for_ready(probe: &mut Guarded) -> anyhow::Result<()> {
+    let stdout = probe
+        .child
+        .stdout
+        .take()
+        .ok_or_else(|| anyhow!("rt-probe stdout not captured"))?;
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut lines = BufReader::new(stdout).lines();
+        let first = lines.next();
+        let _ = tx.send(first);
+        // Keep draining so the probe never blocks on a full pipe.
+        for _ in lines {}
+    });
+    match rx.recv_timeout(Duration::from_secs(10)) {
+        Ok(Some(Ok(line))) if line.trim() == "ready" => Ok(()),
+        Ok(other) => bail!("rt-probe did not report ready: {other:?}"),
+        Err(_) => bail!("rt-probe did not report ready within 10 s"),
+    }
+}
+
+/// A supervisor stand-in: a fresh Reference every 10 ms, stepping between 0.2 and 0.6
+/// every second.
+fn publish_references(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
+    let node = create_node("rt-latency-reference")?;
+    let publisher = open_pubsub::<Reference>(&node, prefix)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow!("Reference publisher: {e:?}"))?;
+    let start = Instant::now();
+    let mut seq = 0;
+    while !stop.load(Ordering::Relaxed) {
+        seq += 1;
+        let force = if start.elapsed().as_secs().is_multiple_of(2) {
+            0.2
+        } else {
+            0.6
+        };
+        publisher
+            .send_copy(Reference::new(seq, monotonic_ns(), force))
+            .map_err(|e| anyhow!("Reference send: {e:?}"))?;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(())
+}
+
+fn print_table(r: &Results) {
+    println!(
+        "rt-latency: {} s in {} round(s), period {} us, SCHED_FIFO {} on core {}, load: {}",
+        r.seconds,
+        r.rounds,
+        r.period_us,
+        r.priority,
+        r.core,
+        r.load.as_deref().unwrap_or("none")
+    );
+    println!(
+        "{:<28} {:>9} {:>9} {:>9} {:>9}",
+        "latency (us)", "p50", "p99", "p99.9", "max"
+    );
+    let row = |name: &str, p: &Percentiles| {
+        println!(
+            "{:<28} {:>9.1} {:>9.1} {:>9.1} {:>9.1}",
+            name, p.p50, p.p99, p.p999, p.max
+        );
+    };
+    row("wake-up lateness", &r.wake_us);
+    row("input (receive references)", &r.input_us);
+    row("compute (tick source)", &r.compute_us);
+    row("publish (+notify)", &r.publish_us);
+    row("ipc publish->receive", &r.ipc_us);
+    row("  of which receive", &r.receive_us);
+    if let Some(c) = &r.cyclictest_us {
+        row("cyclictest latency", c);
+    }
+    println!(
+        "ticks {}, missed periods {} in {} late wake-ups (>= 1 period late), probe received {} (lost {}), hot-path heap allocations {}, telemetry overflows {}",
+        r.ticks,
+        r.misses,
+        r.overruns,
+        r.probe_received,
+        r.probe_lost,
+        r.hot_path_allocations,
+        r.queue_overflows
+    );
+    if let (Some(p99), Some(p999)) = (r.ratio_p99, r.ratio_p999) {
+        println!(
+            "cyclictest: {} samples, {} at or above one period; wake/cyclictest ratio p99 {:.2}, p99.9 {:.2}",
+            r.cyclictest_samples, r.cyclictest_over_period, p99, p999
+        );
+    }
+}

@@ -1,0 +1,358 @@
+//! The pattern generator: one 1 ms tick of the simulated closed loop of thesis Fig. 6.8,
+//! LCN -> pulse shaper -> LMN, run in the model's *advanced form*.
+//!
+//! The model library runs the network as an undelayed core (state `z[k] = x[k+d]`, known
+//! exactly at time `k` because every pulse that reaches it is already decided) followed by
+//! a pure `d`-sample output delay. The controller acts on the core, so the loop
+//! LCN -> shaper -> core has no delay and each frozen local loop has exactly the designed
+//! poles; the force the model shows now is the core output of `d` samples ago.
+//!
+//! One tick at time `k` ([`FeedbackMode::Model`], the thesis's Fig. 6.6(b)):
+//!
+//! 1. `r` = reference clamped to `[0, 1]` (non-finite -> 0);
+//! 2. activation `rho(phi_k)` of the core's scheduling value (model library);
+//! 3. `u_cont = max(0, -K_I(phi) x_I - K_x(phi)' z[k])` (LCN, eq. C.26);
+//! 4. pulse = shaper(`u_cont`) (eq. 6.8);
+//! 5. core step with `u = pulse` (model library): predicted force `y[k+d]`, model force
+//!    `y[k]`;
+//! 6. `x_I += Ts (y[k+d] - r)` with conditional integration (eq. C.24, LCN).
+//!
+//! [`FeedbackMode::MeasuredForce`] (Fig. 6.6(a)) replaces step 2's core state by the one
+//! re-predicted from the measured force by the state estimator ([`super::estimator`]), and
+//! feeds the integrator with the Smith-predictor error
+//! `e = y_pred[k+d] - r + (y_meas[k] - y_pred[k])`, where `y_pred[k]` is the prediction of
+//! `y[k]` made `d` samples ago: for a perfect model the correction term is zero and the loop
+//! is the designed one, and at steady state `e = 0` forces `y_meas = r` (zero steady-state
+//! error on the *real* force). See docs/control.md for its limits.
+//!
+//! `tick` never allocates, locks, or panics on finite input: every type is fixed-size.
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::{AdvancedForm, DelayLine, Network, NetworkError};
+
+use super::design::LocalGains;
+use super::estimator::{EstimatorError, ForceEstimator};
+use super::lcn::{AntiWindup, LcnError, LocalControllerNetwork};
+use super::shaper::{PulseShaper, ShaperConfig, ShaperConfigError, ShaperStats};
+
+/// Which signal closes the controller's loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeedbackMode {
+    /// The simulated model closes the loop; no sensor needed (thesis Fig. 6.6(b), 6.8).
+    #[default]
+    Model,
+    /// The measured force corrects the model state through the estimator and drives the
+    /// integral action (thesis Fig. 6.6(a)).
+    MeasuredForce,
+}
+
+/// Inputs of one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickInput {
+    /// Reference force `r`, normalised (clamped to `[0, 1]`; non-finite -> 0).
+    pub reference: f64,
+    /// Measured force `y[k]`, normalised (used only in [`FeedbackMode::MeasuredForce`]).
+    pub measured_force: Option<f64>,
+}
+
+/// Outputs of one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickOutput {
+    /// Fire a pulse now.
+    pub pulse: bool,
+    /// Control signal handed to the shaper (clamped at 0).
+    pub u_cont: f64,
+    /// Unclamped control law `-K_I x_I - K_x' z`.
+    pub u_raw: f64,
+    /// Shaper energy `E` after this tick.
+    pub energy: f64,
+    /// Model force now, `y[k]` (measured mode: the estimator's `ŷ[k]`).
+    pub model_force: f64,
+    /// Predicted force `y[k+d]` (the core output).
+    pub predicted_force: f64,
+    /// Scheduling value `phi` used for this tick.
+    pub phi: f64,
+    /// Integrator state `x_I` used for this tick (before the update).
+    pub x_i: f64,
+    /// Core state `z[k]` used for this tick.
+    pub z: [f64; 2],
+    /// Whether the integrator integrated (false while anti-windup holds it).
+    pub integrated: bool,
+    /// Measured mode: innovation `y[k] - ŷ[k]` (0 otherwise or when the sample was missing).
+    pub innovation: f64,
+}
+
+/// Why a pattern generator could not be built.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum PatternGeneratorError {
+    /// The network's local models are ARX; the LCN needs state-space ones.
+    #[error("the model's local models are ARX; the LCN needs state-space local models")]
+    NotStateSpace,
+    /// One controller per local model is needed.
+    #[error("{controllers} local controllers given for {units} local models")]
+    UnitMismatch {
+        /// Controllers given.
+        controllers: usize,
+        /// Units of the model.
+        units: usize,
+    },
+    /// Measured-force mode without estimator gains.
+    #[error("feedback mode measured_force needs one estimator gain per unit")]
+    MissingEstimator,
+    /// Invalid LCN gains.
+    #[error(transparent)]
+    Lcn(#[from] LcnError),
+    /// Invalid shaper settings.
+    #[error(transparent)]
+    Shaper(#[from] ShaperConfigError),
+    /// Invalid estimator.
+    #[error(transparent)]
+    Estimator(#[from] EstimatorError),
+    /// The network cannot start.
+    #[error(transparent)]
+    Network(#[from] NetworkError),
+}
+
+/// Measured-force loop state.
+#[derive(Debug, Clone, Copy)]
+struct MeasuredLoop {
+    estimator: ForceEstimator,
+    /// Core outputs predicted over the last `d` samples; popping gives the prediction of
+    /// `y[k]` made at `k - d`.
+    predictions: DelayLine<f64>,
+    initial_predictions: DelayLine<f64>,
+}
+
+/// Counters since construction or the last reset.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PatternGeneratorStats {
+    /// Ticks run.
+    pub ticks: u64,
+    /// References that were not finite or outside `[0, 1]` and were clamped.
+    pub references_clamped: u64,
+    /// Ticks on which the anti-windup held the integrator.
+    pub integrator_held: u64,
+    /// Measured mode: samples without a usable measurement.
+    pub measurements_missing: u64,
+    /// Shaper counters.
+    pub shaper: ShaperStats,
+}
+
+/// The pattern generator (thesis Fig. 6.8 in the advanced form).
+#[derive(Debug, Clone)]
+pub struct PatternGenerator {
+    core: AdvancedForm<f64>,
+    initial_core: AdvancedForm<f64>,
+    lcn: LocalControllerNetwork,
+    shaper: PulseShaper,
+    measured: Option<MeasuredLoop>,
+    ticks: u64,
+    references_clamped: u64,
+    integrator_held: u64,
+}
+
+impl PatternGenerator {
+    /// Build from a state-space network, one gain set per unit, shaper settings, the
+    /// anti-windup rule and, for
+    /// [`FeedbackMode::MeasuredForce`], one estimator gain per unit. May allocate; `tick`
+    /// does not.
+    pub fn new(
+        net: Network<f64>,
+        gains: &[LocalGains],
+        shaper: ShaperConfig,
+        anti_windup: AntiWindup,
+        mode: FeedbackMode,
+        estimator_gains: Option<&[[f64; 2]]>,
+    ) -> Result<Self, PatternGeneratorError> {
+        if net.ss_unit(0).is_none() {
+            return Err(PatternGeneratorError::NotStateSpace);
+        }
+        if gains.len() != net.units() {
+            return Err(PatternGeneratorError::UnitMismatch {
+                controllers: gains.len(),
+                units: net.units(),
+            });
+        }
+        let lcn = LocalControllerNetwork::new(gains, net.ts(), anti_windup)?;
+        let shaper = PulseShaper::new(shaper)?;
+        let core = AdvancedForm::new(net)?;
+        let measured = match mode {
+            FeedbackMode::Model => None,
+            FeedbackMode::MeasuredForce => {
+                let l = estimator_gains.ok_or(PatternGeneratorError::MissingEstimator)?;
+                let estimator = ForceEstimator::new(&net, l)?;
+                let d = net.delay();
+                let mut predictions = DelayLine::new(d, 0.0).ok_or(NetworkError::Delay(d))?;
+                for i in 0..d {
+                    predictions.push(core.pending_output(i).unwrap_or(0.0));
+                }
+                Some(MeasuredLoop {
+                    estimator,
+                    predictions,
+                    initial_predictions: predictions,
+                })
+            }
+        };
+        Ok(Self {
+            initial_core: core.clone(),
+            core,
+            lcn,
+            shaper,
+            measured,
+            ticks: 0,
+            references_clamped: 0,
+            integrator_held: 0,
+        })
+    }
+
+    /// The feedback mode.
+    pub fn mode(&self) -> FeedbackMode {
+        if self.measured.is_some() {
+            FeedbackMode::MeasuredForce
+        } else {
+            FeedbackMode::Model
+        }
+    }
+
+    /// The model network.
+    pub fn network(&self) -> &Network<f64> {
+        self.core.network()
+    }
+
+    /// The LCN (gains and integrator state).
+    pub fn lcn(&self) -> &LocalControllerNetwork {
+        &self.lcn
+    }
+
+    /// Counters since construction or the last reset.
+    pub fn stats(&self) -> PatternGeneratorStats {
+        PatternGeneratorStats {
+            ticks: self.ticks,
+            references_clamped: self.references_clamped,
+            integrator_held: self.integrator_held,
+            measurements_missing: self.measured.as_ref().map_or(0, |m| m.estimator.missing()),
+            shaper: self.shaper.stats(),
+        }
+    }
+
+    /// Back to rest: model at rest, `x_I = 0`, `E = 0`, counters zero. Does not allocate.
+    pub fn reset(&mut self) {
+        self.core.clone_from(&self.initial_core);
+        self.lcn.reset();
+        self.shaper.reset();
+        if let Some(m) = self.measured.as_mut() {
+            m.estimator.reset(self.core.network());
+            m.predictions = m.initial_predictions;
+        }
+        self.ticks = 0;
+        self.references_clamped = 0;
+        self.integrator_held = 0;
+    }
+
+    /// One tick (module docs): decide whether to fire a pulse now.
+    #[inline]
+    pub fn tick(&mut self, input: &TickInput) -> TickOutput {
+        self.advance(input, true)
+    }
+
+    /// One tick with the pulse shaper bypassed: `u_cont` itself drives the model (the
+    /// continuous loop of the design, for analysis and verification; never for
+    /// stimulation — `pulse` is always `false`).
+    pub fn tick_unshaped(&mut self, input: &TickInput) -> TickOutput {
+        self.advance(input, false)
+    }
+
+    #[inline(always)]
+    fn reference(&mut self, r: f64) -> f64 {
+        if r.is_finite() && (0.0..=1.0).contains(&r) {
+            r
+        } else {
+            self.references_clamped += 1;
+            if r.is_finite() {
+                r.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn advance(&mut self, input: &TickInput, shaped: bool) -> TickOutput {
+        self.ticks += 1;
+        let r = self.reference(input.reference);
+        let x_i = self.lcn.x_i();
+        let out = match self.measured.as_mut() {
+            None => {
+                let act = self.core.activation();
+                let phi = self.core.phi();
+                let z = self.core.state().ss_state();
+                let action = self.lcn.control(&act, z);
+                let (pulse, u) = apply(&mut self.shaper, action.u_cont, shaped);
+                let step = self.core.step_with_activation(&act, u);
+                let integrated = self.lcn.integrate(&action, step.y_ahead - r);
+                TickOutput {
+                    pulse,
+                    u_cont: action.u_cont,
+                    u_raw: action.u_raw,
+                    energy: self.shaper.energy(),
+                    model_force: step.y,
+                    predicted_force: step.y_ahead,
+                    phi,
+                    x_i,
+                    z,
+                    integrated,
+                    innovation: 0.0,
+                }
+            }
+            Some(m) => {
+                let net = self.core.network();
+                let upd = m.estimator.update(net, input.measured_force);
+                let mut core = upd.core;
+                let act = net.activation(&core);
+                let phi = core.phi;
+                let z = core.ss_state();
+                let action = self.lcn.control(&act, z);
+                let (pulse, u) = apply(&mut self.shaper, action.u_cont, shaped);
+                let y_ahead = net.step_with_activation(&mut core, &act, u);
+                let y_pred_now = m.predictions.push(y_ahead);
+                m.estimator.push_pulse(u);
+                let mismatch = if upd.measured {
+                    upd.innovation + upd.model_force - y_pred_now
+                } else {
+                    0.0
+                };
+                let integrated = self.lcn.integrate(&action, y_ahead - r + mismatch);
+                TickOutput {
+                    pulse,
+                    u_cont: action.u_cont,
+                    u_raw: action.u_raw,
+                    energy: self.shaper.energy(),
+                    model_force: upd.model_force,
+                    predicted_force: y_ahead,
+                    phi,
+                    x_i,
+                    z,
+                    integrated,
+                    innovation: upd.innovation,
+                }
+            }
+        };
+        if !out.integrated {
+            self.integrator_held += 1;
+        }
+        out
+    }
+}
+
+/// Shaper decision, or the bypass: returns (pulse, input applied to the model).
+#[inline(always)]
+fn apply(shaper: &mut PulseShaper, u_cont: f64, shaped: bool) -> (bool, f64) {
+    if shaped {
+        let p = shaper.step(u_cont);
+        (p, if p { 1.0 } else { 0.0 })
+    } else {
+        (false, u_cont)
+    }
+}

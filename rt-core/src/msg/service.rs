@@ -1,0 +1,163 @@
+//! Service names and quality of service for every topic, in one place.
+//!
+//! A full service name is `<prefix>/<topic>`; the prefix defaults to [`DEFAULT_PREFIX`] and is
+//! configurable in every process so that tests (and two benches on one machine) run in
+//! isolation. Every process opens a topic through [`open_pubsub`] (or
+//! [`open_stim_tick_event`]), which applies the topic's [`PubSubQos`]: whichever process comes
+//! first creates the service with exactly these settings, and the others find them compatible.
+//!
+//! All topics use safe overflow: a full subscriber buffer drops its *oldest* sample, so a
+//! publisher never blocks and never fails because a receiver is slow (the real-time rule "never
+//! a blocking back-pressure strategy on the hot path"). A slow receiver sees a gap in `seq`.
+
+use core::fmt::Debug;
+
+use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+
+use super::ValidationError;
+
+/// Default service-name prefix.
+pub const DEFAULT_PREFIX: &str = "fes";
+
+/// Topic of [`super::Reference`]: supervisor -> rt-core.
+pub const TOPIC_REFERENCE: &str = "reference";
+/// Topic of [`super::StimTick`]: rt-core -> stim-driver (and recorders), every tick.
+pub const TOPIC_STIM_TICK: &str = "stim_tick";
+/// Event service notified by rt-core right after each [`super::StimTick`] is published, so a
+/// receiver can sleep on a listener instead of polling.
+pub const TOPIC_STIM_TICK_EVENT: &str = "stim_tick_event";
+/// Topic of [`super::ForceSample`]: stim-driver -> supervisor, rt-core (feedback mode).
+pub const TOPIC_FORCE_SAMPLE: &str = "force_sample";
+/// Topic of [`super::DriverStatus`]: stim-driver -> supervisor.
+pub const TOPIC_DRIVER_STATUS: &str = "driver_status";
+/// Topic of [`super::TimingReport`]: rt-core, stim-driver, probes -> supervisor.
+pub const TOPIC_TIMING: &str = "timing";
+
+/// Longest accepted prefix (iceoryx2 service names are bounded; the topic is appended).
+pub const MAX_PREFIX_LEN: usize = 64;
+
+/// Quality of service of one publish-subscribe topic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PubSubQos {
+    /// Publishers the service admits.
+    pub max_publishers: usize,
+    /// Subscribers the service admits.
+    pub max_subscribers: usize,
+    /// Samples a subscriber buffers before the oldest is overwritten.
+    pub subscriber_buffer: usize,
+    /// Samples a late-joining subscriber receives on connection (0 = none).
+    pub history: usize,
+}
+
+/// A message type together with its topic, its quality of service and its validation.
+pub trait Contract: Copy + Debug + ZeroCopySend + 'static {
+    /// Topic name (appended to the prefix).
+    const TOPIC: &'static str;
+    /// Quality of service every process uses for this topic.
+    const QOS: PubSubQos;
+    /// Checks everything a receiver relies on: finite floats, ranges, known flags and enums,
+    /// timestamp order. Call it on every received sample before use.
+    fn validate(&self) -> Result<(), ValidationError>;
+}
+
+/// Failure to name or open a service.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ServiceError {
+    /// The prefix is empty, too long, or contains characters other than ASCII letters, digits,
+    /// `_`, `-`, `.` and `/` (no leading or trailing `/`).
+    #[error(
+        "invalid service-name prefix (1..=64 characters of [A-Za-z0-9_./-], no leading/trailing '/')"
+    )]
+    InvalidPrefix,
+    /// iceoryx2 rejected the composed service name.
+    #[error("iceoryx2 rejected the service name: {0:?}")]
+    InvalidName(iceoryx2::service::service_name::ServiceNameError),
+    /// The publish-subscribe service could not be opened or created (an incompatible existing
+    /// service with the same name, e.g. from an older build: remove it or change the prefix).
+    #[error("cannot open or create publish-subscribe service {topic}: {error}")]
+    PubSub {
+        /// Topic that failed.
+        topic: &'static str,
+        /// iceoryx2's reason.
+        error: PublishSubscribeOpenOrCreateError,
+    },
+    /// The event service could not be opened or created.
+    #[error("cannot open or create event service {topic}: {error}")]
+    Event {
+        /// Topic that failed.
+        topic: &'static str,
+        /// iceoryx2's reason.
+        error: EventOpenOrCreateError,
+    },
+}
+
+/// Checks a service-name prefix (see [`ServiceError::InvalidPrefix`]).
+pub fn validate_prefix(prefix: &str) -> Result<(), ServiceError> {
+    let ok_chars = prefix
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.' | b'/'));
+    if prefix.is_empty()
+        || prefix.len() > MAX_PREFIX_LEN
+        || !ok_chars
+        || prefix.starts_with('/')
+        || prefix.ends_with('/')
+    {
+        return Err(ServiceError::InvalidPrefix);
+    }
+    Ok(())
+}
+
+/// `<prefix>/<topic>` as an iceoryx2 service name.
+pub fn service_name(prefix: &str, topic: &str) -> Result<ServiceName, ServiceError> {
+    validate_prefix(prefix)?;
+    let full = format!("{prefix}/{topic}");
+    ServiceName::new(&full).map_err(ServiceError::InvalidName)
+}
+
+/// Opens (or creates) the publish-subscribe service of contract `M` under `prefix` with the
+/// contract's [`PubSubQos`] and safe overflow.
+pub fn open_pubsub<M: Contract>(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+) -> Result<publish_subscribe::PortFactory<ipc::Service, M, ()>, ServiceError> {
+    let name = service_name(prefix, M::TOPIC)?;
+    node.service_builder(&name)
+        .publish_subscribe::<M>()
+        .enable_safe_overflow(true)
+        .max_publishers(M::QOS.max_publishers)
+        .max_subscribers(M::QOS.max_subscribers)
+        .subscriber_max_buffer_size(M::QOS.subscriber_buffer)
+        .history_size(M::QOS.history)
+        .subscriber_max_borrowed_samples(2)
+        .open_or_create()
+        .map_err(|error| ServiceError::PubSub {
+            topic: M::TOPIC,
+            error,
+        })
+}
+
+/// Opens (or creates) the event service that rt-core notifies after each StimTick.
+pub fn open_stim_tick_event(
+    node: &Node<ipc::Service>,
+    prefix: &str,
+) -> Result<event::PortFactory<ipc::Service>, ServiceError> {
+    let name = service_name(prefix, TOPIC_STIM_TICK_EVENT)?;
+    node.service_builder(&name)
+        .event()
+        .max_notifiers(2)
+        .max_listeners(8)
+        .open_or_create()
+        .map_err(|error| ServiceError::Event {
+            topic: TOPIC_STIM_TICK_EVENT,
+            error,
+        })
+}
+
+/// Back-pressure strategy every publisher uses. With safe overflow it is never consulted;
+/// it is set anyway so that a service created elsewhere without safe overflow still cannot
+/// make a publisher wait.
+pub const BACKPRESSURE: BackpressureStrategy = BackpressureStrategy::DiscardData;

@@ -1,0 +1,160 @@
+//! [`StimTick`]: the pattern generator's decision for one tick (rt-core -> stim-driver).
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use super::service::{Contract, PubSubQos, TOPIC_STIM_TICK};
+use super::validate::{
+    ValidationError, finite, in_range, int_in_range, known_flags, nonzero_seq, ordered,
+    reserved_zero,
+};
+
+/// One tick of the pattern generator (thesis Fig. 6.8), published every period whether or
+/// not it fires, so that its absence is itself a fault the driver's watchdog sees.
+///
+/// `seq` increases by exactly one per published tick, also across overruns; skipped periods
+/// are reported in `missed_periods`, not as `seq` gaps. A gap in `seq` at a receiver therefore
+/// means that receiver lost samples.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("fes::StimTick::v1")]
+pub struct StimTick {
+    /// Sequence number, 1, 2, ... without gaps.
+    pub seq: u64,
+    /// The deadline this tick serves (a point of the period grid), CLOCK_MONOTONIC ns.
+    pub t_ns: u64,
+    /// When the real-time thread woke for it, ns (>= `t_ns`).
+    pub t_wake_ns: u64,
+    /// Stamped just before the sample was handed to iceoryx2, ns (>= `t_wake_ns`).
+    pub t_publish_ns: u64,
+    /// `seq` of the [`super::Reference`] in use; 0 = none received yet.
+    pub ref_seq: u64,
+    /// Target r given to the generator this tick, normalised force in [0, 1] (after ramps and
+    /// the staleness rule).
+    pub reference: f64,
+    /// Continuous control signal u_cont of the LCN (thesis 6.5.2).
+    pub u_cont: f64,
+    /// Pulse-shaper energy since the last pulse, E (thesis eq. 6.8).
+    pub energy: f64,
+    /// Output of the simulated muscle model (the LMN in the loop), normalised force.
+    pub model_force: f64,
+    /// Model force predicted `d` samples ahead (the input delay), normalised force.
+    pub predicted_force: f64,
+    /// Scheduling variable phi of the LMN/LCN (thesis 5.4.1).
+    pub phi: f64,
+    /// Pulse amplitude in microamperes; 0 when `pulse` is 0.
+    pub amplitude_ua: u32,
+    /// Whole periods skipped just before this tick (overrun); 0 normally.
+    pub missed_periods: u32,
+    /// Pulse width in microseconds; 0 when `pulse` is 0.
+    pub width_us: u16,
+    /// `StimTick::FLAG_*` bits.
+    pub flags: u16,
+    /// 1 = fire one pulse now, 0 = no pulse.
+    pub pulse: u8,
+    /// Stimulator output channel, 0..=[`StimTick::MAX_CHANNEL`].
+    pub channel: u8,
+    /// Zero.
+    pub reserved: [u8; 2],
+}
+
+impl StimTick {
+    /// The reference is older than the staleness age: the target is ramping to zero.
+    pub const FLAG_STALE_REFERENCE: u16 = 1 << 0;
+    /// No valid reference has been received yet: the target is zero.
+    pub const FLAG_NO_REFERENCE: u16 = 1 << 1;
+    /// Periods were skipped before this tick (`missed_periods` > 0).
+    pub const FLAG_OVERRUN: u16 = 1 << 2;
+    /// Last tick before rt-core stops; `pulse` is 0.
+    pub const FLAG_FINAL: u16 = 1 << 3;
+    /// An invalid or out-of-order reference was received and ignored this tick.
+    pub const FLAG_REFERENCE_REJECTED: u16 = 1 << 4;
+    /// A measured force was passed to the generator (feedback mode).
+    pub const FLAG_FEEDBACK: u16 = 1 << 5;
+    /// The generator produced a non-finite value: outputs zeroed, no pulse, generator reset.
+    pub const FLAG_SOURCE_FAULT: u16 = 1 << 6;
+    /// rt-core runs without some real-time guarantee (best-effort mode).
+    pub const FLAG_DEGRADED: u16 = 1 << 7;
+    /// The operator stop of the reference is in effect.
+    pub const FLAG_STOP: u16 = 1 << 8;
+    /// All flags defined in v1.
+    pub const KNOWN_FLAGS: u16 = (1 << 9) - 1;
+    /// Highest stimulator channel index.
+    pub const MAX_CHANNEL: u8 = 15;
+    /// Contract ceiling of the amplitude, µA (a sanity bound; the driver and the stimulator
+    /// enforce their own, lower, clinical limits).
+    pub const MAX_AMPLITUDE_UA: u32 = 250_000;
+
+    /// True when this tick fires a pulse.
+    pub fn fires(&self) -> bool {
+        self.pulse != 0
+    }
+
+    /// True when `flag` is set.
+    pub fn has(&self, flag: u16) -> bool {
+        self.flags & flag != 0
+    }
+}
+
+impl Contract for StimTick {
+    const TOPIC: &'static str = TOPIC_STIM_TICK;
+    const QOS: PubSubQos = PubSubQos {
+        max_publishers: 1,
+        max_subscribers: 8,
+        subscriber_buffer: 64,
+        history: 0,
+    };
+
+    fn validate(&self) -> Result<(), ValidationError> {
+        nonzero_seq(self.seq)?;
+        ordered("t_ns", self.t_ns, "t_wake_ns", self.t_wake_ns)?;
+        ordered(
+            "t_wake_ns",
+            self.t_wake_ns,
+            "t_publish_ns",
+            self.t_publish_ns,
+        )?;
+        in_range("reference", self.reference, 0.0, 1.0)?;
+        finite("u_cont", self.u_cont)?;
+        finite("energy", self.energy)?;
+        finite("model_force", self.model_force)?;
+        finite("predicted_force", self.predicted_force)?;
+        finite("phi", self.phi)?;
+        int_in_range("pulse", self.pulse.into(), 0, 1)?;
+        int_in_range("channel", self.channel.into(), 0, Self::MAX_CHANNEL.into())?;
+        int_in_range(
+            "amplitude_ua",
+            self.amplitude_ua.into(),
+            0,
+            Self::MAX_AMPLITUDE_UA.into(),
+        )?;
+        known_flags("flags", self.flags.into(), Self::KNOWN_FLAGS.into())?;
+        reserved_zero("reserved", &self.reserved)?;
+        if self.fires() {
+            if self.amplitude_ua == 0 || self.width_us == 0 {
+                return Err(ValidationError::Inconsistent(
+                    "a pulse needs a non-zero amplitude and width",
+                ));
+            }
+            if self.has(Self::FLAG_FINAL) {
+                return Err(ValidationError::Inconsistent(
+                    "the final tick fires a pulse",
+                ));
+            }
+            if self.has(Self::FLAG_SOURCE_FAULT) {
+                return Err(ValidationError::Inconsistent(
+                    "a faulted tick fires a pulse",
+                ));
+            }
+        } else if self.amplitude_ua != 0 || self.width_us != 0 {
+            return Err(ValidationError::Inconsistent(
+                "amplitude and width must be 0 without a pulse",
+            ));
+        }
+        if self.has(Self::FLAG_OVERRUN) != (self.missed_periods > 0) {
+            return Err(ValidationError::Inconsistent(
+                "FLAG_OVERRUN must be set exactly when missed_periods > 0",
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,313 @@
+//! [`PatternLoop`]: one tick of the rt-core process without any I/O: references in, the
+//! source's decision, a [`StimTick`] out. The iceoryx2 adapter ([`super::runner`]) feeds it
+//! and publishes what it returns; tests drive it with mock wake-ups.
+
+use super::clock::Wakeup;
+use super::feedback::{FeedbackRejection, FeedbackTracker};
+use super::reference::{ReferencePolicy, ReferenceRejection, ReferenceTracker};
+use super::source::{TickDecision, TickSource};
+use crate::msg::{ForceSample, Reference, StimTick};
+
+/// Pulse parameters of every fired pulse (supramaximal pulses: amplitude and width are
+/// fixed; the generator only decides *when*, thesis 6.5.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PulseSettings {
+    /// Stimulator channel.
+    pub channel: u8,
+    /// Amplitude, µA.
+    pub amplitude_ua: u32,
+    /// Width, µs.
+    pub width_us: u16,
+}
+
+/// The pattern generator's tick logic around a [`TickSource`].
+#[derive(Debug, Clone)]
+pub struct PatternLoop<S> {
+    source: S,
+    references: ReferenceTracker,
+    feedback: Option<FeedbackTracker>,
+    pulse: PulseSettings,
+    degraded: bool,
+    seq: u64,
+    rejected_since_last_tick: bool,
+}
+
+/// What happened in one [`PatternLoop::step`], besides the tick itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StepEvents {
+    /// The source returned a non-finite value and was reset.
+    pub source_fault: bool,
+}
+
+impl<S: TickSource> PatternLoop<S> {
+    /// A loop around `source`. `feedback_max_age_ns` enables the feedback mode. `degraded`
+    /// marks every tick with [`StimTick::FLAG_DEGRADED`].
+    pub fn new(
+        source: S,
+        reference_policy: ReferencePolicy,
+        feedback_max_age_ns: Option<u64>,
+        pulse: PulseSettings,
+        degraded: bool,
+    ) -> Self {
+        Self {
+            source,
+            references: ReferenceTracker::new(reference_policy),
+            feedback: feedback_max_age_ns.map(FeedbackTracker::new),
+            pulse,
+            degraded,
+            seq: 0,
+            rejected_since_last_tick: false,
+        }
+    }
+
+    /// The wrapped source.
+    pub fn source(&self) -> &S {
+        &self.source
+    }
+
+    /// `seq` of the last tick produced (0 = none).
+    pub fn last_seq(&self) -> u64 {
+        self.seq
+    }
+
+    /// Offers a received reference (see [`ReferenceTracker::offer`]); a rejection marks the
+    /// next tick with [`StimTick::FLAG_REFERENCE_REJECTED`].
+    pub fn offer_reference(
+        &mut self,
+        reference: &Reference,
+        now_ns: u64,
+    ) -> Result<(), ReferenceRejection> {
+        let result = self.references.offer(reference, now_ns);
+        self.rejected_since_last_tick |= result.is_err();
+        result
+    }
+
+    /// Offers a received force sample (ignored unless feedback mode is on).
+    pub fn offer_force(&mut self, sample: &ForceSample) -> Result<(), FeedbackRejection> {
+        match &mut self.feedback {
+            Some(f) => f.offer(sample),
+            None => Ok(()),
+        }
+    }
+
+    /// Runs the source once for this wake-up and returns the tick to publish
+    /// (`t_publish_ns` is set to the wake time; the publisher stamps it just before sending).
+    ///
+    /// The source is called once whatever the number of skipped periods, so a stall can
+    /// never produce more than one pulse in a tick. While the reference's operator stop is in
+    /// effect no pulse is fired.
+    pub fn step(&mut self, wake: &Wakeup) -> (StimTick, StepEvents) {
+        let target = self.references.advance(wake.wake_ns);
+        let measured = self
+            .feedback
+            .as_ref()
+            .and_then(|f| f.measured(wake.wake_ns));
+        let mut decision = self.source.tick(target.value, measured);
+        let mut events = StepEvents::default();
+        if !decision.is_finite() {
+            self.source.reset();
+            decision = TickDecision::default();
+            events.source_fault = true;
+        }
+        let fire = decision.pulse && !target.stop;
+
+        let mut flags = 0u16;
+        let mut set = |cond: bool, flag: u16| {
+            if cond {
+                flags |= flag;
+            }
+        };
+        set(target.stale, StimTick::FLAG_STALE_REFERENCE);
+        set(target.none, StimTick::FLAG_NO_REFERENCE);
+        set(target.stop, StimTick::FLAG_STOP);
+        set(wake.missed_periods > 0, StimTick::FLAG_OVERRUN);
+        set(
+            self.rejected_since_last_tick,
+            StimTick::FLAG_REFERENCE_REJECTED,
+        );
+        set(measured.is_some(), StimTick::FLAG_FEEDBACK);
+        set(events.source_fault, StimTick::FLAG_SOURCE_FAULT);
+        set(self.degraded, StimTick::FLAG_DEGRADED);
+        self.rejected_since_last_tick = false;
+
+        self.seq += 1;
+        let tick = StimTick {
+            seq: self.seq,
+            t_ns: wake.grid_ns,
+            t_wake_ns: wake.wake_ns,
+            t_publish_ns: wake.wake_ns,
+            ref_seq: target.ref_seq,
+            reference: target.value,
+            u_cont: decision.u_cont,
+            energy: decision.energy,
+            model_force: decision.model_force,
+            predicted_force: decision.predicted_force,
+            phi: decision.phi,
+            amplitude_ua: if fire { self.pulse.amplitude_ua } else { 0 },
+            missed_periods: wake.missed_periods,
+            width_us: if fire { self.pulse.width_us } else { 0 },
+            flags,
+            pulse: u8::from(fire),
+            channel: self.pulse.channel,
+            reserved: [0; 2],
+        };
+        (tick, events)
+    }
+
+    /// The last tick of a run: no pulse, [`StimTick::FLAG_FINAL`], stamped `now_ns`.
+    pub fn final_tick(&mut self, now_ns: u64) -> StimTick {
+        self.seq += 1;
+        StimTick {
+            seq: self.seq,
+            t_ns: now_ns,
+            t_wake_ns: now_ns,
+            t_publish_ns: now_ns,
+            ref_seq: 0,
+            reference: 0.0,
+            u_cont: 0.0,
+            energy: 0.0,
+            model_force: 0.0,
+            predicted_force: 0.0,
+            phi: 0.0,
+            amplitude_ua: 0,
+            missed_periods: 0,
+            width_us: 0,
+            flags: StimTick::FLAG_FINAL
+                | if self.degraded {
+                    StimTick::FLAG_DEGRADED
+                } else {
+                    0
+                },
+            pulse: 0,
+            channel: self.pulse.channel,
+            reserved: [0; 2],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::Contract;
+    use crate::rt::clock::PeriodicSchedule;
+    use crate::rt::source::TestPattern;
+    use core::time::Duration;
+
+    const MS: u64 = 1_000_000;
+
+    fn pattern_loop(ipi: u32) -> PatternLoop<TestPattern> {
+        PatternLoop::new(
+            TestPattern::new(ipi).unwrap(),
+            ReferencePolicy {
+                stale_after_ns: 100 * MS,
+                stale_ramp_per_s: 1.0,
+            },
+            None,
+            PulseSettings {
+                channel: 2,
+                amplitude_ua: 20_000,
+                width_us: 200,
+            },
+            false,
+        )
+    }
+
+    /// A source that returns NaN on its third call.
+    struct Faulty(u32);
+    impl TickSource for Faulty {
+        fn tick(&mut self, _r: f64, _m: Option<f64>) -> TickDecision {
+            self.0 += 1;
+            TickDecision {
+                pulse: true,
+                phi: if self.0 == 3 { f64::NAN } else { 0.0 },
+                ..TickDecision::default()
+            }
+        }
+        fn reset(&mut self) {}
+        fn min_pulse_gap_ticks(&self) -> u32 {
+            1
+        }
+    }
+
+    #[test]
+    fn ticks_are_valid_gap_free_and_carry_the_pulse_settings() {
+        let mut l = pattern_loop(4);
+        let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
+        l.offer_reference(&Reference::new(1, MS, 0.5), MS).unwrap();
+        for k in 0..20u64 {
+            let w = sched.advance(MS + k * MS + 30_000);
+            let (t, ev) = l.step(&w);
+            assert!(!ev.source_fault);
+            t.validate().unwrap();
+            assert_eq!(t.seq, k + 1);
+            assert_eq!(t.t_ns, MS + k * MS);
+            assert_eq!(t.fires(), k % 4 == 0);
+            if t.fires() {
+                assert_eq!((t.amplitude_ua, t.width_us, t.channel), (20_000, 200, 2));
+            }
+            assert_eq!(t.ref_seq, 1);
+        }
+        let f = l.final_tick(30 * MS);
+        f.validate().unwrap();
+        assert_eq!(f.seq, 21);
+        assert!(f.has(StimTick::FLAG_FINAL) && !f.fires());
+    }
+
+    #[test]
+    fn a_stall_yields_one_tick_with_the_misses_and_no_burst() {
+        let mut l = pattern_loop(2);
+        let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
+        l.offer_reference(&Reference::new(1, MS, 0.5), MS).unwrap();
+        let (a, _) = l.step(&sched.advance(MS));
+        assert!(a.fires());
+        // 100 ms stall.
+        let (b, _) = l.step(&sched.advance(2 * MS + 100 * MS));
+        assert_eq!(b.seq, a.seq + 1);
+        assert_eq!(b.missed_periods, 100);
+        assert!(b.has(StimTick::FLAG_OVERRUN));
+        assert!(!b.fires(), "the source is called once: its gap still holds");
+        let (c, _) = l.step(&sched.advance(103 * MS));
+        assert!(c.fires() && c.missed_periods == 0);
+    }
+
+    #[test]
+    fn a_non_finite_decision_is_a_fault_without_a_pulse() {
+        let mut l = PatternLoop::new(
+            Faulty(0),
+            ReferencePolicy {
+                stale_after_ns: 100 * MS,
+                stale_ramp_per_s: 1.0,
+            },
+            None,
+            PulseSettings {
+                channel: 0,
+                amplitude_ua: 1,
+                width_us: 1,
+            },
+            true,
+        );
+        let mut sched = PeriodicSchedule::new(Duration::from_millis(1), 0).unwrap();
+        let faults: Vec<bool> = (0..4)
+            .map(|k| {
+                let (t, ev) = l.step(&sched.advance(k * MS));
+                t.validate().unwrap();
+                assert!(t.has(StimTick::FLAG_DEGRADED));
+                assert_eq!(ev.source_fault, t.has(StimTick::FLAG_SOURCE_FAULT));
+                assert_eq!(t.fires(), !ev.source_fault);
+                ev.source_fault
+            })
+            .collect();
+        assert_eq!(faults, [false, false, true, false]);
+    }
+
+    #[test]
+    fn a_rejected_reference_flags_the_next_tick_only() {
+        let mut l = pattern_loop(2);
+        let mut sched = PeriodicSchedule::new(Duration::from_millis(1), 0).unwrap();
+        assert!(l.offer_reference(&Reference::new(1, 0, 2.0), 0).is_err());
+        let (a, _) = l.step(&sched.advance(0));
+        assert!(a.has(StimTick::FLAG_REFERENCE_REJECTED) && a.has(StimTick::FLAG_NO_REFERENCE));
+        let (b, _) = l.step(&sched.advance(MS));
+        assert!(!b.has(StimTick::FLAG_REFERENCE_REJECTED));
+    }
+}

@@ -1,0 +1,378 @@
+//! The iceoryx2 adapter of the rt-core process: the real-time loop thread and its
+//! normal-priority telemetry thread. The binary is a thin shell around these two functions,
+//! which tests also call directly.
+//!
+//! Real-time thread ([`run_pattern_loop`]): [`enter_realtime`] first, then create the
+//! iceoryx2 ports *inside* the thread (they are not `Send`), connect them, start counting
+//! allocations, and loop: sleep to the next absolute deadline; take every waiting
+//! [`Reference`] without blocking (bounded by the subscriber buffer); run the source once;
+//! publish one [`StimTick`] (loaned sample, stamped just before `send`, safe overflow: never
+//! blocks); notify the tick event; push the tick's timing into the telemetry queue. Nothing
+//! on this path allocates, locks, logs or blocks; failures are counted, not logged.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+
+use super::alloc;
+use super::clock::{PeriodError, PeriodicClock, monotonic_ns};
+use super::generator::PatternLoop;
+use super::hlog::{HlogError, HlogWriter};
+use super::process_config::RtCoreConfig;
+use super::realtime::{RtError, RtStatus, enter_realtime};
+use super::source::TickSource;
+use super::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
+use crate::msg::service::{BACKPRESSURE, ServiceError, open_pubsub, open_stim_tick_event};
+use crate::msg::{Contract, ForceSample, Reference, StimTick, TimingReport, TimingSource};
+
+/// Failure of the real-time loop thread before or while it runs.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// Real time could not be entered (refused, or invalid settings).
+    #[error("refused to start: {0}")]
+    Realtime(#[from] RtError),
+    /// A service could not be opened.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// A port could not be created or connected.
+    #[error("cannot create the {port}: {detail}")]
+    Port {
+        /// Which port.
+        port: &'static str,
+        /// iceoryx2's reason.
+        detail: String,
+    },
+    /// The period is invalid.
+    #[error(transparent)]
+    Period(#[from] PeriodError),
+    /// The iceoryx2 node could not be created.
+    #[error("cannot create the iceoryx2 node: {0}")]
+    Node(String),
+    /// The interval log could not be written.
+    #[error(transparent)]
+    Hlog(#[from] HlogError),
+}
+
+fn port_err(port: &'static str) -> impl Fn(&dyn std::fmt::Debug) -> RunError {
+    move |e| RunError::Port {
+        port,
+        detail: format!("{e:?}"),
+    }
+}
+
+/// Creates an iceoryx2 node named `name` with iceoryx2's own signal handling disabled (the
+/// process installs [`super::signals::install_stop_handler`]).
+pub fn create_node(name: &str) -> Result<Node<ipc::Service>, RunError> {
+    let node_name = NodeName::new(name).map_err(|e| RunError::Node(format!("{e:?}")))?;
+    // An explicit default configuration: iceoryx2's defaults, without its warning that no
+    // global configuration file was found.
+    let config = iceoryx2::config::Config::default();
+    NodeBuilder::new()
+        .config(&config)
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| RunError::Node(format!("{e:?}")))
+}
+
+/// How a finished real-time loop went.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LoopOutcome {
+    /// What [`enter_realtime`] achieved.
+    pub status: RtStatus,
+    /// `seq` of the final tick.
+    pub final_seq: u64,
+    /// Whether the counting allocator was installed (else allocations were not counted).
+    pub allocations_counted: bool,
+}
+
+/// Runs the pattern generator's real-time loop on the calling thread until `stop` is set,
+/// then publishes the final tick. `on_ready` is called once real time has been entered and
+/// the ports exist (before the first tick), with what was achieved.
+pub fn run_pattern_loop<S: TickSource>(
+    node: &Node<ipc::Service>,
+    config: &RtCoreConfig,
+    source: S,
+    telemetry: &TelemetryChannel,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(&RtStatus),
+) -> Result<LoopOutcome, RunError> {
+    let status = enter_realtime(&config.rt)?;
+    let prefix = config.ipc.prefix.as_str();
+
+    let tick_service = open_pubsub::<StimTick>(node, prefix)?;
+    let publisher = tick_service
+        .publisher_builder()
+        .backpressure_strategy(BACKPRESSURE)
+        .max_loaned_samples(1)
+        .create()
+        .map_err(|e| port_err("StimTick publisher")(&e))?;
+    let reference_service = open_pubsub::<Reference>(node, prefix)?;
+    let references = reference_service
+        .subscriber_builder()
+        .buffer_size(Reference::QOS.subscriber_buffer)
+        .history_request(Reference::QOS.history)
+        .create()
+        .map_err(|e| port_err("Reference subscriber")(&e))?;
+    let force_subscriber = if config.feedback.enabled {
+        let service = open_pubsub::<ForceSample>(node, prefix)?;
+        Some(
+            service
+                .subscriber_builder()
+                .buffer_size(ForceSample::QOS.subscriber_buffer)
+                .create()
+                .map_err(|e| port_err("ForceSample subscriber")(&e))?,
+        )
+    } else {
+        None
+    };
+    let notifier = if config.ipc.notify {
+        let event = open_stim_tick_event(node, prefix)?;
+        Some(
+            event
+                .notifier_builder()
+                .create()
+                .map_err(|e| port_err("stim-tick notifier")(&e))?,
+        )
+    } else {
+        None
+    };
+    publisher
+        .update_connections()
+        .map_err(|e| port_err("StimTick connections")(&e))?;
+    references
+        .update_connections()
+        .map_err(|e| port_err("Reference connections")(&e))?;
+    if let Some(n) = &notifier {
+        n.update_connections()
+            .map_err(|e| port_err("stim-tick event connections")(&e))?;
+    }
+    if let Some(f) = &force_subscriber {
+        f.update_connections()
+            .map_err(|e| port_err("ForceSample connections")(&e))?;
+    }
+
+    let mut generator = PatternLoop::new(
+        source,
+        config.reference_policy(),
+        config.feedback_max_age_ns(),
+        config.pulse_settings(),
+        status.is_degraded(),
+    );
+    let allocations_counted = alloc::counting_allocator_installed();
+    let mut report_flags = 0;
+    if status.is_degraded() {
+        report_flags |= TimingReport::FLAG_DEGRADED;
+    }
+    if !allocations_counted {
+        report_flags |= TimingReport::FLAG_ALLOCATIONS_UNCOUNTED;
+    }
+    telemetry.set_report_flags(report_flags);
+    let mut clock = PeriodicClock::start(config.period())?;
+    on_ready(&status);
+
+    // ---- hot path from here on: no allocation, lock, log or blocking call ----
+    alloc::track_current_thread(true);
+    let alloc_baseline = alloc::current_thread_allocations();
+    let counters = &telemetry.counters;
+    let max_references = Reference::QOS.subscriber_buffer;
+    let max_forces = ForceSample::QOS.subscriber_buffer;
+    while !stop.load(Ordering::Relaxed) {
+        let wake = clock.wait();
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        for _ in 0..max_references {
+            match references.receive() {
+                Ok(Some(sample)) => {
+                    let reference = *sample.payload();
+                    drop(sample);
+                    if generator.offer_reference(&reference, wake.wake_ns).is_err() {
+                        LoopCounters::bump(&counters.rejected_inputs, 1);
+                    }
+                }
+                Ok(None) => break,
+                Err(_) => {
+                    LoopCounters::bump(&counters.receive_errors, 1);
+                    break;
+                }
+            }
+        }
+        if let Some(forces) = &force_subscriber {
+            for _ in 0..max_forces {
+                match forces.receive() {
+                    Ok(Some(sample)) => {
+                        let force = *sample.payload();
+                        drop(sample);
+                        if generator.offer_force(&force).is_err() {
+                            LoopCounters::bump(&counters.rejected_inputs, 1);
+                        }
+                    }
+                    Ok(None) => break,
+                    Err(_) => {
+                        LoopCounters::bump(&counters.receive_errors, 1);
+                        break;
+                    }
+                }
+            }
+        }
+
+        let t_inputs = monotonic_ns();
+        let (tick, events) = generator.step(&wake);
+        let t_decided = monotonic_ns();
+        if !publish(&publisher, tick) {
+            LoopCounters::bump(&counters.publish_errors, 1);
+        }
+        if let Some(n) = &notifier
+            && n.notify().is_err()
+        {
+            LoopCounters::bump(&counters.publish_errors, 1);
+        }
+        let t_done = monotonic_ns();
+
+        LoopCounters::bump(&counters.ticks, 1);
+        if wake.missed_periods > 0 {
+            LoopCounters::bump(&counters.misses, u64::from(wake.missed_periods));
+            LoopCounters::bump(&counters.overruns, 1);
+        }
+        if events.source_fault {
+            LoopCounters::bump(&counters.source_faults, 1);
+        }
+        let allocs = alloc::current_thread_allocations();
+        counters.hot_path_allocations.store(
+            allocs.allocations - alloc_baseline.allocations,
+            Ordering::Relaxed,
+        );
+        counters.pool_allocations.store(
+            allocs.pool_allocations - alloc_baseline.pool_allocations,
+            Ordering::Relaxed,
+        );
+        telemetry.push(TickTiming {
+            grid_ns: wake.grid_ns,
+            lateness_ns: wake.lateness_ns,
+            input_ns: t_inputs.saturating_sub(wake.wake_ns),
+            compute_ns: t_decided.saturating_sub(t_inputs),
+            publish_ns: t_done.saturating_sub(t_decided),
+        });
+    }
+    // ---- end of the hot path ----
+    alloc::track_current_thread(false);
+
+    let final_tick = generator.final_tick(monotonic_ns());
+    if !publish(&publisher, final_tick) {
+        LoopCounters::bump(&counters.publish_errors, 1);
+    }
+    if let Some(n) = &notifier {
+        let _ = n.notify();
+    }
+    Ok(LoopOutcome {
+        status,
+        final_seq: final_tick.seq,
+        allocations_counted,
+    })
+}
+
+/// Loans a sample, writes `tick`, stamps `t_publish_ns` and sends it. False on failure.
+#[inline]
+fn publish(
+    publisher: &iceoryx2::port::publisher::Publisher<ipc::Service, StimTick, ()>,
+    tick: StimTick,
+) -> bool {
+    match publisher.loan_uninit() {
+        Ok(sample) => {
+            let mut sample = sample.write_payload(tick);
+            sample.payload_mut().t_publish_ns = monotonic_ns();
+            sample.send().is_ok()
+        }
+        Err(_) => false,
+    }
+}
+
+/// Settings of the telemetry thread.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TelemetrySettings {
+    /// Node name of the telemetry thread's iceoryx2 node.
+    pub node_name: String,
+    /// Service-name prefix.
+    pub prefix: String,
+    /// Period of reports and hlog intervals.
+    pub report_period: Duration,
+    /// Who is reporting.
+    pub source: TimingSource,
+}
+
+impl TelemetrySettings {
+    /// The rt-core process's telemetry settings.
+    pub fn for_rt_core(config: &RtCoreConfig) -> Self {
+        Self {
+            node_name: "rt-core-telemetry".to_owned(),
+            prefix: config.ipc.prefix.clone(),
+            report_period: Duration::from_millis(config.telemetry.report_period_ms),
+            source: TimingSource::RtCore,
+        }
+    }
+}
+
+/// How often the telemetry thread drains the queue.
+pub const DRAIN_PERIOD: Duration = Duration::from_millis(10);
+
+/// Runs the telemetry thread (normal priority) until `stop` is set: drains `channel` every
+/// [`DRAIN_PERIOD`], and every report period writes an interval to `hlog` (if given) and
+/// publishes a cumulative [`TimingReport`]. `on_ready` is called once its port exists. On
+/// stop it drains what is left and writes the final interval and the final report
+/// ([`TimingReport::FLAG_FINAL`]), which it also returns.
+pub fn run_telemetry(
+    settings: &TelemetrySettings,
+    mut hlog: Option<HlogWriter>,
+    channel: &TelemetryChannel,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(),
+) -> Result<TimingReport, RunError> {
+    let node = create_node(&settings.node_name)?;
+    let service = open_pubsub::<TimingReport>(&node, &settings.prefix)?;
+    let publisher = service
+        .publisher_builder()
+        .backpressure_strategy(BACKPRESSURE)
+        .create()
+        .map_err(|e| port_err("TimingReport publisher")(&e))?;
+    on_ready();
+    let start = Instant::now();
+    let mut aggregator = TimingAggregator::new();
+    let mut seq = 0u64;
+    let mut interval_start = Duration::ZERO;
+    let mut emit = |aggregator: &mut TimingAggregator,
+                    final_flag: u8|
+     -> Result<TimingReport, RunError> {
+        let now = start.elapsed();
+        if let Some(log) = &mut hlog {
+            aggregator.write_interval(log, interval_start, now.saturating_sub(interval_start))?;
+            log.flush()?;
+        }
+        interval_start = now;
+        seq += 1;
+        let report = aggregator.report(
+            seq,
+            monotonic_ns(),
+            settings.source,
+            &channel.counters.snapshot(),
+            channel.overflows(),
+            channel.report_flags() | final_flag,
+        );
+        // A failed report is not fatal: the next one carries the same cumulative numbers.
+        let _ = publisher.send_copy(report);
+        Ok(report)
+    };
+    let mut next_report = start + settings.report_period;
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(DRAIN_PERIOD);
+        aggregator.drain(channel);
+        if Instant::now() >= next_report {
+            emit(&mut aggregator, 0)?;
+            next_report += settings.report_period;
+        }
+    }
+    aggregator.drain(channel);
+    emit(&mut aggregator, TimingReport::FLAG_FINAL)
+}

@@ -1,0 +1,259 @@
+//! [`TickSource`]: what the real-time loop runs once per tick.
+//!
+//! The loop is written against this small trait, so that it can be tested with the
+//! deterministic [`TestPattern`] and run the thesis's pattern generator (LCN -> pulse shaper
+//! -> LMN, Fig. 6.8) in production. A source is called exactly once per wake-up: after a
+//! stall it is *not* called for the skipped periods, so it can never emit a catch-up burst.
+
+use std::path::Path;
+use std::time::Duration;
+
+use crate::control::file::{Controller, ControllerFileError};
+use crate::control::pattern_generator::{
+    FeedbackMode, PatternGenerator, PatternGeneratorError, TickInput,
+};
+
+/// The decision of one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickDecision {
+    /// Fire one pulse now.
+    pub pulse: bool,
+    /// Continuous control signal u_cont (thesis 6.5.2).
+    pub u_cont: f64,
+    /// Pulse-shaper energy since the last pulse, E (eq. 6.8).
+    pub energy: f64,
+    /// Output of the simulated muscle model, normalised force.
+    pub model_force: f64,
+    /// Model force predicted over the input delay, normalised force.
+    pub predicted_force: f64,
+    /// Scheduling variable phi.
+    pub phi: f64,
+}
+
+impl TickDecision {
+    /// True when every number is finite.
+    pub fn is_finite(&self) -> bool {
+        [
+            self.u_cont,
+            self.energy,
+            self.model_force,
+            self.predicted_force,
+            self.phi,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+    }
+}
+
+/// One step of a pattern generator, called once per tick from the real-time thread: it must
+/// not allocate, lock, log or block.
+pub trait TickSource {
+    /// Decides this tick from the target `reference` (normalised force, [0, 1]) and, in
+    /// feedback mode, the latest measured force.
+    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision;
+
+    /// Returns to rest (all states zero), e.g. after a fault.
+    fn reset(&mut self);
+
+    /// Shortest spacing between two pulses, in ticks, that this source guarantees (the
+    /// thesis's shaper: a pulse is always followed by at least one empty sample, so 2).
+    fn min_pulse_gap_ticks(&self) -> u32;
+}
+
+/// The thesis's pattern generator (LCN -> pulse shaper -> LMN, Fig. 6.8) as a tick source,
+/// built from a validated controller file (schema "fes-lcn/1").
+#[derive(Debug, Clone)]
+pub struct ControllerSource {
+    generator: PatternGenerator,
+    min_gap_ticks: u32,
+    units: usize,
+    mode: FeedbackMode,
+}
+
+/// The controller cannot run in this loop.
+#[derive(Debug, thiserror::Error)]
+pub enum ControllerSourceError {
+    /// The controller file is unreadable or invalid.
+    #[error(transparent)]
+    File(#[from] ControllerFileError),
+    /// The pattern generator cannot be built from it.
+    #[error(transparent)]
+    Generator(#[from] PatternGeneratorError),
+    /// The controller was designed for another sampling period than the loop's.
+    #[error(
+        "the controller's model samples at {model_ts_us} us but the loop period is \
+         {period_us} us (period_us must equal the model's Ts)"
+    )]
+    Period {
+        /// The model's sampling period, µs.
+        model_ts_us: f64,
+        /// The loop period, µs.
+        period_us: f64,
+    },
+}
+
+impl ControllerSource {
+    /// Reads and validates a controller file and checks that its model's sampling period is
+    /// the loop `period`.
+    pub fn load(path: &Path, period: Duration) -> Result<Self, ControllerSourceError> {
+        Self::from_controller(&Controller::load(path)?, period)
+    }
+
+    /// Builds the source from a validated controller.
+    pub fn from_controller(
+        controller: &Controller,
+        period: Duration,
+    ) -> Result<Self, ControllerSourceError> {
+        let model_ts = controller.network.ts();
+        let period_s = period.as_secs_f64();
+        if (model_ts - period_s).abs() > 1e-9 * period_s.max(model_ts) {
+            return Err(ControllerSourceError::Period {
+                model_ts_us: model_ts * 1e6,
+                period_us: period_s * 1e6,
+            });
+        }
+        let generator = controller.pattern_generator()?;
+        Ok(Self {
+            units: generator.network().units(),
+            mode: generator.mode(),
+            generator,
+            min_gap_ticks: controller.settings.shaper.min_gap.saturating_add(1),
+        })
+    }
+
+    /// Number of local models (units).
+    pub fn units(&self) -> usize {
+        self.units
+    }
+
+    /// The controller's feedback mode.
+    pub fn mode(&self) -> FeedbackMode {
+        self.mode
+    }
+
+    /// The wrapped pattern generator.
+    pub fn generator(&self) -> &PatternGenerator {
+        &self.generator
+    }
+}
+
+impl TickSource for ControllerSource {
+    #[inline]
+    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision {
+        let out = self.generator.tick(&TickInput {
+            reference,
+            measured_force,
+        });
+        TickDecision {
+            pulse: out.pulse,
+            u_cont: out.u_cont,
+            energy: out.energy,
+            model_force: out.model_force,
+            predicted_force: out.predicted_force,
+            phi: out.phi,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.generator.reset();
+    }
+
+    fn min_pulse_gap_ticks(&self) -> u32 {
+        self.min_gap_ticks
+    }
+}
+
+/// Invalid [`TestPattern`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("test-pattern ipi_ticks = {0} must be at least 2 (a pulse is followed by an empty tick)")]
+pub struct TestPatternError(pub u32);
+
+/// A deterministic bench source with no muscle model: while the reference is above zero it
+/// fires every `ipi_ticks` ticks, starting on the first such tick; a zero reference stops it
+/// and restarts the count. `u_cont` echoes the reference; the model outputs are 0.
+///
+/// It exists to test and measure the real-time plumbing independently of the controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TestPattern {
+    ipi_ticks: u32,
+    since_last: Option<u32>,
+}
+
+impl TestPattern {
+    /// A pattern with a constant inter-pulse interval of `ipi_ticks` (>= 2).
+    pub fn new(ipi_ticks: u32) -> Result<Self, TestPatternError> {
+        if ipi_ticks < 2 {
+            return Err(TestPatternError(ipi_ticks));
+        }
+        Ok(Self {
+            ipi_ticks,
+            since_last: None,
+        })
+    }
+}
+
+impl TickSource for TestPattern {
+    fn tick(&mut self, reference: f64, _measured_force: Option<f64>) -> TickDecision {
+        // `reference > 0.0` is false for NaN as well: no pulse on a bad input.
+        let pulse = if reference > 0.0 {
+            let fire = self.since_last.is_none_or(|n| n + 1 >= self.ipi_ticks);
+            self.since_last = if fire {
+                Some(0)
+            } else {
+                self.since_last.map(|n| n + 1)
+            };
+            fire
+        } else {
+            self.since_last = None;
+            false
+        };
+        TickDecision {
+            pulse,
+            u_cont: if reference.is_finite() {
+                reference
+            } else {
+                0.0
+            },
+            ..TickDecision::default()
+        }
+    }
+
+    fn reset(&mut self) {
+        self.since_last = None;
+    }
+
+    fn min_pulse_gap_ticks(&self) -> u32 {
+        self.ipi_ticks
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fires_every_ipi_ticks_while_the_reference_is_positive() {
+        let mut p = TestPattern::new(5).unwrap();
+        let fired = (0..23).filter(|_| p.tick(0.4, None).pulse).count();
+        assert_eq!(fired, 5); // ticks 0, 5, 10, 15, 20
+        let mut p = TestPattern::new(5).unwrap();
+        let pattern: Vec<bool> = (0..11).map(|_| p.tick(0.4, None).pulse).collect();
+        let expect: Vec<bool> = (0..11).map(|k| k % 5 == 0).collect();
+        assert_eq!(pattern, expect);
+    }
+
+    #[test]
+    fn zero_reference_stops_and_restarts_the_count() {
+        let mut p = TestPattern::new(3).unwrap();
+        assert!(p.tick(1.0, None).pulse);
+        assert!(!p.tick(1.0, None).pulse);
+        assert!(!p.tick(0.0, None).pulse);
+        assert!(p.tick(1.0, None).pulse);
+        assert!(!p.tick(f64::NAN, None).pulse);
+    }
+
+    #[test]
+    fn ipi_below_two_is_refused() {
+        assert_eq!(TestPattern::new(1), Err(TestPatternError(1)));
+    }
+}

@@ -1,0 +1,215 @@
+//! The controller file `fes-lcn/1`: round trip, and rejection of corrupted, mismatched or
+//! invalid files with errors that name the field.
+
+mod control_support;
+
+use control_support::{TS, fast_muscle, table_6_1_specs};
+use rt_core::control::design::{DesignError, DesignOptions, EstimatorPoles};
+use rt_core::control::file::{Controller, ControllerFile, ControllerFileError, ControllerSettings};
+use rt_core::control::lcn_design::LcnDesignError;
+use rt_core::control::pattern_generator::{FeedbackMode, TickInput};
+use rt_core::control::poles::dominant_pair;
+use rt_core::model::lmn::LocalModelSet;
+use serde_json::Value;
+
+fn measured_settings() -> ControllerSettings {
+    let [p1, p2] = dominant_pair(0.005, 1.2, TS).unwrap();
+    ControllerSettings {
+        mode: FeedbackMode::MeasuredForce,
+        estimator_poles: Some(EstimatorPoles { p1, p2 }),
+        ..ControllerSettings::default()
+    }
+}
+
+fn designed() -> Controller {
+    Controller::design(fast_muscle(6), &table_6_1_specs(6), measured_settings()).unwrap()
+}
+
+fn document() -> Value {
+    serde_json::from_str(&designed().to_json_string().unwrap()).unwrap()
+}
+
+fn load(doc: &Value) -> Result<Controller, ControllerFileError> {
+    Controller::from_json_str(&doc.to_string())
+}
+
+#[test]
+fn round_trip_through_a_file_keeps_everything() {
+    let c = designed();
+    let path = std::env::temp_dir().join(format!("fes-lcn-roundtrip-{}.json", std::process::id()));
+    c.save(&path).unwrap();
+    let back = Controller::load(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    // rt-core enables serde_json's `float_roundtrip`: every number reads back exactly.
+    assert_eq!(back.units, c.units);
+    assert_eq!(back.settings, c.settings);
+    assert_eq!(back.lmn, c.lmn);
+    // Same controller, same pulses.
+    let (mut a, mut b) = (
+        c.pattern_generator().unwrap(),
+        back.pattern_generator().unwrap(),
+    );
+    for k in 0..2000 {
+        let input = TickInput {
+            reference: 0.4,
+            measured_force: Some(0.1 * (k % 5) as f64),
+        };
+        assert_eq!(a.tick(&input), b.tick(&input), "k {k}");
+    }
+    // The text names the schema and the thesis fields.
+    let text = c.to_json_string().unwrap();
+    for key in [
+        "\"fes-lcn/1\"",
+        "\"fes-lmn/1\"",
+        "rise_time_s",
+        "k_x",
+        "k_i",
+        "p3",
+        "min_gap",
+    ] {
+        assert!(text.contains(key), "{key} missing from the file");
+    }
+}
+
+#[test]
+fn a_corrupted_gain_is_rejected_naming_unit_and_field() {
+    let mut doc = document();
+    let k = doc["units"][2]["k_x"][1].as_f64().unwrap();
+    doc["units"][2]["k_x"][1] = (k * (1.0 + 1e-6)).into();
+    let err = load(&doc).unwrap_err();
+    assert!(
+        matches!(&err, ControllerFileError::Mismatch { unit: 2, field, .. } if field == "k_x[1]"),
+        "{err}"
+    );
+    assert!(err.to_string().starts_with("units[2].k_x[1]"), "{err}");
+    // A change far below the tolerance (1e-9 relative) is accepted.
+    let mut doc = document();
+    let k = doc["units"][4]["k_i"].as_f64().unwrap();
+    doc["units"][4]["k_i"] = (k * (1.0 + 1e-12)).into();
+    load(&doc).unwrap();
+    // A corrupted estimator gain and a corrupted pole too.
+    let mut doc = document();
+    let l = doc["units"][0]["l"][0].as_f64().unwrap();
+    doc["units"][0]["l"][0] = (l * 1.001).into();
+    assert!(matches!(
+        load(&doc),
+        Err(ControllerFileError::Mismatch { unit: 0, .. })
+    ));
+    let mut doc = document();
+    doc["units"][5]["p2"]["re"] = (-60.0).into();
+    assert!(
+        matches!(load(&doc), Err(ControllerFileError::Mismatch { unit: 5, field, .. }) if field == "p2.re")
+    );
+}
+
+#[test]
+fn gains_designed_for_another_model_are_rejected() {
+    let mut doc = document();
+    let c = doc["model"]["units"][3]["c"][0].as_f64().unwrap();
+    doc["model"]["units"][3]["c"][0] = (c * 1.05).into();
+    let err = load(&doc).unwrap_err();
+    assert!(
+        matches!(err, ControllerFileError::Mismatch { unit: 3, .. }),
+        "{err}"
+    );
+}
+
+#[test]
+fn structural_errors_name_the_problem() {
+    let mut doc = document();
+    doc["schema"] = "fes-lcn/2".into();
+    assert!(
+        matches!(load(&doc), Err(ControllerFileError::Schema { found }) if found == "fes-lcn/2")
+    );
+
+    let text = document()
+        .to_string()
+        .replacen("\"k_i\":", "\"k_i\":NaN,\"x\":", 1);
+    let err = Controller::from_json_str(&text).unwrap_err();
+    assert!(matches!(err, ControllerFileError::Syntax(_)), "{err}");
+    assert!(err.to_string().contains("NaN"), "{err}");
+
+    let mut doc = document();
+    doc["units"][1]["gain_typo"] = 1.0.into();
+    let err = load(&doc).unwrap_err();
+    assert!(err.to_string().contains("gain_typo"), "{err}");
+
+    let mut doc = document();
+    doc["units"][1].as_object_mut().unwrap().remove("k_i");
+    let err = load(&doc).unwrap_err();
+    assert!(err.to_string().contains("missing field `k_i`"), "{err}");
+
+    let mut doc = document();
+    doc["units"].as_array_mut().unwrap().pop();
+    let err = load(&doc).unwrap_err();
+    assert!(
+        matches!(&err, ControllerFileError::Invalid { field, .. } if field == "units"),
+        "{err}"
+    );
+
+    let mut doc = document();
+    doc["units"][1]["rise_time_s"] = (-0.03).into();
+    let err = load(&doc).unwrap_err();
+    assert!(err.to_string().starts_with("units[1].rise_time_s"), "{err}");
+
+    let mut doc = document();
+    doc["shaper"]["min_gap"] = 0.into();
+    let err = load(&doc).unwrap_err();
+    assert!(matches!(err, ControllerFileError::Shaper(_)), "{err}");
+    assert!(err.to_string().contains("min_gap"), "{err}");
+
+    let mut doc = document();
+    doc.as_object_mut().unwrap().remove("estimator_poles");
+    let err = load(&doc).unwrap_err();
+    assert!(err.to_string().starts_with("units[0].l"), "{err}");
+}
+
+#[test]
+fn an_invalid_embedded_model_is_reported_by_the_model_library() {
+    let mut doc = document();
+    doc["model"]["units"][2]["eigenvalues"][0] = 5.0.into();
+    let err = load(&doc).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, ControllerFileError::Model(_)), "{msg}");
+    assert!(
+        msg.starts_with("model.") && msg.contains("units[2]"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_negative_gain_model_needs_the_explicit_override() {
+    let mut lmn = fast_muscle(6);
+    if let LocalModelSet::SsEigCommon { units, .. } = &mut lmn.local {
+        units[4].c = [-units[4].c[0], -units[4].c[1]];
+    }
+    let err = Controller::design(
+        lmn.clone(),
+        &table_6_1_specs(6),
+        ControllerSettings::default(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            ControllerFileError::Design(LcnDesignError::Design(DesignError::NegativeGain {
+                unit: 4,
+                ..
+            }))
+        ),
+        "{err}"
+    );
+    let settings = ControllerSettings {
+        design: DesignOptions {
+            allow_negative_gain: true,
+            ..DesignOptions::default()
+        },
+        ..ControllerSettings::default()
+    };
+    let c = Controller::design(lmn, &table_6_1_specs(6), settings).unwrap();
+    // The override is stored, so the file loads again.
+    let back = Controller::from_json_str(&c.to_json_string().unwrap()).unwrap();
+    assert!(back.settings.design.allow_negative_gain);
+    let file: ControllerFile = serde_json::from_str(&c.to_json_string().unwrap()).unwrap();
+    assert!(file.design.allow_negative_gain);
+}

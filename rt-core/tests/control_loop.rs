@@ -1,0 +1,277 @@
+//! The pattern generator's closed loop (thesis Fig. 6.8 in the advanced form) against
+//! independent truths: the linear closed loop `A_aug - b_aug K` (eq. C.27) for one unit,
+//! and settling, gap and energy properties with the shaper on a muscle-like LMN.
+
+mod control_support;
+
+use control_support::{DELAY, TS, fast_muscle, fast_muscle_with_offsets, table_6_1_specs};
+use nalgebra::{Matrix3, RowVector3, Vector2, Vector3};
+use rt_core::control::design::augmented;
+use rt_core::control::design::plant_matrices;
+use rt_core::control::file::{Controller, ControllerSettings};
+use rt_core::control::lcn::AntiWindup;
+use rt_core::control::lcn_design::UnitSpec;
+use rt_core::control::pattern_generator::TickInput;
+
+fn controller(lmn: rt_core::model::Lmn, specs: &[UnitSpec]) -> Controller {
+    Controller::design(lmn, specs, ControllerSettings::default()).unwrap()
+}
+
+#[test]
+fn one_unit_unshaped_loop_follows_the_linear_closed_loop() {
+    // One unit: rho = 1 everywhere, so the loop is LTI:
+    // w[k+1] = w[k] + Ts ((A_aug - b_aug K) w[k] - [1; 0] r + [dy; dx]),  w = [x_I; z].
+    // An output offset only (dx = 0): the rest state is z = 0, so u_raw starts at 0 and the
+    // clamp never engages; the linear loop is then the exact truth.
+    let c = controller(
+        fast_muscle_with_offsets(1, false, true),
+        &[UnitSpec::thesis(0.03, TS)],
+    );
+    let m = c.network.ss_unit(0).unwrap();
+    let (a, b, cv) = plant_matrices(m);
+    let (a_aug, b_aug) = augmented(&a, &b, &cv);
+    let g = c.units[0].gains;
+    let k = RowVector3::new(g.k_i, g.k_x[0], g.k_x[1]);
+    let m_cl: Matrix3<f64> = a_aug - b_aug * k;
+    let offs = Vector3::new(m.dy, m.dx[0], m.dx[1]);
+    let r = 0.5;
+
+    let mut pg = c.pattern_generator().unwrap();
+    // Start: x_I = 0, z = the rest state (equilibrium for u = 0).
+    let x0 = m.equilibrium(0.0).unwrap();
+    let mut w = Vector3::new(0.0, x0[0], x0[1]);
+    let mut y_hist = Vec::new();
+    let mut worst = 0.0f64;
+    for k in 0..3000 {
+        let out = pg.tick_unshaped(&TickInput {
+            reference: r,
+            measured_force: None,
+        });
+        assert!(
+            out.u_raw >= 0.0 && out.integrated,
+            "clamp must stay inactive (k = {k})"
+        );
+        let got = Vector3::new(out.x_i, out.z[0], out.z[1]);
+        worst = worst.max((got - w).norm() / w.norm().max(1.0));
+        let y_core = cv.dot(&w.fixed_rows::<2>(1)) + m.dy;
+        assert!((out.predicted_force - y_core).abs() <= 1e-9 * y_core.abs().max(1.0));
+        y_hist.push(y_core);
+        // Model force now = core output d samples ago (rest output before that).
+        let want_now = if k >= DELAY {
+            y_hist[k - DELAY]
+        } else {
+            cv.dot(&Vector2::from(x0)) + m.dy
+        };
+        assert!(
+            (out.model_force - want_now).abs() <= 1e-9 * want_now.abs().max(1.0),
+            "k {k}"
+        );
+        w += TS * (m_cl * w - Vector3::new(r, 0.0, 0.0) + offs);
+    }
+    assert!(worst < 1e-9, "max relative deviation {worst:e}");
+    // Integral action: zero steady-state error despite the offsets (eq. C.29).
+    let y_end = *y_hist.last().unwrap();
+    assert!((y_end - r).abs() < 1e-6, "y = {y_end}");
+}
+
+fn run(
+    pg: &mut rt_core::control::pattern_generator::PatternGenerator,
+    r: f64,
+    n: usize,
+) -> (Vec<f64>, Vec<usize>) {
+    let mut force = Vec::with_capacity(n);
+    let mut pulses = Vec::new();
+    for k in 0..n {
+        let out = pg.tick(&TickInput {
+            reference: r,
+            measured_force: None,
+        });
+        force.push(out.model_force);
+        if out.pulse {
+            pulses.push(k);
+        }
+    }
+    (force, pulses)
+}
+
+#[test]
+fn constant_reference_settles_within_5_percent_with_pulses() {
+    let c = controller(fast_muscle(6), &table_6_1_specs(6));
+    for r in [0.2, 0.3, 0.5, 0.7] {
+        let mut pg = c.pattern_generator().unwrap();
+        let (force, pulses) = run(&mut pg, r, 1500);
+        let tail = &force[1000..];
+        let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+        assert!(
+            (mean - r).abs() <= 0.05 * r,
+            "r = {r}: mean force over the last 500 ms {mean}"
+        );
+        let min_ipi = pulses.windows(2).map(|w| w[1] - w[0]).min().unwrap();
+        assert!(min_ipi >= 2, "r = {r}: pulses {min_ipi} samples apart");
+        eprintln!(
+            "r = {r}: mean {mean:.4}, {} pulses, first IPIs {:?}",
+            pulses.len(),
+            pulses
+                .windows(2)
+                .take(8)
+                .map(|w| w[1] - w[0])
+                .collect::<Vec<_>>()
+        );
+    }
+}
+
+#[test]
+fn reset_reproduces_the_run_and_bad_references_are_clamped() {
+    let c = controller(fast_muscle(6), &table_6_1_specs(6));
+    let mut pg = c.pattern_generator().unwrap();
+    let (f1, p1) = run(&mut pg, 0.3, 600);
+    pg.reset();
+    let (f2, p2) = run(&mut pg, 0.3, 600);
+    assert_eq!(f1, f2);
+    assert_eq!(p1, p2);
+    // A non-finite reference counts as 0, an out-of-range one is clamped; both counted.
+    pg.reset();
+    let mut reference = c.pattern_generator().unwrap();
+    for (bad, good) in [
+        (f64::NAN, 0.0),
+        (7.0, 1.0),
+        (-3.0, 0.0),
+        (f64::INFINITY, 0.0),
+    ] {
+        for _ in 0..50 {
+            let a = pg.tick(&TickInput {
+                reference: bad,
+                measured_force: None,
+            });
+            let b = reference.tick(&TickInput {
+                reference: good,
+                measured_force: None,
+            });
+            assert_eq!(a, b);
+        }
+    }
+    assert_eq!(pg.stats().references_clamped, 200);
+}
+
+#[test]
+fn anti_windup_holds_the_integrator_when_reference_drops() {
+    // After a high plateau the reference drops to 0: u_raw goes negative, the integrator is
+    // held (not wound further negative), and the force decays to rest without pulses once
+    // the error is gone.
+    let c = controller(fast_muscle(6), &table_6_1_specs(6));
+    let mut pg = c.pattern_generator().unwrap();
+    run(&mut pg, 0.5, 800);
+    let mut held = 0;
+    let mut last_pulse = None;
+    for k in 0..1500 {
+        let out = pg.tick(&TickInput {
+            reference: 0.0,
+            measured_force: None,
+        });
+        if !out.integrated {
+            held += 1;
+            assert!(out.u_raw < 0.0, "held only while clamped");
+        }
+        if out.pulse {
+            last_pulse = Some(k);
+        }
+    }
+    assert!(held > 0, "the clamp must engage after the drop");
+    assert!(
+        last_pulse.is_none_or(|k| k < 50),
+        "pulses long after the drop: {last_pulse:?}"
+    );
+    assert!(pg.lcn().x_i().is_finite());
+}
+
+#[test]
+fn no_windup_during_a_pause_with_a_positive_rest_force() {
+    // With offsets the model rests at a force above r = 0, so the error stays positive for
+    // the whole pause. Without anti-windup x_I would grow without bound (about 0.03 per
+    // second here) and delay the next contraction; with it, the next contraction starts as
+    // from a fresh start.
+    let c = controller(fast_muscle_with_offsets(6, true, true), &table_6_1_specs(6));
+    let mut fresh = c.pattern_generator().unwrap();
+    let (_, fresh_pulses) = run(&mut fresh, 0.3, 300);
+    let mut pg = c.pattern_generator().unwrap();
+    run(&mut pg, 0.5, 500);
+    let (rest, pause_pulses) = run(&mut pg, 0.0, 3000);
+    assert!(rest[2999] > 0.0, "the fixture rests above zero force");
+    assert!(
+        pause_pulses.iter().all(|&k| k < 50),
+        "pulses during the pause: {pause_pulses:?}"
+    );
+    assert!(
+        pg.lcn().x_i().abs() < 1e-3,
+        "x_I = {} after a 3 s pause",
+        pg.lcn().x_i()
+    );
+    let (_, pulses) = run(&mut pg, 0.3, 300);
+    assert!(
+        pulses[0] <= fresh_pulses[0] + 2,
+        "first pulse {} ms after the pause vs {} ms from rest",
+        pulses[0],
+        fresh_pulses[0]
+    );
+}
+
+#[test]
+fn output_clamp_rule_biases_the_pulsed_loop() {
+    // The textbook rule (freeze whenever clamped and the error pushes down) sees only the
+    // negative errors in pulsed operation, so the mean force settles too high: the reason
+    // the default rule also requires the integral term to ask for negative stimulation.
+    let settings = ControllerSettings {
+        anti_windup: AntiWindup::OutputClamp,
+        ..ControllerSettings::default()
+    };
+    let c = Controller::design(fast_muscle(6), &table_6_1_specs(6), settings).unwrap();
+    let mut pg = c.pattern_generator().unwrap();
+    let (force, _) = run(&mut pg, 0.3, 1500);
+    let mean = force[1000..].iter().sum::<f64>() / 500.0;
+    eprintln!("output-clamp rule, r = 0.3: mean force {mean:.4}");
+    assert!(mean > 1.2 * 0.3, "mean {mean}");
+}
+
+/// The settling table of docs/control.md (fast-muscle fixture, M = 6, Table 6.1 rise
+/// times): mean model force over 1.5-2 s for each reference and anti-windup rule. Run with
+/// `cargo test -p rt-core --test control_loop -- --ignored --nocapture`; it checks the
+/// documented values (to 0.002) so the table cannot silently go stale.
+#[test]
+#[ignore = "prints the documented settling table; run explicitly"]
+fn settling_table_of_the_docs() {
+    const DOCUMENTED: [(f64, f64, f64); 7] = [
+        // (r, integral_sign, output_clamp)
+        (0.05, 0.0979, 0.1528),
+        (0.1, 0.1291, 0.2198),
+        (0.15, 0.1618, 0.2792),
+        (0.2, 0.2038, 0.3367),
+        (0.3, 0.2967, 0.4355),
+        (0.5, 0.5009, 0.6133),
+        (0.7, 0.7007, 0.8020),
+    ];
+    println!("| r | mean force, integral_sign | pulses/s | mean force, output_clamp |");
+    println!("|---|---|---|---|");
+    for (r, want_sign, want_clamp) in DOCUMENTED {
+        let mut means = [0.0; 2];
+        let mut rate = 0.0;
+        for (j, rule) in [AntiWindup::IntegralSign, AntiWindup::OutputClamp]
+            .into_iter()
+            .enumerate()
+        {
+            let settings = ControllerSettings {
+                anti_windup: rule,
+                ..ControllerSettings::default()
+            };
+            let c = Controller::design(fast_muscle(6), &table_6_1_specs(6), settings).unwrap();
+            let mut pg = c.pattern_generator().unwrap();
+            let (force, pulses) = run(&mut pg, r, 2000);
+            means[j] = force[1500..].iter().sum::<f64>() / 500.0;
+            if j == 0 {
+                rate = pulses.iter().filter(|&&k| k >= 1000).count() as f64;
+            }
+        }
+        println!("| {r} | {:.4} | {rate} | {:.4} |", means[0], means[1]);
+        assert!((means[0] - want_sign).abs() < 2e-3, "r {r}: {}", means[0]);
+        assert!((means[1] - want_clamp).abs() < 2e-3, "r {r}: {}", means[1]);
+    }
+}

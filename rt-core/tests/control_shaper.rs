@@ -1,0 +1,125 @@
+//! The pulse shaper (thesis 6.5.2, eq. 6.7-6.8): energy bookkeeping, minimum gap and the
+//! bounded-burst safety property, checked against sums kept independently by the test.
+
+use proptest::prelude::*;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rt_core::control::shaper::{PulseShaper, ShaperConfig};
+
+#[test]
+fn pulse_count_tracks_integral_of_u_cont_over_a_million_samples() {
+    // eq. (6.7) with eta = 1: sum u_cont ≈ sum u_pulse, to within one pulse.
+    let mut rng = ChaCha8Rng::seed_from_u64(0x6_5_2);
+    let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
+    let mut sum = 0.0f64;
+    let mut pulses = 0u64;
+    let mut worst = 0.0f64;
+    for _ in 0..1_000_000 {
+        let u: f64 = rng.random_range(0.0..0.5);
+        sum += u;
+        if s.step(u) {
+            pulses += 1;
+        }
+        worst = worst.max((sum - pulses as f64).abs());
+    }
+    assert!(worst <= 1.0, "|sum u - pulses| reached {worst}");
+    assert_eq!(
+        s.stats().discarded,
+        0.0,
+        "u <= 0.5 never saturates the 2-sample IPI"
+    );
+    assert_eq!(s.stats().pulses, pulses);
+}
+
+#[test]
+fn no_catch_up_burst_after_saturation() {
+    for (eta, min_gap, e_max) in [(1.0, 1, 2.0), (1.0, 3, 5.5), (0.5, 2, 0.5)] {
+        let cfg = ShaperConfig {
+            eta,
+            min_gap,
+            e_max,
+        };
+        let mut s = PulseShaper::new(cfg).unwrap();
+        for _ in 0..1000 {
+            s.step(50.0); // saturated: the gap limits the rate
+        }
+        let after = (0..1000).filter(|_| s.step(0.0)).count();
+        let bound = (e_max / eta).floor() as usize;
+        assert!(
+            after <= bound,
+            "{cfg:?}: {after} pulses after saturation, bound {bound}"
+        );
+        assert!(s.stats().discarded > 0.0);
+    }
+}
+
+fn arb_config() -> impl Strategy<Value = ShaperConfig> {
+    (0.1..5.0f64, 1u32..6, 1.0..4.0f64).prop_map(|(eta, min_gap, f)| ShaperConfig {
+        eta,
+        min_gap,
+        e_max: eta * f,
+    })
+}
+
+/// Non-negative inputs spanning many orders of magnitude, including huge ones.
+fn arb_input() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        4 => 0.0..1.0f64,
+        2 => 0.0..10.0f64,
+        1 => 0.0..1e9f64,
+        1 => Just(0.0),
+        1 => (0.0..1.0f64).prop_map(|x| x * 1e15),
+    ]
+}
+
+proptest! {
+    #[test]
+    fn energy_is_conserved_gap_holds_and_energy_stays_bounded(
+        cfg in arb_config(),
+        inputs in prop::collection::vec(arb_input(), 1..2000),
+    ) {
+        let mut s = PulseShaper::new(cfg).unwrap();
+        let mut sum = 0.0f64;
+        let mut last_pulse: Option<usize> = None;
+        for (k, &u) in inputs.iter().enumerate() {
+            sum += u;
+            if s.step(u) {
+                if let Some(lp) = last_pulse {
+                    prop_assert!(k - lp > cfg.min_gap as usize,
+                        "pulses at {} and {} closer than gap {}", lp, k, cfg.min_gap);
+                }
+                last_pulse = Some(k);
+            }
+            let e = s.energy();
+            prop_assert!((0.0..=cfg.e_max).contains(&e), "E = {} outside [0, {}]", e, cfg.e_max);
+            let st = s.stats();
+            let accounted = st.pulses as f64 * cfg.eta + e + st.discarded;
+            prop_assert!((sum - accounted).abs() <= 1e-9 * sum.max(1.0),
+                "sum u = {} but pulses*eta + E + discarded = {}", sum, accounted);
+        }
+    }
+
+    #[test]
+    fn negative_and_non_finite_inputs_count_as_zero(
+        inputs in prop::collection::vec(
+            prop_oneof![
+                3 => 0.0..2.0f64,
+                1 => -1e6..0.0f64,
+                1 => Just(f64::NAN),
+                1 => Just(f64::INFINITY),
+                1 => Just(f64::NEG_INFINITY),
+            ],
+            1..500,
+        )
+    ) {
+        let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
+        let mut reference = PulseShaper::new(ShaperConfig::default()).unwrap();
+        let mut bad = 0u64;
+        for &u in &inputs {
+            let clean = if u.is_finite() && u >= 0.0 { u } else { bad += 1; 0.0 };
+            prop_assert_eq!(s.step(u), reference.step(clean));
+        }
+        prop_assert_eq!(s.stats().rejected_inputs, bad);
+        prop_assert_eq!(s.energy(), reference.energy());
+    }
+}

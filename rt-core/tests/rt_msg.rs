@@ -1,0 +1,531 @@
+//! Message contracts: pinned layouts (a change must be deliberate and renamed `v2`), type
+//! names, and validation tables.
+
+use core::mem::{align_of, offset_of, size_of};
+
+use rt_core::msg::service::{TOPIC_STIM_TICK, service_name, validate_prefix};
+use rt_core::msg::*;
+
+fn type_name<T: ZeroCopySend>() -> &'static str {
+    // SAFETY: only reads the constant name string of the derive.
+    unsafe { <T as ZeroCopySend>::type_name() }
+}
+
+#[test]
+fn layouts_are_pinned() {
+    assert_eq!((size_of::<Reference>(), align_of::<Reference>()), (40, 8));
+    assert_eq!(offset_of!(Reference, force), 16);
+    assert_eq!(offset_of!(Reference, flags), 32);
+
+    assert_eq!((size_of::<StimTick>(), align_of::<StimTick>()), (104, 8));
+    assert_eq!(offset_of!(StimTick, seq), 0);
+    assert_eq!(offset_of!(StimTick, t_ns), 8);
+    assert_eq!(offset_of!(StimTick, t_publish_ns), 24);
+    assert_eq!(offset_of!(StimTick, reference), 40);
+    assert_eq!(offset_of!(StimTick, phi), 80);
+    assert_eq!(offset_of!(StimTick, amplitude_ua), 88);
+    assert_eq!(offset_of!(StimTick, missed_periods), 92);
+    assert_eq!(offset_of!(StimTick, width_us), 96);
+    assert_eq!(offset_of!(StimTick, flags), 98);
+    assert_eq!(offset_of!(StimTick, pulse), 100);
+    assert_eq!(offset_of!(StimTick, channel), 101);
+
+    assert_eq!(
+        (size_of::<ForceSample>(), align_of::<ForceSample>()),
+        (40, 8)
+    );
+    assert_eq!(offset_of!(ForceSample, force), 32);
+
+    assert_eq!(
+        (size_of::<DriverStatus>(), align_of::<DriverStatus>()),
+        (64, 8)
+    );
+    assert_eq!(offset_of!(DriverStatus, watchdog_trips), 56);
+    assert_eq!(offset_of!(DriverStatus, state), 62);
+
+    assert_eq!(size_of::<LatencySummary>(), 40);
+    assert_eq!(
+        (size_of::<TimingReport>(), align_of::<TimingReport>()),
+        (272, 8)
+    );
+    assert_eq!(offset_of!(TimingReport, wake), 64);
+    assert_eq!(offset_of!(TimingReport, input), 104);
+    assert_eq!(offset_of!(TimingReport, ipc), 224);
+    assert_eq!(offset_of!(TimingReport, source), 264);
+}
+
+#[test]
+fn type_names_are_explicit_and_versioned() {
+    assert_eq!(type_name::<Reference>(), "fes::Reference::v1");
+    assert_eq!(type_name::<StimTick>(), "fes::StimTick::v1");
+    assert_eq!(type_name::<ForceSample>(), "fes::ForceSample::v1");
+    assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v1");
+    assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");
+    assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
+}
+
+fn tick() -> StimTick {
+    StimTick {
+        seq: 7,
+        t_ns: 1_000_000,
+        t_wake_ns: 1_020_000,
+        t_publish_ns: 1_030_000,
+        ref_seq: 3,
+        reference: 0.5,
+        u_cont: 0.4,
+        energy: 0.2,
+        model_force: 0.45,
+        predicted_force: 0.5,
+        phi: 0.3,
+        amplitude_ua: 20_000,
+        missed_periods: 0,
+        width_us: 200,
+        flags: 0,
+        pulse: 1,
+        channel: 0,
+        reserved: [0; 2],
+    }
+}
+
+/// One row of a validation table: a name, a mutation of the valid baseline, the verdict.
+type Case<M> = (&'static str, fn(&mut M), Option<ValidationError>);
+
+/// Applies each mutation to `base` and checks the verdict.
+fn table<M: Contract>(base: M, cases: &[Case<M>]) {
+    base.validate().expect("baseline is valid");
+    for (name, mutate, expected) in cases {
+        let mut m = base;
+        mutate(&mut m);
+        let got = m.validate();
+        match expected {
+            None => assert_eq!(got, Ok(()), "{name}"),
+            Some(e) => assert_eq!(got, Err(*e), "{name}"),
+        }
+    }
+}
+
+#[test]
+fn reference_validation_table() {
+    use ValidationError::*;
+    table(
+        Reference::new(1, 10, 0.5),
+        &[
+            ("zero force", |r| r.force = 0.0, None),
+            ("full force", |r| r.force = 1.0, None),
+            ("stop flag", |r| r.flags = Reference::FLAG_STOP, None),
+            ("ramp", |r| r.max_rate_per_s = 2.5, None),
+            ("seq 0", |r| r.seq = 0, Some(ZeroSequence)),
+            (
+                "force above 1",
+                |r| r.force = 1.01,
+                Some(OutOfRange {
+                    field: "force",
+                    value: 1.01,
+                    min: 0.0,
+                    max: 1.0,
+                }),
+            ),
+            (
+                "negative force",
+                |r| r.force = -0.1,
+                Some(OutOfRange {
+                    field: "force",
+                    value: -0.1,
+                    min: 0.0,
+                    max: 1.0,
+                }),
+            ),
+            (
+                "infinite force",
+                |r| r.force = f64::INFINITY,
+                Some(NotFinite {
+                    field: "force",
+                    value: f64::INFINITY,
+                }),
+            ),
+            (
+                "negative rate",
+                |r| r.max_rate_per_s = -1.0,
+                Some(OutOfRange {
+                    field: "max_rate_per_s",
+                    value: -1.0,
+                    min: 0.0,
+                    max: Reference::MAX_RATE_PER_S,
+                }),
+            ),
+            (
+                "unknown flag",
+                |r| r.flags = 0b110,
+                Some(UnknownFlags {
+                    field: "flags",
+                    bits: 0b110,
+                }),
+            ),
+            (
+                "reserved",
+                |r| r.reserved[3] = 1,
+                Some(ReservedNotZero { field: "reserved" }),
+            ),
+        ],
+    );
+    // NaN is reported as not finite (NaN != NaN, so compare by variant).
+    let mut r = Reference::new(1, 10, f64::NAN);
+    assert!(matches!(
+        r.validate(),
+        Err(NotFinite { field: "force", .. })
+    ));
+    r.force = 0.5;
+    assert!(r.validate().is_ok());
+}
+
+#[test]
+fn stim_tick_validation_table() {
+    use ValidationError::*;
+    table(
+        tick(),
+        &[
+            (
+                "no pulse, zero amplitude and width",
+                |t| {
+                    t.pulse = 0;
+                    t.amplitude_ua = 0;
+                    t.width_us = 0;
+                },
+                None,
+            ),
+            (
+                "overrun with flag",
+                |t| {
+                    t.missed_periods = 3;
+                    t.flags = StimTick::FLAG_OVERRUN;
+                },
+                None,
+            ),
+            (
+                "every known flag but final/fault",
+                |t| {
+                    t.flags = StimTick::KNOWN_FLAGS
+                        & !(StimTick::FLAG_FINAL
+                            | StimTick::FLAG_SOURCE_FAULT
+                            | StimTick::FLAG_OVERRUN)
+                },
+                None,
+            ),
+            ("seq 0", |t| t.seq = 0, Some(ZeroSequence)),
+            (
+                "woke before deadline",
+                |t| t.t_wake_ns = 999_999,
+                Some(TimestampOrder {
+                    earlier: "t_ns",
+                    earlier_ns: 1_000_000,
+                    later: "t_wake_ns",
+                    later_ns: 999_999,
+                }),
+            ),
+            (
+                "published before wake",
+                |t| t.t_publish_ns = 1_010_000,
+                Some(TimestampOrder {
+                    earlier: "t_wake_ns",
+                    earlier_ns: 1_020_000,
+                    later: "t_publish_ns",
+                    later_ns: 1_010_000,
+                }),
+            ),
+            (
+                "pulse 2",
+                |t| t.pulse = 2,
+                Some(IntOutOfRange {
+                    field: "pulse",
+                    value: 2,
+                    min: 0,
+                    max: 1,
+                }),
+            ),
+            (
+                "channel 16",
+                |t| t.channel = 16,
+                Some(IntOutOfRange {
+                    field: "channel",
+                    value: 16,
+                    min: 0,
+                    max: 15,
+                }),
+            ),
+            (
+                "amplitude above ceiling",
+                |t| t.amplitude_ua = 250_001,
+                Some(IntOutOfRange {
+                    field: "amplitude_ua",
+                    value: 250_001,
+                    min: 0,
+                    max: 250_000,
+                }),
+            ),
+            (
+                "reference above 1",
+                |t| t.reference = 1.5,
+                Some(OutOfRange {
+                    field: "reference",
+                    value: 1.5,
+                    min: 0.0,
+                    max: 1.0,
+                }),
+            ),
+            (
+                "infinite phi",
+                |t| t.phi = f64::NEG_INFINITY,
+                Some(NotFinite {
+                    field: "phi",
+                    value: f64::NEG_INFINITY,
+                }),
+            ),
+            (
+                "pulse without amplitude",
+                |t| t.amplitude_ua = 0,
+                Some(Inconsistent("a pulse needs a non-zero amplitude and width")),
+            ),
+            (
+                "pulse without width",
+                |t| t.width_us = 0,
+                Some(Inconsistent("a pulse needs a non-zero amplitude and width")),
+            ),
+            (
+                "amplitude without pulse",
+                |t| t.pulse = 0,
+                Some(Inconsistent(
+                    "amplitude and width must be 0 without a pulse",
+                )),
+            ),
+            (
+                "final tick fires",
+                |t| t.flags = StimTick::FLAG_FINAL,
+                Some(Inconsistent("the final tick fires a pulse")),
+            ),
+            (
+                "faulted tick fires",
+                |t| t.flags = StimTick::FLAG_SOURCE_FAULT,
+                Some(Inconsistent("a faulted tick fires a pulse")),
+            ),
+            (
+                "misses without flag",
+                |t| t.missed_periods = 2,
+                Some(Inconsistent(
+                    "FLAG_OVERRUN must be set exactly when missed_periods > 0",
+                )),
+            ),
+            (
+                "flag without misses",
+                |t| t.flags = StimTick::FLAG_OVERRUN,
+                Some(Inconsistent(
+                    "FLAG_OVERRUN must be set exactly when missed_periods > 0",
+                )),
+            ),
+            (
+                "unknown flag",
+                |t| t.flags = 1 << 12,
+                Some(UnknownFlags {
+                    field: "flags",
+                    bits: 1 << 12,
+                }),
+            ),
+            (
+                "reserved",
+                |t| t.reserved[0] = 9,
+                Some(ReservedNotZero { field: "reserved" }),
+            ),
+        ],
+    );
+}
+
+#[test]
+fn force_sample_validation_table() {
+    use ValidationError::*;
+    table(
+        ForceSample {
+            seq: 1,
+            t_ns: 5,
+            stim_seq: 0,
+            force_n: 3.0,
+            force: 0.3,
+        },
+        &[
+            (
+                "slightly negative (offset, noise)",
+                |f| f.force = -0.05,
+                None,
+            ),
+            ("seq 0", |f| f.seq = 0, Some(ZeroSequence)),
+            (
+                "garbage normalised force",
+                |f| f.force = 2.5,
+                Some(OutOfRange {
+                    field: "force",
+                    value: 2.5,
+                    min: -1.0,
+                    max: 2.0,
+                }),
+            ),
+            (
+                "garbage newtons",
+                |f| f.force_n = -20_000.0,
+                Some(OutOfRange {
+                    field: "force_n",
+                    value: -20_000.0,
+                    min: -10_000.0,
+                    max: 10_000.0,
+                }),
+            ),
+        ],
+    );
+}
+
+#[test]
+fn driver_status_validation_table() {
+    use ValidationError::*;
+    let base = DriverStatus {
+        seq: 1,
+        t_ns: 1,
+        ticks_received: 100,
+        ticks_lost: 0,
+        pulses_sent: 10,
+        pulses_rejected: 0,
+        can_tx_errors: 0,
+        watchdog_trips: 0,
+        fault_code: 0,
+        state: DeviceState::Armed as u8,
+        stimulator_state: DeviceState::Unknown as u8,
+    };
+    table(
+        base,
+        &[
+            (
+                "fault state with EMCY code",
+                |s| {
+                    s.state = DeviceState::Fault as u8;
+                    s.fault_code = 0x8130;
+                },
+                None,
+            ),
+            (
+                "unknown state",
+                |s| s.state = 9,
+                Some(UnknownEnum {
+                    field: "state",
+                    value: 9,
+                }),
+            ),
+            (
+                "unknown stimulator state",
+                |s| s.stimulator_state = 77,
+                Some(UnknownEnum {
+                    field: "stimulator_state",
+                    value: 77,
+                }),
+            ),
+            (
+                "more pulses than ticks",
+                |s| s.pulses_sent = 101,
+                Some(Inconsistent("more pulses sent than StimTicks received")),
+            ),
+        ],
+    );
+    assert_eq!(base.state(), Ok(DeviceState::Armed));
+    for v in 0..=255u8 {
+        let known = matches!(v, 0..=4 | 255);
+        assert_eq!(DeviceState::try_from(v).is_ok(), known, "{v}");
+    }
+}
+
+#[test]
+fn timing_report_validation_table() {
+    use ValidationError::*;
+    let s = LatencySummary {
+        count: 10,
+        p50_ns: 5,
+        p99_ns: 9,
+        p999_ns: 9,
+        max_ns: 12,
+    };
+    let base = TimingReport {
+        seq: 1,
+        t_ns: 1,
+        ticks: 10,
+        misses: 0,
+        overruns: 0,
+        queue_overflows: 0,
+        hot_path_allocations: 0,
+        rejected_inputs: 0,
+        wake: s,
+        input: s,
+        compute: s,
+        publish: s,
+        ipc: LatencySummary::default(),
+        source: TimingSource::RtCore as u8,
+        flags: TimingReport::FLAG_FINAL,
+        reserved: [0; 6],
+    };
+    table(
+        base,
+        &[
+            (
+                "misses and overruns",
+                |r| {
+                    r.misses = 100;
+                    r.overruns = 1;
+                },
+                None,
+            ),
+            (
+                "source 0",
+                |r| r.source = 0,
+                Some(UnknownEnum {
+                    field: "source",
+                    value: 0,
+                }),
+            ),
+            (
+                "unknown flag",
+                |r| r.flags = 1 << 5,
+                Some(UnknownFlags {
+                    field: "flags",
+                    bits: 1 << 5,
+                }),
+            ),
+            (
+                "overruns without misses",
+                |r| r.overruns = 1,
+                Some(Inconsistent("overruns exceed misses or ticks")),
+            ),
+            (
+                "unordered wake percentiles",
+                |r| r.wake.p99_ns = 3,
+                Some(Inconsistent(
+                    "wake percentiles not ordered (or non-zero with count 0)",
+                )),
+            ),
+            (
+                "ipc values without count",
+                |r| r.ipc.max_ns = 1,
+                Some(Inconsistent(
+                    "ipc percentiles not ordered (or non-zero with count 0)",
+                )),
+            ),
+        ],
+    );
+}
+
+#[test]
+fn service_names_compose_prefix_and_topic() {
+    assert_eq!(
+        service_name("fes", TOPIC_STIM_TICK).unwrap().as_str(),
+        "fes/stim_tick"
+    );
+    assert_eq!(
+        service_name("bench/a-1", "x").unwrap().as_str(),
+        "bench/a-1/x"
+    );
+    for bad in ["", "/fes", "fes/", "a b", "ü", &"x".repeat(65)] {
+        assert!(validate_prefix(bad).is_err(), "{bad:?}");
+    }
+}
