@@ -320,7 +320,7 @@ pub fn identify(
     if let LocalModelSet::SsEigCommon { reference_unit, .. } = &mut template.local {
         *reference_unit = run.reference;
     }
-    run.unit_weights = weights.clone();
+    run.unit_weights = weights;
     let mut outcome = match opts.mode {
         Mode::Prediction => {
             (hooks.progress)(Progress::Stage("least squares (prediction mode)"));
@@ -347,6 +347,39 @@ pub fn identify(
     let metrics = evaluate(&outcome.lmn, &train, &test)?;
     let seconds = (hooks.clock)() - t0;
     let mut lmn = outcome.lmn;
+    lmn.provenance = provenance(
+        records,
+        opts,
+        &run,
+        (outcome.final_iterations, outcome.stop),
+        &metrics,
+        seconds,
+        (&train, &test),
+    );
+    Ok(Identified {
+        lmn,
+        metrics,
+        iterations: run.iterations,
+        final_iterations: outcome.final_iterations,
+        stop: outcome.stop,
+        start_msse: outcome.start_msse,
+        seconds,
+        unit_weights: run.unit_weights,
+        pulse_shift: train.shift.merge(test.shift),
+        warnings: run.warnings,
+    })
+}
+
+/// The model file's provenance of a run (docs/identification.md, "Errors and provenance").
+fn provenance(
+    records: &RecordSet,
+    opts: &IdentOptions,
+    run: &Run<'_>,
+    (final_iterations, stop): (usize, Option<StopReason>),
+    metrics: &Metrics,
+    seconds: f64,
+    (train, test): (&ModelData, &ModelData),
+) -> Provenance {
     let finite = |v: f64| v.is_finite().then_some(v);
     let mut extra = std::collections::BTreeMap::new();
     extra.insert("data_set".into(), json!(records.source));
@@ -358,20 +391,20 @@ pub fn identify(
         json!(format!("rt-core ident {}", env!("CARGO_PKG_VERSION"))),
     );
     extra.insert("iterations".into(), json!(run.iterations));
-    extra.insert("final_iterations".into(), json!(outcome.final_iterations));
-    if let Some(s) = outcome.stop {
+    extra.insert("final_iterations".into(), json!(final_iterations));
+    if let Some(s) = stop {
         extra.insert("stop".into(), json!(s.to_string()));
     }
     extra.insert(
         "unit_validity_share".into(),
-        json!(weights.iter().map(|w| w.share).collect::<Vec<_>>()),
+        json!(run.unit_weights.iter().map(|w| w.share).collect::<Vec<_>>()),
     );
     if opts.ts_factor > 1 {
+        let s = train.shift.merge(test.shift);
         extra.insert(
             "pulse_shift".into(),
-            json!({"pulses": train.shift.pulses + test.shift.pulses,
-                   "collisions": train.shift.collisions + test.shift.collisions,
-                   "max_displacement_samples": train.shift.max_displacement.max(test.shift.max_displacement)}),
+            json!({"pulses": s.pulses, "collisions": s.collisions,
+                   "max_displacement_ms": s.max_displacement as f64 * records.ts * 1e3}),
         );
     }
     if !metrics.train_msse.is_finite() || !metrics.test_msse.is_finite() {
@@ -380,25 +413,13 @@ pub fn identify(
     if !run.warnings.is_empty() {
         extra.insert("warnings".into(), json!(run.warnings));
     }
-    lmn.provenance = Provenance {
+    Provenance {
         train_mspe: metrics.train_mspe.and_then(finite),
         train_msse: finite(metrics.train_msse),
         test_msse: finite(metrics.test_msse),
         fit_seconds: finite(seconds),
         extra,
-    };
-    Ok(Identified {
-        lmn,
-        metrics,
-        iterations: run.iterations,
-        final_iterations: outcome.final_iterations,
-        stop: outcome.stop,
-        start_msse: outcome.start_msse,
-        seconds,
-        unit_weights: weights,
-        pulse_shift: train.shift.merge(test.shift),
-        warnings: run.warnings,
-    })
+    }
 }
 
 /// A fitted network before metrics.

@@ -161,8 +161,8 @@ pub fn load_records(dir: &Path) -> Result<RecordSet> {
     RecordSet::load(dir).with_context(|| format!("cannot use data set {}", dir.display()))
 }
 
-/// Prints the run's figures.
-pub fn print_summary(r: &Identified) {
+/// Prints the run's figures (`data_ts_s`: the data's sampling period).
+pub fn print_summary(r: &Identified, data_ts_s: f64) {
     let m = &r.metrics;
     println!(
         "structure      {} ({} units)",
@@ -188,7 +188,9 @@ pub fn print_summary(r: &Identified) {
     if r.pulse_shift.collisions > 0 {
         println!(
             "down-sampling  {} of {} pulses moved past their nearest sample, at most {} ms",
-            r.pulse_shift.collisions, r.pulse_shift.pulses, r.pulse_shift.max_displacement
+            r.pulse_shift.collisions,
+            r.pulse_shift.pulses,
+            r.pulse_shift.max_displacement as f64 * data_ts_s * 1e3
         );
     }
     let stab = r.lmn.stability();
@@ -214,7 +216,7 @@ pub fn run(args: Args) -> Result<()> {
     super::stamp_tool(&mut result.lmn, "identify");
     file::save(&result.lmn, &args.out)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
-    print_summary(&result);
+    print_summary(&result, records.ts);
     println!("model          {}", args.out.display());
     Ok(())
 }
