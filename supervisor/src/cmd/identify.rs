@@ -1,0 +1,222 @@
+//! `supervisor identify`: one identification run, the model file and its metrics.
+
+use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
+use anyhow::{Context, Result, bail};
+use rt_core::ident::{IdentOptions, Identified, Learning, RecordSet, identify};
+use rt_core::model::file;
+use std::path::{Path, PathBuf};
+
+const AFTER_HELP: &str = "\
+STRUCTURES (local models; thesis 5.3, 5.4.2)
+  arx-shift      ARX, shift-operator parameters (eq. 2.20-2.24). At Ts = 1 ms prediction
+                 mode only learns to repeat the last sample (5.3.1); use --ts-ms 5 or 10
+                 (pulse-preserving down-sampling, 5.2.2; delay 10 ms, Fig. 5.6).
+  arx-delta      ARX with delta-operator parameters (D.2.2), Ts = 1 ms, delay 7 ms (5.3.2).
+  ss-direct      2nd-order delta-domain state space, A b c dx dy free, 11 per unit (Fig. 5.18).
+  ss-eig-local   real eigensystem per unit, A_i = V_i diag(e_i) V_i^-1 (eq. 5.5, Fig. 5.19).
+  ss-eig-common  common eigenvectors, A_i = V diag(e_i) V^-1 (eq. 5.6, Fig. 5.21), gauge
+                 V = I, b = (1, 1) for the best-covered unit; every eigenvalue inside
+                 (-1/Ts, 0) by construction, so the network is stable (2.4.1).
+  --units 1 is the single linear model; --order sets the ARX order (state space: 2).
+
+ESTIMATION (App. B)
+  simulation     free run from rest, Levenberg-Marquardt with exact (dual-number)
+                 Jacobians; starts from the best linear fit copied into every unit.
+  prediction     one-step-ahead least squares by SVD; ARX only; --learning global
+                 (eq. 2.33) or local (eq. 2.35, default).
+
+ERRORS (5.3, eq. B.8, normalised force, always at the data's 1 ms)
+  train MSPE (ARX), train MSSE, test MSSE; stored in the model file's provenance with the
+  options, the data set, the seed and the fit time.
+
+EXAMPLES
+  supervisor identify --data data/fast --structure ss-eig-common --units 4 --out fast.lmn.json
+  supervisor identify --data data/fast --structure arx-shift --ts-ms 5 --mode prediction \\
+      --units 10 --out fast-arx.lmn.json
+  See docs/identification.md.";
+
+/// `supervisor identify` arguments.
+#[derive(Debug, clap::Args)]
+#[command(after_help = AFTER_HELP)]
+pub struct Args {
+    /// Data-set directory (fes-dataset/1, e.g. from `sim-muscle record`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Local model structure.
+    #[arg(long, value_enum)]
+    pub structure: StructureArg,
+    /// Number of units M (validity functions / local models), 1..=16; 1 = linear model.
+    #[arg(long)]
+    pub units: usize,
+    /// Output model file (fes-lmn/1 JSON).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub fit: FitArgs,
+}
+
+/// The options shared by identify, sweep and compare.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FitArgs {
+    /// ARX order n (1..=3; ARX structures).
+    #[arg(long, default_value_t = 2)]
+    pub order: usize,
+    /// Model sampling period in ms, a multiple of the data's (1; 5 or 10 for arx-shift).
+    #[arg(long, default_value_t = 1)]
+    pub ts_ms: usize,
+    /// Input delay in ms (default 7 ms at the data's period, 10 ms at a longer one).
+    #[arg(long)]
+    pub delay_ms: Option<usize>,
+    /// Fix every offset dx, dy (ARX: d) at zero (thesis 6.5.3).
+    #[arg(long)]
+    pub zero_offsets: bool,
+    /// Scheduling variable.
+    #[arg(long, value_enum, default_value_t = SchedulingArg::Input)]
+    pub scheduling: SchedulingArg,
+    /// Estimation mode.
+    #[arg(long, value_enum, default_value_t = ModeArg::Simulation)]
+    pub mode: ModeArg,
+    /// Global or local learning (prediction mode; default local).
+    #[arg(long, value_enum)]
+    pub learning: Option<LearningArg>,
+    /// Alternate interior-knot optimisation with parameter estimation (5.4.2).
+    #[arg(long)]
+    pub optimise_knots: bool,
+    /// Number of network starts for Levenberg-Marquardt (best training error wins).
+    #[arg(long, default_value_t = 1)]
+    pub starts: usize,
+    /// Levenberg-Marquardt iteration limit per run.
+    #[arg(long, default_value_t = 200)]
+    pub max_iter: usize,
+    /// Seed of the perturbed starts.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Strength of the prior keeping units the data barely reach near the start (pitfall
+    /// d; 0 = the thesis's pure error criterion). See docs/identification.md.
+    #[arg(long, default_value_t = rt_core::ident::identify::DEFAULT_PRIOR)]
+    pub prior: f64,
+    /// Print every stage and accepted step on stderr.
+    #[arg(long, short)]
+    pub verbose: bool,
+}
+
+impl FitArgs {
+    /// Library options for `structure` and `units`, checked against the data's period.
+    pub fn options(
+        &self,
+        structure: StructureArg,
+        units: usize,
+        data_ts_s: f64,
+    ) -> Result<IdentOptions> {
+        let data_ms = data_ts_s * 1e3;
+        let factor = self.ts_ms as f64 / data_ms;
+        if self.ts_ms == 0 || (factor - factor.round()).abs() > 1e-9 || factor.round() < 1.0 {
+            bail!(
+                "--ts-ms {}: the model period must be a positive multiple of the data's {data_ms} ms",
+                self.ts_ms
+            );
+        }
+        let ts_model_ms = factor.round() * data_ms;
+        let delay = match self.delay_ms {
+            None => None,
+            Some(d) => {
+                let k = d as f64 / ts_model_ms;
+                if (k - k.round()).abs() > 1e-9 {
+                    bail!(
+                        "--delay-ms {d}: the delay must be a multiple of the model period {ts_model_ms} ms"
+                    );
+                }
+                Some(k.round() as usize)
+            }
+        };
+        if self.learning.is_some() && self.mode == ModeArg::Simulation {
+            bail!(
+                "--learning applies to prediction mode only (local learning, eq. 2.35, fits one-step predictors)"
+            );
+        }
+        let opts = IdentOptions {
+            structure: structure.into(),
+            units,
+            arx_order: self.order,
+            ts_factor: factor.round() as usize,
+            delay,
+            scheduling: self.scheduling.into(),
+            zero_offsets: self.zero_offsets,
+            mode: self.mode.into(),
+            learning: self.learning.map_or(Learning::Local, Into::into),
+            optimise_knots: self.optimise_knots,
+            starts: self.starts,
+            max_iter: self.max_iter,
+            seed: self.seed,
+            prior: self.prior,
+            ..IdentOptions::default()
+        };
+        opts.validate()?;
+        Ok(opts)
+    }
+}
+
+/// Loads a data set with a message naming the directory.
+pub fn load_records(dir: &Path) -> Result<RecordSet> {
+    RecordSet::load(dir).with_context(|| format!("cannot use data set {}", dir.display()))
+}
+
+/// Prints the run's figures (`data_ts_s`: the data's sampling period).
+pub fn print_summary(r: &Identified, data_ts_s: f64) {
+    let m = &r.metrics;
+    println!(
+        "structure      {} ({} units)",
+        r.lmn.structure(),
+        r.lmn.units()
+    );
+    println!("train MSPE     {}", fmt_err(m.train_mspe));
+    println!("train MSSE     {}", fmt_err(Some(m.train_msse)));
+    println!("test MSSE      {}", fmt_err(Some(m.test_msse)));
+    println!(
+        "iterations     {} (final fit {}{})",
+        r.iterations,
+        r.final_iterations,
+        r.stop.map_or(String::new(), |s| format!(", {s}"))
+    );
+    println!("fit time       {:.2} s", r.seconds);
+    let shares: Vec<String> = r
+        .unit_weights
+        .iter()
+        .map(|w| format!("{:.1}%", 100.0 * w.share))
+        .collect();
+    println!("unit weights   {}", shares.join(" "));
+    if r.pulse_shift.collisions > 0 {
+        println!(
+            "down-sampling  {} of {} pulses moved past their nearest sample, at most {} ms",
+            r.pulse_shift.collisions,
+            r.pulse_shift.pulses,
+            r.pulse_shift.max_displacement as f64 * data_ts_s * 1e3
+        );
+    }
+    let stab = r.lmn.stability();
+    if let Some(u) = stab.iter().find(|s| !s.stable) {
+        println!(
+            "stability      unit {} is unstable (max |1 + Ts p| = {:.4})",
+            u.unit, u.radius
+        );
+    }
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
+}
+
+/// Runs `supervisor identify`.
+pub fn run(args: Args) -> Result<()> {
+    let records = load_records(&args.data)?;
+    let opts = args.fit.options(args.structure, args.units, records.ts)?;
+    let fb = Feedback::new("", args.fit.verbose);
+    let result = fb.with_hooks(|h| identify(&records, &opts, h));
+    fb.finish();
+    let mut result = result.context("identification failed")?;
+    super::stamp_tool(&mut result.lmn, "identify");
+    file::save(&result.lmn, &args.out)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    print_summary(&result, records.ts);
+    println!("model          {}", args.out.display());
+    Ok(())
+}

@@ -1,0 +1,574 @@
+//! `supervisor identify / sweep / compare` end to end, bad inputs, and the acceptance ratios
+//! of the common-eigenvector network against the linear delta model on the sim-muscle
+//! `fast` and `slow` data sets (thesis protocol, seed 1), recorded here with sim-muscle's
+//! library exactly as `sim-muscle record --preset P --seed 1` does.
+
+use rt_core::dataset::{DataSet, WriteMode};
+use rt_core::ident::{Hooks, IdentOptions, RecordSet, identify};
+use rt_core::model::{Structure, file};
+use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
+use sim_muscle::plant::MusclePlant;
+use sim_muscle::preset::Preset;
+use sim_muscle::protocol::ProtocolConfig;
+use sim_muscle::recorder::{Origin, record};
+use sim_muscle::sensor::{ForceSensor, Measured, SensorConfig};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+const BIN: &str = env!("CARGO_BIN_EXE_supervisor");
+
+fn tmp(name: &str) -> PathBuf {
+    let p = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("ident_cli")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&p);
+    std::fs::create_dir_all(&p).expect("temp dir");
+    p
+}
+
+/// The data set `sim-muscle record --preset <preset> --seed <seed>` writes.
+fn record_preset(preset: Preset, seed: u64) -> DataSet {
+    let protocol = ProtocolConfig::thesis(preset);
+    let cfg = MuscleConfig::preset(preset);
+    let mut muscle = Muscle::new(cfg).expect("preset muscle");
+    let fmax = max_force(&mut muscle);
+    muscle.reset();
+    let sensor = SensorConfig::defaults_for(fmax, seed);
+    let mut plant = Measured::new(muscle, ForceSensor::new(sensor, cfg.ts_s).expect("sensor"));
+    let origin = Origin {
+        source: "sim-muscle (ident_cli test)".into(),
+        preset: Some(preset.name().into()),
+        parameters: cfg.parameters(),
+        seed,
+        noise: serde_json::Value::Null,
+    };
+    record(&mut plant, &protocol, origin).expect("record")
+}
+
+/// The fast and slow data sets, recorded once per test binary.
+fn data_dir(preset: Preset) -> &'static Path {
+    static FAST: OnceLock<PathBuf> = OnceLock::new();
+    static SLOW: OnceLock<PathBuf> = OnceLock::new();
+    let cell = match preset {
+        Preset::Fast => &FAST,
+        Preset::Slow => &SLOW,
+    };
+    cell.get_or_init(|| {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join("ident_cli_data")
+            .join(preset.name());
+        let ds = record_preset(preset, 1);
+        ds.write(&dir, WriteMode::Overwrite)
+            .expect("write data set");
+        dir
+    })
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .output()
+        .expect("run supervisor")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A small valid data set written by hand: `n` records of 200 ms, every pulse 20 ms apart.
+fn small_dataset(dir: &Path, n: usize) {
+    let mut records = Vec::new();
+    let mut entries = Vec::new();
+    for i in 0..n {
+        let name = format!("r{i}.csv");
+        let mut csv = String::from("t_ms,pulse,force\n");
+        let mut pulses = 0;
+        for k in 0..200 {
+            let p = k >= 10 && k % 20 == 10;
+            pulses += usize::from(p);
+            let f = if k > 17 {
+                0.2 + 0.1 * ((k as f64) / 13.0).sin()
+            } else {
+                0.0
+            };
+            csv.push_str(&format!("{k},{},{f}\n", u8::from(p)));
+        }
+        std::fs::write(dir.join(&name), csv).expect("write csv");
+        entries.push(format!(
+            r#"{{"file": "{name}", "kind": "random", "samples": 200, "pulses": {pulses}}}"#
+        ));
+        records.push(i);
+    }
+    let (train, test): (Vec<usize>, Vec<usize>) = records.iter().partition(|&&i| i + 1 < n.max(2));
+    let json = format!(
+        r#"{{"schema": "fes-dataset/1", "source": "test", "scale_n": 10.0, "offset_n": 0.0, "ts_s": 0.001,
+            "split": {{"train": {train:?}, "test": {test:?}}}, "records": [{}]}}"#,
+        entries.join(",")
+    );
+    std::fs::write(dir.join("dataset.json"), json).expect("write meta");
+}
+
+#[test]
+fn identify_writes_a_loadable_model_with_provenance() {
+    let dir = tmp("identify_ok");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).expect("dir");
+    small_dataset(&data, 4);
+    let out = dir.join("m.lmn.json");
+    let o = run(&[
+        "identify",
+        "--data",
+        data.to_str().expect("utf8"),
+        "--structure",
+        "ss-eig-common",
+        "--units",
+        "2",
+        "--max-iter",
+        "15",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    for key in ["train MSSE", "test MSSE", "iterations", "fit time"] {
+        assert!(text.contains(key), "{key} missing from:\n{text}");
+    }
+    let lmn = file::load(&out).expect("the model loads with the stability check");
+    assert_eq!(lmn.structure(), Structure::SsEigCommon);
+    let p = &lmn.provenance;
+    assert!(p.train_msse.is_some() && p.test_msse.is_some() && p.fit_seconds.is_some());
+    for key in ["data_set", "seed", "structure", "options", "tool"] {
+        assert!(p.extra.contains_key(key), "provenance lacks {key}");
+    }
+    // Prediction mode, ARX at 5 ms, global learning: MSPE is reported.
+    let out2 = dir.join("arx.lmn.json");
+    let o = run(&[
+        "identify",
+        "--data",
+        data.to_str().expect("utf8"),
+        "--structure",
+        "arx-shift",
+        "--ts-ms",
+        "5",
+        "--mode",
+        "prediction",
+        "--learning",
+        "global",
+        "--units",
+        "3",
+        "--out",
+        out2.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (lmn, _) = file::load_allow_unstable(&out2).expect("load");
+    assert_eq!(lmn.ts, 5e-3);
+    assert_eq!(lmn.delay, 2, "10 ms delay at 5 ms (Fig. 5.6)");
+    assert!(lmn.provenance.train_mspe.is_some());
+}
+
+/// Each bad input ends with a non-zero status and a message naming the problem.
+#[test]
+fn bad_inputs_are_refused_with_clear_errors() {
+    let dir = tmp("bad_inputs");
+    let good = dir.join("good");
+    std::fs::create_dir_all(&good).expect("dir");
+    small_dataset(&good, 3);
+    let one = dir.join("one");
+    std::fs::create_dir_all(&one).expect("dir");
+    small_dataset(&one, 1);
+    let nan = dir.join("nan");
+    std::fs::create_dir_all(&nan).expect("dir");
+    small_dataset(&nan, 3);
+    // The force at t = 50 ms of one record becomes NaN.
+    let csv = std::fs::read_to_string(nan.join("r1.csv")).expect("read");
+    let fixed: String = csv
+        .lines()
+        .map(|l| {
+            if l.starts_with("50,") {
+                "50,0,NaN".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(nan.join("r1.csv"), fixed + "\n").expect("write");
+    let out = dir.join("m.json");
+    let (g, o1, n, missing, outp) = (
+        good.to_str().expect("utf8"),
+        one.to_str().expect("utf8"),
+        nan.to_str().expect("utf8"),
+        dir.join("nope"),
+        out.to_str().expect("utf8"),
+    );
+    let missing = missing.to_str().expect("utf8");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "identify",
+                "--data",
+                missing,
+                "--structure",
+                "ss-eig-common",
+                "--units",
+                "2",
+                "--out",
+                outp,
+            ],
+            "does not exist",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                o1,
+                "--structure",
+                "ss-eig-common",
+                "--units",
+                "2",
+                "--out",
+                outp,
+            ],
+            "at least 2",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                n,
+                "--structure",
+                "ss-eig-common",
+                "--units",
+                "2",
+                "--out",
+                outp,
+            ],
+            "r1.csv",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "ss-eig-common",
+                "--units",
+                "0",
+                "--out",
+                outp,
+            ],
+            "units = 0",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "ss-eig-common",
+                "--units",
+                "17",
+                "--out",
+                outp,
+            ],
+            "units = 17",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "ss-direct",
+                "--units",
+                "2",
+                "--mode",
+                "prediction",
+                "--out",
+                outp,
+            ],
+            "prediction mode needs an ARX structure",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "arx-shift",
+                "--units",
+                "2",
+                "--ts-ms",
+                "0",
+                "--out",
+                outp,
+            ],
+            "--ts-ms",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "arx-shift",
+                "--units",
+                "2",
+                "--ts-ms",
+                "5",
+                "--delay-ms",
+                "7",
+                "--out",
+                outp,
+            ],
+            "--delay-ms",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "arx-delta",
+                "--units",
+                "2",
+                "--learning",
+                "global",
+                "--out",
+                outp,
+            ],
+            "--learning applies to prediction mode",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "arx-delta",
+                "--units",
+                "2",
+                "--order",
+                "5",
+                "--out",
+                outp,
+            ],
+            "order 5",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "arx-delta",
+                "--units",
+                "1",
+                "--starts",
+                "0",
+                "--out",
+                outp,
+            ],
+            "starts",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "nonsense",
+                "--units",
+                "1",
+                "--out",
+                outp,
+            ],
+            "nonsense",
+        ),
+        (
+            vec![
+                "identify",
+                "--data",
+                g,
+                "--structure",
+                "arx-delta",
+                "--units",
+                "1",
+                "--out",
+                "/nonexistent-dir/m.json",
+            ],
+            "cannot write",
+        ),
+        (
+            vec![
+                "sweep",
+                "--data",
+                g,
+                "--structure",
+                "arx-delta",
+                "--units",
+                "3..2",
+            ],
+            "unit range",
+        ),
+        (
+            vec![
+                "sweep",
+                "--data",
+                g,
+                "--structure",
+                "arx-delta",
+                "--units",
+                "0..2",
+            ],
+            "unit range",
+        ),
+        (vec!["compare", "--data", missing], "does not exist"),
+    ];
+    for (args, want) in cases {
+        let o = run(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(
+            err.contains(want),
+            "{args:?}: stderr should mention {want:?}:\n{err}"
+        );
+        assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+    }
+}
+
+#[test]
+fn help_explains_structures_and_modes() {
+    let o = run(&["identify", "--help"]);
+    assert!(o.status.success());
+    let h = stdout(&o);
+    for s in [
+        "arx-shift",
+        "arx-delta",
+        "ss-direct",
+        "ss-eig-local",
+        "ss-eig-common",
+        "eq. 5.6",
+        "prediction",
+        "simulation",
+        "--zero-offsets",
+        "--optimise-knots",
+        "--starts",
+        "--seed",
+    ] {
+        assert!(h.contains(s), "identify --help lacks {s}");
+    }
+}
+
+#[test]
+fn sweep_and_compare_write_tables_and_plot() {
+    let dir = tmp("sweep_compare");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).expect("dir");
+    small_dataset(&data, 4);
+    let d = data.to_str().expect("utf8");
+    let sw = dir.join("sweep");
+    let o = run(&[
+        "sweep",
+        "--data",
+        d,
+        "--structure",
+        "arx-delta",
+        "--units",
+        "1..3",
+        "--max-iter",
+        "10",
+        "--out",
+        sw.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(text.contains("best size:"), "{text}");
+    assert_eq!(
+        text.lines()
+            .filter(|l| l.starts_with("| ") && !l.starts_with("| units"))
+            .count(),
+        3
+    );
+    for f in [
+        "sweep.md",
+        "sweep.json",
+        "sweep.png",
+        "units_1.lmn.json",
+        "units_3.lmn.json",
+    ] {
+        assert!(sw.join(f).is_file(), "{f} missing");
+    }
+    let png = std::fs::read(sw.join("sweep.png")).expect("png");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sw.join("sweep.json")).expect("json"))
+            .expect("parse");
+    assert_eq!(json["rows"].as_array().map(|r| r.len()), Some(3));
+    let cmp = dir.join("compare");
+    let o = run(&[
+        "compare",
+        "--data",
+        d,
+        "--quick",
+        "--out",
+        cmp.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cmp.join("compare.json")).expect("json"))
+            .expect("parse");
+    let rows = json["rows"].as_array().expect("rows");
+    assert_eq!(
+        rows.len(),
+        11,
+        "Table 5.1 rows + 2 state-space rows + zero offsets"
+    );
+    assert!(cmp.join("compare.md").is_file());
+}
+
+/// Acceptance: on the thesis protocol's fast and slow data sets (seed 1) the 4-unit
+/// common-eigenvector network's test MSSE is at most 0.3 (fast) / 0.03 (slow) of the
+/// 2nd-order linear delta model's, and every local model is stable.
+#[test]
+fn common_eigenvector_network_beats_the_linear_model_by_the_thesis_ratios() {
+    for (preset, limit) in [(Preset::Fast, 0.3), (Preset::Slow, 0.03)] {
+        let recs = RecordSet::load(data_dir(preset)).expect("data set");
+        assert_eq!(recs.train.len(), 30);
+        let linear = identify(
+            &recs,
+            &IdentOptions {
+                structure: Structure::ArxDelta,
+                units: 1,
+                ..IdentOptions::default()
+            },
+            &Hooks::silent(),
+        )
+        .expect("linear delta model");
+        let lmn = identify(
+            &recs,
+            &IdentOptions {
+                structure: Structure::SsEigCommon,
+                units: 4,
+                ..IdentOptions::default()
+            },
+            &Hooks::silent(),
+        )
+        .expect("common-eigenvector network");
+        let ratio = lmn.metrics.test_msse / linear.metrics.test_msse;
+        eprintln!(
+            "{}: linear delta test MSSE {:.3e}, 4-unit ss-eig-common {:.3e}, ratio {ratio:.4}",
+            preset.name(),
+            linear.metrics.test_msse,
+            lmn.metrics.test_msse
+        );
+        assert!(ratio <= limit, "{}: ratio {ratio} > {limit}", preset.name());
+        assert!(lmn.lmn.stability().iter().all(|s| s.stable));
+        file::to_json_string(&lmn.lmn).expect("serialisable");
+    }
+}
