@@ -1,5 +1,39 @@
-//! `supervisor` (to be written).
-fn main() {
-    eprintln!("supervisor: not built yet");
-    std::process::exit(2);
+//! `supervisor`: the operator's command line.
+//!
+//! One variant of [`Command`] per subcommand, each dispatched to `cmd::<name>::run`.
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// FES controller supervisor.
+#[derive(Debug, Parser)]
+#[command(name = "supervisor", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Static analysis, force-frequency curve, stability report and validation of a model
+    /// (thesis 2.4, 5.4.3; Figs. 5.24-5.28).
+    Analyse(cmd::analyse::Args),
+    /// Modify a model: replace unstable local eigenvalues and re-estimate that unit's
+    /// offsets (thesis 5.4.3, Tables 5.3-5.4, Fig. 5.32).
+    Modify(cmd::modify::Args),
+    /// Design the Local Controller Network by pole placement (thesis 6.5.3, Tables 6.1/6.2).
+    Design(cmd::design::Args),
+    /// Optimal stimulation patterns: FTI/FTIpP, random, trains, iterative and LCN methods
+    /// (thesis ch. 6).
+    Osp(cmd::osp::Args),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Analyse(args) => cmd::analyse::run(args),
+        Command::Modify(args) => cmd::modify::run(args),
+        Command::Design(args) => cmd::design::run(args),
+        Command::Osp(args) => cmd::osp::run(args),
+    }
 }
