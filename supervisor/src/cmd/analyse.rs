@@ -395,14 +395,11 @@ fn static_section(
         rep.points.iter().filter(|p| !p.stable).count(),
         rep.points.len()
     );
-    match train_phi {
-        Some((lo, hi)) => {
-            let _ = writeln!(
-                md,
-                "The training records drive phi over [{lo:.3}, {hi:.3}] (the model's own scheduler); the shaded range outside it is extrapolation.\n"
-            );
-        }
-        None => {}
+    if let Some((lo, hi)) = train_phi {
+        let _ = writeln!(
+            md,
+            "The training records drive phi over [{lo:.3}, {hi:.3}] (the model's own scheduler); the shaded range outside it is extrapolation.\n"
+        );
     }
     Ok(())
 }
