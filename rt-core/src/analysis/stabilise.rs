@@ -218,6 +218,35 @@ fn offset_indices(layout: &ParamLayout, unit: usize) -> Option<[usize; 3]> {
     Some([find("dx0")?, find("dx1")?, find("dy")?])
 }
 
+/// The model with the offsets of `units` taken from theta (every other number exactly as
+/// in `lmn`: re-deriving eigenvalues from eta would round them).
+fn with_offsets(lmn: &Lmn, units: &[usize], idx: &[[usize; 3]], theta: &[f64]) -> Lmn {
+    let mut out = lmn.clone();
+    for (&u, ix) in units.iter().zip(idx) {
+        let [dx0, dx1, dy] = ix.map(|i| theta[i]);
+        let set = |dx: &mut [f64; 2], y: &mut f64| {
+            *dx = [dx0, dx1];
+            *y = dy;
+        };
+        match &mut out.local {
+            LocalModelSet::SsDirect(m) => {
+                let m = &mut m[u];
+                set(&mut m.dx, &mut m.dy)
+            }
+            LocalModelSet::SsEigLocal(m) => {
+                let m = &mut m[u];
+                set(&mut m.dx, &mut m.dy)
+            }
+            LocalModelSet::SsEigCommon { units, .. } => {
+                let m = &mut units[u];
+                set(&mut m.dx, &mut m.dy)
+            }
+            LocalModelSet::ArxShift { .. } | LocalModelSet::ArxDelta { .. } => {}
+        }
+    }
+    out
+}
+
 /// Sum of squared simulation errors over the records, and the sample count.
 fn sse(lmn: &Lmn, records: &[Series<'_>]) -> Result<(f64, usize), StabiliseError> {
     let net = lmn.network().map_err(|e| StabiliseError::Param(e.into()))?;
@@ -340,7 +369,7 @@ pub fn reestimate_offsets(
                 .zip(&proposal)
                 .map(|(t, p)| t + alpha * (p - t))
                 .collect();
-            let m = layout.apply(lmn, &trial)?;
+            let m = with_offsets(lmn, units, &idx, &trial);
             let (c, _) = sse(&m, records)?;
             if c <= cost {
                 accepted = Some((trial, m, c));

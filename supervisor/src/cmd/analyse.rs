@@ -296,6 +296,7 @@ fn static_section(
             color(0),
         )],
         hline: Some(0.0),
+        y: gain_range(rep),
         bands: bands.clone(),
         ..Panel::default()
     };
@@ -402,6 +403,26 @@ fn static_section(
         );
     }
     Ok(())
+}
+
+/// The gain axis from the 5th to the 95th percentile of the gain (widened by half its span
+/// and including 0): where an eigenvalue crosses zero A is nearly singular and the gain
+/// spikes; those values run along the border.
+fn gain_range(rep: &StaticReport) -> Option<(f64, f64)> {
+    let mut g: Vec<f64> = rep
+        .points
+        .iter()
+        .filter_map(|p| p.gain)
+        .filter(|g| g.is_finite())
+        .collect();
+    if g.is_empty() {
+        return None;
+    }
+    g.sort_by(f64::total_cmp);
+    let q = |f: f64| g[((g.len() - 1) as f64 * f).round() as usize];
+    let (lo, hi) = (q(0.05).min(0.0), q(0.95).max(0.0));
+    let span = (hi - lo).max(1e-9);
+    Some((lo - 0.5 * span, hi + 0.5 * span))
 }
 
 fn ff_section(
@@ -565,7 +586,7 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
     let mut sim = Vec::new();
     let mut seps = Vec::new();
     let mut texts = Vec::new();
-    let mut hi: f64 = 1.0;
+    let mut hi: f64 = 0.1;
     for (s, f) in d.test.iter().zip(&fits).take(shown) {
         if t0 > 0.0 {
             seps.push(t0);
@@ -579,14 +600,17 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
             }
             meas.push((t, s.y[k]));
             sim.push((t, f.simulated[k]));
-            hi = hi.max(s.y[k]);
+            hi = hi.max(s.y[k]).max(f.simulated[k].min(1.5));
         }
         texts.push((
             t0 + 8.0 * ts_ms,
-            1.02 * hi + 0.06,
+            0.0,
             format!("{}: MSSE {}", s.kind, sci(f.msse)),
         ));
         t0 += s.u.len() as f64 * ts_ms;
+    }
+    for t in &mut texts {
+        t.1 = 1.2 * hi;
     }
     let fig = Figure {
         title: format!(
@@ -600,6 +624,8 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
                     y_label: "pulse".into(),
                     x: Some((0.0, t0)),
                     y: Some((0.0, 1.1)),
+                    y_ticks: Some(2),
+                    compact: true,
                     impulses: pulses,
                     separators: seps.clone(),
                     ..Panel::default()
@@ -611,7 +637,7 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
                     x_label: "time (ms), records concatenated, each simulated from rest".into(),
                     y_label: "force (normalised)".into(),
                     x: Some((0.0, t0)),
-                    y: Some((-0.1, 1.12 * hi + 0.1)),
+                    y: Some((-0.1 * hi, 1.25 * hi)),
                     lines: vec![
                         Line::new(Some("measured".to_string()), meas, color(7)).dashed(),
                         Line::new(Some("model".to_string()), sim, color(0)),

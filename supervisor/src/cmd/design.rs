@@ -71,12 +71,23 @@ fn rise_times(text: &str, units: usize) -> Result<Vec<f64>> {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<()> {
-    let lmn = file::load(&args.model).with_context(|| {
-        format!(
-            "model file {} (an unstable model can be repaired with `supervisor modify --stabilise`)",
-            args.model.display()
-        )
-    })?;
+    let lmn = match file::load(&args.model) {
+        Ok(lmn) => lmn,
+        Err(e) => {
+            // Say so when only the stability requirement fails.
+            if let Ok((_, st)) = file::load_allow_unstable(&args.model) {
+                let bad: Vec<usize> = st.iter().filter(|s| !s.stable).map(|s| s.unit).collect();
+                if bad.is_empty() {
+                    return Err(e).with_context(|| format!("model file {}", args.model.display()));
+                }
+                bail!(
+                    "model file {}: {e}\nthe model is unstable (units {bad:?}); a controller needs every local model stable: repair it with `supervisor modify --stabilise`",
+                    args.model.display()
+                );
+            }
+            return Err(e).with_context(|| format!("model file {}", args.model.display()));
+        }
+    };
     let units = lmn.units();
     let Some(local) = lmn.ss_units() else {
         bail!(

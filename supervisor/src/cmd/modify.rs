@@ -173,6 +173,11 @@ fn long_train(
             .filter(|v| v.is_finite())
             .fold(0.0, f64::min);
     let span = (hi - lo).max(0.1);
+    let (ylo, yhi) = (lo - 0.5 * span, hi + 0.5 * span);
+    let leaves =
+        t0.y.iter()
+            .position(|v| !(v.is_finite() && (ylo..=yhi).contains(v)))
+            .map(|k| k as f64 * ts_ms);
     let units: Vec<usize> = result
         .offsets
         .iter()
@@ -216,6 +221,22 @@ fn long_train(
                         Line::new(Some("modified".to_string()), pts(&t1.y), color(0)),
                     ],
                     hline: Some(0.0),
+                    texts: leaves
+                        .map(|t| {
+                            vec![(
+                                t + 20.0,
+                                hi + 0.35 * span,
+                                format!(
+                                    "original leaves the plot at {t:.0} ms (max |y| {})",
+                                    if amax(&t0.y).is_finite() {
+                                        format!("{:.3e}", amax(&t0.y))
+                                    } else {
+                                        "infinite".into()
+                                    }
+                                ),
+                            )]
+                        })
+                        .unwrap_or_default(),
                     legend: true,
                     ..Panel::default()
                 },

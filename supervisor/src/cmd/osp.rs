@@ -827,16 +827,16 @@ fn lcn(
                 color(7),
             )
             .dashed(),
-            Line::new(
-                Some("loop model (design LMN)".to_string()),
-                run.model_force
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &y)| (k as f64 * ms, y))
-                    .collect(),
-                color(0),
-            ),
         ];
+        let loop_line = Line::new(
+            Some("loop model (design LMN)".to_string()),
+            run.model_force
+                .iter()
+                .enumerate()
+                .map(|(k, &y)| (k as f64 * ms, y))
+                .collect(),
+            color(0),
+        );
         let mut extra = Vec::new();
         for (si, s) in subjects.iter().enumerate() {
             let f = s
@@ -857,15 +857,17 @@ fn lcn(
                 color(1 + si),
             ));
         }
+        lines.push(loop_line);
         let tail = (n / 2).max(1);
         let loop_mean = run.model_force[n - tail..].iter().sum::<f64>() / tail as f64;
         column.push((
             1,
             Panel {
-                title: Some(format!("r = {level}: {} pulses", times.len())),
                 y_label: "pulse".into(),
                 x: Some((0.0, n as f64 * ms)),
                 y: Some((0.0, 1.1)),
+                y_ticks: Some(2),
+                compact: true,
                 impulses: times.iter().map(|&k| k as f64 * ms).collect(),
                 ..Panel::default()
             },
@@ -873,6 +875,7 @@ fn lcn(
         column.push((
             3,
             Panel {
+                title: Some(format!("r = {level}: {} pulses (above)", times.len())),
                 x_label: if li + 1 == levels.len() {
                     "time (ms)".into()
                 } else {

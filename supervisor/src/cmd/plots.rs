@@ -126,6 +126,10 @@ pub struct Panel {
     pub hline: Option<f64>,
     /// Draw the legend (when some element has a label).
     pub legend: bool,
+    /// Number of y tick labels (default: plotters' choice).
+    pub y_ticks: Option<usize>,
+    /// A strip without caption and x axis (e.g. pulses above a force panel).
+    pub compact: bool,
 }
 
 /// Panels arranged in columns; each panel has a relative height within its column.
@@ -208,18 +212,21 @@ where
     let (xr, yr) = p.ranges();
     let mut builder = ChartBuilder::on(area);
     builder
-        .margin(8)
+        .margin(if p.compact { 2 } else { 8 })
         .margin_right(16)
-        .x_label_area_size(38)
+        .x_label_area_size(if p.compact { 0 } else { 38 })
         .y_label_area_size(62);
-    if let Some(t) = &p.title {
+    if let (Some(t), false) = (&p.title, p.compact) {
         builder.caption(t, ("sans-serif", 15));
     }
     let mut chart = builder
         .build_cartesian_2d(xr.clone(), yr.clone())
         .map_err(|e| err(&e))?;
-    chart
-        .configure_mesh()
+    let mut mesh = chart.configure_mesh();
+    if p.compact {
+        mesh.disable_x_axis().disable_x_mesh();
+    }
+    mesh.y_labels(p.y_ticks.unwrap_or(10))
         .light_line_style(BLACK.mix(0.05))
         .bold_line_style(BLACK.mix(0.12))
         .x_desc(p.x_label.as_str())
