@@ -1,1 +1,10 @@
-//! Test harness (to be written).
+//! Cross-process CAN tests and the vcan harness shared by every CAN test of the workspace.
+//!
+//! * [`vcan`]: get a CAN interface (native vcan, a given interface, or a User-Mode Linux
+//!   guest) for a `#[test]` ([`vcan::with_vcan`]) or for any command (`vcan-run`).
+//! * [`bus`]: host-side helpers for protocol tests: a frame tap with timestamps, a host
+//!   port that sends PULSE/NMT/CONFIG with correct counters, a heartbeat thread.
+#![deny(missing_docs)]
+
+pub mod bus;
+pub mod vcan;

@@ -1,1 +1,302 @@
-//! The virtual stimulator on the CAN bus (to be written).
+//! The virtual stimulator on the CAN bus: the stimulator side of the protocol in
+//! `fes-can/dbc/fes.dbc`, driving a [`MusclePlant`].
+//!
+//! * [`machine`]: the protocol as a pure state machine (NMT states, heartbeat producer
+//!   and consumer, CONFIG in pre-operational only, interlocks, EMCY on every rejection,
+//!   watchdog), unit-tested without a socket;
+//! * [`interlock`], [`watchdog`], [`outbox`]: its parts;
+//! * `socket_loop`: the SocketCAN adapter on a 1 ms absolute-time loop;
+//! * `clock`: the loop's only timing primitives;
+//! * [`test_plant`]: a deterministic plant for protocol tests.
+//!
+//! Entry points: [`run`] (what `sim-muscle stimulator` calls; SIGINT/SIGTERM stop it) and
+//! [`run_until`] (the same with a caller-owned stop flag, for tests and embedding).
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context as _, bail};
+use fes_can::{Nodes, StimLimits};
+
+use crate::plant::MusclePlant;
+
+mod clock;
+pub mod interlock;
+pub mod machine;
+pub mod outbox;
+mod record;
+mod socket_loop;
+pub mod test_plant;
+pub mod watchdog;
+
+pub use machine::{Settings, SettingsError, Stimulator, Tick, TickReport};
+pub use socket_loop::RunSummary;
+
+/// Parses a node id given as decimal or `0x` hexadecimal.
+fn parse_node_id(s: &str) -> Result<u8, String> {
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16),
+        None => s.parse::<u8>(),
+    }
+    .map_err(|e| format!("{s:?} is not a node id: {e}"))?;
+    if (1..=0x7F).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("node id {v:#04x} outside 1..=0x7f (CANopen)"))
+    }
+}
+
+/// Command-line options of the virtual stimulator (`sim-muscle stimulator ...`).
+///
+/// The limits are the stimulator's own: its boot configuration and the ceiling that no
+/// CONFIG frame can loosen.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StimulatorArgs {
+    /// CAN interface (SocketCAN).
+    #[arg(long, default_value = "vcan0")]
+    pub iface: String,
+    /// The stimulator's CANopen node id (decimal or 0x..).
+    #[arg(long, default_value = "0x10", value_parser = parse_node_id)]
+    pub node_id: u8,
+    /// The host's CANopen node id, whose heartbeat feeds the watchdog.
+    #[arg(long, default_value = "0x01", value_parser = parse_node_id)]
+    pub host_node_id: u8,
+    /// Number of output channels (1..=16).
+    #[arg(long, default_value_t = 1)]
+    pub channels: u8,
+    /// Amplitude ceiling, mA (a multiple of 0.1 mA, at most 150).
+    #[arg(long, default_value_t = f64::from(StimLimits::DEFAULT.max_amplitude_100ua) / 10.0)]
+    pub max_amplitude_ma: f64,
+    /// Pulse width ceiling, us (at most 1000).
+    #[arg(long, default_value_t = StimLimits::DEFAULT.max_width_us)]
+    pub max_width_us: u16,
+    /// Minimum inter-pulse interval, ms.
+    #[arg(long, default_value_t = StimLimits::DEFAULT.min_ipi_ms)]
+    pub min_ipi_ms: u16,
+    /// Most pulses in any rate window.
+    #[arg(long, default_value_t = StimLimits::DEFAULT.max_pulses)]
+    pub max_pulses: u16,
+    /// Rate window, ms.
+    #[arg(long, default_value_t = StimLimits::DEFAULT.rate_window_ms)]
+    pub rate_window_ms: u16,
+    /// Watchdog: operational output stops when no host heartbeat arrives for this long, ms.
+    #[arg(long, default_value_t = StimLimits::DEFAULT.watchdog_ms)]
+    pub watchdog_ms: u16,
+    /// Period of the stimulator's heartbeat, ms.
+    #[arg(long, default_value_t = 100)]
+    pub heartbeat_ms: u16,
+    /// Period of the host's heartbeat, ms (the watchdog must span at least two).
+    #[arg(long, default_value_t = 10)]
+    pub host_heartbeat_ms: u16,
+    /// Write a CSV line per tick (time, lateness, state, force, applied pulse) to this file.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Log filter for the stimulator's event log on stderr (tracing syntax, e.g. `debug`).
+    #[arg(long, default_value = "info")]
+    pub log: String,
+    /// Stop by itself after this many seconds (default: run until SIGINT/SIGTERM).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+}
+
+impl StimulatorArgs {
+    /// The validated settings these options describe.
+    pub fn settings(&self) -> anyhow::Result<Settings> {
+        let nodes =
+            Nodes::new(self.host_node_id, self.node_id).context("--node-id / --host-node-id")?;
+        let amplitude_100ua = (self.max_amplitude_ma * 10.0).round();
+        if !self.max_amplitude_ma.is_finite()
+            || (amplitude_100ua / 10.0 - self.max_amplitude_ma).abs() > 1e-9
+        {
+            bail!(
+                "--max-amplitude-ma {} is not a multiple of 0.1 mA",
+                self.max_amplitude_ma
+            );
+        }
+        if !(0.0..=f64::from(u16::MAX)).contains(&amplitude_100ua) {
+            bail!(
+                "--max-amplitude-ma {} is outside 0..=150 mA",
+                self.max_amplitude_ma
+            );
+        }
+        let ceiling = StimLimits {
+            max_amplitude_100ua: amplitude_100ua as u16,
+            max_width_us: self.max_width_us,
+            min_ipi_ms: self.min_ipi_ms,
+            max_pulses: self.max_pulses,
+            rate_window_ms: self.rate_window_ms,
+            watchdog_ms: self.watchdog_ms,
+        };
+        let settings = Settings {
+            nodes,
+            ceiling,
+            channels: self.channels,
+            heartbeat_ms: self.heartbeat_ms,
+            host_heartbeat_ms: self.host_heartbeat_ms,
+        };
+        settings.validate().context("invalid stimulator options")?;
+        Ok(settings)
+    }
+
+    fn max_ticks(&self) -> anyhow::Result<Option<u64>> {
+        match self.duration_s {
+            None => Ok(None),
+            Some(d) if d.is_finite() && d > 0.0 && d < 1e7 => Ok(Some((d * 1000.0).round() as u64)),
+            Some(d) => bail!("--duration-s {d} must be a positive number of seconds"),
+        }
+    }
+}
+
+static SIGNALLED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: nix::libc::c_int) {
+    SIGNALLED.store(true, Ordering::Relaxed);
+}
+
+fn install_signal_handlers() -> anyhow::Result<()> {
+    use nix::sys::signal::{SaFlags, SigAction, SigHandler, SigSet, Signal, sigaction};
+    // No SA_RESTART: the loop's sleep returns EINTR and the loop sees the flag at once.
+    let action = SigAction::new(
+        SigHandler::Handler(on_signal),
+        SaFlags::empty(),
+        SigSet::empty(),
+    );
+    for sig in [Signal::SIGINT, Signal::SIGTERM] {
+        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+        unsafe { sigaction(sig, &action) }
+            .with_context(|| format!("installing the {sig} handler"))?;
+    }
+    Ok(())
+}
+
+/// Runs the virtual stimulator until SIGINT or SIGTERM (or `--duration-s`): output off,
+/// a final STATUS, then `Ok`.
+pub fn run(args: StimulatorArgs, plant: Box<dyn MusclePlant>) -> anyhow::Result<()> {
+    install_signal_handlers()?;
+    run_until(args, plant, &SIGNALLED).map(|_| ())
+}
+
+/// [`run`] with a caller-owned stop flag instead of signal handlers.
+pub fn run_until(
+    args: StimulatorArgs,
+    mut plant: Box<dyn MusclePlant>,
+    stop: &AtomicBool,
+) -> anyhow::Result<RunSummary> {
+    // A subscriber may already be installed by the binary; then this one is not needed.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_new(&args.log)
+                .with_context(|| format!("--log {:?}", args.log))?,
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .try_init();
+    let settings = args.settings()?;
+    let ts = plant.ts();
+    if (ts - 1e-3).abs() > 1e-12 {
+        bail!(
+            "the muscle model samples at {ts} s; the stimulator runs a 1 ms loop and needs Ts = 0.001 s"
+        );
+    }
+    let recorder = args
+        .record
+        .as_deref()
+        .map(record::Recorder::create)
+        .transpose()?;
+    socket_loop::run_loop(
+        &args.iface,
+        settings,
+        plant.as_mut(),
+        stop,
+        recorder,
+        args.max_ticks()?,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: StimulatorArgs,
+    }
+
+    fn parse(extra: &[&str]) -> Result<StimulatorArgs, clap::Error> {
+        let mut argv = vec!["stim"];
+        argv.extend_from_slice(extra);
+        Cli::try_parse_from(argv).map(|c| c.args)
+    }
+
+    #[test]
+    fn defaults_are_the_protocol_defaults() {
+        let s = parse(&["--iface", "vcan0"]).unwrap().settings().unwrap();
+        assert_eq!(s.ceiling, StimLimits::DEFAULT);
+        assert_eq!(s.nodes, Nodes::DEFAULT);
+    }
+
+    #[test]
+    fn node_ids_accept_hex_and_refuse_out_of_range() {
+        assert_eq!(parse(&["--node-id", "0x22"]).unwrap().node_id, 0x22);
+        assert_eq!(parse(&["--node-id", "34"]).unwrap().node_id, 34);
+        assert!(parse(&["--node-id", "0x80"]).is_err());
+        assert!(parse(&["--node-id", "zero"]).is_err());
+        let same = parse(&["--node-id", "1"]).unwrap().settings().unwrap_err();
+        assert!(format!("{same:#}").contains("both use node id"), "{same:#}");
+    }
+
+    #[test]
+    fn limits_are_validated_with_clear_messages() {
+        let e = parse(&["--max-amplitude-ma", "20.05"])
+            .unwrap()
+            .settings()
+            .unwrap_err();
+        assert!(format!("{e:#}").contains("multiple of 0.1 mA"), "{e:#}");
+        let e = parse(&["--max-width-us", "2000"])
+            .unwrap()
+            .settings()
+            .unwrap_err();
+        assert!(format!("{e:#}").contains("max_width"), "{e:#}");
+        let e = parse(&["--watchdog-ms", "30", "--host-heartbeat-ms", "20"])
+            .unwrap()
+            .settings()
+            .unwrap_err();
+        assert!(
+            format!("{e:#}").contains("two host heartbeat periods"),
+            "{e:#}"
+        );
+        let e = parse(&["--duration-s=-1"])
+            .unwrap()
+            .max_ticks()
+            .unwrap_err();
+        assert!(format!("{e:#}").contains("positive"), "{e:#}");
+        assert_eq!(
+            parse(&["--max-amplitude-ma", "12.3"])
+                .unwrap()
+                .settings()
+                .unwrap()
+                .ceiling
+                .max_amplitude_100ua,
+            123
+        );
+    }
+
+    #[test]
+    fn a_plant_with_another_sample_time_is_refused() {
+        struct Slow;
+        impl MusclePlant for Slow {
+            fn ts(&self) -> f64 {
+                0.005
+            }
+            fn step(&mut self, _: Option<crate::plant::Pulse>) -> f64 {
+                0.0
+            }
+            fn reset(&mut self) {}
+        }
+        let stop = AtomicBool::new(false);
+        let e = run_until(parse(&[]).unwrap(), Box::new(Slow), &stop).unwrap_err();
+        assert!(format!("{e:#}").contains("Ts = 0.001"), "{e:#}");
+    }
+}

@@ -1,0 +1,286 @@
+//! The thin adapter between a SocketCAN interface and the state machine: a 1 ms
+//! absolute-time loop that drains received frames into [`Stimulator::on_frame`], runs
+//! [`Stimulator::tick`] and sends what the machine produced.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::Context as _;
+use fes_can::{ErrorCode, Message, MessageKind, Nodes, decode};
+use nix::errno::Errno;
+use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions};
+
+use super::clock::{monotonic_ns, sleep_until};
+use super::machine::{Settings, Stimulator, TICK_NS, Tick};
+use super::outbox::Outbox;
+use super::record::{Recorder, TickRecord};
+use crate::plant::MusclePlant;
+
+/// What a run did, for the final log line and tests.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RunSummary {
+    /// Ticks run.
+    pub ticks: u64,
+    /// Ticks skipped because the loop woke more than a period late.
+    pub missed_ticks: u64,
+    /// Largest wake-up lateness behind the deadline slept for, ns.
+    pub max_late_ns: u64,
+    /// Frames received (data frames, all identifiers that passed the socket filter).
+    pub frames_rx: u64,
+    /// Frames sent.
+    pub frames_tx: u64,
+    /// Frames that could not be sent (transmit queue full, bus down).
+    pub tx_errors: u64,
+    /// Pulses applied.
+    pub pulses_delivered: u32,
+    /// Records dropped by the recorder.
+    pub records_dropped: u64,
+}
+
+// Linux CAN error-frame classes and controller-status bits (linux/can/error.h).
+const CAN_ERR_CRTL: u32 = 0x0000_0004;
+const CAN_ERR_BUSOFF: u32 = 0x0000_0040;
+const CAN_ERR_RESTARTED: u32 = 0x0000_0100;
+const CAN_ERR_CRTL_RX_OVERFLOW: u8 = 0x01;
+const CAN_ERR_CRTL_TX_OVERFLOW: u8 = 0x02;
+const CAN_ERR_CRTL_RX_PASSIVE: u8 = 0x10;
+const CAN_ERR_CRTL_TX_PASSIVE: u8 = 0x20;
+
+/// The EMCY code for a SocketCAN error frame (`class`: the error class bits of its
+/// identifier; `data`: its payload, byte 1 holding the controller status).
+pub fn classify_error_frame(class: u32, data: &[u8]) -> ErrorCode {
+    let ctrl = data.get(1).copied().unwrap_or(0);
+    if class & CAN_ERR_RESTARTED != 0 {
+        ErrorCode::BusOffRecovered
+    } else if class & CAN_ERR_BUSOFF != 0 {
+        ErrorCode::Communication
+    } else if class & CAN_ERR_CRTL != 0
+        && ctrl & (CAN_ERR_CRTL_RX_OVERFLOW | CAN_ERR_CRTL_TX_OVERFLOW) != 0
+    {
+        ErrorCode::CanOverrun
+    } else if class & CAN_ERR_CRTL != 0
+        && ctrl & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE) != 0
+    {
+        ErrorCode::CanErrorPassive
+    } else {
+        ErrorCode::Communication
+    }
+}
+
+/// Opens `iface` with a filter for the frames the stimulator consumes (NMT, its PULSE and
+/// CONFIG, the host heartbeat; standard data frames only) plus error frames.
+fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<CanSocket> {
+    let socket = CanSocket::open(iface).with_context(|| {
+        format!("opening CAN interface {iface:?} (does it exist and is it up? see docs/vcan.md)")
+    })?;
+    // Match the 11-bit identifier and require the EFF and RTR flags clear.
+    let mask = 0x7FF | libc_flags::EFF | libc_flags::RTR;
+    let filters: Vec<CanFilter> = [
+        MessageKind::Nmt,
+        MessageKind::Pulse,
+        MessageKind::Config,
+        MessageKind::HostHeartbeat,
+    ]
+    .into_iter()
+    .map(|k| CanFilter::new(u32::from(nodes.id_of(k)), mask))
+    .collect();
+    socket
+        .set_filters(&filters)
+        .context("setting the CAN receive filters")?;
+    socket
+        .set_error_filter_accept_all()
+        .context("enabling CAN error frames")?;
+    socket
+        .set_nonblocking(true)
+        .context("making the CAN socket non-blocking")?;
+    Ok(socket)
+}
+
+mod libc_flags {
+    /// CAN_EFF_FLAG: extended frame format.
+    pub const EFF: u32 = 0x8000_0000;
+    /// CAN_RTR_FLAG: remote transmission request.
+    pub const RTR: u32 = 0x4000_0000;
+}
+
+/// Sends everything in `out`; counts failures (the frame is lost, the machine is told at
+/// the next tick).
+fn flush(socket: &CanSocket, out: &mut Outbox, stim_nodes: &Nodes, summary: &mut RunSummary) {
+    for f in out.frames() {
+        let Some(id) = socketcan::StandardId::new(f.id) else {
+            summary.tx_errors += 1;
+            continue;
+        };
+        let Some(frame) = CanFrame::new(id, f.payload()) else {
+            summary.tx_errors += 1;
+            continue;
+        };
+        match socket.write_frame(&frame) {
+            Ok(()) => summary.frames_tx += 1,
+            Err(_) => summary.tx_errors += 1,
+        }
+        if f.id == stim_nodes.id_of(MessageKind::Emcy)
+            && let Ok(Message::Emcy(e)) = decode(u32::from(f.id), f.payload())
+        {
+            if e.code == ErrorCode::NoError {
+                tracing::info!(state = %e.state, "EMCY: fault cleared");
+            } else {
+                tracing::warn!(code = %e.code, seq = e.seq, detail = e.detail, state = %e.state, "EMCY");
+            }
+        }
+    }
+    out.clear();
+}
+
+/// Runs the stimulator on `iface` until `stop` is set: 1 ms absolute-time ticks on
+/// CLOCK_MONOTONIC; on stop (or a socket or clock failure, which is then returned),
+/// output off and a final STATUS.
+pub fn run_loop(
+    iface: &str,
+    settings: Settings,
+    plant: &mut dyn MusclePlant,
+    stop: &AtomicBool,
+    mut recorder: Option<Recorder>,
+    max_ticks: Option<u64>,
+) -> anyhow::Result<RunSummary> {
+    let socket = open_socket(iface, &settings.nodes)?;
+    let mut summary = RunSummary::default();
+    let mut out = Outbox::new();
+    let boot_ns = monotonic_ns();
+    let mut stim = Stimulator::new(settings, boot_ns, &mut out);
+    flush(&socket, &mut out, &settings.nodes, &mut summary);
+    tracing::info!(iface, node = settings.nodes.stim(), limits = ?settings.ceiling, "stimulator pre-operational");
+
+    let t0 = boot_ns + TICK_NS;
+    let mut k: u64 = 0;
+    let mut tx_errors_reported = 0;
+    let mut state = stim.state();
+    // A failure ends the loop but not before the orderly shutdown below.
+    let mut failure: Option<anyhow::Error> = None;
+    'ticks: while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| k < m) {
+        let deadline = t0 + k * TICK_NS;
+        match sleep_until(deadline) {
+            Ok(()) => {}
+            Err(Errno::EINTR) => continue,
+            Err(e) => {
+                failure = Some(anyhow::Error::new(e).context("clock_nanosleep failed"));
+                break;
+            }
+        }
+        let now = monotonic_ns();
+        let late_ns = now.saturating_sub(deadline);
+        summary.max_late_ns = summary.max_late_ns.max(late_ns);
+        // Woke more than a period late: skip the missed periods, keep the phase.
+        let late_k = now.saturating_sub(t0) / TICK_NS;
+        if late_k > k {
+            k = late_k;
+        }
+        let nominal = t0 + k * TICK_NS;
+
+        loop {
+            match socket.read_frame() {
+                Ok(CanFrame::Error(e)) => {
+                    let code = classify_error_frame(e.error_bits(), e.data());
+                    stim.on_bus_error(code, (e.error_bits() & 0xFFFF) as u16, &mut out);
+                }
+                Ok(frame) => {
+                    summary.frames_rx += 1;
+                    if !frame.is_extended() && !frame.is_remote_frame() {
+                        stim.on_frame(now, frame.raw_id(), frame.data(), &mut out);
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    failure = Some(anyhow::Error::new(e).context(format!("reading from {iface}")));
+                    break 'ticks;
+                }
+            }
+            flush(&socket, &mut out, &settings.nodes, &mut summary);
+        }
+        if summary.tx_errors > tx_errors_reported {
+            let lost = summary.tx_errors - tx_errors_reported;
+            tx_errors_reported = summary.tx_errors;
+            stim.on_bus_error(
+                ErrorCode::CanOverrun,
+                u16::try_from(lost).unwrap_or(u16::MAX),
+                &mut out,
+            );
+        }
+        let report = stim.tick(
+            Tick {
+                index: k,
+                nominal_ns: nominal,
+                now_ns: now,
+            },
+            plant,
+            &mut out,
+        );
+        flush(&socket, &mut out, &settings.nodes, &mut summary);
+        if report.state != state {
+            tracing::info!(from = %state, to = %report.state, tick = k, "state");
+            state = report.state;
+        }
+        if let Some(r) = recorder.as_mut() {
+            r.push(TickRecord {
+                tick: k,
+                nominal_ns: nominal,
+                late_ns,
+                state: report.state,
+                force_n: report.force_n,
+                pulse: report
+                    .applied
+                    .map(|p| (p.seq, p.amplitude_ma(), p.width_us)),
+            });
+        }
+        summary.ticks += 1;
+        k += 1;
+    }
+
+    stim.shutdown(&mut out);
+    flush(&socket, &mut out, &settings.nodes, &mut summary);
+    summary.missed_ticks = stim.diagnostics().missed_ticks;
+    summary.pulses_delivered = stim.pulses_delivered();
+    if let Some(r) = recorder.take() {
+        summary.records_dropped = r.finish()?;
+    }
+    tracing::info!(?summary, "stimulator stopped");
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(summary),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_frames_map_to_canopen_codes() {
+        assert_eq!(
+            classify_error_frame(CAN_ERR_CRTL, &[0, CAN_ERR_CRTL_RX_OVERFLOW]),
+            ErrorCode::CanOverrun
+        );
+        assert_eq!(
+            classify_error_frame(CAN_ERR_CRTL, &[0, CAN_ERR_CRTL_TX_PASSIVE]),
+            ErrorCode::CanErrorPassive
+        );
+        assert_eq!(
+            classify_error_frame(CAN_ERR_RESTARTED, &[]),
+            ErrorCode::BusOffRecovered
+        );
+        assert_eq!(
+            classify_error_frame(CAN_ERR_BUSOFF, &[]),
+            ErrorCode::Communication
+        );
+        assert_eq!(
+            classify_error_frame(CAN_ERR_CRTL, &[]),
+            ErrorCode::Communication
+        );
+    }
+
+    #[test]
+    fn a_missing_interface_is_a_clear_error() {
+        let e = open_socket("nosuchcan9", &Nodes::DEFAULT).unwrap_err();
+        assert!(format!("{e:#}").contains("nosuchcan9"), "{e:#}");
+    }
+}
