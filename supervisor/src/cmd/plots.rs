@@ -30,6 +30,12 @@ pub const EXTRAPOLATION_BAND: RGBColor = RGBColor(255, 150, 0);
 /// Shading of ranges where a model is unstable (red).
 pub const UNSTABLE_BAND: RGBColor = RGBColor(214, 39, 40);
 
+/// `c` mixed with white: `f` = 0 keeps it, 1 gives white (opaque, so PNGs stay small).
+pub fn lighten(c: RGBColor, f: f64) -> RGBColor {
+    let m = |v: u8| (v as f64 + (255.0 - v as f64) * f).round() as u8;
+    RGBColor(m(c.0), m(c.1), m(c.2))
+}
+
 /// Colour number `i` of the palette (wrapping).
 pub fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
@@ -227,8 +233,8 @@ where
         mesh.disable_x_axis().disable_x_mesh();
     }
     mesh.y_labels(p.y_ticks.unwrap_or(10))
-        .light_line_style(BLACK.mix(0.05))
-        .bold_line_style(BLACK.mix(0.12))
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(RGBColor(225, 225, 225))
         .x_desc(p.x_label.as_str())
         .y_desc(p.y_label.as_str())
         .label_style(("sans-serif", 12))
@@ -247,12 +253,12 @@ where
         let s = chart
             .draw_series(std::iter::once(Rectangle::new(
                 [(x0, yr.start), (x1, yr.end)],
-                color.mix(0.15).filled(),
+                lighten(color, 0.8).filled(),
             )))
             .map_err(|e| err(&e))?;
         if let Some(l) = &b.label {
             s.label(l.as_str()).legend(move |(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 18, y + 5)], color.mix(0.3).filled())
+                Rectangle::new([(x, y - 5), (x + 18, y + 5)], lighten(color, 0.6).filled())
             });
         }
     }
