@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use rt_core::analysis::stabilise::{DEFAULT_EIGENVALUE, Stabilised, stabilise};
-use rt_core::analysis::trace::simulate_trace;
+use rt_core::analysis::trace::{Trace, simulate_trace};
 use rt_core::analysis::validation::msse;
 use rt_core::model::{Lmn, file};
 use sim_muscle::pattern::constant_train;
@@ -228,7 +228,9 @@ fn long_train(
                                 hi + 0.35 * span,
                                 format!(
                                     "original leaves the plot at {t:.0} ms (max |y| {})",
-                                    if amax(&t0.y).is_finite() {
+                                    if amax(&t0.y) < 1e4 {
+                                        format!("{:.2}", amax(&t0.y))
+                                    } else if amax(&t0.y).is_finite() {
                                         format!("{:.3e}", amax(&t0.y))
                                     } else {
                                         "infinite".into()
@@ -254,12 +256,50 @@ fn long_train(
             ),
         ]],
     };
-    plots::save(&fig, png, (900, 600))?;
+    let mut fig = fig;
+    fig.columns.push(vec![(1, phase_plane(&t0, &t1, ts_ms))]);
+    plots::save(&fig, png, (1300, 600))?;
     Ok((
         amax(&t0.y),
         amax(&t1.y),
         t1.y.last().copied().unwrap_or(0.0),
     ))
+}
+
+/// State trajectories of both models over the first 300 ms (Fig. 5.32(b)), axes from the
+/// modified model's trajectory.
+fn phase_plane(t0: &Trace, t1: &Trace, ts_ms: f64) -> Panel {
+    let n = ((300.0 / ts_ms) as usize).min(t1.x.len());
+    let traj = |t: &Trace| -> Vec<(f64, f64)> {
+        t.x[..n.min(t.x.len())]
+            .iter()
+            .map(|x| (x[0], x[1]))
+            .collect()
+    };
+    let m = traj(t1);
+    let ext = |f: &dyn Fn(&(f64, f64)) -> f64| {
+        let (lo, hi) = m
+            .iter()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+        let span = (hi - lo).max(1e-9);
+        (lo - 0.3 * span, hi + 0.3 * span)
+    };
+    Panel {
+        title: Some("state trajectories, 0-300 ms (Fig. 5.32(b))".into()),
+        x_label: "x_1".into(),
+        y_label: "x_2".into(),
+        x: Some(ext(&|p| p.0)),
+        y: Some(ext(&|p| p.1)),
+        lines: vec![
+            Line::new(Some("original".to_string()), traj(t0), color(3)).dashed(),
+            Line::new(Some("modified".to_string()), m, color(0)),
+        ],
+        legend: true,
+        ..Panel::default()
+    }
 }
 
 fn report(

@@ -191,15 +191,15 @@ impl Panel {
     }
 }
 
-/// Splits `points` at non-finite values and clamps y into `y` (slightly beyond).
-fn segments(points: &[(f64, f64)], y: &Range<f64>) -> Vec<Vec<(f64, f64)>> {
+/// Splits `points` at non-finite values and clamps them into the ranges (y slightly beyond).
+fn segments(points: &[(f64, f64)], x: &Range<f64>, y: &Range<f64>) -> Vec<Vec<(f64, f64)>> {
     let margin = 0.005 * (y.end - y.start);
     let (lo, hi) = (y.start - margin, y.end + margin);
     let mut out = Vec::new();
     let mut cur = Vec::new();
     for &(px, py) in points {
         if px.is_finite() && py.is_finite() {
-            cur.push((px, py.clamp(lo, hi)));
+            cur.push((px.clamp(x.start, x.end), py.clamp(lo, hi)));
         } else if !cur.is_empty() {
             out.push(std::mem::take(&mut cur));
         }
@@ -288,7 +288,7 @@ where
     for l in &p.lines {
         let style = l.color.stroke_width(l.width);
         let mut first = true;
-        for seg in segments(&l.points, &yr) {
+        for seg in segments(&l.points, &xr, &yr) {
             let anno = if l.dashed {
                 chart
                     .draw_series(DashedLineSeries::new(seg, 7, 5, style))
@@ -362,16 +362,21 @@ where
     Ok(())
 }
 
-/// A tick label: integers plainly, else up to 3 significant digits.
+/// A tick label: 4 significant digits, trailing zeros dropped; scientific outside
+/// 1e-4..1e5.
 fn fmt_tick(v: f64) -> String {
     if v == 0.0 {
         return "0".into();
     }
     let a = v.abs();
-    if (1e-3..1e5).contains(&a) {
-        let s = format!("{v:.3}");
-        let s = s.trim_end_matches('0').trim_end_matches('.');
-        s.to_string()
+    if (1e-4..1e5).contains(&a) {
+        let decimals = (3 - a.log10().floor() as i32).clamp(0, 8) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
     } else {
         format!("{v:.1e}")
     }
