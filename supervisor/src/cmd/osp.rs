@@ -576,6 +576,14 @@ fn trains(args: &Args, subjects: &[Subject], md: &mut String) -> Result<()> {
         &args.out.join("trains.png"),
         (520 * surfaces.len() as u32 + 110, 520),
     )?;
+    plots::save_surfaces(
+        &maps,
+        "constant-frequency train method (6.3, Fig. 6.3): FTIpP surface",
+        (lo, 1.0, hi),
+        "FTIpP",
+        &args.out.join("trains_3d.png"),
+        (560 * surfaces.len() as u32, 520),
+    )?;
     write_csv(
         &args.out.join("trains.csv"),
         &["subject", "pulses", "ipi_ms", "fti", "ftipp", "peak"],
@@ -588,6 +596,7 @@ fn trains(args: &Args, subjects: &[Subject], md: &mut String) -> Result<()> {
         args.train_pulses, args.ipi_min_ms, args.ipi_max_ms
     );
     let _ = writeln!(md, "![constant-frequency trains](trains.png)\n");
+    let _ = writeln!(md, "![constant-frequency trains, surface](trains_3d.png)\n");
     let summary: Vec<Vec<String>> = surfaces
         .iter()
         .map(|(name, s, ts)| {

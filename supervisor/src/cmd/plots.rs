@@ -597,3 +597,72 @@ pub fn save_heatmaps(
     };
     draw().with_context(|| format!("writing {}", path.display()))
 }
+
+/// Draws the heat maps' grids as 3-D surfaces side by side (thesis Fig. 6.3 style), coloured
+/// with the same diverging scale `lo..mid..hi`; `z_label` names the height.
+pub fn save_surfaces(
+    maps: &[HeatMap],
+    title: &str,
+    scale: (f64, f64, f64),
+    z_label: &str,
+    path: &Path,
+    size: (u32, u32),
+) -> Result<()> {
+    check_png(path)?;
+    let (lo, mid, hi) = scale;
+    let draw = || -> Result<()> {
+        let err = |e: &dyn std::fmt::Display| anyhow!("drawing failed: {e}");
+        let root = BitMapBackend::new(path, size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let root = root
+            .titled(title, ("sans-serif", 18))
+            .map_err(|e| err(&e))?;
+        let areas = root.split_evenly((1, maps.len().max(1)));
+        for (m, area) in maps.iter().zip(areas) {
+            let (x0, x1) = (m.xs[0], m.xs[m.xs.len() - 1]);
+            let (z0, z1) = (m.ys[0], m.ys[m.ys.len() - 1]);
+            let mut chart = ChartBuilder::on(&area)
+                .margin(10)
+                .caption(
+                    format!(
+                        "{}: {} along the front, {} to the right, {z_label} up",
+                        m.title, m.x_label, m.y_label
+                    ),
+                    ("sans-serif", 14),
+                )
+                .build_cartesian_3d(x0..x1, lo..hi, z0..z1)
+                .map_err(|e| err(&e))?;
+            chart.with_projection(|mut pb| {
+                pb.yaw = 0.6;
+                pb.pitch = 0.35;
+                pb.scale = 0.8;
+                pb.into_matrix()
+            });
+            chart
+                .configure_axes()
+                .light_grid_style(RGBColor(230, 230, 230))
+                .max_light_lines(2)
+                .label_style(("sans-serif", 12))
+                .x_formatter(&|v| format!("{v:.0}"))
+                .z_formatter(&|v| format!("{v:.0}"))
+                .y_formatter(&|v| format!("{v:.2}"))
+                .draw()
+                .map_err(|e| err(&e))?;
+            let value = |x: f64, z: f64| {
+                let ix = m.xs.iter().position(|&v| v == x).unwrap_or(0);
+                let iz = m.ys.iter().position(|&v| v == z).unwrap_or(0);
+                m.z[iz][ix].clamp(lo, hi)
+            };
+            let style = |y: &f64| diverging(*y, lo, mid, hi).filled();
+            chart
+                .draw_series(
+                    SurfaceSeries::xoz(m.xs.iter().copied(), m.ys.iter().copied(), value)
+                        .style_func(&style),
+                )
+                .map_err(|e| err(&e))?;
+        }
+        root.present().map_err(|e| err(&e))?;
+        Ok(())
+    };
+    draw().with_context(|| format!("writing {}", path.display()))
+}
