@@ -1,4 +1,4 @@
-//! `supervisor`: the operator's command line (identification now; bench commands later).
+//! `supervisor`: the operator's command line.
 //!
 //! One variant of [`Command`] per subcommand, each dispatched to `cmd::<name>::run`.
 use clap::{Parser, Subcommand};
@@ -21,6 +21,17 @@ enum Command {
     Sweep(cmd::sweep::Args),
     /// The thesis's Tables 5.1 and 5.2 on a data set.
     Compare(cmd::compare::Args),
+    /// Static analysis, force-frequency curve, stability report and validation of a model
+    /// (thesis 2.4, 5.4.3; Figs. 5.24-5.28).
+    Analyse(cmd::analyse::Args),
+    /// Modify a model: replace unstable local eigenvalues and re-estimate that unit's
+    /// offsets (thesis 5.4.3, Tables 5.3-5.4, Fig. 5.32).
+    Modify(cmd::modify::Args),
+    /// Design the Local Controller Network by pole placement (thesis 6.5.3, Tables 6.1/6.2).
+    Design(cmd::design::Args),
+    /// Optimal stimulation patterns: FTI/FTIpP, random, trains, iterative and LCN methods
+    /// (thesis ch. 6).
+    Osp(cmd::osp::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -29,5 +40,9 @@ fn main() -> anyhow::Result<()> {
         Command::Identify(args) => cmd::identify::run(args),
         Command::Sweep(args) => cmd::sweep::run(args),
         Command::Compare(args) => cmd::compare::run(args),
+        Command::Analyse(args) => cmd::analyse::run(args),
+        Command::Modify(args) => cmd::modify::run(args),
+        Command::Design(args) => cmd::design::run(args),
+        Command::Osp(args) => cmd::osp::run(args),
     }
 }

@@ -1,8 +1,15 @@
 //! Subcommands, one module each, plus what they share: the structure / mode flags of an
-//! identification, a progress bar, and table formatting.
+//! identification, a progress bar, table formatting (and, in [`plots`] and [`inputs`], what
+//! the analysis commands share).
 
+pub mod analyse;
 pub mod compare;
+pub mod design;
 pub mod identify;
+pub mod inputs;
+pub mod modify;
+pub mod osp;
+pub mod plots;
 pub mod sweep;
 
 use clap::ValueEnum;

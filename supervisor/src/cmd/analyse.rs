@@ -1,0 +1,683 @@
+//! `supervisor analyse`: what a model does away from its training data (thesis 2.4, 5.4.3):
+//! static analysis over phi (Fig. 5.27-5.28), the force-frequency curve (Fig. 5.26) with the
+//! extrapolated range marked, the stability report (2.4.1, Fig. D.4) and, with a data set,
+//! simulated against measured test records (Fig. 5.24). Writes PNG plots, CSV tables and
+//! `report.md` into `--out`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use rt_core::analysis::force_frequency::{ForceFrequencyPoint, force_frequency};
+use rt_core::analysis::static_analysis::{StaticReport, analyse};
+use rt_core::analysis::trace::phi_range;
+use rt_core::analysis::validation::{fit_record, msse};
+use rt_core::model::{Lmn, Network, Scheduler};
+use sim_muscle::pattern::constant_train;
+
+use super::inputs::{Data, OpenedModel, md_table, open_data, open_model, out_dir, sci, write_csv};
+use super::plots::{self, Band, Figure, Line, Panel, color};
+
+/// Arguments of `supervisor analyse`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The model file (fes-lmn/1); unstable models are opened and flagged.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// A data set (fes-dataset/1): its training records give the phi range the model was
+    /// identified on; its test records are simulated and scored.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Output directory (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Points of the static analysis over the valid phi range.
+    #[arg(long, default_value_t = 201)]
+    pub grid: usize,
+    /// Highest frequency of the force-frequency curve, Hz (1 Hz steps from 1 Hz).
+    #[arg(long, default_value_t = 150)]
+    pub max_hz: u32,
+    /// Length of each constant train, ms (thesis: 1000).
+    #[arg(long, default_value_t = 1000)]
+    pub train_ms: u32,
+    /// The mean force is taken from this time to the end of the train, ms ("after the
+    /// initial rising portion").
+    #[arg(long, default_value_t = 500)]
+    pub average_from_ms: u32,
+    /// Test records drawn in validation.png (all are scored).
+    #[arg(long, default_value_t = 4)]
+    pub plot_records: usize,
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    if args.grid < 2 {
+        bail!("--grid {}: need at least 2 points", args.grid);
+    }
+    if args.max_hz == 0 {
+        bail!("--max-hz must be at least 1");
+    }
+    if args.average_from_ms >= args.train_ms {
+        bail!(
+            "--average-from-ms {} must be shorter than --train-ms {}",
+            args.average_from_ms,
+            args.train_ms
+        );
+    }
+    let model = open_model(&args.model)?;
+    let data = args
+        .data
+        .as_deref()
+        .map(|d| open_data(d, model.lmn.ts))
+        .transpose()?;
+    out_dir(&args.out)?;
+    let net = model.lmn.network().context("building the model network")?;
+    let report = analyse(&model.lmn, args.grid).context("static analysis")?;
+
+    let train_phi = match &data {
+        Some(d) => phi_range(&net, d.train.iter().map(|s| s.u.as_slice()))
+            .context("scheduling variable over the training records")?,
+        None => None,
+    };
+
+    let mut md = String::new();
+    let _ = writeln!(md, "# Analysis of `{}`\n", args.model.display());
+    stability_section(&mut md, &model, &report);
+    static_section(&mut md, &args.out, &model.lmn, &report, train_phi)?;
+    ff_section(&mut md, &args, &net, train_phi)?;
+    if let Some(d) = &data {
+        validation_section(&mut md, &args, &net, d)?;
+    } else {
+        let _ = writeln!(
+            md,
+            "## Validation\n\nNo data set given (`--data`): no test records simulated, and the \
+             extrapolated phi range is not marked.\n"
+        );
+    }
+    let path = args.out.join("report.md");
+    std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))?;
+    println!("report written to {}", path.display());
+    Ok(())
+}
+
+fn stability_section(md: &mut String, model: &OpenedModel, rep: &StaticReport) {
+    let lmn = &model.lmn;
+    let bad = model.unstable_units();
+    if !bad.is_empty() {
+        let _ = writeln!(
+            md,
+            "> **WARNING: UNSTABLE MODEL.** The local models of units {bad:?} are unstable \
+             (|1 + Ts p| >= 1). The model was opened with the stability check disabled; \
+             long stimulation in the region these units dominate drives the output away \
+             without bound (thesis 5.4.3, Fig. 5.32). Repair: `supervisor modify --stabilise`.\n"
+        );
+    }
+    let _ = writeln!(
+        md,
+        "Structure `{}`, {} units, Ts = {} ms, delay {} samples, scheduling {}, offsets {}.\n",
+        lmn.structure(),
+        lmn.units(),
+        lmn.ts * 1e3,
+        lmn.delay,
+        match Scheduler::new(&lmn.scheduling, lmn.ts) {
+            Ok(Scheduler::Output) => "output (phi = y[k-1], eq. 5.1)",
+            _ => "input (pre-filtered pulse train, eq. 5.2-5.4)",
+        },
+        if lmn.zero_offsets {
+            "fixed at zero"
+        } else {
+            "free"
+        }
+    );
+    let _ = writeln!(md, "## Stability of the local models\n");
+    let _ = writeln!(
+        md,
+        "Delta-domain stability region: a pole p is stable when |1 + Ts p| < 1 (the circle of \
+         radius 1/Ts = {:.0} /s centred at -1/Ts, Fig. D.4); for real poles -2/Ts < p < 0.\n",
+        1.0 / lmn.ts
+    );
+    let rows: Vec<Vec<String>> = model
+        .stability
+        .iter()
+        .map(|s| {
+            vec![
+                s.unit.to_string(),
+                s.poles
+                    .iter()
+                    .map(|p| {
+                        if p.im == 0.0 {
+                            format!("{:.2}", p.re)
+                        } else {
+                            format!("{:.2}{:+.2}i", p.re, p.im)
+                        }
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                format!("{:.6}", s.radius),
+                if s.stable { "stable" } else { "**UNSTABLE**" }.into(),
+            ]
+        })
+        .collect();
+    md.push_str(&md_table(
+        &["unit", "poles (1/s)", "max abs(1 + Ts p)", "verdict"],
+        &rows,
+    ));
+    md.push('\n');
+    match rep.common_eigenvectors {
+        Some(a) => {
+            let _ = writeln!(
+                md,
+                "The local models share real eigenvectors (angles {:.4} and {:.4} rad). {}\n",
+                a[0],
+                a[1],
+                if rep.network_stable_by_construction {
+                    "With every local model stable, the network is stable for any scheduling \
+                     sequence (thesis 2.4.1)."
+                } else {
+                    "But some local model is unstable, so the network is not stable."
+                }
+            );
+        }
+        None => {
+            let _ = writeln!(
+                md,
+                "**The eigenvectors are local** (not common to all units). Caveat (thesis \
+                 2.4.1): the network is a linear parameter-varying system, and stability of \
+                 every local model does **not** imply stability of the network; only common \
+                 eigenvectors with all local models stable guarantee it. The frozen-phi \
+                 figures below describe the interpolated model at each fixed phi, not the \
+                 network's behaviour while phi varies (2.4.2).\n"
+            );
+        }
+    }
+}
+
+/// Contiguous x intervals where `flag` holds, from sorted (x, flag) pairs.
+fn runs(points: &[(f64, bool)], half_step: f64) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut open: Option<f64> = None;
+    for (i, &(x, f)) in points.iter().enumerate() {
+        match (f, open) {
+            (true, None) => open = Some(x - half_step),
+            (false, Some(s)) => {
+                out.push((s, points[i - 1].0 + half_step));
+                open = None;
+            }
+            _ => {}
+        }
+    }
+    if let (Some(s), Some(last)) = (open, points.last()) {
+        out.push((s, last.0 + half_step));
+    }
+    out
+}
+
+fn extrapolation_bands(range: (f64, f64), train_phi: Option<(f64, f64)>) -> Vec<Band> {
+    let Some((lo, hi)) = train_phi else {
+        return Vec::new();
+    };
+    let mut bands = Vec::new();
+    let label = Some("extrapolation (phi not in training data)".to_string());
+    if lo > range.0 {
+        bands.push(Band {
+            x0: range.0,
+            x1: lo,
+            color: plots::EXTRAPOLATION_BAND,
+            label: label.clone(),
+        });
+    }
+    if hi < range.1 {
+        bands.push(Band {
+            x0: hi,
+            x1: range.1,
+            color: plots::EXTRAPOLATION_BAND,
+            label: if bands.is_empty() { label } else { None },
+        });
+    }
+    bands
+}
+
+fn static_section(
+    md: &mut String,
+    out: &Path,
+    lmn: &Lmn,
+    rep: &StaticReport,
+    train_phi: Option<(f64, f64)>,
+) -> Result<()> {
+    let m = lmn.units();
+    let phis: Vec<f64> = rep.points.iter().map(|p| p.phi).collect();
+    let range = (phis[0], phis[phis.len() - 1]);
+    let mut bands = extrapolation_bands(range, train_phi);
+    let step = if phis.len() > 1 {
+        0.5 * (phis[1] - phis[0])
+    } else {
+        0.0
+    };
+    let unstable: Vec<(f64, bool)> = rep.points.iter().map(|p| (p.phi, !p.stable)).collect();
+    for (i, (a, b)) in runs(&unstable, step).into_iter().enumerate() {
+        bands.push(Band {
+            x0: a,
+            x1: b,
+            color: plots::UNSTABLE_BAND,
+            label: (i == 0).then(|| "frozen model unstable".to_string()),
+        });
+    }
+    let act = Panel {
+        title: Some("activations rho_i(phi)".into()),
+        x_label: "phi".into(),
+        y_label: "rho_i".into(),
+        y: Some((0.0, 1.05)),
+        lines: (0..m)
+            .map(|i| {
+                Line::new(
+                    Some(format!("unit {i}")),
+                    rep.points
+                        .iter()
+                        .map(|p| (p.phi, p.activations[i]))
+                        .collect(),
+                    color(i),
+                )
+            })
+            .collect(),
+        bands: bands.clone(),
+        legend: true,
+        ..Panel::default()
+    };
+    let gain = Panel {
+        title: Some("steady-state gain G = -c'A^-1 b (eq. A.18) = FTI per pulse / Ts".into()),
+        x_label: "phi".into(),
+        y_label: "G".into(),
+        lines: vec![Line::new(
+            None,
+            rep.points
+                .iter()
+                .map(|p| (p.phi, p.gain.unwrap_or(f64::NAN)))
+                .collect(),
+            color(0),
+        )],
+        hline: Some(0.0),
+        y: gain_range(rep),
+        bands: bands.clone(),
+        ..Panel::default()
+    };
+    let pole = |j: usize, im: bool| -> Vec<(f64, f64)> {
+        rep.points
+            .iter()
+            .map(|p| {
+                let z = p.poles.get(j).copied().unwrap_or_default();
+                (p.phi, if im { z.im } else { z.re })
+            })
+            .collect()
+    };
+    let any_complex = rep
+        .points
+        .iter()
+        .any(|p| p.poles.iter().any(|z| z.im != 0.0));
+    let mut pole_lines = vec![
+        Line::new(Some("Re p1".to_string()), pole(0, false), color(0)),
+        Line::new(Some("Re p2".to_string()), pole(1, false), color(1)),
+    ];
+    if any_complex {
+        pole_lines.push(Line::new(Some("Im p1".to_string()), pole(0, true), color(2)).dashed());
+    }
+    let poles = Panel {
+        title: Some("poles of the interpolated model (delta domain)".into()),
+        x_label: "phi".into(),
+        y_label: "p (1/s)".into(),
+        lines: pole_lines,
+        hline: Some(0.0),
+        bands,
+        legend: true,
+        ..Panel::default()
+    };
+    let fig = Figure {
+        title: format!(
+            "static analysis over phi ({} units, {})",
+            m,
+            lmn.structure()
+        ),
+        columns: vec![vec![(1, act), (1, gain), (1, poles)]],
+    };
+    plots::save(&fig, &out.join("static.png"), (900, 900))?;
+
+    let mut header: Vec<String> = vec!["phi".into()];
+    header.extend((0..m).map(|i| format!("rho_{i}")));
+    header.extend(
+        [
+            "gain",
+            "offset_output",
+            "p1_re",
+            "p1_im",
+            "p2_re",
+            "p2_im",
+            "radius",
+            "stable",
+        ]
+        .map(String::from),
+    );
+    let rows: Vec<Vec<String>> = rep
+        .points
+        .iter()
+        .map(|p| {
+            let mut r = vec![format!("{}", p.phi)];
+            r.extend(p.activations.iter().map(|a| format!("{a}")));
+            let opt = |v: Option<f64>| v.map_or("".into(), |v| format!("{v}"));
+            r.push(opt(p.gain));
+            r.push(opt(p.offset_output));
+            for j in 0..2 {
+                let z = p.poles.get(j).copied().unwrap_or_default();
+                r.push(format!("{}", z.re));
+                r.push(format!("{}", z.im));
+            }
+            r.push(format!("{}", p.stability_radius));
+            r.push(p.stable.to_string());
+            r
+        })
+        .collect();
+    let h: Vec<&str> = header.iter().map(String::as_str).collect();
+    write_csv(&out.join("static.csv"), &h, &rows)?;
+
+    let _ = writeln!(md, "## Static analysis over phi (Fig. 5.27)\n");
+    let _ = writeln!(md, "![static analysis](static.png)\n");
+    let gains: Vec<f64> = rep.points.iter().filter_map(|p| p.gain).collect();
+    let (gmin, gmax) = gains
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &g| {
+            (a.min(g), b.max(g))
+        });
+    let _ = writeln!(
+        md,
+        "Gain range over phi: {gmin:.4} .. {gmax:.4}{}. Frozen model unstable at {} of {} grid points. Table: `static.csv`.\n",
+        if gmin < 0.0 {
+            " (**negative somewhere**: the LCN design refuses negative local gains, thesis 6.5.3)"
+        } else {
+            ""
+        },
+        rep.points.iter().filter(|p| !p.stable).count(),
+        rep.points.len()
+    );
+    if let Some((lo, hi)) = train_phi {
+        let _ = writeln!(
+            md,
+            "The training records drive phi over [{lo:.3}, {hi:.3}] (the model's own scheduler); the shaded range outside it is extrapolation.\n"
+        );
+    }
+    Ok(())
+}
+
+/// The gain axis from the 5th to the 95th percentile of the gain (widened by half its span
+/// and including 0): where an eigenvalue crosses zero A is nearly singular and the gain
+/// spikes; those values run along the border.
+fn gain_range(rep: &StaticReport) -> Option<(f64, f64)> {
+    let mut g: Vec<f64> = rep
+        .points
+        .iter()
+        .filter_map(|p| p.gain)
+        .filter(|g| g.is_finite())
+        .collect();
+    if g.is_empty() {
+        return None;
+    }
+    g.sort_by(f64::total_cmp);
+    let q = |f: f64| g[((g.len() - 1) as f64 * f).round() as usize];
+    let (lo, hi) = (q(0.05).min(0.0), q(0.95).max(0.0));
+    let span = (hi - lo).max(1e-9);
+    Some((lo - 0.5 * span, hi + 0.5 * span))
+}
+
+fn ff_section(
+    md: &mut String,
+    args: &Args,
+    net: &Network<f64>,
+    train_phi: Option<(f64, f64)>,
+) -> Result<()> {
+    let ts = net.ts();
+    let samples = (args.train_ms as f64 * 1e-3 / ts).round() as usize;
+    let from = (args.average_from_ms as f64 * 1e-3 / ts).round() as usize;
+    let trains = (1..=args.max_hz)
+        .map(|f| {
+            let f = f as f64;
+            constant_train(f, 0, samples, ts)
+                .map(|p| (f, p))
+                .with_context(|| format!("{f} Hz train"))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let pts = force_frequency(net, &trains, samples, from).context("force-frequency curve")?;
+    let extrap = |p: &ForceFrequencyPoint| {
+        train_phi.is_some_and(|(lo, hi)| p.phi_max > hi + 1e-9 || p.phi_max < lo - 1e-9)
+    };
+    let flags: Vec<(f64, bool)> = pts.iter().map(|p| (p.frequency_hz, extrap(p))).collect();
+    let bands: Vec<Band> = runs(&flags, 0.5)
+        .into_iter()
+        .enumerate()
+        .map(|(i, (a, b))| Band {
+            x0: a,
+            x1: b,
+            color: plots::EXTRAPOLATION_BAND,
+            label: (i == 0).then(|| "extrapolation (phi above the training data's)".to_string()),
+        })
+        .collect();
+    let fig = Figure {
+        title: format!(
+            "force-frequency curve: mean model output over {}..{} ms of {} ms constant trains",
+            args.average_from_ms, args.train_ms, args.train_ms
+        ),
+        columns: vec![vec![
+            (
+                3,
+                Panel {
+                    x_label: "stimulation frequency (Hz)".into(),
+                    y_label: "mean output (normalised force)".into(),
+                    x: Some((0.0, args.max_hz as f64 + 1.0)),
+                    lines: vec![Line::new(
+                        None,
+                        pts.iter()
+                            .map(|p| (p.frequency_hz, p.mean_output))
+                            .collect(),
+                        color(0),
+                    )],
+                    bands: bands.clone(),
+                    hline: Some(0.0),
+                    legend: true,
+                    ..Panel::default()
+                },
+            ),
+            (
+                2,
+                Panel {
+                    x_label: "stimulation frequency (Hz)".into(),
+                    y_label: "phi".into(),
+                    x: Some((0.0, args.max_hz as f64 + 1.0)),
+                    lines: vec![
+                        Line::new(
+                            Some("mean phi".to_string()),
+                            pts.iter().map(|p| (p.frequency_hz, p.phi_mean)).collect(),
+                            color(1),
+                        ),
+                        Line::new(
+                            Some("max phi".to_string()),
+                            pts.iter().map(|p| (p.frequency_hz, p.phi_max)).collect(),
+                            color(2),
+                        )
+                        .dashed(),
+                    ],
+                    hline: train_phi.map(|r| r.1),
+                    bands,
+                    legend: true,
+                    ..Panel::default()
+                },
+            ),
+        ]],
+    };
+    plots::save(&fig, &args.out.join("force_frequency.png"), (900, 650))?;
+    let rows: Vec<Vec<String>> = pts
+        .iter()
+        .map(|p| {
+            vec![
+                format!("{}", p.frequency_hz),
+                format!("{}", p.mean_output),
+                format!("{}", p.phi_mean),
+                format!("{}", p.phi_max),
+                if train_phi.is_some() {
+                    extrap(p).to_string()
+                } else {
+                    "".into()
+                },
+            ]
+        })
+        .collect();
+    write_csv(
+        &args.out.join("force_frequency.csv"),
+        &[
+            "frequency_hz",
+            "mean_output",
+            "phi_mean",
+            "phi_max",
+            "extrapolated",
+        ],
+        &rows,
+    )?;
+    let _ = writeln!(md, "## Force-frequency curve (Fig. 5.26)\n");
+    let _ = writeln!(md, "![force-frequency curve](force_frequency.png)\n");
+    let _ = writeln!(
+        md,
+        "Constant trains of {} ms at 1..{} Hz from rest (pulses at the nearest sample); the \
+         force is the mean model output over {}..{} ms. Table: `force_frequency.csv`.",
+        args.train_ms, args.max_hz, args.average_from_ms, args.train_ms
+    );
+    let drops: Vec<f64> = pts
+        .windows(2)
+        .filter(|w| w[1].mean_output < w[0].mean_output)
+        .map(|w| w[1].frequency_hz)
+        .collect();
+    if let Some(first) = pts.iter().find(|p| extrap(p)) {
+        let _ = write!(
+            md,
+            " From {} Hz on, the trains drive phi above the training data's maximum: the curve is extrapolated there.",
+            first.frequency_hz
+        );
+    }
+    if !drops.is_empty() {
+        let _ = write!(
+            md,
+            " The curve falls at {} of {} steps (first at {} Hz): a force that drops as the frequency rises is not a property of muscle (thesis 5.4.3: the 30-40 Hz bump of an unstable local model).",
+            drops.len(),
+            pts.len() - 1,
+            drops[0]
+        );
+    }
+    md.push_str("\n\n");
+    Ok(())
+}
+
+fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data) -> Result<()> {
+    let fits = d
+        .test
+        .iter()
+        .map(|s| fit_record(net, &s.u, &s.y).with_context(|| format!("simulating {}", s.name)))
+        .collect::<Result<Vec<_>>>()?;
+    let train = msse(net, d.train_pairs()).context("training MSSE")?;
+    let test = msse(net, d.test_pairs()).context("test MSSE")?;
+    let ts_ms = net.ts() * 1e3;
+    let shown = d.test.len().min(args.plot_records.max(1));
+    let mut t0 = 0.0;
+    let mut pulses = Vec::new();
+    let mut meas = Vec::new();
+    let mut sim = Vec::new();
+    let mut seps = Vec::new();
+    let mut texts = Vec::new();
+    let mut hi: f64 = 0.1;
+    for (s, f) in d.test.iter().zip(&fits).take(shown) {
+        if t0 > 0.0 {
+            seps.push(t0);
+            meas.push((f64::NAN, f64::NAN));
+            sim.push((f64::NAN, f64::NAN));
+        }
+        for k in 0..s.u.len() {
+            let t = t0 + k as f64 * ts_ms;
+            if s.u[k] > 0.5 {
+                pulses.push(t);
+            }
+            meas.push((t, s.y[k]));
+            sim.push((t, f.simulated[k]));
+            hi = hi.max(s.y[k]).max(f.simulated[k].min(1.5));
+        }
+        texts.push((
+            t0 + 8.0 * ts_ms,
+            0.0,
+            format!("{}: MSSE {}", s.kind, sci(f.msse)),
+        ));
+        t0 += s.u.len() as f64 * ts_ms;
+    }
+    for t in &mut texts {
+        t.1 = 1.2 * hi;
+    }
+    let fig = Figure {
+        title: format!(
+            "test records: measured (dashed) and simulated from rest (solid); first {shown} of {}",
+            d.test.len()
+        ),
+        columns: vec![vec![
+            (
+                1,
+                Panel {
+                    y_label: "pulse".into(),
+                    x: Some((0.0, t0)),
+                    y: Some((0.0, 1.1)),
+                    y_ticks: Some(2),
+                    compact: true,
+                    impulses: pulses,
+                    separators: seps.clone(),
+                    ..Panel::default()
+                },
+            ),
+            (
+                4,
+                Panel {
+                    x_label: "time (ms), records concatenated, each simulated from rest".into(),
+                    y_label: "force (normalised)".into(),
+                    x: Some((0.0, t0)),
+                    y: Some((-0.1 * hi, 1.25 * hi)),
+                    lines: vec![
+                        Line::new(Some("measured".to_string()), meas, color(7)).dashed(),
+                        Line::new(Some("model".to_string()), sim, color(0)),
+                    ],
+                    separators: seps,
+                    texts,
+                    legend: true,
+                    ..Panel::default()
+                },
+            ),
+        ]],
+    };
+    plots::save(&fig, &args.out.join("validation.png"), (1100, 600))?;
+    let rows: Vec<Vec<String>> = d
+        .test
+        .iter()
+        .zip(&fits)
+        .map(|(s, f)| vec![s.name.clone(), s.kind.clone(), format!("{}", f.msse)])
+        .collect();
+    write_csv(
+        &args.out.join("validation.csv"),
+        &["record", "kind", "msse"],
+        &rows,
+    )?;
+    let _ = writeln!(md, "## Validation on the test records (Fig. 5.24)\n");
+    let _ = writeln!(
+        md,
+        "Data set `{}`: training MSSE {}, test MSSE {} (eq. B.8, every record simulated from rest).\n",
+        d.dir.display(),
+        sci(train),
+        sci(test)
+    );
+    let _ = writeln!(md, "![validation](validation.png)\n");
+    let md_rows: Vec<Vec<String>> = d
+        .test
+        .iter()
+        .zip(&fits)
+        .map(|(s, f)| vec![s.name.clone(), s.kind.clone(), sci(f.msse)])
+        .collect();
+    md.push_str(&md_table(&["test record", "kind", "MSSE"], &md_rows));
+    md.push('\n');
+    Ok(())
+}

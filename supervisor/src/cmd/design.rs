@@ -1,0 +1,189 @@
+//! `supervisor design`: the Local Controller Network of a model by pole placement (thesis
+//! 6.5.3, App. C.2), one local controller per unit from a rise time and a damping factor;
+//! prints the layout of Tables 6.1 / 6.2 and writes the controller file `fes-lcn/1`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use rt_core::control::file::{Controller, ControllerSettings};
+use rt_core::control::lcn_design::{THESIS_DAMPING, UnitSpec};
+use rt_core::control::poles::{Pole, default_third_pole};
+use rt_core::model::file;
+
+use super::inputs::{md_table, parse_list};
+
+/// `--rise-ms auto` spreads the rise times evenly over this interval, ms (Table 6.2).
+pub const AUTO_RISE_MS: (f64, f64) = (30.0, 200.0);
+
+/// Arguments of `supervisor design`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The model file (fes-lmn/1; every local model must be stable).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Closed-loop rise time per unit, ms, comma-separated in unit order (Table 6.1:
+    /// 100,30,30,10,20,30), or `auto`: evenly spaced from 30 to 200 ms over the units, as
+    /// Table 6.2.
+    #[arg(long)]
+    pub rise_ms: String,
+    /// Damping factor xi of the dominant pair (1.2: no overshoot, thesis 6.5.3).
+    #[arg(long, default_value_t = THESIS_DAMPING)]
+    pub damping: f64,
+    /// Third (integrator) pole, delta domain, 1/s (default -1.9/Ts, thesis 6.5.3).
+    #[arg(long, allow_negative_numbers = true)]
+    pub third_pole: Option<f64>,
+    /// Design even for units with a negative local steady-state gain (thesis 6.5.3 explains
+    /// why the loop then switches between neighbouring controllers).
+    #[arg(long)]
+    pub allow_negative_gain: bool,
+    /// The controller file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Rise times in seconds, one per unit.
+fn rise_times(text: &str, units: usize) -> Result<Vec<f64>> {
+    if text.trim() == "auto" {
+        let (lo, hi) = AUTO_RISE_MS;
+        return Ok((0..units)
+            .map(|i| {
+                let f = if units > 1 {
+                    i as f64 / (units - 1) as f64
+                } else {
+                    0.0
+                };
+                (lo + (hi - lo) * f) * 1e-3
+            })
+            .collect());
+    }
+    let ms = parse_list("--rise-ms", text)?;
+    if ms.len() != units {
+        bail!(
+            "--rise-ms gives {} rise time(s) but the model has {units} units: give one per unit, in unit order",
+            ms.len()
+        );
+    }
+    if let Some((i, v)) = ms.iter().enumerate().find(|(_, v)| **v <= 0.0) {
+        bail!("--rise-ms: rise time of unit {i} is {v} ms; rise times must be > 0");
+    }
+    Ok(ms.iter().map(|v| v * 1e-3).collect())
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    let lmn = match file::load(&args.model) {
+        Ok(lmn) => lmn,
+        Err(e) => {
+            // Say so when only the stability requirement fails.
+            if let Ok((_, st)) = file::load_allow_unstable(&args.model) {
+                let bad: Vec<usize> = st.iter().filter(|s| !s.stable).map(|s| s.unit).collect();
+                if bad.is_empty() {
+                    return Err(e).with_context(|| format!("model file {}", args.model.display()));
+                }
+                bail!(
+                    "model file {}: {e}\nthe model is unstable (units {bad:?}); a controller needs every local model stable: repair it with `supervisor modify --stabilise`",
+                    args.model.display()
+                );
+            }
+            return Err(e).with_context(|| format!("model file {}", args.model.display()));
+        }
+    };
+    let units = lmn.units();
+    let Some(local) = lmn.ss_units() else {
+        bail!(
+            "model {}: structure {} has ARX local models; the LCN needs state-space local models (ss-direct, ss-eig-local, ss-eig-common)",
+            args.model.display(),
+            lmn.structure()
+        );
+    };
+    let tr = rise_times(&args.rise_ms, units)?;
+    if !(args.damping.is_finite() && args.damping > 0.0) {
+        bail!("--damping {}: must be a finite number > 0", args.damping);
+    }
+    let p3 = match args.third_pole {
+        Some(p) => Pole::real(p),
+        None => default_third_pole(lmn.ts),
+    };
+    // Every negative local gain at once (the library reports the first only).
+    let negative: Vec<String> = local
+        .iter()
+        .enumerate()
+        .filter_map(|(i, m)| {
+            m.gain()
+                .filter(|g| *g < 0.0)
+                .map(|g| format!("unit {i}: G = {g:.4}"))
+        })
+        .collect();
+    if !negative.is_empty() && !args.allow_negative_gain {
+        bail!(
+            "the model's offsets give negative local steady-state gains G = -c'A^-1 b ({}). \
+             An LCN whose units mix negative- and positive-gain controllers switches back and \
+             forth between them and never settles (thesis 6.5.3). Identify the model with the \
+             offsets fixed at zero (`supervisor identify --zero-offsets`), which keeps every \
+             local gain non-negative, or pass --allow-negative-gain to design anyway",
+            negative.join(", ")
+        );
+    }
+    let specs: Vec<UnitSpec> = tr
+        .iter()
+        .map(|&t| UnitSpec {
+            rise_time_s: t,
+            damping: args.damping,
+            p3,
+        })
+        .collect();
+    let mut settings = ControllerSettings::default();
+    settings.design.allow_negative_gain = args.allow_negative_gain;
+    let ts = lmn.ts;
+    let controller = Controller::design(lmn, &specs, settings)
+        .with_context(|| format!("designing the LCN for {}", args.model.display()))?;
+    println!("{}", table(&controller, ts));
+    if !negative.is_empty() {
+        eprintln!(
+            "WARNING: designed with negative local gains ({}), as --allow-negative-gain asked",
+            negative.join(", ")
+        );
+    }
+    controller
+        .save(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!("controller written to {}", args.out.display());
+    Ok(())
+}
+
+/// Tables 6.1 / 6.2: one column per unit.
+fn table(c: &Controller, ts: f64) -> String {
+    let mut header = vec!["unit".to_string()];
+    header.extend((1..=c.units.len()).map(|i| i.to_string()));
+    let row = |name: &str, f: &dyn Fn(usize) -> String| {
+        let mut r = vec![name.to_string()];
+        r.extend((0..c.units.len()).map(f));
+        r
+    };
+    let pole = |p: Pole| {
+        if p.im == 0.0 {
+            format!("{:.1}", p.re)
+        } else {
+            format!("{:.1}{:+.1}i", p.re, p.im)
+        }
+    };
+    let u = &c.units;
+    let rows = vec![
+        row("t_r [ms]", &|i| {
+            format!("{:.1}", u[i].spec.rise_time_s * 1e3)
+        }),
+        row("p_1", &|i| pole(u[i].poles.p1)),
+        row("p_2", &|i| pole(u[i].poles.p2)),
+        row("p_3", &|i| pole(u[i].poles.p3)),
+        row("K_x,1", &|i| format!("{:.4}", u[i].gains.k_x[0])),
+        row("K_x,2", &|i| format!("{:.4}", u[i].gains.k_x[1])),
+        row("K_I", &|i| format!("{:.2}", u[i].gains.k_i)),
+    ];
+    let h: Vec<&str> = header.iter().map(String::as_str).collect();
+    format!(
+        "LCN design (delta domain, Ts = {} ms, damping {}; poles in 1/s)\n\n{}",
+        ts * 1e3,
+        u.first().map_or(0.0, |x| x.spec.damping),
+        md_table(&h, &rows)
+    )
+}

@@ -1,0 +1,397 @@
+//! `supervisor modify --stabilise`: the thesis's model modification (5.4.3): every unstable
+//! local eigenvalue is replaced by a slow stable one and that unit's offsets are
+//! re-estimated on the training data (`rt_core::analysis::stabilise`). Prints Table 5.4
+//! (training/test MSSE before and after), writes the model, and draws the long-train
+//! response before and after (Fig. 5.32(a)) next to it.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use rt_core::analysis::stabilise::{DEFAULT_EIGENVALUE, Stabilised, stabilise};
+use rt_core::analysis::trace::{Trace, simulate_trace};
+use rt_core::analysis::validation::msse;
+use rt_core::model::{Lmn, file};
+use sim_muscle::pattern::constant_train;
+
+use super::inputs::{Data, md_table, open_data, open_model, sci};
+use super::plots::{self, Figure, Line, Panel, color};
+
+/// Arguments of `supervisor modify`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The model file (fes-lmn/1); opened even when unstable.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Replace unstable local eigenvalues and re-estimate the units' offsets (5.4.3).
+    #[arg(long)]
+    pub stabilise: bool,
+    /// The replacement eigenvalue, 1/s, in (-1/Ts, 0) (thesis: -1).
+    #[arg(long, default_value_t = DEFAULT_EIGENVALUE, allow_negative_numbers = true)]
+    pub eigenvalue: f64,
+    /// The data set whose training records re-estimate the offsets (its test records give
+    /// the test MSSE).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The modified model file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Frequency of the long constant train drawn before/after, Hz (thesis Fig. 5.32: 37).
+    #[arg(long, default_value_t = 37.0)]
+    pub long_train_hz: f64,
+    /// Length of that train, ms.
+    #[arg(long, default_value_t = 3000)]
+    pub long_train_ms: u32,
+}
+
+/// Where the plot and the report go: next to `--out`, named after it.
+fn side_file(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().trim_end_matches(".lmn").to_string())
+        .unwrap_or_else(|| "model".into());
+    out.with_file_name(format!("{stem}{suffix}"))
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<()> {
+    if !args.stabilise {
+        bail!("nothing to do: give --stabilise (the only modification offered)");
+    }
+    if !(args.long_train_hz.is_finite() && args.long_train_hz > 0.0) {
+        bail!(
+            "--long-train-hz {}: must be a finite number > 0",
+            args.long_train_hz
+        );
+    }
+    if args.out.extension().is_none_or(|e| e != "json") {
+        bail!(
+            "--out {}: the model file must end in .json",
+            args.out.display()
+        );
+    }
+    let model = open_model(&args.model)?;
+    let data = open_data(&args.data, model.lmn.ts)?;
+    let train = data.train_pairs();
+    let result = stabilise(&model.lmn, args.eigenvalue, &train)
+        .with_context(|| format!("stabilising {}", args.model.display()))?;
+    let before = errors(&model.lmn, &data)?;
+    let after = errors(&result.model, &data)?;
+
+    let mut fixed = result.model.clone();
+    fixed.provenance.train_mspe = None;
+    fixed.provenance.train_msse = Some(after.0);
+    fixed.provenance.test_msse = Some(after.1);
+    fixed.provenance.extra.insert(
+        "modified".into(),
+        serde_json::json!({
+            "tool": format!("supervisor modify {}", env!("CARGO_PKG_VERSION")),
+            "from": args.model.display().to_string(),
+            "data_set": data.dir.display().to_string(),
+            "eigenvalues_replaced": result.changes.iter().map(|c| serde_json::json!({
+                "unit": c.unit, "index": c.index, "old": c.old, "new": c.new })).collect::<Vec<_>>(),
+            "offsets_reestimated": result.offsets.iter().map(|o| o.unit).collect::<Vec<_>>(),
+        }),
+    );
+    file::save(&fixed, &args.out).with_context(|| format!("writing {}", args.out.display()))?;
+    // The result must pass the strict loader (every local model stable).
+    file::load(&args.out).with_context(|| {
+        format!(
+            "{} does not pass the strict model check",
+            args.out.display()
+        )
+    })?;
+
+    let png = side_file(&args.out, "-long-train.png");
+    let long = long_train(&args, &model.lmn, &fixed, &result, &png)?;
+    let md = report(&args, &result, before, after, &png, long);
+    let md_path = side_file(&args.out, "-modify.md");
+    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    println!("{md}");
+    println!(
+        "modified model written to {} (report {}, plot {})",
+        args.out.display(),
+        md_path.display(),
+        png.display()
+    );
+    Ok(())
+}
+
+/// Training and test MSSE (eq. B.8).
+fn errors(lmn: &Lmn, data: &Data) -> Result<(f64, f64)> {
+    let net = lmn.network().context("building the network")?;
+    Ok((
+        msse(&net, data.train_pairs()).context("training MSSE")?,
+        msse(&net, data.test_pairs()).context("test MSSE")?,
+    ))
+}
+
+/// Summary of the long train: (max |y| original, max |y| modified, final y modified).
+type LongTrain = (f64, f64, f64);
+
+fn long_train(
+    args: &Args,
+    original: &Lmn,
+    fixed: &Lmn,
+    result: &Stabilised,
+    png: &Path,
+) -> Result<LongTrain> {
+    let ts = fixed.ts;
+    let n = (args.long_train_ms as f64 * 1e-3 / ts).round() as usize;
+    let pulses = constant_train(args.long_train_hz, 0, n, ts)
+        .with_context(|| format!("--long-train-hz {}", args.long_train_hz))?;
+    let mut u = vec![0.0; n];
+    for k in pulses {
+        u[k] = 1.0;
+    }
+    let t0 = simulate_trace(&original.network()?, &u).context("original model")?;
+    let t1 = simulate_trace(&fixed.network()?, &u).context("modified model")?;
+    let ts_ms = ts * 1e3;
+    let pts = |y: &[f64]| -> Vec<(f64, f64)> {
+        y.iter()
+            .enumerate()
+            .map(|(k, &v)| (k as f64 * ts_ms, v))
+            .collect()
+    };
+    let amax = |y: &[f64]| {
+        y.iter().fold(0.0f64, |a, v| {
+            if v.is_finite() {
+                a.max(v.abs())
+            } else {
+                f64::INFINITY
+            }
+        })
+    };
+    let hi =
+        t1.y.iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
+    let lo =
+        t1.y.iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::min);
+    let span = (hi - lo).max(0.1);
+    let (ylo, yhi) = (lo - 0.5 * span, hi + 0.5 * span);
+    let leaves =
+        t0.y.iter()
+            .position(|v| !(v.is_finite() && (ylo..=yhi).contains(v)))
+            .map(|k| k as f64 * ts_ms);
+    let units: Vec<usize> = result
+        .offsets
+        .iter()
+        .map(|o| o.unit)
+        .chain(result.changes.iter().map(|c| c.unit))
+        .collect();
+    let net = fixed.network()?;
+    let mut act_lines = Vec::new();
+    let mut seen = Vec::new();
+    for &i in &units {
+        if seen.contains(&i) {
+            continue;
+        }
+        seen.push(i);
+        let rho: Vec<(f64, f64)> = t1
+            .phi
+            .iter()
+            .enumerate()
+            .map(|(k, &phi)| (k as f64 * ts_ms, net.validity().eval(phi).get(i)))
+            .collect();
+        act_lines.push(Line::new(
+            Some(format!("rho_{i} (modified unit)")),
+            rho,
+            color(2 + seen.len()),
+        ));
+    }
+    let fig = Figure {
+        title: format!(
+            "{} Hz constant train: original (unstable) and modified model (Fig. 5.32(a))",
+            args.long_train_hz
+        ),
+        columns: vec![vec![
+            (
+                3,
+                Panel {
+                    x_label: "time (ms)".into(),
+                    y_label: "model output (normalised force)".into(),
+                    y: Some((lo - 0.5 * span, hi + 0.5 * span)),
+                    lines: vec![
+                        Line::new(Some("original".to_string()), pts(&t0.y), color(3)).dashed(),
+                        Line::new(Some("modified".to_string()), pts(&t1.y), color(0)),
+                    ],
+                    hline: Some(0.0),
+                    texts: leaves
+                        .map(|t| {
+                            vec![(
+                                t + 20.0,
+                                hi + 0.35 * span,
+                                format!(
+                                    "original leaves the plot at {t:.0} ms (max |y| {})",
+                                    if amax(&t0.y) < 1e4 {
+                                        format!("{:.2}", amax(&t0.y))
+                                    } else if amax(&t0.y).is_finite() {
+                                        format!("{:.3e}", amax(&t0.y))
+                                    } else {
+                                        "infinite".into()
+                                    }
+                                ),
+                            )]
+                        })
+                        .unwrap_or_default(),
+                    legend: true,
+                    ..Panel::default()
+                },
+            ),
+            (
+                1,
+                Panel {
+                    x_label: "time (ms)".into(),
+                    y_label: "activation".into(),
+                    y: Some((0.0, 1.05)),
+                    lines: act_lines,
+                    legend: true,
+                    ..Panel::default()
+                },
+            ),
+        ]],
+    };
+    let mut fig = fig;
+    fig.columns.push(vec![(1, phase_plane(&t0, &t1, ts_ms))]);
+    plots::save(&fig, png, (1300, 600))?;
+    Ok((
+        amax(&t0.y),
+        amax(&t1.y),
+        t1.y.last().copied().unwrap_or(0.0),
+    ))
+}
+
+/// State trajectories of both models over the first 300 ms (Fig. 5.32(b)), axes from the
+/// modified model's trajectory.
+fn phase_plane(t0: &Trace, t1: &Trace, ts_ms: f64) -> Panel {
+    let n = ((300.0 / ts_ms) as usize).min(t1.x.len());
+    let traj = |t: &Trace| -> Vec<(f64, f64)> {
+        t.x[..n.min(t.x.len())]
+            .iter()
+            .map(|x| (x[0], x[1]))
+            .collect()
+    };
+    let m = traj(t1);
+    let ext = |f: &dyn Fn(&(f64, f64)) -> f64| {
+        let (lo, hi) = m
+            .iter()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+        let span = (hi - lo).max(1e-9);
+        (lo - 0.3 * span, hi + 0.3 * span)
+    };
+    Panel {
+        title: Some("state trajectories, 0-300 ms (Fig. 5.32(b))".into()),
+        x_label: "x_1".into(),
+        y_label: "x_2".into(),
+        x: Some(ext(&|p| p.0)),
+        y: Some(ext(&|p| p.1)),
+        lines: vec![
+            Line::new(Some("original".to_string()), traj(t0), color(3)).dashed(),
+            Line::new(Some("modified".to_string()), m, color(0)),
+        ],
+        legend: true,
+        ..Panel::default()
+    }
+}
+
+fn report(
+    args: &Args,
+    r: &Stabilised,
+    before: (f64, f64),
+    after: (f64, f64),
+    png: &Path,
+    long: LongTrain,
+) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "# Modification of `{}` (thesis 5.4.3)\n",
+        args.model.display()
+    );
+    if r.changes.is_empty() {
+        let _ = writeln!(
+            md,
+            "Every local model is already stable: nothing was changed.\n"
+        );
+    } else {
+        let rows: Vec<Vec<String>> = r
+            .changes
+            .iter()
+            .map(|c| {
+                vec![
+                    c.unit.to_string(),
+                    c.index.to_string(),
+                    format!("{:.4}", c.old),
+                    format!("{:.4}", c.new),
+                ]
+            })
+            .collect();
+        md.push_str("Replaced eigenvalues (1/s):\n\n");
+        md.push_str(&md_table(
+            &["unit", "eigenvalue #", "before", "after"],
+            &rows,
+        ));
+        md.push('\n');
+    }
+    if !r.offsets.is_empty() {
+        let f = |v: [f64; 3]| format!("{:.6}, {:.6}, {:.6}", v[0], v[1], v[2]);
+        let rows: Vec<Vec<String>> = r
+            .offsets
+            .iter()
+            .map(|o| vec![o.unit.to_string(), f(o.before), f(o.after)])
+            .collect();
+        let _ = writeln!(
+            md,
+            "Re-estimated offsets (d^x_0, d^x_1, d^y) on the training records (exact linear least squares on Dual sensitivities, {} step(s)):\n",
+            r.iterations
+        );
+        md.push_str(&md_table(&["unit", "before", "after"], &rows));
+        md.push('\n');
+    } else if !r.changes.is_empty() {
+        md.push_str(
+            "The model has its offsets fixed at zero: only the eigenvalues were replaced.\n\n",
+        );
+    }
+    md.push_str("Mean squared simulation errors (Table 5.4):\n\n");
+    md.push_str(&md_table(
+        &["LMN", "training MSSE", "test MSSE"],
+        &[
+            vec!["original".into(), sci(before.0), sci(before.1)],
+            vec![
+                "eigenvalue replaced only".into(),
+                sci(r.msse_replaced),
+                "".into(),
+            ],
+            vec!["modified".into(), sci(after.0), sci(after.1)],
+        ],
+    ));
+    let _ = writeln!(
+        md,
+        "\n{} Hz, {} ms constant train: max |output| original {}, modified {:.4} (final value {:.4}).\n",
+        args.long_train_hz,
+        args.long_train_ms,
+        if long.0.is_finite() {
+            format!("{:.4}", long.0)
+        } else {
+            "diverges".into()
+        },
+        long.1,
+        long.2
+    );
+    let _ = writeln!(
+        md,
+        "![long train]({})\n",
+        png.file_name()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default()
+    );
+    md
+}
