@@ -399,7 +399,11 @@ impl<T: CanTx> ForwardPath<T> {
         let fresh = command.t_ns <= now_ns + COMMAND_FUTURE_TOLERANCE_NS
             && now_ns.saturating_sub(command.t_ns) <= self.settings.command_max_age_ns
             && command.t_ns > self.last_command_t_ns;
-        self.last_command_t_ns = self.last_command_t_ns.max(command.t_ns);
+        if fresh {
+            // Only a command in its time window sets the order (a bogus future time must not
+            // block the next genuine one).
+            self.last_command_t_ns = command.t_ns;
+        }
         match command.kind() {
             Ok(DriverCommandKind::Arm) => {
                 if fresh {
