@@ -19,10 +19,15 @@
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
+pub mod bus;
 pub mod config;
 pub mod event;
 pub mod fault;
 pub mod forward;
 pub mod interlock;
+pub mod liveness;
 pub mod output;
+pub mod telemetry;
+pub mod systemd;
 pub mod tx;
+pub mod txstamp;
