@@ -1,5 +1,2 @@
-//! `stim-driver` (to be written).
-fn main() {
-    eprintln!("stim-driver: not built yet");
-    std::process::exit(2);
-}
+//! `stim-driver` (being written).
+fn main() {}

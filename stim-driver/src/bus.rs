@@ -1,0 +1,346 @@
+//! The receive side: one normal-priority thread that reads the stimulator's frames and the
+//! CAN error frames, watches the interface's link state, republishes FORCE as
+//! [`ForceSample`] on iceoryx2, and hands STATUS, EMCY, heartbeats, error frames and link
+//! changes to the forward thread through a preallocated lock-free queue.
+//!
+//! Its socket accepts exactly FORCE, STATUS, EMCY and the stimulator heartbeat (standard
+//! data frames) plus every error frame (`CAN_RAW_ERR_FILTER` = all), so bus-off,
+//! error-passive and controller problems arrive as frames. A read failing with `ENETDOWN`
+//! and the interface flags (`SIOCGIFFLAGS`: up and running), polled every
+//! [`LINK_CHECK_NS`], tell when the link goes down and comes back.
+
+use std::io;
+use std::os::fd::{AsRawFd, RawFd};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+use crossbeam::queue::ArrayQueue;
+use fes_can::{Message, MessageKind, Nodes};
+use rt_core::msg::service::{BACKPRESSURE, ServiceError, open_pubsub};
+use rt_core::msg::{Contract, ForceSample};
+use rt_core::rt::clock::monotonic_ns;
+use rt_core::rt::runner::create_node;
+use socketcan::errors::{CanError, ControllerProblems};
+use socketcan::{
+    CanErrorFrame, CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket,
+    SocketOptions,
+};
+
+use crate::event::{BusErrorKind, BusEvent, SharedStatus};
+
+/// How often the interface flags are read, ns.
+pub const LINK_CHECK_NS: u64 = 10_000_000;
+/// Read timeout of the receive socket (the longest the thread sleeps).
+pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
+
+/// Classifies a CAN error frame (the most severe condition it reports).
+pub fn classify_error_frame(frame: CanErrorFrame) -> BusErrorKind {
+    let class = frame.error_bits();
+    let error = CanError::from(frame);
+    if error.is_bus_off() {
+        return BusErrorKind::BusOff;
+    }
+    if error.is_restarted() {
+        return BusErrorKind::Restarted;
+    }
+    if let Some(p) = error.controller() {
+        if p.intersects(ControllerProblems::RX_PASSIVE | ControllerProblems::TX_PASSIVE) {
+            return BusErrorKind::ErrorPassive;
+        }
+        if p.intersects(ControllerProblems::RX_OVERFLOW | ControllerProblems::TX_OVERFLOW) {
+            return BusErrorKind::Overflow;
+        }
+        if p.intersects(ControllerProblems::RX_WARNING | ControllerProblems::TX_WARNING) {
+            return BusErrorKind::ErrorWarning;
+        }
+        if p.contains(ControllerProblems::ACTIVE) {
+            return BusErrorKind::ErrorActive;
+        }
+    }
+    BusErrorKind::Other { class }
+}
+
+/// Whether interface `iface` is up and running (`IFF_UP` and `IFF_RUNNING`), read with
+/// `SIOCGIFFLAGS` through the socket `fd`.
+pub fn link_is_up(fd: RawFd, iface: &str) -> io::Result<bool> {
+    // SAFETY: `ifreq` is a plain C struct (a name array and a union of plain data): all
+    // zero bytes is a valid value.
+    let mut request: libc::ifreq = unsafe { std::mem::zeroed() };
+    let name = iface.as_bytes();
+    if name.is_empty() || name.len() >= request.ifr_name.len() {
+        return Err(io::Error::from(io::ErrorKind::InvalidInput));
+    }
+    for (dst, &src) in request.ifr_name.iter_mut().zip(name) {
+        *dst = src as libc::c_char;
+    }
+    // SAFETY: SIOCGIFFLAGS reads the NUL-terminated name from `request` and writes the
+    // flags into its union; `request` is valid and outlives the call.
+    let rc = unsafe { libc::ioctl(fd, libc::SIOCGIFFLAGS, &mut request) };
+    if rc < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    // SAFETY: after a successful SIOCGIFFLAGS the kernel has written `ifru_flags`.
+    let flags = i32::from(unsafe { request.ifr_ifru.ifru_flags });
+    Ok(flags & libc::IFF_UP != 0 && flags & libc::IFF_RUNNING != 0)
+}
+
+/// Settings of the receive thread.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BusSettings {
+    /// Interface.
+    pub iface: String,
+    /// Node ids.
+    pub nodes: Nodes,
+    /// The muscle's maximal force, N (normalises `ForceSample.force`).
+    pub max_force_n: f64,
+    /// iceoryx2 service-name prefix.
+    pub prefix: String,
+}
+
+/// Counters of the receive thread (one writer, relaxed).
+#[derive(Debug, Default)]
+pub struct BusCounters {
+    /// Data frames received.
+    pub frames: AtomicU64,
+    /// ForceSamples published.
+    pub forces_published: AtomicU64,
+    /// FORCE frames whose force was outside ForceSample's valid range (not published).
+    pub forces_invalid: AtomicU64,
+    /// FORCE frames missing (gaps in their `seq`).
+    pub forces_lost: AtomicU64,
+    /// Frames that failed to decode.
+    pub decode_errors: AtomicU64,
+    /// CAN error frames.
+    pub error_frames: AtomicU64,
+    /// Failed reads (other than timeouts).
+    pub read_errors: AtomicU64,
+    /// Failed ForceSample publishes.
+    pub publish_errors: AtomicU64,
+    /// Bus events dropped because the queue to the forward thread was full.
+    pub events_lost: AtomicU64,
+}
+
+impl BusCounters {
+    fn bump(c: &AtomicU64) {
+        c.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The receive thread failed to start or run.
+#[derive(Debug, thiserror::Error)]
+pub enum BusError {
+    /// The interface could not be opened or configured.
+    #[error("CAN interface {iface:?}: {what}: {source}")]
+    Socket {
+        /// Interface.
+        iface: String,
+        /// Which step.
+        what: &'static str,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// iceoryx2.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// iceoryx2 node or port.
+    #[error("receive thread: {0}")]
+    Ipc(String),
+}
+
+/// The receive socket: the stimulator's frames and every error frame.
+fn open_socket(settings: &BusSettings) -> Result<CanSocket, BusError> {
+    let err = |what| {
+        let iface = settings.iface.clone();
+        move |source| BusError::Socket {
+            iface,
+            what,
+            source,
+        }
+    };
+    let socket = CanSocket::open(&settings.iface).map_err(err("open"))?;
+    // Match the 11-bit identifier and require the EFF and RTR flags clear.
+    let mask = 0x7FF | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
+    let filters: Vec<CanFilter> = [
+        MessageKind::Force,
+        MessageKind::Status,
+        MessageKind::Emcy,
+        MessageKind::StimHeartbeat,
+    ]
+    .into_iter()
+    .map(|k| CanFilter::new(u32::from(settings.nodes.id_of(k)), mask))
+    .collect();
+    socket.set_filters(&filters).map_err(err("receive filters"))?;
+    socket
+        .set_error_filter_accept_all()
+        .map_err(err("error-frame filter"))?;
+    socket
+        .set_read_timeout(READ_TIMEOUT)
+        .map_err(err("read timeout"))?;
+    Ok(socket)
+}
+
+/// Runs the receive thread until `stop` is set. `on_ready` is called once the socket and
+/// the ForceSample publisher exist.
+pub fn run_bus(
+    settings: &BusSettings,
+    to_forward: &ArrayQueue<BusEvent>,
+    status: &SharedStatus,
+    counters: &BusCounters,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(),
+) -> Result<(), BusError> {
+    let socket = open_socket(settings)?;
+    let node = create_node("stim-driver-bus").map_err(|e| BusError::Ipc(e.to_string()))?;
+    let service = open_pubsub::<ForceSample>(&node, &settings.prefix)?;
+    let publisher = service
+        .publisher_builder()
+        .backpressure_strategy(BACKPRESSURE)
+        .create()
+        .map_err(|e| BusError::Ipc(format!("ForceSample publisher: {e:?}")))?;
+    on_ready();
+
+    let push = |e: BusEvent| {
+        if to_forward.push(e).is_err() {
+            BusCounters::bump(&counters.events_lost);
+        }
+    };
+    let mut link_up = true;
+    let mut next_link_check = 0u64;
+    let mut force_seq = 0u64;
+    let mut last_frame_seq: Option<u16> = None;
+    while !stop.load(Ordering::Relaxed) {
+        let now = monotonic_ns();
+        if now >= next_link_check {
+            next_link_check = now + LINK_CHECK_NS;
+            if let Ok(up) = link_is_up(socket.as_raw_fd(), &settings.iface)
+                && up != link_up
+            {
+                link_up = up;
+                push(if up {
+                    BusEvent::LinkUp
+                } else {
+                    BusEvent::LinkDown
+                });
+            }
+        }
+        match socket.read_frame() {
+            Ok(CanFrame::Error(e)) => {
+                BusCounters::bump(&counters.error_frames);
+                push(BusEvent::BusError(classify_error_frame(e)));
+            }
+            Ok(CanFrame::Data(frame)) => {
+                BusCounters::bump(&counters.frames);
+                match settings.nodes.decode(frame.raw_id(), frame.data()) {
+                    Ok(Message::Force(f)) => {
+                        if let Some(last) = last_frame_seq {
+                            let gap = f.seq.wrapping_sub(last).wrapping_sub(1);
+                            if gap > 0 && gap < 0x8000 {
+                                counters
+                                    .forces_lost
+                                    .fetch_add(u64::from(gap), Ordering::Relaxed);
+                            }
+                        }
+                        last_frame_seq = Some(f.seq);
+                        let force_n = f.force_n();
+                        force_seq += 1;
+                        let sample = ForceSample {
+                            seq: force_seq,
+                            t_ns: monotonic_ns(),
+                            stim_seq: status.load().last_pulse_tick_seq,
+                            force_n,
+                            force: force_n / settings.max_force_n,
+                        };
+                        if sample.validate().is_err() {
+                            force_seq -= 1;
+                            BusCounters::bump(&counters.forces_invalid);
+                        } else if publisher.send_copy(sample).is_ok() {
+                            BusCounters::bump(&counters.forces_published);
+                        } else {
+                            BusCounters::bump(&counters.publish_errors);
+                        }
+                    }
+                    Ok(Message::Status(s)) => push(BusEvent::Status(s)),
+                    Ok(Message::Emcy(e)) => push(BusEvent::Emcy(e)),
+                    Ok(Message::StimHeartbeat(h)) => push(BusEvent::StimHeartbeat(h.state)),
+                    Ok(_) => {}
+                    Err(_) => BusCounters::bump(&counters.decode_errors),
+                }
+            }
+            Ok(CanFrame::Remote(_)) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
+                ) => {}
+            Err(e) => {
+                BusCounters::bump(&counters.read_errors);
+                if matches!(
+                    e.raw_os_error(),
+                    Some(libc::ENETDOWN) | Some(libc::ENODEV) | Some(libc::ENXIO)
+                ) && link_up
+                {
+                    link_up = false;
+                    push(BusEvent::LinkDown);
+                }
+                // Do not spin on a failing socket.
+                std::thread::sleep(READ_TIMEOUT);
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(class: u32, data: &[u8]) -> CanErrorFrame {
+        CanErrorFrame::new_error(class, data).unwrap()
+    }
+
+    #[test]
+    fn error_frames_are_classified_by_linux_can_error_h() {
+        // Classes: CAN_ERR_CRTL 0x4, CAN_ERR_BUSOFF 0x40, CAN_ERR_RESTARTED 0x100,
+        // CAN_ERR_ACK 0x20; controller byte 1: 0x01 rx overflow, 0x04 rx warning,
+        // 0x10 rx passive, 0x40 active.
+        assert_eq!(classify_error_frame(frame(0x40, &[])), BusErrorKind::BusOff);
+        assert_eq!(
+            classify_error_frame(frame(0x100, &[])),
+            BusErrorKind::Restarted
+        );
+        assert_eq!(
+            classify_error_frame(frame(0x4, &[0, 0x10])),
+            BusErrorKind::ErrorPassive
+        );
+        assert_eq!(
+            classify_error_frame(frame(0x4, &[0, 0x01])),
+            BusErrorKind::Overflow
+        );
+        assert_eq!(
+            classify_error_frame(frame(0x4, &[0, 0x04])),
+            BusErrorKind::ErrorWarning
+        );
+        assert_eq!(
+            classify_error_frame(frame(0x4, &[0, 0x40])),
+            BusErrorKind::ErrorActive
+        );
+        assert_eq!(
+            classify_error_frame(frame(0x20, &[])),
+            BusErrorKind::Other { class: 0x20 }
+        );
+        // Bus-off wins over a controller problem in the same frame.
+        assert_eq!(
+            classify_error_frame(frame(0x44, &[0, 0x10])),
+            BusErrorKind::BusOff
+        );
+    }
+
+    #[test]
+    fn link_flags_of_the_loopback_interface() {
+        // The host has no CAN, but the ioctl is generic: "lo" is up and running.
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        assert!(link_is_up(s.as_raw_fd(), "lo").unwrap());
+        assert!(link_is_up(s.as_raw_fd(), "no-such-if0").is_err());
+        assert!(link_is_up(s.as_raw_fd(), "").is_err());
+    }
+}

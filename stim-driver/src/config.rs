@@ -1,0 +1,731 @@
+//! [`DriverConfig`]: the `stim-driver` configuration file (`schema = "fes-stim-driver/1"`,
+//! TOML). Read once at start-up, validated, never read inside the loop.
+//!
+//! ```toml
+//! schema = "fes-stim-driver/1"
+//!
+//! [can]
+//! iface = "can0"                 # required
+//! host_node = 1                  # our CANopen node id (1..=127)
+//! stim_node = 16                 # the stimulator's (0x10)
+//! heartbeat_ms = 10              # host heartbeat period
+//! tx_retry_budget_us = 200       # a full transmit queue is retried this long ...
+//! tx_retry_interval_us = 50      # ... at this interval, then the frame is dropped
+//! bringup_retry_ms = 500         # a bring-up step not confirmed in this starts over
+//!
+//! [stimulator]                   # the run's limits, sent in CONFIG (stricter than its own)
+//! max_amplitude_ua = 100000      # multiple of 100 uA, <= 150 mA
+//! max_width_us = 500
+//! min_ipi_ms = 2
+//! max_pulses = 100
+//! rate_window_ms = 1000
+//! watchdog_ms = 100              # the stimulator's heartbeat watchdog (>= 2 heartbeats)
+//!
+//! [interlocks]                   # the driver's own, independent of rt-core and the stimulator
+//! min_ipi_us = 2000              # on grid times
+//! max_pulses = 100               # in any window of rate_window_ms
+//! rate_window_ms = 1000
+//! max_amplitude_ua = 100000
+//! max_width_us = 500
+//! max_charge_nc = 40000          # amplitude x width per phase
+//! channels = [0]
+//! max_pulse_delay_us = 500       # a pulse later than this after its grid time is refused
+//!
+//! [watchdog]
+//! tick_period_us = 1000          # rt-core's period
+//! timeout_ticks = 3              # no StimTick for this many periods -> NMT stop
+//! stale_after_ticks = 3          # a StimTick this old on arrival -> NMT stop
+//! stimulator_timeout_ms = 100    # no STATUS for this long -> NMT stop (and no arming)
+//! arm_confirm_ms = 100           # NMT start must show in STATUS within this
+//! command_max_age_ms = 100       # an older Arm is refused
+//! liveness_check_ms = 20         # how often the publisher's node is checked
+//!
+//! [force]
+//! max_n = 40.0                   # required: the muscle's maximal force, normalises ForceSample
+//!
+//! [rt]                           # the forward thread (rt_core::rt::RtConfig)
+//! priority = 85
+//!
+//! # [bus_rt]                     # optional: make the receive thread real-time too
+//! # priority = 70
+//!
+//! [telemetry]
+//! # hlog = "stim-driver.hlog"
+//! report_period_ms = 1000
+//! status_period_ms = 100
+//! queue_capacity = 8192
+//!
+//! [ipc]
+//! prefix = "fes"
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use fes_can::{Nodes, StimLimits};
+use rt_core::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
+use rt_core::rt::RtConfig;
+use rt_core::rt::config::RtConfigError;
+use serde::{Deserialize, Serialize};
+
+use crate::forward::ForwardSettings;
+use crate::interlock::{AMPLITUDE_STEP_UA, InterlockLimits, LimitsError};
+use crate::tx::RetryPolicy;
+
+/// The schema tag this version reads.
+pub const SCHEMA: &str = "fes-stim-driver/1";
+
+const MS: u64 = 1_000_000;
+const US: u64 = 1_000;
+
+/// The configuration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriverConfig {
+    /// Must be [`SCHEMA`].
+    pub schema: String,
+    /// The CAN side.
+    pub can: CanConfig,
+    /// Limits sent to the stimulator.
+    #[serde(default)]
+    pub stimulator: StimulatorConfig,
+    /// The driver's own interlocks.
+    #[serde(default)]
+    pub interlocks: InterlockConfig,
+    /// Watchdogs and timeouts.
+    #[serde(default)]
+    pub watchdog: WatchdogConfig,
+    /// Force scaling.
+    pub force: ForceConfig,
+    /// Real-time settings of the forward thread.
+    #[serde(default = "default_rt")]
+    pub rt: RtConfig,
+    /// Real-time settings of the receive thread (absent: normal priority).
+    #[serde(default)]
+    pub bus_rt: Option<RtConfig>,
+    /// Telemetry and status.
+    #[serde(default)]
+    pub telemetry: TelemetryConfig,
+    /// iceoryx2.
+    #[serde(default)]
+    pub ipc: IpcConfig,
+}
+
+/// The forward thread's default real-time settings: [`RtConfig`]'s, at priority 85 (above
+/// rt-core's default 80: a tick is forwarded before the next one is computed).
+fn default_rt() -> RtConfig {
+    RtConfig {
+        priority: 85,
+        ..RtConfig::default()
+    }
+}
+
+/// `[can]`. Defaults: nodes 0x01 / 0x10, 10 ms heartbeat, 200 µs retry budget at 50 µs,
+/// bring-up steps retried after 500 ms.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CanConfig {
+    /// SocketCAN interface (required).
+    pub iface: String,
+    /// The host's node id.
+    #[serde(default = "default_host_node")]
+    pub host_node: u8,
+    /// The stimulator's node id.
+    #[serde(default = "default_stim_node")]
+    pub stim_node: u8,
+    /// Host heartbeat period, ms (1..=1000).
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_ms: u16,
+    /// How long a full transmit queue is retried for one frame, µs (0..=1000).
+    #[serde(default = "default_retry_budget_us")]
+    pub tx_retry_budget_us: u32,
+    /// Pause between retries, µs (10..=budget, or anything when the budget is 0).
+    #[serde(default = "default_retry_interval_us")]
+    pub tx_retry_interval_us: u32,
+    /// A bring-up step not confirmed within this starts over, ms (50..=60000).
+    #[serde(default = "default_bringup_retry_ms")]
+    pub bringup_retry_ms: u32,
+}
+
+fn default_host_node() -> u8 {
+    Nodes::DEFAULT.host()
+}
+fn default_stim_node() -> u8 {
+    Nodes::DEFAULT.stim()
+}
+fn default_heartbeat_ms() -> u16 {
+    10
+}
+fn default_retry_budget_us() -> u32 {
+    200
+}
+fn default_retry_interval_us() -> u32 {
+    50
+}
+fn default_bringup_retry_ms() -> u32 {
+    500
+}
+
+/// `[stimulator]`: the run's limits sent in CONFIG. Defaults: the protocol's
+/// (`StimLimits::DEFAULT`: 100 mA, 500 µs, 2 ms, 100 pulses per 1000 ms, 100 ms watchdog).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StimulatorConfig {
+    /// Amplitude ceiling, µA (a multiple of 100 µA, at most 150 mA).
+    pub max_amplitude_ua: u32,
+    /// Width ceiling, µs (at most 1000).
+    pub max_width_us: u16,
+    /// Minimum inter-pulse interval, ms (1..=1000).
+    pub min_ipi_ms: u16,
+    /// Most pulses in any rate window (1..=1000).
+    pub max_pulses: u16,
+    /// Rate window, ms (1..=60000).
+    pub rate_window_ms: u16,
+    /// Host heartbeat timeout, ms (20..=5000, and at least two heartbeat periods).
+    pub watchdog_ms: u16,
+}
+
+impl Default for StimulatorConfig {
+    fn default() -> Self {
+        let d = StimLimits::DEFAULT;
+        Self {
+            max_amplitude_ua: u32::from(d.max_amplitude_100ua) * AMPLITUDE_STEP_UA,
+            max_width_us: d.max_width_us,
+            min_ipi_ms: d.min_ipi_ms,
+            max_pulses: d.max_pulses,
+            rate_window_ms: d.rate_window_ms,
+            watchdog_ms: d.watchdog_ms,
+        }
+    }
+}
+
+/// `[interlocks]`. Defaults: 2 ms minimum IPI, 100 pulses per 1000 ms, 100 mA, 500 µs,
+/// 40 µC per phase, channel 0 only, pulses at most 500 µs late.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InterlockConfig {
+    /// Minimum inter-pulse interval on grid times, µs (>= 1).
+    pub min_ipi_us: u32,
+    /// Most pulses in any window (1..=1000).
+    pub max_pulses: u16,
+    /// Rate window, ms (>= 1).
+    pub rate_window_ms: u32,
+    /// Amplitude ceiling, µA (>= 1).
+    pub max_amplitude_ua: u32,
+    /// Width ceiling, µs (1..=1000).
+    pub max_width_us: u16,
+    /// Charge-per-phase ceiling, nC (>= 1).
+    pub max_charge_nc: u64,
+    /// Channels that may be stimulated (0..=15, at least one).
+    pub channels: Vec<u8>,
+    /// A pulse later than this after its grid time is refused, µs (>= 1).
+    pub max_pulse_delay_us: u32,
+}
+
+impl Default for InterlockConfig {
+    fn default() -> Self {
+        Self {
+            min_ipi_us: 2000,
+            max_pulses: 100,
+            rate_window_ms: 1000,
+            max_amplitude_ua: 100_000,
+            max_width_us: 500,
+            max_charge_nc: 40_000,
+            channels: vec![0],
+            max_pulse_delay_us: 500,
+        }
+    }
+}
+
+/// `[watchdog]`. Defaults: 1 ms period, 3 ticks, 3 ticks, 100 ms, 100 ms, 100 ms, 20 ms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WatchdogConfig {
+    /// rt-core's tick period, µs (100..=1000000).
+    pub tick_period_us: u32,
+    /// No valid StimTick for this many periods trips the watchdog (1..=10000).
+    pub timeout_ticks: u32,
+    /// A StimTick older than this many periods on arrival trips it (1..=10000).
+    pub stale_after_ticks: u32,
+    /// No STATUS from the stimulator for this long trips it, ms (20..=10000).
+    pub stimulator_timeout_ms: u32,
+    /// NMT start must show in STATUS within this, ms (20..=10000).
+    pub arm_confirm_ms: u32,
+    /// An Arm command older than this is refused, ms (1..=10000).
+    pub command_max_age_ms: u32,
+    /// Period of the publisher-liveness check, ms (1..=1000).
+    pub liveness_check_ms: u32,
+}
+
+impl Default for WatchdogConfig {
+    fn default() -> Self {
+        Self {
+            tick_period_us: 1000,
+            timeout_ticks: 3,
+            stale_after_ticks: 3,
+            stimulator_timeout_ms: 100,
+            arm_confirm_ms: 100,
+            command_max_age_ms: 100,
+            liveness_check_ms: 20,
+        }
+    }
+}
+
+/// `[force]` (required).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceConfig {
+    /// The muscle's maximal force, N (> 0, <= 10000): `ForceSample.force = force_n / max_n`.
+    pub max_n: f64,
+}
+
+/// `[telemetry]`. Defaults: no hlog, a TimingReport every 1000 ms, a DriverStatus every
+/// 100 ms (and on every state change), 8192 queued events.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TelemetryConfig {
+    /// HdrHistogram interval log; relative paths are relative to the working directory.
+    pub hlog: Option<PathBuf>,
+    /// Period of TimingReports and hlog intervals, ms (10..=60000).
+    pub report_period_ms: u64,
+    /// Period of DriverStatus, ms (10..=10000).
+    pub status_period_ms: u64,
+    /// Events the queue from the forward thread holds (256..=1048576).
+    pub queue_capacity: usize,
+}
+
+impl Default for TelemetryConfig {
+    fn default() -> Self {
+        Self {
+            hlog: None,
+            report_period_ms: 1000,
+            status_period_ms: 100,
+            queue_capacity: 8192,
+        }
+    }
+}
+
+/// `[ipc]`. Default prefix "fes".
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IpcConfig {
+    /// Service-name prefix.
+    pub prefix: String,
+}
+
+impl Default for IpcConfig {
+    fn default() -> Self {
+        Self {
+            prefix: DEFAULT_PREFIX.to_owned(),
+        }
+    }
+}
+
+/// Invalid configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// Not valid TOML for this schema (unknown key, wrong type, missing table...).
+    #[error("{path}: {source}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The cause (with line and column).
+        source: Box<toml::de::Error>,
+    },
+    /// Wrong `schema`.
+    #[error("schema is {found:?}, expected {SCHEMA:?}")]
+    Schema {
+        /// What the file says.
+        found: String,
+    },
+    /// A value is out of range.
+    #[error("{field} = {value} is out of range ({allowed})")]
+    Range {
+        /// Dotted key.
+        field: &'static str,
+        /// The value.
+        value: String,
+        /// What is allowed.
+        allowed: &'static str,
+    },
+    /// Node ids.
+    #[error("can.host_node / can.stim_node: {0}")]
+    Nodes(#[from] fes_can::NodeError),
+    /// The stimulator limits cannot be carried by CONFIG.
+    #[error("stimulator.{0}")]
+    StimLimits(#[from] fes_can::LimitsError),
+    /// The interlock limits.
+    #[error(transparent)]
+    Interlocks(#[from] LimitsError),
+    /// `[rt]` or `[bus_rt]`.
+    #[error(transparent)]
+    Rt(#[from] RtConfigError),
+    /// The prefix.
+    #[error("ipc.prefix: {0}")]
+    Prefix(#[from] ServiceError),
+}
+
+fn range<T: ToString>(
+    ok: bool,
+    field: &'static str,
+    value: T,
+    allowed: &'static str,
+) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::Range {
+            field,
+            value: value.to_string(),
+            allowed,
+        })
+    }
+}
+
+impl DriverConfig {
+    /// A configuration with every default, interface `iface` and maximal force `max_n`.
+    pub fn with_defaults(iface: &str, max_n: f64) -> Self {
+        Self {
+            schema: SCHEMA.to_owned(),
+            can: CanConfig {
+                iface: iface.to_owned(),
+                host_node: default_host_node(),
+                stim_node: default_stim_node(),
+                heartbeat_ms: default_heartbeat_ms(),
+                tx_retry_budget_us: default_retry_budget_us(),
+                tx_retry_interval_us: default_retry_interval_us(),
+                bringup_retry_ms: default_bringup_retry_ms(),
+            },
+            stimulator: StimulatorConfig::default(),
+            interlocks: InterlockConfig::default(),
+            watchdog: WatchdogConfig::default(),
+            force: ForceConfig { max_n },
+            rt: default_rt(),
+            bus_rt: None,
+            telemetry: TelemetryConfig::default(),
+            ipc: IpcConfig::default(),
+        }
+    }
+
+    /// Reads, parses and validates a file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text).map_err(|e| match e {
+            ConfigError::Parse { source, .. } => ConfigError::Parse {
+                path: path.to_path_buf(),
+                source,
+            },
+            other => other,
+        })
+    }
+
+    /// Parses and validates TOML text.
+    pub fn parse(text: &str) -> Result<Self, ConfigError> {
+        let config: Self = toml::from_str(text).map_err(|source| ConfigError::Parse {
+            path: PathBuf::new(),
+            source: Box::new(source),
+        })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The node ids.
+    pub fn nodes(&self) -> Result<Nodes, ConfigError> {
+        Ok(Nodes::new(self.can.host_node, self.can.stim_node)?)
+    }
+
+    /// The CONFIG limits.
+    pub fn stim_limits(&self) -> Result<StimLimits, ConfigError> {
+        let s = &self.stimulator;
+        range(
+            s.max_amplitude_ua.is_multiple_of(AMPLITUDE_STEP_UA),
+            "stimulator.max_amplitude_ua",
+            s.max_amplitude_ua,
+            "a multiple of 100 uA (the bus step)",
+        )?;
+        let max_amplitude_100ua = u16::try_from(s.max_amplitude_ua / AMPLITUDE_STEP_UA)
+            .map_err(|_| ConfigError::Range {
+                field: "stimulator.max_amplitude_ua",
+                value: s.max_amplitude_ua.to_string(),
+                allowed: "0..=150000",
+            })?;
+        let limits = StimLimits {
+            max_amplitude_100ua,
+            max_width_us: s.max_width_us,
+            min_ipi_ms: s.min_ipi_ms,
+            max_pulses: s.max_pulses,
+            rate_window_ms: s.rate_window_ms,
+            watchdog_ms: s.watchdog_ms,
+        };
+        limits.validate()?;
+        Ok(limits)
+    }
+
+    /// The interlock limits.
+    pub fn interlock_limits(&self) -> Result<InterlockLimits, ConfigError> {
+        let i = &self.interlocks;
+        let mut allowed_channels = 0u16;
+        for &c in &i.channels {
+            range(c <= 15, "interlocks.channels", c, "0..=15")?;
+            allowed_channels |= 1 << c;
+        }
+        range(
+            (1..=1000).contains(&i.max_width_us),
+            "interlocks.max_width_us",
+            i.max_width_us,
+            "1..=1000 (the bus range)",
+        )?;
+        let limits = InterlockLimits {
+            min_ipi_ns: u64::from(i.min_ipi_us) * US,
+            max_pulses: i.max_pulses,
+            rate_window_ns: u64::from(i.rate_window_ms) * MS,
+            max_amplitude_ua: i.max_amplitude_ua,
+            max_width_us: i.max_width_us,
+            max_charge_nc: i.max_charge_nc,
+            allowed_channels,
+            max_pulse_delay_ns: u64::from(i.max_pulse_delay_us) * US,
+        };
+        range(
+            i.max_pulse_delay_us >= 1,
+            "interlocks.max_pulse_delay_us",
+            i.max_pulse_delay_us,
+            ">= 1",
+        )?;
+        limits.validate()?;
+        Ok(limits)
+    }
+
+    /// Checks every value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.schema != SCHEMA {
+            return Err(ConfigError::Schema {
+                found: self.schema.clone(),
+            });
+        }
+        let c = &self.can;
+        range(
+            !c.iface.is_empty() && c.iface.len() < 16 && !c.iface.contains(['/', ' ']),
+            "can.iface",
+            &c.iface,
+            "an interface name of 1..=15 characters",
+        )?;
+        self.nodes()?;
+        range(
+            (1..=1000).contains(&c.heartbeat_ms),
+            "can.heartbeat_ms",
+            c.heartbeat_ms,
+            "1..=1000",
+        )?;
+        range(
+            c.tx_retry_budget_us <= 1000,
+            "can.tx_retry_budget_us",
+            c.tx_retry_budget_us,
+            "0..=1000",
+        )?;
+        range(
+            c.tx_retry_budget_us == 0
+                || (10..=c.tx_retry_budget_us).contains(&c.tx_retry_interval_us),
+            "can.tx_retry_interval_us",
+            c.tx_retry_interval_us,
+            "10..=tx_retry_budget_us",
+        )?;
+        range(
+            (50..=60_000).contains(&c.bringup_retry_ms),
+            "can.bringup_retry_ms",
+            c.bringup_retry_ms,
+            "50..=60000",
+        )?;
+        let limits = self.stim_limits()?;
+        range(
+            u32::from(limits.watchdog_ms) >= 2 * u32::from(c.heartbeat_ms),
+            "stimulator.watchdog_ms",
+            limits.watchdog_ms,
+            ">= 2 x can.heartbeat_ms",
+        )?;
+        self.interlock_limits()?;
+        let w = &self.watchdog;
+        range(
+            (100..=1_000_000).contains(&w.tick_period_us),
+            "watchdog.tick_period_us",
+            w.tick_period_us,
+            "100..=1000000",
+        )?;
+        range(
+            (1..=10_000).contains(&w.timeout_ticks),
+            "watchdog.timeout_ticks",
+            w.timeout_ticks,
+            "1..=10000",
+        )?;
+        range(
+            (1..=10_000).contains(&w.stale_after_ticks),
+            "watchdog.stale_after_ticks",
+            w.stale_after_ticks,
+            "1..=10000",
+        )?;
+        range(
+            (20..=10_000).contains(&w.stimulator_timeout_ms),
+            "watchdog.stimulator_timeout_ms",
+            w.stimulator_timeout_ms,
+            "20..=10000",
+        )?;
+        range(
+            (20..=10_000).contains(&w.arm_confirm_ms),
+            "watchdog.arm_confirm_ms",
+            w.arm_confirm_ms,
+            "20..=10000",
+        )?;
+        range(
+            (1..=10_000).contains(&w.command_max_age_ms),
+            "watchdog.command_max_age_ms",
+            w.command_max_age_ms,
+            "1..=10000",
+        )?;
+        range(
+            (1..=1000).contains(&w.liveness_check_ms),
+            "watchdog.liveness_check_ms",
+            w.liveness_check_ms,
+            "1..=1000",
+        )?;
+        range(
+            self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
+            "force.max_n",
+            self.force.max_n,
+            "> 0 and <= 10000 N",
+        )?;
+        self.rt.validate()?;
+        if let Some(b) = &self.bus_rt {
+            b.validate()?;
+        }
+        let t = &self.telemetry;
+        range(
+            (10..=60_000).contains(&t.report_period_ms),
+            "telemetry.report_period_ms",
+            t.report_period_ms,
+            "10..=60000",
+        )?;
+        range(
+            (10..=10_000).contains(&t.status_period_ms),
+            "telemetry.status_period_ms",
+            t.status_period_ms,
+            "10..=10000",
+        )?;
+        range(
+            (256..=1 << 20).contains(&t.queue_capacity),
+            "telemetry.queue_capacity",
+            t.queue_capacity,
+            "256..=1048576",
+        )?;
+        validate_prefix(&self.ipc.prefix)?;
+        Ok(())
+    }
+
+    /// The forward path's settings (call after [`Self::validate`]).
+    pub fn forward_settings(&self) -> Result<ForwardSettings, ConfigError> {
+        let w = &self.watchdog;
+        let period_ns = u64::from(w.tick_period_us) * US;
+        Ok(ForwardSettings {
+            nodes: self.nodes()?,
+            stim_limits: self.stim_limits()?,
+            interlocks: self.interlock_limits()?,
+            heartbeat_ns: u64::from(self.can.heartbeat_ms) * MS,
+            tick_timeout_ns: u64::from(w.timeout_ticks) * period_ns,
+            stale_after_ns: u64::from(w.stale_after_ticks) * period_ns,
+            stimulator_timeout_ns: u64::from(w.stimulator_timeout_ms) * MS,
+            arm_confirm_ns: u64::from(w.arm_confirm_ms) * MS,
+            command_max_age_ns: u64::from(w.command_max_age_ms) * MS,
+            bringup_retry_ns: u64::from(self.can.bringup_retry_ms) * MS,
+            max_wait_ns: period_ns,
+        })
+    }
+
+    /// The transmit retry policy.
+    pub fn retry_policy(&self) -> RetryPolicy {
+        RetryPolicy {
+            budget_ns: u64::from(self.can.tx_retry_budget_us) * US,
+            interval_ns: u64::from(self.can.tx_retry_interval_us) * US,
+        }
+    }
+
+    /// The configuration as TOML.
+    pub fn to_toml(&self) -> String {
+        // Every field is a TOML-representable value (strings, integers, finite floats,
+        // tables, arrays); serialisation of this type cannot fail.
+        toml::to_string_pretty(self).expect("DriverConfig serialises to TOML")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MIN: &str = "schema = \"fes-stim-driver/1\"\n[can]\niface = \"vcan0\"\n[force]\nmax_n = 40.0\n";
+
+    #[test]
+    fn minimal_file_takes_the_documented_defaults() {
+        let c = DriverConfig::parse(MIN).unwrap();
+        assert_eq!(c, DriverConfig::with_defaults("vcan0", 40.0));
+        let f = c.forward_settings().unwrap();
+        assert_eq!(f.tick_timeout_ns, 3_000_000);
+        assert_eq!(f.stale_after_ns, 3_000_000);
+        assert_eq!(f.heartbeat_ns, 10_000_000);
+        assert_eq!(f.stim_limits, StimLimits::DEFAULT);
+        assert_eq!(f.interlocks.min_ipi_ns, 2_000_000);
+        assert_eq!(f.interlocks.allowed_channels, 1);
+        assert_eq!(c.rt.priority, 85);
+    }
+
+    #[test]
+    fn the_printed_example_parses_back() {
+        let c = DriverConfig::with_defaults("can0", 12.5);
+        assert_eq!(DriverConfig::parse(&c.to_toml()).unwrap(), c);
+    }
+
+    fn err(extra: &str) -> String {
+        DriverConfig::parse(&format!("{MIN}{extra}"))
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn bad_values_name_their_key() {
+        assert!(err("[watchdog]\ntimeout_ticks = 0\n").contains("watchdog.timeout_ticks"));
+        assert!(
+            err("[stimulator]\nmax_amplitude_ua = 20050\n").contains("stimulator.max_amplitude_ua")
+        );
+        assert!(err("[stimulator]\nmax_width_us = 2000\n").contains("max_width"));
+        assert!(err("[stimulator]\nwatchdog_ms = 19\n").contains("watchdog"));
+        assert!(err("[interlocks]\nchannels = []\n").contains("channels"));
+        assert!(err("[interlocks]\nchannels = [16]\n").contains("interlocks.channels"));
+        assert!(err("[interlocks]\nmax_pulses = 1001\n").contains("max_pulses"));
+        assert!(err("[ipc]\nprefix = \"/x\"\n").contains("ipc.prefix"));
+        assert!(err("[telemetry]\nqueue_capacity = 3\n").contains("queue_capacity"));
+        assert!(err("[rt]\npriority = 0\n").contains("rt.priority"));
+        assert!(err("[can]\n").contains("duplicate") || err("[can]\n").contains("can"));
+        let e = DriverConfig::parse(
+            "schema = \"fes-stim-driver/1\"\n[can]\niface = \"vcan0\"\nstim_node = 1\n[force]\nmax_n = 1.0\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("both use node id"), "{e}");
+        let e = DriverConfig::parse("schema = \"fes-stim-driver/1\"\n[can]\niface = \"vcan0\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("force"), "{e}");
+        let e = DriverConfig::parse(&MIN.replace("/1", "/2")).unwrap_err().to_string();
+        assert!(e.contains("schema"), "{e}");
+        let e = DriverConfig::parse(&format!("{MIN}bogus = 1\n")).unwrap_err().to_string();
+        assert!(e.contains("bogus"), "{e}");
+        let e = DriverConfig::parse(&MIN.replace("40.0", "-1.0")).unwrap_err().to_string();
+        assert!(e.contains("force.max_n"), "{e}");
+    }
+}

@@ -1,0 +1,230 @@
+//! Why the driver entered its safe state ([`Fault`]) and why it refused to arm
+//! ([`ArmRefusal`]), with the codes `DriverStatus.fault_code` carries.
+//!
+//! Codes: a stimulator EMCY is reported with the stimulator's own CANopen code; the
+//! driver's own conditions use the manufacturer-specific range 0xFF21..=0xFF2F (the bus
+//! protocol's own codes stop at 0xFF0B; these never appear on the bus).
+
+use fes_can::ErrorCode;
+
+/// A condition that stops stimulation: NMT stop on the bus, the driver's safe state, and
+/// nothing forwarded until an explicit re-arm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// No StimTick for the watchdog time.
+    TickTimeout {
+        /// Time since the last valid tick, ns.
+        silent_ns: u64,
+    },
+    /// The StimTick publisher's iceoryx2 node is dead (its process died).
+    PublisherDead,
+    /// The StimTick service has no publisher any more.
+    PublisherGone,
+    /// A StimTick arrived older than the staleness limit.
+    StaleTick {
+        /// Its age on arrival (publish to receive), ns.
+        age_ns: u64,
+    },
+    /// rt-core published its final tick (it is stopping).
+    GeneratorStopped,
+    /// The CAN interface is down (or gone).
+    LinkDown,
+    /// The CAN controller went bus-off.
+    BusOff,
+    /// The stimulator raised an emergency.
+    StimulatorEmcy {
+        /// Its code.
+        code: ErrorCode,
+        /// Its detail field.
+        detail: u16,
+    },
+    /// No STATUS from the stimulator for its timeout.
+    StimulatorSilent {
+        /// Time since the last STATUS, ns.
+        silent_ns: u64,
+    },
+    /// The stimulator restarted (boot-up heartbeat) or lost our configuration.
+    StimulatorReset,
+    /// After NMT start the stimulator did not report operational in time, or it left
+    /// operational by itself.
+    StimulatorNotOperational,
+    /// The supervisor ordered a safe stop.
+    SafeStopCommand,
+    /// A bus event was lost (the queue from the receive thread overflowed).
+    BusEventsLost,
+    /// A frame could not be written for a reason other than a full queue or a down link.
+    TxFailed {
+        /// errno.
+        errno: i32,
+    },
+    /// The stimulator refused our CONFIG (its EMCY detail names the limit).
+    ConfigRefused {
+        /// Index of the offending limit (see docs/can-protocol.md).
+        detail: u16,
+    },
+}
+
+impl Fault {
+    /// The code reported in `DriverStatus.fault_code`.
+    pub const fn code(&self) -> u16 {
+        match self {
+            Fault::StimulatorEmcy { code, .. } => code.raw(),
+            Fault::ConfigRefused { .. } => ErrorCode::ConfigInvalid.raw(),
+            Fault::TickTimeout { .. } => 0xFF21,
+            Fault::PublisherDead => 0xFF22,
+            Fault::PublisherGone => 0xFF23,
+            Fault::StaleTick { .. } => 0xFF24,
+            Fault::GeneratorStopped => 0xFF25,
+            Fault::LinkDown => 0xFF26,
+            Fault::BusOff => 0xFF27,
+            Fault::StimulatorSilent { .. } => 0xFF28,
+            Fault::StimulatorReset => 0xFF29,
+            Fault::StimulatorNotOperational => 0xFF2A,
+            Fault::SafeStopCommand => 0xFF2B,
+            Fault::BusEventsLost => 0xFF2C,
+            Fault::TxFailed { .. } => 0xFF2D,
+        }
+    }
+
+    /// True for the watchdog conditions counted in `DriverStatus.watchdog_trips`: the
+    /// generator side (ticks missing, stale, its node dead or gone) and the stimulator side
+    /// (silent).
+    pub const fn is_watchdog(&self) -> bool {
+        matches!(
+            self,
+            Fault::TickTimeout { .. }
+                | Fault::PublisherDead
+                | Fault::PublisherGone
+                | Fault::StaleTick { .. }
+                | Fault::StimulatorSilent { .. }
+        )
+    }
+}
+
+impl core::fmt::Display for Fault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let ms = |ns: u64| ns as f64 / 1e6;
+        match *self {
+            Fault::TickTimeout { silent_ns } => {
+                write!(f, "watchdog: no StimTick for {:.3} ms", ms(silent_ns))
+            }
+            Fault::PublisherDead => f.write_str("watchdog: the StimTick publisher's node is dead"),
+            Fault::PublisherGone => f.write_str("watchdog: the StimTick publisher is gone"),
+            Fault::StaleTick { age_ns } => {
+                write!(f, "watchdog: StimTick {:.3} ms old on arrival", ms(age_ns))
+            }
+            Fault::GeneratorStopped => f.write_str("the generator published its final tick"),
+            Fault::LinkDown => f.write_str("CAN interface down"),
+            Fault::BusOff => f.write_str("CAN controller bus-off"),
+            Fault::StimulatorEmcy { code, detail } => write!(
+                f,
+                "stimulator emergency {code} ({:#06x}), detail {detail}",
+                code.raw()
+            ),
+            Fault::StimulatorSilent { silent_ns } => {
+                write!(f, "no STATUS from the stimulator for {:.1} ms", ms(silent_ns))
+            }
+            Fault::StimulatorReset => f.write_str("the stimulator restarted or lost its configuration"),
+            Fault::StimulatorNotOperational => {
+                f.write_str("the stimulator is not operational (NMT start not confirmed, or it left)")
+            }
+            Fault::SafeStopCommand => f.write_str("safe stop ordered by the supervisor"),
+            Fault::BusEventsLost => f.write_str("bus events lost (receive queue overflow)"),
+            Fault::TxFailed { errno } => write!(f, "CAN write failed (errno {errno})"),
+            Fault::ConfigRefused { detail } => {
+                write!(f, "the stimulator refused the CONFIG (limit index {detail})")
+            }
+        }
+    }
+}
+
+/// Why an Arm command was refused (the driver stays as it was).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ArmRefusal {
+    /// The stimulator is still being brought up (or refused the configuration).
+    NotConfigured,
+    /// The CAN interface is down, or a stop is still waiting to be sent.
+    LinkDown,
+    /// No STATUS from the stimulator recently.
+    StimulatorSilent,
+    /// The stimulator's STATUS does not show our configuration.
+    StimulatorConfigMismatch {
+        /// The configuration id the stimulator reports.
+        reported: u8,
+        /// Ours.
+        expected: u8,
+    },
+    /// No valid StimTick within the watchdog time.
+    NoTicks,
+    /// The StimTick publisher is not alive.
+    PublisherNotAlive,
+    /// The generator has published its final tick.
+    GeneratorStopped,
+    /// The command was older than the age limit, from the future, or not newer than the
+    /// last one.
+    StaleCommand,
+    /// The NMT start could not be written.
+    TxFailed,
+}
+
+impl core::fmt::Display for ArmRefusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            ArmRefusal::NotConfigured => f.write_str("the stimulator is not configured yet"),
+            ArmRefusal::LinkDown => f.write_str("the CAN link is down"),
+            ArmRefusal::StimulatorSilent => f.write_str("no recent STATUS from the stimulator"),
+            ArmRefusal::StimulatorConfigMismatch { reported, expected } => write!(
+                f,
+                "the stimulator reports configuration {reported}, expected {expected}"
+            ),
+            ArmRefusal::NoTicks => f.write_str("no valid StimTick within the watchdog time"),
+            ArmRefusal::PublisherNotAlive => f.write_str("the StimTick publisher is not alive"),
+            ArmRefusal::GeneratorStopped => f.write_str("the generator has stopped (final tick)"),
+            ArmRefusal::StaleCommand => {
+                f.write_str("the command is stale, from the future, or not newer than the last")
+            }
+            ArmRefusal::TxFailed => f.write_str("NMT start could not be written"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_are_distinct_and_in_the_driver_range() {
+        let faults = [
+            Fault::TickTimeout { silent_ns: 0 },
+            Fault::PublisherDead,
+            Fault::PublisherGone,
+            Fault::StaleTick { age_ns: 0 },
+            Fault::GeneratorStopped,
+            Fault::LinkDown,
+            Fault::BusOff,
+            Fault::StimulatorSilent { silent_ns: 0 },
+            Fault::StimulatorReset,
+            Fault::StimulatorNotOperational,
+            Fault::SafeStopCommand,
+            Fault::BusEventsLost,
+            Fault::TxFailed { errno: 5 },
+        ];
+        let mut codes: Vec<u16> = faults.iter().map(Fault::code).collect();
+        assert!(codes.iter().all(|c| (0xFF21..=0xFF2F).contains(c)));
+        codes.sort_unstable();
+        codes.dedup();
+        assert_eq!(codes.len(), faults.len());
+        // None collides with a bus protocol code.
+        for c in codes {
+            assert_eq!(ErrorCode::from_raw(u64::from(c)), None);
+        }
+        assert_eq!(
+            Fault::StimulatorEmcy {
+                code: ErrorCode::HeartbeatLost,
+                detail: 3
+            }
+            .code(),
+            0x8130
+        );
+    }
+}

@@ -1,0 +1,800 @@
+//! [`ForwardPath`]: the driver's whole decision logic, without I/O threads or clocks.
+//!
+//! StimTicks, commands, bus events and the publisher's liveness go in, each with the
+//! current CLOCK_MONOTONIC time; frames go out through a [`CanTx`] and reports through an
+//! [`EventSink`]. Nothing here allocates, locks, logs or reads a clock, so the same code
+//! runs on the real-time thread, in the unit tests on simulated time, and in the
+//! benchmark on a counting sink.
+//!
+//! Two orthogonal state variables:
+//!
+//! * **configuration** of the stimulator (while not armed): NMT enter pre-operational; on
+//!   a STATUS showing pre-operational, both CONFIG pages with a configuration id different
+//!   from the one the stimulator reports; on a STATUS showing that id, confirmed. No
+//!   confirmation within the retry time, or a stimulator that restarts or loses the
+//!   configuration, starts it over; an EMCY `config_invalid` ends it (refused).
+//! * **mode**: disarmed, armed, or the safe state. Only an Arm command arms (after checking
+//!   its preconditions: see [`crate::fault::ArmRefusal`]); every fault while armed sends NMT
+//!   stop and enters the safe state, which only an Arm command leaves. The driver never
+//!   re-arms itself.
+//!
+//! While armed, the watchdog trips on: no valid StimTick for `tick_timeout`, a StimTick
+//! older than `stale_after` on arrival, the final tick, the publisher's node dead or gone,
+//! no STATUS for `stimulator_timeout`, NMT start not confirmed within `arm_confirm`; and
+//! the bus side trips on an EMCY, bus-off, the link going down, a failed write, and lost bus
+//! events. An NMT stop that could not be written is retried until it is; while disarmed, a
+//! STATUS that still shows the stimulator operational gets another NMT stop.
+
+use fes_can::{ErrorCode, NmtState, Nodes, StimLimits, StimState, Status};
+use rt_core::msg::{Contract, DriverCommand, DriverCommandKind, StimTick};
+
+use crate::event::{
+    BringUp, BusErrorKind, BusEvent, Counters, DriverEvent, DriverState, EventSink, FrameKind,
+    Liveness, stimulator_device_state,
+};
+use crate::fault::{ArmRefusal, Fault};
+use crate::interlock::{InterlockLimits, Interlocks, PulseCommand, Verdict};
+use crate::output::{ControlFrame, Disarmed, Output, SendError};
+use crate::tx::{CanTx, TxError};
+
+/// Timing and identity settings of the forward path (from the configuration file).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ForwardSettings {
+    /// Node ids on the bus.
+    pub nodes: Nodes,
+    /// The run's limits sent to the stimulator in CONFIG.
+    pub stim_limits: StimLimits,
+    /// The driver's own interlocks.
+    pub interlocks: InterlockLimits,
+    /// Host heartbeat period, ns.
+    pub heartbeat_ns: u64,
+    /// No valid StimTick for this long trips the watchdog, ns.
+    pub tick_timeout_ns: u64,
+    /// A StimTick older than this on arrival (publish to receive) trips the watchdog, ns.
+    pub stale_after_ns: u64,
+    /// No STATUS from the stimulator for this long trips (and refuses an Arm), ns.
+    pub stimulator_timeout_ns: u64,
+    /// After NMT start the stimulator must report operational within this, ns.
+    pub arm_confirm_ns: u64,
+    /// An Arm command older than this is refused, ns.
+    pub command_max_age_ns: u64,
+    /// Bringing the stimulator up starts over when a step is not confirmed in this, ns.
+    pub bringup_retry_ns: u64,
+    /// Longest sleep of the loop, ns: bus events and liveness changes are acted on at the
+    /// latest this long after they arrive.
+    pub max_wait_ns: u64,
+}
+
+/// A pending NMT stop is not re-sent more often than this, ns.
+const STOP_RESEND_NS: u64 = 10_000_000;
+/// A command may be this far in the future of the driver's clock (same host), ns.
+const COMMAND_FUTURE_TOLERANCE_NS: u64 = 1_000_000;
+
+/// Progress of configuring the stimulator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ConfigState {
+    /// Nothing sent yet.
+    Idle,
+    /// NMT enter pre-operational sent at `sent_ns`; waiting for a pre-operational STATUS.
+    Probing { sent_ns: u64 },
+    /// CONFIG `id` sent at `sent_ns`; waiting for STATUS to show it.
+    Configuring { id: u8, sent_ns: u64 },
+    /// Applied and confirmed.
+    Confirmed { id: u8 },
+    /// Refused by the stimulator.
+    Refused,
+}
+
+/// Armed or not.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Disarmed,
+    Armed { since_ns: u64, confirmed: bool },
+    Safe(Fault),
+}
+
+/// The forward path (see the module documentation).
+#[derive(Debug)]
+pub struct ForwardPath<T: CanTx> {
+    settings: ForwardSettings,
+    interlocks: Interlocks,
+    output: Option<Output<T>>,
+    config: ConfigState,
+    mode: Mode,
+    counters: Counters,
+    link_up: bool,
+    stop_pending: bool,
+    last_stop_ns: u64,
+    started: bool,
+    next_heartbeat_ns: u64,
+    last_valid_tick_ns: Option<u64>,
+    generator_stopped: bool,
+    liveness: Liveness,
+    last_status: Option<(Status, u64)>,
+    last_command_t_ns: u64,
+}
+
+impl<T: CanTx> ForwardPath<T> {
+    /// A forward path writing to `tx`, disarmed, not yet started (call [`Self::start`]).
+    pub fn new(settings: ForwardSettings, tx: T) -> Self {
+        Self {
+            interlocks: Interlocks::new(settings.interlocks),
+            output: Some(Output::Disarmed(Disarmed::new(tx, settings.nodes))),
+            config: ConfigState::Idle,
+            mode: Mode::Disarmed,
+            counters: Counters {
+                state: DriverState::Starting.device_state() as u8,
+                stimulator_state: rt_core::msg::DeviceState::Unknown as u8,
+                ..Counters::default()
+            },
+            settings,
+            link_up: true,
+            stop_pending: false,
+            last_stop_ns: 0,
+            started: false,
+            next_heartbeat_ns: 0,
+            last_valid_tick_ns: None,
+            generator_stopped: false,
+            liveness: Liveness::Unknown,
+            last_status: None,
+            last_command_t_ns: 0,
+        }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &ForwardSettings {
+        &self.settings
+    }
+
+    /// The counters.
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// The transmit side.
+    pub fn tx(&self) -> &T {
+        match &self.output {
+            Some(o) => o.tx(),
+            None => unreachable!("the output is only taken within a transition"),
+        }
+    }
+
+    /// The driver's state.
+    pub fn state(&self) -> DriverState {
+        match self.mode {
+            Mode::Armed { .. } => DriverState::Armed,
+            Mode::Safe(fault) => DriverState::SafeState(fault),
+            Mode::Disarmed => match self.config {
+                ConfigState::Confirmed { .. } => DriverState::Disarmed,
+                ConfigState::Refused => DriverState::ConfigRefused,
+                _ => DriverState::Starting,
+            },
+        }
+    }
+
+    /// True when armed.
+    pub fn is_armed(&self) -> bool {
+        matches!(self.mode, Mode::Armed { .. })
+    }
+
+    /// The confirmed configuration id, if any.
+    pub fn config_id(&self) -> Option<u8> {
+        match self.config {
+            ConfigState::Confirmed { id } => Some(id),
+            _ => None,
+        }
+    }
+
+    /// Starts: boot-up heartbeat, then NMT enter pre-operational (bringing the stimulator
+    /// up). Call once, before anything else.
+    pub fn start(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        let before = self.state();
+        self.started = true;
+        self.control(ControlFrame::Heartbeat(NmtState::BootUp), now_ns, ev);
+        self.next_heartbeat_ns = now_ns + self.settings.heartbeat_ns;
+        self.probe(now_ns, ev);
+        self.finish(before, ev);
+    }
+
+    /// Handles one StimTick received at `now_ns`.
+    pub fn on_tick(&mut self, tick: &StimTick, now_ns: u64, ev: &mut impl EventSink) {
+        let before = self.state();
+        self.counters.ticks_received += 1;
+        let age_ns = now_ns.saturating_sub(tick.t_publish_ns);
+        if age_ns > self.settings.stale_after_ns {
+            self.counters.ticks_refused += 1;
+            ev.emit(DriverEvent::StaleTick {
+                seq: tick.seq,
+                age_ns,
+            });
+            if self.is_armed() {
+                self.trip(Fault::StaleTick { age_ns }, now_ns, ev);
+            }
+            self.finish(before, ev);
+            return;
+        }
+        let assessment = self.interlocks.assess(tick, now_ns);
+        if assessment.lost_ticks > 0 {
+            self.counters.ticks_lost += assessment.lost_ticks;
+            ev.emit(DriverEvent::TicksLost {
+                seq: tick.seq,
+                count: assessment.lost_ticks,
+            });
+        }
+        if let Verdict::Rejected { violation, pulse } = assessment.verdict
+            && violation.is_stream_fault()
+        {
+            self.counters.ticks_refused += 1;
+            self.counters.pulses_rejected += u64::from(pulse);
+            ev.emit(DriverEvent::Rejected {
+                tick_seq: tick.seq,
+                violation,
+                pulse,
+            });
+            self.finish(before, ev);
+            return;
+        }
+        self.last_valid_tick_ns = Some(now_ns);
+        self.generator_stopped = tick.has(StimTick::FLAG_FINAL);
+        if self.generator_stopped && self.is_armed() {
+            self.trip(Fault::GeneratorStopped, now_ns, ev);
+        }
+        match assessment.verdict {
+            Verdict::NoPulse => {}
+            Verdict::Rejected { violation, pulse } => {
+                self.counters.pulses_rejected += u64::from(pulse);
+                ev.emit(DriverEvent::Rejected {
+                    tick_seq: tick.seq,
+                    violation,
+                    pulse,
+                });
+            }
+            Verdict::Pulse(command) => self.forward(&command, now_ns, ev),
+        }
+        self.finish(before, ev);
+    }
+
+    /// Sends an accepted pulse if armed.
+    fn forward(&mut self, command: &PulseCommand, now_ns: u64, ev: &mut impl EventSink) {
+        let result = match self.output.as_mut() {
+            Some(Output::Armed(armed)) => armed.send_pulse(command),
+            _ => {
+                self.counters.pulses_not_armed += 1;
+                return;
+            }
+        };
+        match result {
+            Ok(sent) => {
+                self.counters.pulses_sent += 1;
+                self.counters.tx_retries += u64::from(sent.done.retries);
+                self.counters.last_pulse_ns = sent.done.written_ns.max(now_ns);
+                self.counters.last_pulse_tick_seq = command.tick_seq;
+                ev.emit(DriverEvent::PulseSent {
+                    tick_seq: command.tick_seq,
+                    pulse_seq: sent.pulse.seq,
+                    t_publish_ns: command.t_publish_ns,
+                    written_ns: sent.done.written_ns,
+                    write_ns: sent.done.write_ns,
+                    retries: sent.done.retries,
+                });
+            }
+            Err(error) => self.tx_problem(FrameKind::Pulse, error, now_ns, ev),
+        }
+    }
+
+    /// Counts and reports a failed write; a down link or a hard failure trips.
+    fn tx_problem(
+        &mut self,
+        frame: FrameKind,
+        error: SendError,
+        now_ns: u64,
+        ev: &mut impl EventSink,
+    ) {
+        self.counters.can_tx_errors += 1;
+        ev.emit(DriverEvent::TxProblem { frame, error });
+        match error {
+            SendError::Tx(TxError::Dropped { attempts }) => {
+                self.counters.tx_retries += u64::from(attempts.saturating_sub(1));
+            }
+            SendError::Tx(TxError::LinkDown { .. }) => {
+                self.link_up = false;
+                if self.is_armed() {
+                    self.trip(Fault::LinkDown, now_ns, ev);
+                }
+            }
+            SendError::Tx(TxError::Failed { errno }) => {
+                if self.is_armed() {
+                    self.trip(Fault::TxFailed { errno }, now_ns, ev);
+                }
+            }
+            SendError::Encode(_) => {}
+        }
+    }
+
+    /// Sends a control frame, handling failures.
+    fn control(&mut self, frame: ControlFrame, now_ns: u64, ev: &mut impl EventSink) -> bool {
+        let result = match self.output.as_mut() {
+            Some(o) => o.send_control(&frame),
+            None => unreachable!("the output is only taken within a transition"),
+        };
+        match result {
+            Ok(done) => {
+                self.counters.tx_retries += u64::from(done.retries);
+                true
+            }
+            Err(error) => {
+                let kind = match frame {
+                    ControlFrame::Heartbeat(_) => FrameKind::Heartbeat,
+                    ControlFrame::Config(_) => FrameKind::Config,
+                    ControlFrame::Stop | ControlFrame::EnterPreOperational => FrameKind::Nmt,
+                };
+                self.tx_problem(kind, error, now_ns, ev);
+                false
+            }
+        }
+    }
+
+    /// Enters the safe state: NMT stop (retried later if it cannot be written now).
+    fn trip(&mut self, fault: Fault, now_ns: u64, ev: &mut impl EventSink) {
+        self.counters.trips += 1;
+        if fault.is_watchdog() {
+            self.counters.watchdog_trips += 1;
+        }
+        self.counters.fault_code = fault.code();
+        self.mode = Mode::Safe(fault);
+        let stop_sent = self.send_stop(now_ns, ev);
+        ev.emit(DriverEvent::Tripped { fault, stop_sent });
+    }
+
+    /// Disarms the output (if armed) with NMT stop, or sends NMT stop; remembers a stop
+    /// that could not be written.
+    fn send_stop(&mut self, now_ns: u64, ev: &mut impl EventSink) -> bool {
+        self.last_stop_ns = now_ns;
+        let result = match self.output.take() {
+            Some(Output::Armed(armed)) => {
+                let (disarmed, result) = armed.disarm();
+                self.output = Some(Output::Disarmed(disarmed));
+                result.map(|_| ())
+            }
+            Some(Output::Disarmed(mut d)) => {
+                let result = d.send_control(&ControlFrame::Stop).map(|_| ());
+                self.output = Some(Output::Disarmed(d));
+                result
+            }
+            None => unreachable!("the output is only taken within a transition"),
+        };
+        match result {
+            Ok(()) => {
+                self.stop_pending = false;
+                true
+            }
+            Err(error) => {
+                self.stop_pending = true;
+                self.counters.can_tx_errors += 1;
+                if let SendError::Tx(TxError::LinkDown { .. }) = error {
+                    self.link_up = false;
+                }
+                ev.emit(DriverEvent::TxProblem {
+                    frame: FrameKind::Nmt,
+                    error,
+                });
+                false
+            }
+        }
+    }
+
+    /// Handles one command received at `now_ns`. Stops are obeyed whatever their age;
+    /// an Arm must be fresh and newer than the last command.
+    pub fn on_command(&mut self, command: &DriverCommand, now_ns: u64, ev: &mut impl EventSink) {
+        let before = self.state();
+        if let Err(error) = command.validate() {
+            self.counters.commands_refused += 1;
+            ev.emit(DriverEvent::CommandInvalid {
+                seq: command.seq,
+                error,
+            });
+            self.finish(before, ev);
+            return;
+        }
+        let fresh = command.t_ns <= now_ns + COMMAND_FUTURE_TOLERANCE_NS
+            && now_ns.saturating_sub(command.t_ns) <= self.settings.command_max_age_ns
+            && command.t_ns > self.last_command_t_ns;
+        if fresh {
+            // Only a command in its time window sets the order (a bogus future time must not
+            // block the next genuine one).
+            self.last_command_t_ns = command.t_ns;
+        }
+        match command.kind() {
+            Ok(DriverCommandKind::Arm) => {
+                if fresh {
+                    self.try_arm(command.seq, now_ns, ev);
+                } else {
+                    self.refuse_arm(command.seq, ArmRefusal::StaleCommand, ev);
+                }
+            }
+            Ok(DriverCommandKind::Disarm) => {
+                self.send_stop(now_ns, ev);
+                // A disarm never clears the safe state (only an Arm does).
+                if self.is_armed() {
+                    self.mode = Mode::Disarmed;
+                }
+                ev.emit(DriverEvent::Disarmed {
+                    command_seq: command.seq,
+                });
+            }
+            Ok(DriverCommandKind::SafeStop) => self.trip(Fault::SafeStopCommand, now_ns, ev),
+            // validate() above decoded the kind already.
+            Err(_) => {}
+        }
+        self.finish(before, ev);
+    }
+
+    fn refuse_arm(&mut self, command_seq: u64, refusal: ArmRefusal, ev: &mut impl EventSink) {
+        self.counters.commands_refused += 1;
+        ev.emit(DriverEvent::ArmRefused {
+            command_seq,
+            refusal,
+        });
+    }
+
+    /// The first unmet precondition of arming, if any.
+    fn arm_refusal(&self, now_ns: u64) -> Option<ArmRefusal> {
+        let s = &self.settings;
+        let Some(expected) = self.config_id() else {
+            return Some(ArmRefusal::NotConfigured);
+        };
+        if !self.link_up || self.stop_pending {
+            return Some(ArmRefusal::LinkDown);
+        }
+        let Some((status, at)) = self.last_status else {
+            return Some(ArmRefusal::StimulatorSilent);
+        };
+        if now_ns.saturating_sub(at) > s.stimulator_timeout_ns {
+            return Some(ArmRefusal::StimulatorSilent);
+        }
+        if status.config_id != expected {
+            return Some(ArmRefusal::StimulatorConfigMismatch {
+                reported: status.config_id,
+                expected,
+            });
+        }
+        match self.last_valid_tick_ns {
+            Some(t) if now_ns.saturating_sub(t) <= s.tick_timeout_ns => {}
+            _ => return Some(ArmRefusal::NoTicks),
+        }
+        if self.liveness != Liveness::Alive {
+            return Some(ArmRefusal::PublisherNotAlive);
+        }
+        if self.generator_stopped {
+            return Some(ArmRefusal::GeneratorStopped);
+        }
+        None
+    }
+
+    fn try_arm(&mut self, command_seq: u64, now_ns: u64, ev: &mut impl EventSink) {
+        if self.is_armed() {
+            return;
+        }
+        if let Some(refusal) = self.arm_refusal(now_ns) {
+            self.refuse_arm(command_seq, refusal, ev);
+            return;
+        }
+        match self.output.take() {
+            Some(Output::Disarmed(disarmed)) => match disarmed.arm() {
+                Ok(armed) => {
+                    self.output = Some(Output::Armed(armed));
+                    self.mode = Mode::Armed {
+                        since_ns: now_ns,
+                        confirmed: false,
+                    };
+                    self.interlocks.resync_sequence();
+                    ev.emit(DriverEvent::Armed { command_seq });
+                }
+                Err((disarmed, error)) => {
+                    self.output = Some(Output::Disarmed(disarmed));
+                    self.tx_problem(FrameKind::Nmt, error, now_ns, ev);
+                    self.refuse_arm(command_seq, ArmRefusal::TxFailed, ev);
+                }
+            },
+            other => self.output = other,
+        }
+    }
+
+    /// Handles one bus event received by `now_ns`.
+    pub fn on_bus(&mut self, event: BusEvent, now_ns: u64, ev: &mut impl EventSink) {
+        let before = self.state();
+        match event {
+            BusEvent::Status(status) => self.on_status(status, now_ns, ev),
+            BusEvent::Emcy(emcy) => {
+                ev.emit(DriverEvent::StimulatorEmcy(emcy));
+                if emcy.code == ErrorCode::ConfigInvalid
+                    && matches!(self.config, ConfigState::Configuring { .. })
+                {
+                    self.config = ConfigState::Refused;
+                    ev.emit(DriverEvent::BringUp(BringUp::ConfigRefused {
+                        detail: emcy.detail,
+                    }));
+                }
+                if emcy.code != ErrorCode::NoError && self.is_armed() {
+                    self.trip(
+                        Fault::StimulatorEmcy {
+                            code: emcy.code,
+                            detail: emcy.detail,
+                        },
+                        now_ns,
+                        ev,
+                    );
+                }
+            }
+            BusEvent::StimHeartbeat(state) => {
+                if state == NmtState::BootUp {
+                    ev.emit(DriverEvent::Bus(event));
+                    self.stimulator_lost(now_ns, ev);
+                }
+            }
+            BusEvent::BusError(kind) => {
+                ev.emit(DriverEvent::Bus(event));
+                if kind == BusErrorKind::BusOff {
+                    self.link_up = false;
+                    if self.is_armed() {
+                        self.trip(Fault::BusOff, now_ns, ev);
+                    }
+                }
+            }
+            BusEvent::LinkDown => {
+                if self.link_up {
+                    ev.emit(DriverEvent::Bus(event));
+                }
+                self.link_up = false;
+                if self.is_armed() {
+                    self.trip(Fault::LinkDown, now_ns, ev);
+                }
+            }
+            BusEvent::LinkUp => {
+                if !self.link_up {
+                    ev.emit(DriverEvent::Bus(event));
+                }
+                self.link_up = true;
+                if self.stop_pending && self.send_stop(now_ns, ev) {
+                    ev.emit(DriverEvent::StopResent);
+                }
+            }
+            BusEvent::EventsLost => {
+                ev.emit(DriverEvent::Bus(event));
+                if self.is_armed() {
+                    self.trip(Fault::BusEventsLost, now_ns, ev);
+                }
+            }
+        }
+        self.finish(before, ev);
+    }
+
+    /// The stimulator restarted or lost our configuration.
+    fn stimulator_lost(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        if self.is_armed() {
+            self.trip(Fault::StimulatorReset, now_ns, ev);
+        }
+        if !matches!(self.config, ConfigState::Probing { .. } | ConfigState::Idle) {
+            ev.emit(DriverEvent::BringUp(BringUp::StimulatorLost));
+            self.probe(now_ns, ev);
+        }
+    }
+
+    fn on_status(&mut self, status: Status, now_ns: u64, ev: &mut impl EventSink) {
+        let changed = self.last_status.is_none_or(|(s, _)| s.state != status.state);
+        self.last_status = Some((status, now_ns));
+        self.counters.stimulator_state = stimulator_device_state(status.state) as u8;
+        self.counters.stimulator_pulses = status.pulses_delivered;
+        if changed {
+            ev.emit(DriverEvent::StimulatorState {
+                state: status.state,
+                pulses_delivered: status.pulses_delivered,
+            });
+        }
+        let operational = matches!(status.state, StimState::Armed | StimState::Stimulating);
+        match self.mode {
+            Mode::Armed { since_ns, confirmed } => {
+                if Some(status.config_id) != self.config_id() {
+                    self.stimulator_lost(now_ns, ev);
+                    return;
+                }
+                if operational && !confirmed {
+                    self.mode = Mode::Armed {
+                        since_ns,
+                        confirmed: true,
+                    };
+                } else if !operational && confirmed {
+                    self.trip(Fault::StimulatorNotOperational, now_ns, ev);
+                }
+                return;
+            }
+            Mode::Disarmed | Mode::Safe(_) => {
+                if operational
+                    && now_ns.saturating_sub(self.last_stop_ns) >= STOP_RESEND_NS
+                    && self.link_up
+                {
+                    // Not armed, yet the stimulator is operational: stop it (again).
+                    if self.send_stop(now_ns, ev) {
+                        ev.emit(DriverEvent::StopResent);
+                    }
+                }
+            }
+        }
+        match self.config {
+            ConfigState::Probing { .. } if status.state == StimState::PreOperational => {
+                // A different id, so that an old configuration cannot confirm ours.
+                let id = status.config_id % 255 + 1;
+                let mut ok = true;
+                for page in self.settings.stim_limits.to_pages(id) {
+                    ok &= self.control(ControlFrame::Config(page), now_ns, ev);
+                }
+                if ok {
+                    self.config = ConfigState::Configuring { id, sent_ns: now_ns };
+                    ev.emit(DriverEvent::BringUp(BringUp::ConfigSent { config_id: id }));
+                }
+            }
+            ConfigState::Configuring { id, .. }
+                if status.config_id == id && status.state == StimState::PreOperational =>
+            {
+                self.config = ConfigState::Confirmed { id };
+                ev.emit(DriverEvent::BringUp(BringUp::ConfigConfirmed { config_id: id }));
+            }
+            ConfigState::Confirmed { id } if status.config_id != id => {
+                self.stimulator_lost(now_ns, ev);
+            }
+            _ => {}
+        }
+    }
+
+    /// Sends NMT enter pre-operational and waits for the stimulator to show it.
+    fn probe(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        if self.control(ControlFrame::EnterPreOperational, now_ns, ev) {
+            ev.emit(DriverEvent::BringUp(BringUp::PreOperationalSent));
+        }
+        // Even when the write failed: the retry timer starts over from here.
+        self.config = ConfigState::Probing { sent_ns: now_ns };
+    }
+
+    /// Takes the publisher liveness the report thread found.
+    pub fn on_liveness(&mut self, liveness: Liveness, now_ns: u64, ev: &mut impl EventSink) {
+        if liveness == self.liveness {
+            return;
+        }
+        let before = self.state();
+        self.liveness = liveness;
+        ev.emit(DriverEvent::Liveness(liveness));
+        if self.is_armed() {
+            match liveness {
+                Liveness::Dead => self.trip(Fault::PublisherDead, now_ns, ev),
+                Liveness::NoPublisher => self.trip(Fault::PublisherGone, now_ns, ev),
+                Liveness::Alive | Liveness::Unknown => {}
+            }
+        }
+        self.finish(before, ev);
+    }
+
+    /// Runs the timers due at `now_ns`: watchdogs, bring-up retries, a pending stop, the
+    /// heartbeat.
+    pub fn poll(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        let before = self.state();
+        let s = self.settings;
+        if let Mode::Armed {
+            since_ns,
+            confirmed,
+        } = self.mode
+        {
+            let silent_ns = self
+                .last_valid_tick_ns
+                .map_or(u64::MAX, |t| now_ns.saturating_sub(t));
+            let status_silent_ns = self
+                .last_status
+                .map_or(u64::MAX, |(_, at)| now_ns.saturating_sub(at));
+            if silent_ns > s.tick_timeout_ns {
+                self.trip(Fault::TickTimeout { silent_ns }, now_ns, ev);
+            } else if status_silent_ns > s.stimulator_timeout_ns {
+                self.trip(
+                    Fault::StimulatorSilent {
+                        silent_ns: status_silent_ns,
+                    },
+                    now_ns,
+                    ev,
+                );
+            } else if !confirmed && now_ns.saturating_sub(since_ns) > s.arm_confirm_ns {
+                self.trip(Fault::StimulatorNotOperational, now_ns, ev);
+            }
+        } else {
+            match self.config {
+                ConfigState::Probing { sent_ns } | ConfigState::Configuring { sent_ns, .. }
+                    if now_ns.saturating_sub(sent_ns) > s.bringup_retry_ns =>
+                {
+                    ev.emit(DriverEvent::BringUp(BringUp::Retry));
+                    self.probe(now_ns, ev);
+                }
+                _ => {}
+            }
+        }
+        if self.stop_pending
+            && self.link_up
+            && now_ns.saturating_sub(self.last_stop_ns) >= STOP_RESEND_NS
+            && self.send_stop(now_ns, ev)
+        {
+            ev.emit(DriverEvent::StopResent);
+        }
+        if now_ns >= self.next_heartbeat_ns {
+            let state = self.host_nmt_state();
+            self.control(ControlFrame::Heartbeat(state), now_ns, ev);
+            self.next_heartbeat_ns += s.heartbeat_ns;
+            if self.next_heartbeat_ns <= now_ns {
+                // Late by more than a period: keep the period, do not send a burst.
+                self.next_heartbeat_ns = now_ns + s.heartbeat_ns;
+            }
+        }
+        self.finish(before, ev);
+    }
+
+    /// The host's NMT state for its heartbeat.
+    fn host_nmt_state(&self) -> NmtState {
+        match self.mode {
+            Mode::Armed { .. } => NmtState::Operational,
+            Mode::Safe(_) => NmtState::Stopped,
+            Mode::Disarmed => NmtState::PreOperational,
+        }
+    }
+
+    /// When the loop must wake next at the latest, ns (never before `now_ns`, never later
+    /// than `now_ns + max_wait`).
+    pub fn next_deadline(&self, now_ns: u64) -> u64 {
+        let s = &self.settings;
+        let mut d = self.next_heartbeat_ns.min(now_ns + s.max_wait_ns);
+        if let Mode::Armed {
+            since_ns,
+            confirmed,
+        } = self.mode
+        {
+            if let Some(t) = self.last_valid_tick_ns {
+                d = d.min(t + s.tick_timeout_ns + 1);
+            }
+            if let Some((_, at)) = self.last_status {
+                d = d.min(at + s.stimulator_timeout_ns + 1);
+            }
+            if !confirmed {
+                d = d.min(since_ns + s.arm_confirm_ns + 1);
+            }
+        }
+        d.max(now_ns)
+    }
+
+    /// Shutdown: NMT stop (armed or not) and a heartbeat showing "stopped".
+    pub fn shutdown(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        let before = self.state();
+        let stop_sent = self.send_stop(now_ns, ev);
+        if let Mode::Armed { .. } = self.mode {
+            self.mode = Mode::Disarmed;
+        }
+        self.control(ControlFrame::Heartbeat(NmtState::Stopped), now_ns, ev);
+        ev.emit(DriverEvent::Shutdown { stop_sent });
+        self.finish(before, ev);
+    }
+
+    /// Records the state and reports a change.
+    fn finish(&mut self, before: DriverState, ev: &mut impl EventSink) {
+        let after = self.state();
+        self.counters.state = after.device_state() as u8;
+        if after != before {
+            ev.emit(DriverEvent::StateChanged {
+                from: before,
+                to: after,
+            });
+        }
+    }
+
+    /// Counts one wake-up of the loop (progress for the systemd watchdog).
+    pub fn count_wakeup(&mut self) {
+        self.counters.wakeups += 1;
+    }
+
+    /// Whether [`Self::start`] was called.
+    pub fn is_started(&self) -> bool {
+        self.started
+    }
+}

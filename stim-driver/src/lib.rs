@@ -1,0 +1,33 @@
+//! # stim-driver: StimTicks from iceoryx2 to PULSE frames on SocketCAN
+//!
+//! The last software between the controller and current in tissue. It subscribes to
+//! rt-core's StimTicks, brings the stimulator up over CAN, and forwards each pulse decision
+//! as one PULSE frame within the same millisecond, but only while armed and only after its
+//! own interlocks ([`interlock`]) have passed it. A watchdog stops the stimulator (NMT
+//! stop) when the ticks stop, go stale or their publisher dies, and the bus side stops it
+//! on an EMCY, bus-off or a link going down; only an explicit Arm command re-arms.
+//!
+//! - [`interlock`]: the interlocks as a pure struct (ticks in, decisions out, time passed in).
+//! - [`output`]: the stimulator output as a typestate (an unarmed handle cannot send PULSE).
+//! - [`forward`]: the whole decision logic ([`forward::ForwardPath`]) without threads or clocks.
+//! - [`tx`]: the write seam ([`tx::CanTx`]): SocketCAN, or a counting sink.
+//! - [`event`], [`fault`]: what the threads exchange, and the fault and refusal reasons.
+//! - [`config`]: the TOML configuration file.
+//! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state).
+//! - [`runner`], [`report`], [`telemetry`], [`liveness`], [`systemd`]: the process.
+//! - [`safe_stop`]: the `safe-stop` subcommand.
+#![deny(missing_docs)]
+#![deny(clippy::missing_safety_doc)]
+
+pub mod bus;
+pub mod config;
+pub mod event;
+pub mod fault;
+pub mod forward;
+pub mod interlock;
+pub mod liveness;
+pub mod output;
+pub mod telemetry;
+pub mod systemd;
+pub mod tx;
+pub mod txstamp;

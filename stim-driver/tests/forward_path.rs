@@ -1,0 +1,737 @@
+//! The forward path's state machine on simulated time: bring-up, arming and its
+//! preconditions, forwarding, the watchdog conditions, the bus faults, and what reaches
+//! the (recorded) bus in each case. No CAN, no threads: every input carries its time.
+
+use std::cell::{Cell, RefCell};
+use std::rc::Rc;
+
+use fes_can::{
+    Emcy, ErrorCode, Frame, Message, NmtCommand, NmtState, Nodes, StimLimits, StimState, Status,
+};
+use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
+use stim_driver::config::DriverConfig;
+use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
+use stim_driver::fault::{ArmRefusal, Fault};
+use stim_driver::forward::{ForwardPath, ForwardSettings};
+use stim_driver::tx::{CanTx, TxDone, TxError};
+
+const MS: u64 = 1_000_000;
+const T0: u64 = 1_000 * MS;
+
+/// A bus that records every frame with the simulated time it was sent at.
+#[derive(Clone, Default)]
+struct Bus {
+    now: Rc<Cell<u64>>,
+    frames: Rc<RefCell<Vec<(u64, Frame)>>>,
+    fail: Rc<Cell<Option<TxError>>>,
+}
+
+impl CanTx for Bus {
+    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        if let Some(e) = self.fail.get() {
+            return Err(e);
+        }
+        self.frames.borrow_mut().push((self.now.get(), *frame));
+        Ok(TxDone {
+            retries: 0,
+            written_ns: self.now.get(),
+            write_ns: 0,
+        })
+    }
+}
+
+impl Bus {
+    fn messages(&self) -> Vec<(u64, Message)> {
+        self.frames
+            .borrow()
+            .iter()
+            .map(|(t, f)| {
+                (
+                    *t,
+                    fes_can::decode(u32::from(f.id), f.payload()).expect("driver frames decode"),
+                )
+            })
+            .collect()
+    }
+
+    fn nmt(&self) -> Vec<(u64, NmtCommand)> {
+        self.messages()
+            .into_iter()
+            .filter_map(|(t, m)| match m {
+                Message::Nmt(n) => Some((t, n.command)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn pulses(&self) -> Vec<(u64, fes_can::Pulse)> {
+        self.messages()
+            .into_iter()
+            .filter_map(|(t, m)| match m {
+                Message::Pulse(p) => Some((t, p)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn clear(&self) {
+        self.frames.borrow_mut().clear();
+    }
+}
+
+fn settings() -> ForwardSettings {
+    DriverConfig::with_defaults("vcan0", 40.0)
+        .forward_settings()
+        .unwrap()
+}
+
+struct Rig {
+    fp: ForwardPath<Bus>,
+    bus: Bus,
+    ev: Vec<DriverEvent>,
+    now: u64,
+    tick_seq: u64,
+    cmd_seq: u64,
+    config_id: u8,
+}
+
+fn status(state: StimState, config_id: u8) -> BusEvent {
+    BusEvent::Status(Status {
+        state,
+        counter: 0,
+        last_error: ErrorCode::NoError,
+        pulses_delivered: 0,
+        rejected: 0,
+        config_id,
+    })
+}
+
+fn tick(seq: u64, t_ns: u64, pulse: bool) -> StimTick {
+    StimTick {
+        seq,
+        t_ns,
+        t_wake_ns: t_ns,
+        t_publish_ns: t_ns,
+        ref_seq: 0,
+        reference: 0.0,
+        u_cont: 0.0,
+        energy: 0.0,
+        model_force: 0.0,
+        predicted_force: 0.0,
+        phi: 0.0,
+        amplitude_ua: if pulse { 20_000 } else { 0 },
+        missed_periods: 0,
+        width_us: if pulse { 200 } else { 0 },
+        flags: 0,
+        pulse: u8::from(pulse),
+        channel: 0,
+        reserved: [0; 2],
+    }
+}
+
+impl Rig {
+    fn new(s: ForwardSettings) -> Self {
+        let bus = Bus::default();
+        bus.now.set(T0);
+        let fp = ForwardPath::new(s, bus.clone());
+        Self {
+            fp,
+            bus,
+            ev: Vec::new(),
+            now: T0,
+            tick_seq: 0,
+            cmd_seq: 0,
+            config_id: 0,
+        }
+    }
+
+    fn at(&mut self, t: u64) {
+        self.now = t;
+        self.bus.now.set(t);
+    }
+
+    fn advance(&mut self, dt: u64) {
+        let t = self.now + dt;
+        self.at(t);
+    }
+
+    fn poll(&mut self) {
+        self.fp.poll(self.now, &mut self.ev);
+    }
+
+    fn bus_event(&mut self, e: BusEvent) {
+        self.fp.on_bus(e, self.now, &mut self.ev);
+    }
+
+    /// One StimTick on the 1 ms grid at the current time, then the timers.
+    fn tick(&mut self, pulse: bool) {
+        self.tick_seq += 1;
+        let t = tick(self.tick_seq, self.now - 20_000, pulse);
+        self.fp.on_tick(&t, self.now, &mut self.ev);
+        self.poll();
+    }
+
+    fn command(&mut self, kind: DriverCommandKind) {
+        self.cmd_seq += 1;
+        let c = DriverCommand::new(self.cmd_seq, self.now - 1000, kind);
+        self.fp.on_command(&c, self.now, &mut self.ev);
+    }
+
+    /// start + STATUS pre-op (stimulator's config 7) + STATUS confirming ours.
+    fn configured(s: ForwardSettings) -> Self {
+        let mut r = Self::new(s);
+        r.fp.start(r.now, &mut r.ev);
+        r.advance(MS);
+        r.bus_event(status(StimState::PreOperational, 7));
+        r.advance(MS);
+        r.config_id = 8;
+        r.bus_event(status(StimState::PreOperational, 8));
+        assert_eq!(r.fp.state(), DriverState::Disarmed);
+        r
+    }
+
+    /// Configured, ticks flowing, publisher alive, armed and confirmed.
+    fn armed(s: ForwardSettings) -> Self {
+        let mut r = Self::configured(s);
+        r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+        for _ in 0..3 {
+            r.advance(MS);
+            r.tick(false);
+        }
+        r.command(DriverCommandKind::Arm);
+        assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+        r.advance(MS / 2);
+        let id = r.config_id;
+        r.bus_event(status(StimState::Armed, id));
+        r
+    }
+
+    fn fault(&self) -> Option<Fault> {
+        match self.fp.state() {
+            DriverState::SafeState(f) => Some(f),
+            _ => None,
+        }
+    }
+}
+
+#[test]
+fn bring_up_sends_pre_operational_then_a_fresh_config_and_waits_for_status() {
+    let mut r = Rig::new(settings());
+    r.fp.start(r.now, &mut r.ev);
+    let m = r.bus.messages();
+    assert_eq!(
+        m.iter().map(|(_, m)| *m).collect::<Vec<_>>(),
+        vec![
+            Message::HostHeartbeat(fes_can::Heartbeat {
+                state: NmtState::BootUp
+            }),
+            Message::Nmt(fes_can::Nmt {
+                command: NmtCommand::EnterPreOperational,
+                node: 0x10
+            }),
+        ]
+    );
+    assert_eq!(r.fp.state(), DriverState::Starting);
+    r.bus.clear();
+    // A STATUS still showing the old (operational) state does not start the CONFIG.
+    r.bus_event(status(StimState::Armed, 3));
+    assert!(
+        !r.bus
+            .messages()
+            .iter()
+            .any(|(_, m)| matches!(m, Message::Config(_)))
+    );
+    r.bus.clear();
+    r.bus_event(status(StimState::PreOperational, 255));
+    // Id 255 is in use: ours is 1, both pages carry the configured limits.
+    let pages: Vec<_> = r
+        .bus
+        .messages()
+        .into_iter()
+        .filter_map(|(_, m)| match m {
+            Message::Config(c) => Some(c),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(pages, StimLimits::DEFAULT.to_pages(1).to_vec());
+    // The old id does not confirm; ours does.
+    r.bus_event(status(StimState::PreOperational, 255));
+    assert_eq!(r.fp.state(), DriverState::Starting);
+    r.bus_event(status(StimState::PreOperational, 1));
+    assert_eq!(r.fp.state(), DriverState::Disarmed);
+    assert_eq!(r.fp.config_id(), Some(1));
+}
+
+#[test]
+fn bring_up_starts_over_without_confirmation_and_stops_on_refusal() {
+    let s = settings();
+    let mut r = Rig::new(s);
+    r.fp.start(r.now, &mut r.ev);
+    r.bus.clear();
+    r.at(T0 + s.bringup_retry_ns);
+    r.poll();
+    assert!(r.bus.nmt().is_empty(), "not before the retry time");
+    r.at(T0 + s.bringup_retry_ns + 1);
+    r.poll();
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::EnterPreOperational)]);
+    r.bus_event(status(StimState::PreOperational, 0));
+    r.bus_event(BusEvent::Emcy(Emcy::new(
+        ErrorCode::ConfigInvalid,
+        StimState::PreOperational,
+        0,
+        2,
+    )));
+    assert_eq!(r.fp.state(), DriverState::ConfigRefused);
+    r.command(DriverCommandKind::Arm);
+    assert!(r.ev.iter().any(|e| matches!(
+        e,
+        DriverEvent::ArmRefused {
+            refusal: ArmRefusal::NotConfigured,
+            ..
+        }
+    )));
+}
+
+#[test]
+fn arming_checks_every_precondition_and_sends_nmt_start() {
+    let mut r = Rig::configured(settings());
+    let refusal = |r: &Rig| {
+        r.ev.iter().rev().find_map(|e| match e {
+            DriverEvent::ArmRefused { refusal, .. } => Some(*refusal),
+            _ => None,
+        })
+    };
+    r.advance(MS);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(refusal(&r), Some(ArmRefusal::NoTicks));
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(true);
+    }
+    assert!(r.bus.pulses().is_empty(), "disarmed: nothing forwarded");
+    // Ticks 1 ms apart: the second pulse breaks the 2 ms minimum IPI, the third passes.
+    assert_eq!(r.fp.counters().pulses_not_armed, 2);
+    assert_eq!(r.fp.counters().pulses_rejected, 1);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(refusal(&r), Some(ArmRefusal::PublisherNotAlive));
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    // STATUS older than the stimulator timeout.
+    let s = *r.fp.settings();
+    let (t_status, now) = (r.now, r.now + s.stimulator_timeout_ns + MS);
+    r.at(now);
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(refusal(&r), Some(ArmRefusal::StimulatorSilent));
+    assert!(now > t_status);
+    // Another configuration reported.
+    r.bus_event(status(StimState::PreOperational, 9));
+    assert_eq!(r.fp.state(), DriverState::Starting, "config lost: brought up again");
+    r.bus_event(status(StimState::PreOperational, 9));
+    r.bus_event(status(StimState::PreOperational, 10));
+    assert_eq!(r.fp.state(), DriverState::Disarmed);
+    assert_eq!(r.fp.config_id(), Some(10));
+    // A stale command.
+    r.cmd_seq += 1;
+    let old = DriverCommand::new(r.cmd_seq, r.now - s.command_max_age_ns - 1, DriverCommandKind::Arm);
+    r.fp.on_command(&old, r.now, &mut r.ev);
+    assert_eq!(refusal(&r), Some(ArmRefusal::StaleCommand));
+    // A command from the future.
+    let future = DriverCommand::new(99, r.now + 2 * MS, DriverCommandKind::Arm);
+    r.fp.on_command(&future, r.now, &mut r.ev);
+    assert_eq!(refusal(&r), Some(ArmRefusal::StaleCommand));
+    // An invalid command.
+    let mut bad = DriverCommand::new(100, r.now, DriverCommandKind::Arm);
+    bad.command = 7;
+    r.advance(MS);
+    r.fp.on_command(&bad, r.now, &mut r.ev);
+    assert!(matches!(r.ev.last(), Some(DriverEvent::CommandInvalid { .. })));
+    r.bus.clear();
+    r.advance(MS);
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", refusal(&r));
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Start)]);
+}
+
+#[test]
+fn armed_pulses_reach_the_bus_once_in_order_with_counters() {
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    let mut expected = Vec::new();
+    for k in 0..50 {
+        r.advance(MS);
+        let fire = k % 5 == 0;
+        r.tick(fire);
+        if fire {
+            expected.push(r.tick_seq);
+        }
+    }
+    let pulses = r.bus.pulses();
+    assert_eq!(pulses.len(), expected.len());
+    for (i, (_, p)) in pulses.iter().enumerate() {
+        assert_eq!(usize::from(p.seq), i + 1);
+        assert_eq!(usize::from(p.alive_counter), i % 16);
+        assert_eq!((p.amplitude_100ua, p.width_us, p.channel), (200, 200, 0));
+    }
+    let sent: Vec<u64> = r
+        .ev
+        .iter()
+        .filter_map(|e| match e {
+            DriverEvent::PulseSent { tick_seq, .. } => Some(*tick_seq),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(sent, expected);
+    assert_eq!(r.fp.counters().pulses_sent, 10);
+}
+
+#[test]
+fn watchdog_trips_exactly_after_the_timeout_and_stays_stopped() {
+    let s = settings();
+    let mut r = Rig::armed(s);
+    r.advance(MS);
+    r.tick(true);
+    let last = r.now;
+    // The loop never sleeps past the watchdog's deadline.
+    assert!(r.fp.next_deadline(r.now) <= last + s.tick_timeout_ns + 1);
+    r.bus.clear();
+    r.at(last + s.tick_timeout_ns);
+    r.poll();
+    assert_eq!(r.fp.state(), DriverState::Armed, "not at the timeout itself");
+    r.at(last + s.tick_timeout_ns + 1);
+    r.poll();
+    assert_eq!(
+        r.fault(),
+        Some(Fault::TickTimeout {
+            silent_ns: s.tick_timeout_ns + 1
+        })
+    );
+    assert_eq!(r.bus.nmt(), vec![(last + s.tick_timeout_ns + 1, NmtCommand::Stop)]);
+    assert_eq!(r.fp.counters().watchdog_trips, 1);
+    assert_eq!(r.fp.counters().fault_code, 0xFF21);
+    // The publisher resumes (after a 100 ms stall): nothing is forwarded, no burst, and
+    // the driver stays stopped.
+    r.bus.clear();
+    r.advance(100 * MS);
+    for _ in 0..30 {
+        r.advance(MS);
+        r.tick(true);
+    }
+    assert!(r.bus.pulses().is_empty());
+    assert!(r.fault().is_some());
+    // Heartbeats report "stopped".
+    assert!(r.bus.messages().iter().any(|(_, m)| *m
+        == Message::HostHeartbeat(fes_can::Heartbeat {
+            state: NmtState::Stopped
+        })));
+    // An explicit re-arm brings it back; the first tick after it sets the order again.
+    let id = r.config_id;
+    r.bus_event(status(StimState::Stopped, id));
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    r.advance(5 * MS);
+    r.tick(true);
+    assert_eq!(r.bus.pulses().len(), 1);
+}
+
+#[test]
+fn stale_and_final_ticks_trip_and_block_arming() {
+    let s = settings();
+    let mut r = Rig::armed(s);
+    r.advance(MS);
+    r.tick_seq += 1;
+    let mut t = tick(r.tick_seq, r.now - s.stale_after_ns - 1, true);
+    t.t_publish_ns = t.t_ns;
+    r.fp.on_tick(&t, r.now, &mut r.ev);
+    assert_eq!(
+        r.fault(),
+        Some(Fault::StaleTick {
+            age_ns: s.stale_after_ns + 1
+        })
+    );
+    assert!(r.bus.pulses().is_empty());
+
+    let mut r = Rig::armed(s);
+    r.advance(MS);
+    r.tick_seq += 1;
+    let mut t = tick(r.tick_seq, r.now - 10_000, false);
+    t.flags = StimTick::FLAG_FINAL;
+    r.fp.on_tick(&t, r.now, &mut r.ev);
+    assert_eq!(r.fault(), Some(Fault::GeneratorStopped));
+    r.command(DriverCommandKind::Arm);
+    assert!(r.ev.iter().any(|e| matches!(
+        e,
+        DriverEvent::ArmRefused {
+            refusal: ArmRefusal::GeneratorStopped,
+            ..
+        }
+    )));
+}
+
+#[test]
+fn publisher_death_and_disappearance_trip() {
+    for (l, f) in [
+        (Liveness::Dead, Fault::PublisherDead),
+        (Liveness::NoPublisher, Fault::PublisherGone),
+    ] {
+        let mut r = Rig::armed(settings());
+        r.bus.clear();
+        r.fp.on_liveness(l, r.now, &mut r.ev);
+        assert_eq!(r.fault(), Some(f));
+        assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+        assert!(f.is_watchdog());
+    }
+}
+
+#[test]
+fn stimulator_emcy_reset_silence_and_unconfirmed_start_trip() {
+    let s = settings();
+    let mut r = Rig::armed(s);
+    r.bus_event(BusEvent::Emcy(Emcy::new(
+        ErrorCode::NoError,
+        StimState::Armed,
+        0,
+        0,
+    )));
+    assert_eq!(r.fp.state(), DriverState::Armed, "'no error' is not a fault");
+    r.bus_event(BusEvent::Emcy(Emcy::new(
+        ErrorCode::MinIpiViolation,
+        StimState::Armed,
+        4,
+        1,
+    )));
+    assert_eq!(
+        r.fault(),
+        Some(Fault::StimulatorEmcy {
+            code: ErrorCode::MinIpiViolation,
+            detail: 1
+        })
+    );
+    assert_eq!(r.fp.counters().fault_code, 0xFF01);
+
+    let mut r = Rig::armed(s);
+    r.bus_event(BusEvent::StimHeartbeat(NmtState::BootUp));
+    assert_eq!(r.fault(), Some(Fault::StimulatorReset));
+    assert_eq!(
+        r.bus.nmt().last().map(|n| n.1),
+        Some(NmtCommand::EnterPreOperational),
+        "brought up again"
+    );
+
+    let mut r = Rig::armed(s);
+    for _ in 0..(s.stimulator_timeout_ns / MS) + 1 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    assert!(matches!(r.fault(), Some(Fault::StimulatorSilent { .. })));
+
+    let mut r = Rig::configured(s);
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.advance(MS);
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    // STATUS keeps showing pre-operational: the start did not take.
+    for _ in 0..(s.arm_confirm_ns / MS) + 1 {
+        r.advance(MS);
+        r.tick(false);
+        if r.now % (10 * MS) == 0 {
+            let id = r.config_id;
+            r.bus_event(status(StimState::PreOperational, id));
+        }
+    }
+    assert_eq!(r.fault(), Some(Fault::StimulatorNotOperational));
+
+    // Confirmed, then the stimulator leaves operational by itself.
+    let mut r = Rig::armed(s);
+    let id = r.config_id;
+    r.bus_event(status(StimState::Fault, id));
+    assert_eq!(r.fault(), Some(Fault::StimulatorNotOperational));
+}
+
+#[test]
+fn link_down_trips_and_the_stop_is_sent_when_the_link_returns() {
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    r.bus.fail.set(Some(TxError::LinkDown {
+        errno: libc::ENETDOWN,
+    }));
+    r.advance(MS);
+    r.tick(true);
+    assert_eq!(r.fault(), Some(Fault::LinkDown));
+    assert!(r.bus.frames.borrow().is_empty());
+    // Still down: arming is refused, nothing is sent.
+    r.advance(MS);
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    assert!(r.ev.iter().any(|e| matches!(
+        e,
+        DriverEvent::ArmRefused {
+            refusal: ArmRefusal::LinkDown,
+            ..
+        }
+    )));
+    // Back up: the pending stop goes out first.
+    r.bus.fail.set(None);
+    r.advance(MS);
+    r.bus_event(BusEvent::LinkUp);
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+    // Re-arm once the stimulator is heard again.
+    r.advance(MS);
+    let id = r.config_id;
+    r.bus_event(status(StimState::Fault, id));
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+}
+
+#[test]
+fn bus_off_a_down_interface_and_lost_events_trip() {
+    for (e, f) in [
+        (BusEvent::BusError(BusErrorKind::BusOff), Fault::BusOff),
+        (BusEvent::LinkDown, Fault::LinkDown),
+        (BusEvent::EventsLost, Fault::BusEventsLost),
+    ] {
+        let mut r = Rig::armed(settings());
+        r.bus_event(e);
+        assert_eq!(r.fault(), Some(f));
+    }
+    let mut r = Rig::armed(settings());
+    r.bus_event(BusEvent::BusError(BusErrorKind::ErrorPassive));
+    assert_eq!(r.fp.state(), DriverState::Armed, "error-passive is reported only");
+}
+
+#[test]
+fn a_dropped_pulse_is_counted_and_does_not_trip() {
+    let mut r = Rig::armed(settings());
+    r.bus.fail.set(Some(TxError::Dropped { attempts: 5 }));
+    r.advance(MS);
+    r.tick(true);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    assert_eq!(r.fp.counters().can_tx_errors, 1);
+    assert_eq!(r.fp.counters().tx_retries, 4);
+    assert_eq!(r.fp.counters().pulses_sent, 0);
+    r.bus.fail.set(None);
+    r.advance(5 * MS);
+    r.tick(true);
+    let p = r.bus.pulses();
+    assert_eq!(p.len(), 1);
+    assert_eq!((p[0].1.seq, p[0].1.alive_counter), (1, 0), "no gap left behind");
+}
+
+#[test]
+fn commands_disarm_and_safe_stop() {
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    r.command(DriverCommandKind::Disarm);
+    assert_eq!(r.fp.state(), DriverState::Disarmed);
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+    r.advance(MS);
+    r.tick(true);
+    assert!(r.bus.pulses().is_empty());
+    // SafeStop works from any state and is a fault until re-armed; an old one still stops.
+    r.bus.clear();
+    r.cmd_seq += 1;
+    let old = DriverCommand::new(r.cmd_seq, r.now - 500 * MS, DriverCommandKind::SafeStop);
+    r.fp.on_command(&old, r.now, &mut r.ev);
+    assert_eq!(r.fault(), Some(Fault::SafeStopCommand));
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+    // Disarm does not clear the safe state.
+    r.advance(MS);
+    r.command(DriverCommandKind::Disarm);
+    assert_eq!(r.fault(), Some(Fault::SafeStopCommand));
+}
+
+#[test]
+fn a_stimulator_still_operational_while_disarmed_is_stopped_again() {
+    let mut r = Rig::armed(settings());
+    r.command(DriverCommandKind::Disarm);
+    r.bus.clear();
+    let id = r.config_id;
+    r.advance(MS);
+    r.bus_event(status(StimState::Stimulating, id));
+    assert!(r.bus.nmt().is_empty(), "not within 10 ms of the last stop");
+    r.advance(10 * MS);
+    r.bus_event(status(StimState::Stimulating, id));
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+    assert!(r.ev.contains(&DriverEvent::StopResent));
+}
+
+#[test]
+fn heartbeat_every_period_with_the_host_state_and_no_burst_after_a_stall() {
+    let s = settings();
+    let mut r = Rig::configured(s);
+    r.bus.clear();
+    let start = r.now;
+    for _ in 0..100 {
+        r.advance(MS);
+        r.poll();
+    }
+    let beats: Vec<(u64, NmtState)> = r
+        .bus
+        .messages()
+        .into_iter()
+        .filter_map(|(t, m)| match m {
+            Message::HostHeartbeat(h) => Some((t, h.state)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(beats.len(), 10);
+    assert!(beats.iter().all(|b| b.1 == NmtState::PreOperational));
+    for w in beats.windows(2) {
+        assert_eq!(w[1].0 - w[0].0, s.heartbeat_ns);
+    }
+    assert!(beats[0].0 <= start + s.heartbeat_ns);
+    // A 95 ms stall of the loop: one heartbeat, not nine.
+    r.bus.clear();
+    r.advance(95 * MS);
+    r.poll();
+    r.poll();
+    assert_eq!(r.bus.messages().len(), 1);
+    assert!(r.fp.next_deadline(r.now) <= r.now + s.heartbeat_ns);
+    assert!(r.fp.next_deadline(r.now) <= r.now + s.max_wait_ns);
+}
+
+#[test]
+fn shutdown_stops_the_stimulator_and_reports_stopped() {
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    r.fp.shutdown(r.now, &mut r.ev);
+    let m = r.bus.messages();
+    assert_eq!(m.len(), 2);
+    assert_eq!(
+        m[0].1,
+        Message::Nmt(fes_can::Nmt {
+            command: NmtCommand::Stop,
+            node: Nodes::DEFAULT.stim()
+        })
+    );
+    assert_eq!(
+        m[1].1,
+        Message::HostHeartbeat(fes_can::Heartbeat {
+            state: NmtState::Stopped
+        })
+    );
+    assert!(r.ev.contains(&DriverEvent::Shutdown { stop_sent: true }));
+}
+
+#[test]
+fn defective_ticks_are_refused_and_do_not_feed_the_watchdog() {
+    let s = settings();
+    let mut r = Rig::armed(s);
+    r.advance(MS);
+    r.tick(false);
+    let last_good = r.now;
+    // Duplicates of the last tick keep arriving: they are refused and the watchdog still
+    // trips on time.
+    for _ in 0..3 {
+        r.advance(MS);
+        let dup = tick(r.tick_seq, r.now - 20_000, false);
+        r.fp.on_tick(&dup, r.now, &mut r.ev);
+        r.poll();
+    }
+    r.at(last_good + s.tick_timeout_ns + 1);
+    r.poll();
+    assert!(matches!(r.fault(), Some(Fault::TickTimeout { .. })));
+    assert_eq!(r.fp.counters().ticks_refused, 3);
+}
