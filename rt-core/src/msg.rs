@@ -14,6 +14,7 @@
 //! Service names and quality-of-service settings live in [`service`], in one place, so that
 //! whichever process starts first creates each service with settings the others accept.
 
+mod driver_command;
 mod driver_status;
 mod force_sample;
 mod reference;
@@ -22,6 +23,7 @@ mod stim_tick;
 mod timing_report;
 mod validate;
 
+pub use driver_command::{DriverCommand, DriverCommandKind};
 pub use driver_status::{DeviceState, DriverStatus};
 pub use force_sample::ForceSample;
 pub use iceoryx2::prelude::ZeroCopySend;

@@ -36,6 +36,8 @@ pub const TOPIC_FORCE_SAMPLE: &str = "force_sample";
 pub const TOPIC_DRIVER_STATUS: &str = "driver_status";
 /// Topic of [`super::TimingReport`]: rt-core, stim-driver, probes -> supervisor.
 pub const TOPIC_TIMING: &str = "timing";
+/// Topic of [`super::DriverCommand`]: supervisor -> stim-driver (arm, disarm, safe stop).
+pub const TOPIC_DRIVER_COMMAND: &str = "driver_command";
 
 /// Longest accepted prefix (iceoryx2 service names are bounded; the topic is appended).
 pub const MAX_PREFIX_LEN: usize = 64;
