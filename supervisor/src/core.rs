@@ -22,7 +22,7 @@ use rt_core::msg::Reference;
 use crate::contraction::{BeatMeasurement, ContractionEstimator, ContractionSettings};
 use crate::limits::ReferenceLimits;
 use crate::outer_loop::{OuterLoop, OuterLoopSettings, OuterLoopUpdate};
-use crate::profile::{ProfileEvent, ProfileRunner, ProfileSpec, Setpoint};
+use crate::profile::{Beat, ProfileEvent, ProfileRunner, ProfileSpec, Setpoint};
 use crate::protocol::Command;
 
 /// Arming state.
@@ -82,6 +82,7 @@ pub struct SupervisorCore {
     last: Option<Reference>,
     orders: Vec<DriverOrder>,
     beats: Vec<BeatRecord>,
+    beat_starts: Vec<Beat>,
     events: VecDeque<String>,
     new_events: Vec<String>,
 }
@@ -109,6 +110,7 @@ impl SupervisorCore {
             last: None,
             orders: Vec::new(),
             beats: Vec::new(),
+            beat_starts: Vec::new(),
             events: VecDeque::new(),
             new_events: Vec::new(),
         }
@@ -173,6 +175,11 @@ impl SupervisorCore {
         std::mem::take(&mut self.beats)
     }
 
+    /// Takes the beats started since the last call.
+    pub fn take_beat_starts(&mut self) -> Vec<Beat> {
+        std::mem::take(&mut self.beat_starts)
+    }
+
     /// Carries out an operator command at `now_ns`. `ready` is the health monitor's verdict
     /// (needed to arm). Returns what was done, or why nothing was done.
     pub fn command(
@@ -182,6 +189,9 @@ impl SupervisorCore {
         ready: Result<(), String>,
     ) -> Result<String, String> {
         let result = self.apply(command, now_ns, ready);
+        if matches!(command, Command::Status) {
+            return result;
+        }
         match &result {
             Ok(m) => self.note(format!("command {}: {m}", command.name())),
             Err(e) => self.note(format!("command {} refused: {e}", command.name())),
@@ -282,6 +292,7 @@ impl SupervisorCore {
         let run = ProfileRunner::start(spec, self.limits, now_ns);
         if let Some(b) = run.first_beat() {
             self.contraction.begin(b);
+            self.beat_starts.push(b);
         }
         self.profile = Some(run);
     }
@@ -318,6 +329,7 @@ impl SupervisorCore {
         for e in events {
             if let ProfileEvent::BeatStarted(b) = e {
                 self.contraction.begin(b);
+                self.beat_starts.push(b);
             }
         }
         for m in self.contraction.poll(self.latest_force_ns, now_ns) {

@@ -16,9 +16,12 @@
 
 pub mod config;
 pub mod contraction;
+pub mod control;
 pub mod core;
+pub mod daemon;
 pub mod health;
 pub mod limits;
 pub mod outer_loop;
 pub mod profile;
 pub mod protocol;
+pub mod recording;
