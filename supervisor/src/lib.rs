@@ -22,6 +22,8 @@ pub mod daemon;
 pub mod health;
 pub mod limits;
 pub mod outer_loop;
+pub mod plots;
 pub mod profile;
 pub mod protocol;
 pub mod recording;
+pub mod simulation;
