@@ -14,6 +14,8 @@
 //! [`bench`] (child processes).
 #![deny(missing_docs)]
 
+pub mod baseline;
+pub mod bench;
 pub mod config;
 pub mod contraction;
 pub mod control;
@@ -27,3 +29,4 @@ pub mod profile;
 pub mod protocol;
 pub mod recording;
 pub mod simulation;
+pub mod summary;
