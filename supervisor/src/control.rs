@@ -199,6 +199,16 @@ impl ControlServer {
         requests: mpsc::Sender<Pending>,
     ) -> Result<Self, ControlError> {
         let policy = PeerPolicy::from_config(cfg)?;
+        Self::start_with_policy(cfg, policy, requests)
+    }
+
+    /// [`ControlServer::start`] with an explicit peer policy (tests use one that excludes
+    /// the test's own user).
+    pub fn start_with_policy(
+        cfg: &ControlConfig,
+        policy: PeerPolicy,
+        requests: mpsc::Sender<Pending>,
+    ) -> Result<Self, ControlError> {
         let path = cfg.socket.clone();
         let io = |op: &'static str, p: &Path| {
             let path = p.to_path_buf();

@@ -14,10 +14,10 @@ use supervisor::protocol::{Command, Response, Status};
 #[derive(Debug, Clone, clap::Args)]
 pub struct SocketArgs {
     /// Control socket of the daemon.
-    #[arg(long, default_value = "/run/fes/supervisor.sock")]
+    #[arg(long, global = true, default_value = "/run/fes/supervisor.sock")]
     pub socket: PathBuf,
     /// Seconds to wait for the answer.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, global = true, default_value_t = 5.0)]
     pub timeout_s: f64,
 }
 
@@ -25,7 +25,7 @@ pub struct SocketArgs {
 #[derive(Debug, clap::Args)]
 pub struct SetArgs {
     /// Reference force, normalised to the muscle's maximum, [0, 1].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub force: f64,
     /// Ramp rate towards it, normalised force per second (default: the daemon's).
     #[arg(long)]
@@ -155,8 +155,17 @@ fn finish(r: Response) -> anyhow::Result<()> {
     }
 }
 
+fn finite(flag: &str, v: Option<f64>) -> anyhow::Result<()> {
+    match v {
+        Some(x) if !x.is_finite() => bail!("{flag} {x}: must be a finite number"),
+        _ => Ok(()),
+    }
+}
+
 /// `supervisor set`.
 pub fn set(a: SetArgs) -> anyhow::Result<()> {
+    finite("--force", Some(a.force))?;
+    finite("--rate", a.rate)?;
     finish(send(
         &a.socket,
         Command::Set {
@@ -168,6 +177,23 @@ pub fn set(a: SetArgs) -> anyhow::Result<()> {
 
 /// `supervisor profile`.
 pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
+    if let ProfileKind::Cardiac {
+        hr,
+        duty,
+        amplitude,
+        edge_rate,
+        ..
+    } = &a.kind
+    {
+        finite("--hr", Some(*hr))?;
+        finite("--duty", Some(*duty))?;
+        finite("--amplitude", Some(*amplitude))?;
+        finite("--edge-rate", *edge_rate)?;
+    }
+    if let ProfileKind::Constant { force, rate } = &a.kind {
+        finite("--force", Some(*force))?;
+        finite("--rate", *rate)?;
+    }
     let profile = match a.kind {
         ProfileKind::Cardiac {
             hr,
