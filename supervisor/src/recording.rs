@@ -206,6 +206,7 @@ pub struct Recorder {
     recent_force: VecDeque<(u64, f64)>,
     scale: ScaleFit,
     boundary_pending: Option<String>,
+    boundaries: VecDeque<(u64, String)>,
     last_flush_ns: u64,
     tick_count: u64,
     force_count: u64,
@@ -282,6 +283,7 @@ impl Recorder {
             recent_force: VecDeque::new(),
             scale: ScaleFit::default(),
             boundary_pending: Some("start".into()),
+            boundaries: VecDeque::new(),
             last_flush_ns: now_ns,
             tick_count: 0,
             force_count: 0,
@@ -458,9 +460,10 @@ impl Recorder {
         self.guard(r)
     }
 
-    /// Ends the current data-set record at the next tick; the next one has `kind`.
-    pub fn boundary(&mut self, kind: String) {
-        self.boundary_pending = Some(kind);
+    /// Ends the current data-set record before the tick at `t_ns` (a beat start); the
+    /// next record has `kind`.
+    pub fn boundary(&mut self, t_ns: u64, kind: String) {
+        self.boundaries.push_back((t_ns, kind));
     }
 
     /// The force sample nearest to `t_ns`, if one is within [`FORCE_MATCH_NS`].
@@ -500,6 +503,11 @@ impl Recorder {
     }
 
     fn row(&mut self, t: &StimTick, force: Option<f64>) -> Result<(), RecordingError> {
+        while self.boundaries.front().is_some_and(|(b, _)| *b <= t.t_ns) {
+            if let Some((_, kind)) = self.boundaries.pop_front() {
+                self.boundary_pending = Some(kind);
+            }
+        }
         let (lo, hi) = DATASET_FORCE_RANGE;
         let usable = force.filter(|f| (lo..=hi).contains(f));
         let gap = self.last_tick_seq != 0 && t.seq != self.last_tick_seq + 1;
