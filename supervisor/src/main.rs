@@ -1,6 +1,8 @@
-//! `supervisor`: the operator's command line.
+//! `supervisor`: the operator's command line and the supervisor daemon.
 //!
-//! One variant of [`Command`] per subcommand, each dispatched to `cmd::<name>::run`.
+//! Offline model work (`identify`, `sweep`, `compare`, `analyse`, `modify`, `design`,
+//! `osp`) and the live runtime (`run`, the operator client, `bench`): one variant of
+//! [`Command`] per subcommand, each dispatched to its `cmd::<name>` module.
 use clap::{Parser, Subcommand};
 
 mod cmd;
@@ -32,6 +34,20 @@ enum Command {
     /// Optimal stimulation patterns: FTI/FTIpP, random, trains, iterative and LCN methods
     /// (thesis ch. 6).
     Osp(cmd::osp::Args),
+    /// Run the supervisor daemon: references, outer loop, health, recording, control socket.
+    Run(cmd::run::Args),
+    /// Hold a constant reference force (operator client).
+    Set(cmd::client::SetArgs),
+    /// Run a reference profile: constant, steps, ramps, cardiac (operator client).
+    Profile(cmd::client::ProfileArgs),
+    /// Stop stimulation at once and disarm the driver (operator client).
+    Stop(cmd::client::SocketArgs),
+    /// Arm the driver; clears a fault once its cause is gone (operator client).
+    Arm(cmd::client::SocketArgs),
+    /// Show the daemon's state (operator client).
+    Status(cmd::client::StatusArgs),
+    /// End-to-end bench: sim-muscle, stim-driver, rt-core and the supervisor on vcan.
+    Bench(cmd::bench::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -44,5 +60,12 @@ fn main() -> anyhow::Result<()> {
         Command::Modify(args) => cmd::modify::run(args),
         Command::Design(args) => cmd::design::run(args),
         Command::Osp(args) => cmd::osp::run(args),
+        Command::Run(args) => cmd::run::run(args),
+        Command::Set(args) => cmd::client::set(args),
+        Command::Profile(args) => cmd::client::profile(args),
+        Command::Stop(args) => cmd::client::stop(args),
+        Command::Arm(args) => cmd::client::arm(args),
+        Command::Status(args) => cmd::client::status(args),
+        Command::Bench(args) => cmd::bench::run(args),
     }
 }

@@ -1,8 +1,14 @@
 //! Subcommands, one module each, plus what they share: the structure / mode flags of an
 //! identification, a progress bar, table formatting (and, in [`plots`] and [`inputs`], what
 //! the analysis commands share).
+//!
+//! Offline model work: [`identify`], [`sweep`], [`compare`], [`analyse`], [`modify`],
+//! [`design`], [`osp`]. The live runtime: the daemon ([`run`]), the operator client
+//! ([`client`]: `set`, `profile`, `stop`, `arm`, `status`) and the end-to-end [`bench`].
 
 pub mod analyse;
+pub mod bench;
+pub mod client;
 pub mod compare;
 pub mod design;
 pub mod identify;
@@ -10,6 +16,7 @@ pub mod inputs;
 pub mod modify;
 pub mod osp;
 pub mod plots;
+pub mod run;
 pub mod sweep;
 
 use clap::ValueEnum;

@@ -1,0 +1,496 @@
+//! The end-to-end bench: sim-muscle (the virtual stimulator and fast muscle on vcan),
+//! stim-driver, rt-core with the default controller, and the supervisor daemon, started
+//! as separate processes on one CAN interface, driven through the control socket.
+//!
+//! [`Stack`] starts, watches and stops the processes (tests use it to kill one mid-run);
+//! `supervisor bench` ([`run_bench`]) runs a cardiac profile for a set time, stops
+//! everything and summarises the recording ([`crate::summary`]).
+
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command as Proc, Stdio};
+use std::time::{Duration, Instant};
+
+use rt_core::control::file::Controller;
+
+use crate::control;
+use crate::protocol::{Command, Response, Status};
+
+/// A bench failure.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// A file or process operation failed.
+    #[error("{what}: {source}")]
+    Io {
+        /// What was being done.
+        what: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A binary is missing.
+    #[error("{0} not found: build the workspace first (cargo build --release --workspace)")]
+    MissingBinary(PathBuf),
+    /// The default controller could not be loaded.
+    #[error("controller {path}: {message}")]
+    Controller {
+        /// File.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+    /// A process exited or never became ready.
+    #[error("{0}")]
+    Process(String),
+    /// The supervisor refused a command.
+    #[error("supervisor refused `{command}`: {reason}")]
+    Refused {
+        /// Command.
+        command: String,
+        /// Reason.
+        reason: String,
+    },
+    /// Control socket.
+    #[error("control socket: {0}")]
+    Client(#[from] control::ClientError),
+}
+
+fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> BenchError {
+    let what = what.into();
+    move |source| BenchError::Io { what, source }
+}
+
+/// The processes of the bench, upstream first.
+pub const PROCESSES: [&str; 4] = ["sim-muscle", "stim-driver", "rt-core", "supervisor"];
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct StackOptions {
+    /// Directory for configurations, logs and the recording.
+    pub dir: PathBuf,
+    /// Directory of the binaries (rt-core, stim-driver, sim-muscle, supervisor).
+    pub bin_dir: PathBuf,
+    /// Controller file (fes-lcn/1) for rt-core.
+    pub controller: PathBuf,
+    /// CAN interface.
+    pub iface: String,
+    /// Running inside a UML guest: generous timeouts (its timing is functional only).
+    pub uml: bool,
+    /// Fatigue in the muscle.
+    pub fatigue: bool,
+    /// Outer loop at start.
+    pub outer_loop: bool,
+    /// iceoryx2 prefix (unique per bench).
+    pub prefix: String,
+}
+
+struct Proc1 {
+    name: &'static str,
+    child: Child,
+    log: PathBuf,
+}
+
+/// The running processes.
+pub struct Stack {
+    opts: StackOptions,
+    procs: Vec<Proc1>,
+    socket: PathBuf,
+    scale_n: f64,
+    delay: usize,
+}
+
+/// Timeouts of the chain: (rt-core stale ms, driver watchdog ticks, stimulator watchdog
+/// ms, supervisor stim-tick timeout ms, driver-status timeout ms, force timeout ms).
+fn timeouts(uml: bool) -> (u64, u32, u32, u64, u64, u64) {
+    if uml {
+        (1000, 500, 1000, 1500, 3000, 1500)
+    } else {
+        (100, 20, 100, 50, 500, 100)
+    }
+}
+
+/// The last `n` bytes of a log, for error messages.
+pub fn log_tail(path: &Path, n: u64) -> String {
+    let Ok(mut f) = File::open(path) else {
+        return String::new();
+    };
+    let len = f.metadata().map_or(0, |m| m.len());
+    let _ = f.seek(SeekFrom::Start(len.saturating_sub(n)));
+    let mut s = String::new();
+    let _ = f.read_to_string(&mut s);
+    s
+}
+
+impl Stack {
+    /// Writes the configurations and starts the four processes, upstream first; returns
+    /// once the supervisor's control socket answers.
+    pub fn start(opts: StackOptions) -> Result<Self, BenchError> {
+        let d = &opts.dir;
+        std::fs::create_dir_all(d).map_err(io(format!("create {}", d.display())))?;
+        for b in PROCESSES {
+            let p = opts.bin_dir.join(b);
+            if !p.is_file() {
+                return Err(BenchError::MissingBinary(p));
+            }
+        }
+        let controller =
+            Controller::load(&opts.controller).map_err(|e| BenchError::Controller {
+                path: opts.controller.clone(),
+                message: e.to_string(),
+            })?;
+        let scale_n = controller.lmn.force_scale_n;
+        let delay = controller.lmn.delay;
+        let (stale_ms, drv_ticks, stim_wd, tick_to, status_to, force_to) = timeouts(opts.uml);
+        let controller_path = std::fs::canonicalize(&opts.controller)
+            .map_err(io(format!("resolve {}", opts.controller.display())))?;
+        let write = |name: &str, text: String| -> Result<PathBuf, BenchError> {
+            let p = d.join(name);
+            std::fs::write(&p, text).map_err(io(format!("write {}", p.display())))?;
+            Ok(p)
+        };
+        let prefix = &opts.prefix;
+        let rt_cfg = write(
+            "rt-core.toml",
+            format!(
+                r#"schema = "fes-rt-core/1"
+period_us = 1000
+
+[source]
+kind = "controller"
+path = "{controller}"
+
+[rt]
+priority = 80
+on_missing_rights = "best-effort"
+
+[reference]
+stale_after_ms = {stale_ms}
+stale_ramp_per_s = 2.0
+
+[telemetry]
+hlog = "{dir}/rt-core.hlog"
+report_period_ms = 1000
+
+[ipc]
+prefix = "{prefix}"
+"#,
+                controller = controller_path.display(),
+                dir = d.display(),
+            ),
+        )?;
+        let drv_cfg = write(
+            "stim-driver.toml",
+            format!(
+                r#"schema = "fes-stim-driver/1"
+
+[can]
+iface = "{iface}"
+
+[stimulator]
+watchdog_ms = {stim_wd}
+
+[watchdog]
+timeout_ticks = {drv_ticks}
+stale_after_ticks = {drv_ticks}
+stimulator_timeout_ms = {stim_wd}
+arm_confirm_ms = {arm_ms}
+command_max_age_ms = {cmd_age}
+
+[force]
+max_n = {scale_n}
+
+[rt]
+priority = 79
+on_missing_rights = "best-effort"
+
+[telemetry]
+hlog = "{dir}/stim-driver.hlog"
+
+[ipc]
+prefix = "{prefix}"
+"#,
+                iface = opts.iface,
+                arm_ms = if opts.uml { 2000 } else { 200 },
+                cmd_age = if opts.uml { 2000 } else { 100 },
+                dir = d.display(),
+            ),
+        )?;
+        let socket = d.join("supervisor.sock");
+        let mut procs = Vec::new();
+        let spawn = |procs: &mut Vec<Proc1>, name: &'static str, args: Vec<String>| {
+            let log = d.join(format!("{name}.log"));
+            let out = File::create(&log).map_err(io(format!("create {}", log.display())))?;
+            let err = out.try_clone().map_err(io("log"))?;
+            let child = Proc::new(opts.bin_dir.join(name))
+                .args(&args)
+                .stdin(Stdio::null())
+                .stdout(out)
+                .stderr(err)
+                .spawn()
+                .map_err(io(format!("start {name}")))?;
+            procs.push(Proc1 { name, child, log });
+            Ok::<(), BenchError>(())
+        };
+        let mut sim_args: Vec<String> = vec![
+            "stimulator".into(),
+            "--iface".into(),
+            opts.iface.clone(),
+            "--preset".into(),
+            "fast".into(),
+            "--measured".into(),
+            "--offset-n".into(),
+            "0".into(),
+            "--watchdog-ms".into(),
+            stim_wd.to_string(),
+            "--record".into(),
+            d.join("stimulator.csv").display().to_string(),
+        ];
+        if opts.fatigue {
+            sim_args.push("--fatigue".into());
+        }
+        spawn(&mut procs, "sim-muscle", sim_args)?;
+        std::thread::sleep(Duration::from_millis(300));
+        let sim_pid = procs[0].child.id();
+        let sup_cfg = write(
+            "supervisor.toml",
+            format!(
+                r#"schema = "fes-supervisor/1"
+
+[ipc]
+prefix = "{prefix}"
+
+[control]
+socket = "{socket}"
+
+[outer_loop]
+enabled = {outer}
+
+[contraction]
+delay_ms = {delay}.0
+
+[health]
+stim_tick_timeout_ms = {tick_to}
+driver_status_timeout_ms = {status_to}
+force_timeout_ms = {force_to}
+stimulator_pid = {sim_pid}
+
+[recording]
+dir = "{dir}/recording"
+scale_n = {scale_n}
+source = "supervisor bench"
+"#,
+                socket = socket.display(),
+                outer = opts.outer_loop,
+                dir = d.display(),
+            ),
+        )?;
+        spawn(
+            &mut procs,
+            "stim-driver",
+            vec![
+                "run".into(),
+                "--config".into(),
+                drv_cfg.display().to_string(),
+            ],
+        )?;
+        spawn(
+            &mut procs,
+            "rt-core",
+            vec!["--config".into(), rt_cfg.display().to_string()],
+        )?;
+        spawn(
+            &mut procs,
+            "supervisor",
+            vec![
+                "run".into(),
+                "--config".into(),
+                sup_cfg.display().to_string(),
+            ],
+        )?;
+        let stack = Self {
+            opts,
+            procs,
+            socket,
+            scale_n,
+            delay,
+        };
+        let deadline = Instant::now() + Duration::from_secs(if stack.opts.uml { 60 } else { 20 });
+        loop {
+            stack.check_alive()?;
+            if stack.socket.exists() && stack.command(Command::Status).is_ok() {
+                return Ok(stack);
+            }
+            if Instant::now() > deadline {
+                return Err(BenchError::Process(format!(
+                    "the supervisor's control socket {} did not answer; its log:\n{}",
+                    stack.socket.display(),
+                    log_tail(&stack.procs[3].log, 2000)
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Newtons per normalised force of the controller's model.
+    pub fn scale_n(&self) -> f64 {
+        self.scale_n
+    }
+
+    /// The controller model's delay, samples.
+    pub fn delay(&self) -> usize {
+        self.delay
+    }
+
+    /// The options.
+    pub fn options(&self) -> &StackOptions {
+        &self.opts
+    }
+
+    /// Process id of a process by name.
+    pub fn pid(&self, name: &str) -> Option<u32> {
+        self.procs
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.child.id())
+    }
+
+    /// Fails with the log of the first process that has exited.
+    pub fn check_alive(&self) -> Result<(), BenchError> {
+        for p in &self.procs {
+            if !Path::new(&format!("/proc/{}", p.child.id())).exists()
+                || std::fs::read_to_string(format!("/proc/{}/stat", p.child.id())).is_ok_and(|s| {
+                    s.rsplit(')')
+                        .next()
+                        .is_some_and(|r| r.trim_start().starts_with('Z'))
+                })
+            {
+                return Err(BenchError::Process(format!(
+                    "{} exited unexpectedly; its log ({}):\n{}",
+                    p.name,
+                    p.log.display(),
+                    log_tail(&p.log, 3000)
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends a command to the supervisor.
+    pub fn command(&self, c: Command) -> Result<Response, BenchError> {
+        Ok(control::request(&self.socket, c, Duration::from_secs(10))?)
+    }
+
+    /// Sends a command that must be accepted.
+    pub fn must(&self, c: Command) -> Result<Response, BenchError> {
+        let name = c.name().to_string();
+        let r = self.command(c)?;
+        if !r.ok {
+            return Err(BenchError::Refused {
+                command: name,
+                reason: r.error.unwrap_or_default(),
+            });
+        }
+        Ok(r)
+    }
+
+    /// The supervisor's status.
+    pub fn status(&self) -> Result<Status, BenchError> {
+        self.command(Command::Status)?
+            .status
+            .ok_or_else(|| BenchError::Process("status without state".into()))
+    }
+
+    /// Waits until the supervisor has heard from every process (or `timeout`).
+    pub fn wait_healthy(&self, timeout: Duration) -> Result<Status, BenchError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            self.check_alive()?;
+            let s = self.status()?;
+            if s.processes.iter().all(|p| p.state == "ok") {
+                return Ok(s);
+            }
+            if Instant::now() > deadline {
+                let waiting: Vec<String> = s
+                    .processes
+                    .iter()
+                    .filter(|p| p.state != "ok")
+                    .map(|p| format!("{} {} {}", p.name, p.state, p.detail))
+                    .collect();
+                return Err(BenchError::Process(format!(
+                    "the supervisor has not heard from every process: {}",
+                    waiting.join("; ")
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+
+    /// Sends `signal` to the process `name`.
+    pub fn signal(&self, name: &str, signal: nix::sys::signal::Signal) -> Result<(), BenchError> {
+        let pid = self
+            .pid(name)
+            .ok_or_else(|| BenchError::Process(format!("no process {name}")))?;
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), signal)
+            .map_err(|e| BenchError::Process(format!("kill {name}: {e}")))
+    }
+
+    /// Stops every process: the supervisor first (it closes the recording), then rt-core,
+    /// stim-driver and sim-muscle; SIGTERM, then SIGKILL after `grace`. Returns each
+    /// process's exit status (None when it had to be killed or was already reaped).
+    pub fn stop(mut self, grace: Duration) -> Vec<(&'static str, Option<i32>)> {
+        let mut out = Vec::new();
+        for name in ["supervisor", "rt-core", "stim-driver", "sim-muscle"] {
+            let Some(i) = self.procs.iter().position(|p| p.name == name) else {
+                continue;
+            };
+            let mut p = self.procs.remove(i);
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(p.child.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+            let deadline = Instant::now() + grace;
+            let code = loop {
+                match p.child.try_wait() {
+                    Ok(Some(s)) => break s.code(),
+                    Ok(None) if Instant::now() < deadline => {
+                        std::thread::sleep(Duration::from_millis(20))
+                    }
+                    _ => {
+                        let _ = p.child.kill();
+                        let _ = p.child.wait();
+                        break None;
+                    }
+                }
+            };
+            out.push((p.name, code));
+        }
+        out
+    }
+
+    /// The recording directories the supervisor wrote.
+    pub fn recordings(&self) -> Vec<PathBuf> {
+        recordings_in(&self.opts.dir.join("recording"))
+    }
+}
+
+impl Drop for Stack {
+    fn drop(&mut self) {
+        for p in &mut self.procs {
+            let _ = p.child.kill();
+            let _ = p.child.wait();
+        }
+    }
+}
+
+/// Run directories under `root`, oldest first.
+pub fn recordings_in(root: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root)
+        .map(|r| {
+            r.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_dir())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}

@@ -1,0 +1,456 @@
+//! `supervisor bench`: the end-to-end bench (docs/bench.md).
+//!
+//! Without a CAN interface in reach (no `FES_VCAN_IFACE`), it re-runs itself through
+//! `vcan-run`, which uses native vcan when the kernel has it and a User-Mode Linux guest
+//! otherwise; inside, it starts sim-muscle, stim-driver, rt-core and the supervisor daemon,
+//! arms, runs the cardiac profile, stops everything and prints the summary.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use supervisor::baseline::{BeatShape, baseline_40hz};
+use supervisor::bench::{Stack, StackOptions, log_tail};
+use supervisor::plots::{LatencyCurve, RunSeries, percentile_grid, plot_latency, plot_run};
+use supervisor::profile::{CardiacSpec, ProfileSpec};
+use supervisor::protocol::Command;
+use supervisor::summary::{AnalysisInput, Summary, analyse, read_series};
+
+use super::client::OnOff;
+
+/// Arguments of `supervisor bench`.
+#[derive(Debug, Clone, clap::Args)]
+#[command(
+    after_help = "Example: supervisor bench --seconds 30 --hr 75 --json bench.json\n\
+The README's `scripts/bench` builds everything and runs this with --seconds 30."
+)]
+pub struct Args {
+    /// Length of the cardiac profile, s.
+    #[arg(long, default_value_t = 30.0)]
+    pub seconds: f64,
+    /// Heart rate, beats per minute (60..=200).
+    #[arg(long, default_value_t = 75.0)]
+    pub hr: f64,
+    /// Fraction of each beat that contracts.
+    #[arg(long, default_value_t = 0.4)]
+    pub duty: f64,
+    /// Target contraction, normalised force.
+    #[arg(long, default_value_t = 0.3)]
+    pub amplitude: f64,
+    /// Outer loop (thesis Controller 1).
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub outer_loop: OnOff,
+    /// Fatigue in the simulated muscle (Ding 2003).
+    #[arg(long)]
+    pub fatigue: bool,
+    /// Controller file for rt-core (fes-lcn/1).
+    #[arg(long, default_value = "models/fast.lcn.json")]
+    pub controller: PathBuf,
+    /// Output directory (configurations, logs, recording, plots); default
+    /// target/bench/<UTC time>.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also write the summary as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Length of the time window shown in the force plot, s.
+    #[arg(long, default_value_t = 4.0)]
+    pub plot_window_s: f64,
+}
+
+fn check(a: &Args) -> anyhow::Result<()> {
+    if !(a.seconds.is_finite() && (2.0..=3600.0).contains(&a.seconds)) {
+        bail!("--seconds {} must be in [2, 3600]", a.seconds);
+    }
+    if !(a.plot_window_s.is_finite() && a.plot_window_s > 0.0) {
+        bail!("--plot-window-s {} must be > 0", a.plot_window_s);
+    }
+    let spec = ProfileSpec::Cardiac(cardiac(a));
+    spec.validate(&supervisor::limits::ReferenceLimits::default())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    if !a.controller.is_file() {
+        bail!(
+            "controller file {} not found (run from the repository root, or give --controller; models/README.md says how it is made)",
+            a.controller.display()
+        );
+    }
+    Ok(())
+}
+
+fn cardiac(a: &Args) -> CardiacSpec {
+    CardiacSpec {
+        bpm: a.hr,
+        duty: a.duty,
+        amplitude: a.amplitude,
+        edge_rate_per_s: None,
+        outer_loop: Some(a.outer_loop == OnOff::On),
+    }
+}
+
+/// Runs the bench.
+pub fn run(a: Args) -> anyhow::Result<()> {
+    check(&a)?;
+    let exe = std::env::current_exe().context("own executable")?;
+    let bin_dir = exe.parent().context("executable directory")?.to_path_buf();
+    let out = match &a.out {
+        Some(o) => o.clone(),
+        None => PathBuf::from("target/bench").join(supervisor::recording::utc_stamp()),
+    };
+    if std::env::var_os("FES_VCAN_IFACE").is_none() {
+        // Not in a CAN environment yet: run this same command inside one.
+        let vcan_run = bin_dir.join("vcan-run");
+        if !vcan_run.is_file() {
+            bail!(
+                "{} not found: build it (cargo build --release -p fes-tests --bins)",
+                vcan_run.display()
+            );
+        }
+        let mut args: Vec<String> = std::env::args().skip(1).collect();
+        if a.out.is_none() {
+            args.push("--out".into());
+            args.push(out.display().to_string());
+        }
+        let timeout = (a.seconds + 300.0).ceil() as u64;
+        eprintln!(
+            "bench: no CAN interface here; running inside `vcan-run` (native vcan or a User-Mode Linux guest)"
+        );
+        let status = std::process::Command::new(&vcan_run)
+            .arg("--timeout-s")
+            .arg(timeout.to_string())
+            .arg("--")
+            .arg(&exe)
+            .args(&args)
+            .status()
+            .with_context(|| format!("start {}", vcan_run.display()))?;
+        std::process::exit(status.code().unwrap_or(1));
+    }
+    inside(&a, &bin_dir, &out)
+}
+
+fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
+    let iface = std::env::var("FES_VCAN_IFACE").unwrap_or_else(|_| "vcan0".into());
+    let uml = std::env::var("FES_VCAN_BACKEND").is_ok_and(|b| b == "uml");
+    let prefix = format!("bench{}", std::process::id());
+    std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
+    let out = std::fs::canonicalize(out)?;
+    println!(
+        "bench: sim-muscle (fast{}), stim-driver, rt-core ({}), supervisor on {iface} ({})",
+        if a.fatigue { ", fatigue" } else { "" },
+        a.controller.display(),
+        if uml {
+            "User-Mode Linux guest: timings are functional only"
+        } else {
+            "native"
+        }
+    );
+    let stack = Stack::start(StackOptions {
+        dir: out.clone(),
+        bin_dir: bin_dir.to_path_buf(),
+        controller: a.controller.clone(),
+        iface,
+        uml,
+        fatigue: a.fatigue,
+        outer_loop: a.outer_loop == OnOff::On,
+        prefix,
+    })?;
+    let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
+    if let Err(e) = healthy {
+        let logs: String = supervisor::bench::PROCESSES
+            .iter()
+            .map(|p| {
+                format!(
+                    "--- {p}.log\n{}",
+                    log_tail(&out.join(format!("{p}.log")), 1500)
+                )
+            })
+            .collect();
+        let _ = stack.stop(Duration::from_secs(3));
+        bail!("{e}\n{logs}");
+    }
+    stack.must(Command::Arm)?;
+    stack.must(Command::Profile {
+        profile: ProfileSpec::Cardiac(cardiac(a)),
+    })?;
+    println!(
+        "bench: armed; cardiac profile {} beats/min, duty {}, amplitude {}, outer loop {} for {} s",
+        a.hr,
+        a.duty,
+        a.amplitude,
+        if a.outer_loop == OnOff::On {
+            "on"
+        } else {
+            "off"
+        },
+        a.seconds
+    );
+    let start = Instant::now();
+    let run_for = Duration::from_secs_f64(a.seconds);
+    let mut next_report = Duration::from_secs(5);
+    let mut failure = None;
+    while start.elapsed() < run_for {
+        std::thread::sleep(Duration::from_millis(200));
+        if let Err(e) = stack.check_alive() {
+            failure = Some(e.to_string());
+            break;
+        }
+        if start.elapsed() >= next_report {
+            next_report += Duration::from_secs(5);
+            if let Ok(s) = stack.status() {
+                println!(
+                    "  {:5.1} s  {}  beat {:>3}  contraction {}  outer-loop correction {:+.3}",
+                    start.elapsed().as_secs_f64(),
+                    s.state,
+                    s.beat.map_or("-".into(), |b| b.to_string()),
+                    s.last_contraction.map_or("-".into(), |c| format!("{c:.3}")),
+                    s.outer_loop_correction
+                );
+                if let Some(f) = s.fault {
+                    failure = Some(format!("the supervisor stopped stimulation: {f}"));
+                    break;
+                }
+            }
+        }
+    }
+    let _ = std::io::stdout().flush();
+    let _ = stack.command(Command::Stop);
+    std::thread::sleep(Duration::from_millis(300));
+    let scale_n = stack.scale_n();
+    let delay = stack.delay();
+    let exits = stack.stop(Duration::from_secs(if uml { 10 } else { 5 }));
+    let unclean: Vec<String> = exits
+        .iter()
+        .filter(|(_, c)| *c != Some(0))
+        .map(|(n, c)| {
+            format!(
+                "{n} (exit {})",
+                c.map_or("killed".into(), |c| c.to_string())
+            )
+        })
+        .collect();
+    if let Some(f) = failure {
+        bail!("bench run failed: {f}");
+    }
+    let rec = supervisor::bench::recordings_in(&out.join("recording"));
+    let Some(rec) = rec.last() else {
+        bail!(
+            "the supervisor wrote no recording under {}",
+            out.join("recording").display()
+        );
+    };
+    let amplitude = a.amplitude;
+    let shape_of = move |fti: f64, period_ms: usize, on_ms: usize| {
+        let muscle = sim_muscle::muscle::MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
+        let shape = BeatShape {
+            period_ms,
+            on_ms,
+            amplitude,
+            edge_rate_per_s: supervisor::limits::ReferenceLimits::default().max_rate_per_s,
+            delay,
+        };
+        baseline_40hz(&muscle, scale_n, &shape, fti)
+    };
+    let summary = analyse(
+        rec,
+        &AnalysisInput {
+            delay,
+            target: a.amplitude,
+            baseline: Some(Box::new(shape_of)),
+            uml,
+        },
+    )?;
+    let plots = draw(rec, &out, &summary, a, delay)?;
+    print_summary(&summary, &plots, &unclean);
+    if let Some(j) = &a.json {
+        let mut v = serde_json::to_value(&summary)?;
+        if let Some(o) = v.as_object_mut() {
+            o.insert(
+                "plots".into(),
+                serde_json::json!(
+                    plots
+                        .iter()
+                        .map(|p| p.display().to_string())
+                        .collect::<Vec<_>>()
+                ),
+            );
+            o.insert(
+                "command".into(),
+                serde_json::json!(std::env::args().collect::<Vec<_>>().join(" ")),
+            );
+        }
+        std::fs::write(j, serde_json::to_string_pretty(&v)? + "\n")
+            .with_context(|| format!("write {}", j.display()))?;
+        println!("summary JSON: {}", j.display());
+    }
+    Ok(())
+}
+
+fn draw(
+    rec: &Path,
+    out: &Path,
+    s: &Summary,
+    a: &Args,
+    delay: usize,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let series = read_series(rec)?;
+    let mut paths = Vec::new();
+    let t0 = series.beats.first().map_or(0, |b| b.start_ns);
+    let run = RunSeries {
+        t_s: series
+            .t_ns
+            .iter()
+            .map(|&t| (t as f64 - t0 as f64) * 1e-9)
+            .collect(),
+        reference: series.reference.clone(),
+        model: series.model.clone(),
+        measured: series.measured.clone(),
+        pulses_s: series
+            .t_ns
+            .iter()
+            .zip(&series.pulse)
+            .filter(|(_, p)| **p)
+            .map(|(&t, _)| (t as f64 - t0 as f64) * 1e-9)
+            .collect(),
+    };
+    let from = 2.0f64.min(s.duration_s / 2.0);
+    let p = out.join("force.png");
+    plot_run(
+        &p,
+        &format!(
+            "Bench: cardiac {} beats/min, target {} (model delay {delay} ms), {} pulses/contraction",
+            a.hr,
+            a.amplitude,
+            fmt(s.pulses_per_contraction, 1)
+        ),
+        &run,
+        (from, from + a.plot_window_s),
+    )?;
+    paths.push(p);
+    let mut curves = Vec::new();
+    for (file, who) in [
+        ("rt-core.hlog", "rt-core"),
+        ("stim-driver.hlog", "stim-driver"),
+    ] {
+        let path = out.join(file);
+        if let Ok(tags) = rt_core::rt::hlog::merge_by_tag(&path) {
+            for (tag, h) in tags {
+                if h.count() == 0 {
+                    continue;
+                }
+                curves.push(LatencyCurve {
+                    label: format!("{who} {tag}"),
+                    points: percentile_grid()
+                        .into_iter()
+                        .map(|q| (q * 100.0, h.quantile_ns(q) as f64 * 1e-3))
+                        .collect(),
+                });
+            }
+        }
+    }
+    if !curves.is_empty() {
+        let p = out.join("latency.png");
+        plot_latency(
+            &p,
+            if s.timing_functional_only {
+                "Latency percentiles (UML guest: functional only, not representative)"
+            } else {
+                "Latency percentiles"
+            },
+            &curves,
+        )?;
+        paths.push(p);
+    }
+    Ok(paths)
+}
+
+fn fmt(v: f64, digits: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.digits$}")
+    } else {
+        "-".into()
+    }
+}
+
+fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
+    println!();
+    println!(
+        "== bench summary ({:.1} s of cardiac profile, {} contractions)",
+        s.duration_s, s.contractions
+    );
+    println!("  tracking error (RMS, normalised force, vs reference delayed by the model delay)");
+    println!("    model force              {}", fmt(s.rms_error_model, 4));
+    println!(
+        "    measured force           {}",
+        fmt(s.rms_error_measured, 4)
+    );
+    println!(
+        "  contraction (plateau mean) target {}: mean {}, first 5 beats {}, last 5 beats {}, worst after beat 10 {} %",
+        s.target,
+        fmt(s.mean_contraction, 4),
+        fmt(s.first_last_contraction[0], 4),
+        fmt(s.first_last_contraction[1], 4),
+        fmt(s.worst_deviation_after_10 * 100.0, 1)
+    );
+    println!(
+        "  pulses delivered           {} ({} per contraction){}",
+        s.pulses,
+        fmt(s.pulses_per_contraction, 2),
+        s.pulses_sent
+            .map_or(String::new(), |p| format!("; stimulator driver sent {p}"))
+    );
+    println!(
+        "  40 Hz baseline, same FTI   {} pulses per contraction, RMS error {} (FTI per contraction {} s)",
+        fmt(s.baseline_pulses_per_contraction, 2),
+        fmt(s.baseline_rms_error, 4),
+        fmt(s.fti_per_contraction, 4)
+    );
+    if let Some(b) = &s.baseline {
+        println!(
+            "    (a 40 Hz train over the whole contraction: {} pulses, FTI {} s{})",
+            b.full_contraction_pulses,
+            fmt(b.full_contraction_fti, 4),
+            if b.saturated {
+                "; even a whole-beat 40 Hz train stays below the target FTI"
+            } else {
+                ""
+            }
+        );
+    }
+    println!(
+        "  latency (us){}       p50       p99       max",
+        if s.timing_functional_only {
+            " [UML guest: functional only]"
+        } else {
+            ""
+        }
+    );
+    let row = |name: &str, v: [f64; 3]| {
+        println!(
+            "    {name:<26} {:>9} {:>9} {:>9}",
+            fmt(v[0], 1),
+            fmt(v[1], 1),
+            fmt(v[2], 1)
+        );
+    };
+    row("rt-core wake-up lateness", s.rt_core.wake_us);
+    if let Some(d) = &s.stim_driver {
+        row("stim-driver wake-up", d.wake_us);
+        row("StimTick -> stim-driver", d.ipc_us);
+    }
+    println!(
+        "    rt-core compute p99 {} us, publish p99 {} us",
+        fmt(s.rt_core.compute_p99_us, 1),
+        fmt(s.rt_core.publish_p99_us, 1)
+    );
+    println!(
+        "  deadline misses (rt-core skipped periods) {}",
+        s.deadline_misses
+    );
+    println!("  recording: {}", s.recording);
+    for p in plots {
+        println!("  plot: {}", p.display());
+    }
+    if !unclean.is_empty() {
+        println!("  note: not stopped cleanly: {}", unclean.join(", "));
+    }
+}

@@ -1,0 +1,324 @@
+//! The operator client: `supervisor set`, `profile`, `stop`, `arm`, `status`. Each sends
+//! one command over the control socket and prints the answer; a refused command exits
+//! with status 1 and the daemon's reason.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use supervisor::control;
+use supervisor::profile::{CardiacSpec, ProfileSpec, RampPoint, Step};
+use supervisor::protocol::{Command, Response, Status};
+
+/// Where the daemon is.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SocketArgs {
+    /// Control socket of the daemon.
+    #[arg(long, global = true, default_value = "/run/fes/supervisor.sock")]
+    pub socket: PathBuf,
+    /// Seconds to wait for the answer.
+    #[arg(long, global = true, default_value_t = 5.0)]
+    pub timeout_s: f64,
+}
+
+/// `supervisor set`.
+#[derive(Debug, clap::Args)]
+pub struct SetArgs {
+    /// Reference force, normalised to the muscle's maximum, [0, 1].
+    #[arg(long, allow_negative_numbers = true)]
+    pub force: f64,
+    /// Ramp rate towards it, normalised force per second (default: the daemon's).
+    #[arg(long)]
+    pub rate: Option<f64>,
+    #[command(flatten)]
+    socket: SocketArgs,
+}
+
+/// `supervisor status`.
+#[derive(Debug, clap::Args)]
+pub struct StatusArgs {
+    /// Print the daemon's answer as JSON.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    socket: SocketArgs,
+}
+
+/// On or off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnOff {
+    /// On.
+    On,
+    /// Off.
+    Off,
+}
+
+/// `supervisor profile <kind>`.
+#[derive(Debug, clap::Args)]
+pub struct ProfileArgs {
+    #[command(subcommand)]
+    kind: ProfileKind,
+    #[command(flatten)]
+    socket: SocketArgs,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum ProfileKind {
+    /// Square-wave contractions synchronised to a heart rate (thesis 1.1); while one runs,
+    /// the new values take effect at the next beat.
+    Cardiac {
+        /// Heart rate, beats per minute, 60..=200.
+        #[arg(long)]
+        hr: f64,
+        /// Fraction of the beat that contracts.
+        #[arg(long, default_value_t = 0.4)]
+        duty: f64,
+        /// Target contraction, normalised force.
+        #[arg(long)]
+        amplitude: f64,
+        /// Rate of the edges, normalised force per second (default: the rate limit).
+        #[arg(long)]
+        edge_rate: Option<f64>,
+        /// Switch the outer loop on or off with this profile.
+        #[arg(long, value_enum)]
+        outer_loop: Option<OnOff>,
+    },
+    /// A constant force.
+    Constant {
+        /// Normalised force.
+        #[arg(long)]
+        force: f64,
+        /// Ramp rate towards it, /s.
+        #[arg(long)]
+        rate: Option<f64>,
+    },
+    /// Levels held in turn: `--levels 0.2:1.0,0.5:0.5` (force:seconds, ...).
+    Steps {
+        /// force:hold_s pairs, comma separated.
+        #[arg(long)]
+        levels: String,
+        /// Start again after the last level.
+        #[arg(long)]
+        repeat: bool,
+        /// Ramp rate between levels, /s.
+        #[arg(long)]
+        rate: Option<f64>,
+    },
+    /// Piecewise-linear: `--points 0:0,2:0.5,3:0.5` (seconds:force, ...; the first at 0).
+    Ramps {
+        /// t_s:force pairs, comma separated.
+        #[arg(long)]
+        points: String,
+        /// Start again after the last point.
+        #[arg(long)]
+        repeat: bool,
+    },
+}
+
+fn pairs(text: &str, what: &str) -> anyhow::Result<Vec<(f64, f64)>> {
+    text.split(',')
+        .map(|p| {
+            let (a, b) = p
+                .split_once(':')
+                .with_context(|| format!("{what}: `{p}` is not a:b"))?;
+            let a: f64 = a
+                .trim()
+                .parse()
+                .with_context(|| format!("{what}: `{a}` is not a number"))?;
+            let b: f64 = b
+                .trim()
+                .parse()
+                .with_context(|| format!("{what}: `{b}` is not a number"))?;
+            Ok((a, b))
+        })
+        .collect()
+}
+
+fn send(socket: &SocketArgs, command: Command) -> anyhow::Result<Response> {
+    if !(socket.timeout_s.is_finite() && socket.timeout_s > 0.0 && socket.timeout_s <= 600.0) {
+        bail!("--timeout-s {} must be in (0, 600]", socket.timeout_s);
+    }
+    Ok(control::request(
+        &socket.socket,
+        command,
+        Duration::from_secs_f64(socket.timeout_s),
+    )?)
+}
+
+fn finish(r: Response) -> anyhow::Result<()> {
+    if r.ok {
+        println!("{}", r.message.unwrap_or_default());
+        Ok(())
+    } else {
+        eprintln!("refused: {}", r.error.unwrap_or_default());
+        std::process::exit(1);
+    }
+}
+
+fn finite(flag: &str, v: Option<f64>) -> anyhow::Result<()> {
+    match v {
+        Some(x) if !x.is_finite() => bail!("{flag} {x}: must be a finite number"),
+        _ => Ok(()),
+    }
+}
+
+/// `supervisor set`.
+pub fn set(a: SetArgs) -> anyhow::Result<()> {
+    finite("--force", Some(a.force))?;
+    finite("--rate", a.rate)?;
+    finish(send(
+        &a.socket,
+        Command::Set {
+            force: a.force,
+            rate_per_s: a.rate,
+        },
+    )?)
+}
+
+/// `supervisor profile`.
+pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
+    if let ProfileKind::Cardiac {
+        hr,
+        duty,
+        amplitude,
+        edge_rate,
+        ..
+    } = &a.kind
+    {
+        finite("--hr", Some(*hr))?;
+        finite("--duty", Some(*duty))?;
+        finite("--amplitude", Some(*amplitude))?;
+        finite("--edge-rate", *edge_rate)?;
+    }
+    if let ProfileKind::Constant { force, rate } = &a.kind {
+        finite("--force", Some(*force))?;
+        finite("--rate", *rate)?;
+    }
+    let profile = match a.kind {
+        ProfileKind::Cardiac {
+            hr,
+            duty,
+            amplitude,
+            edge_rate,
+            outer_loop,
+        } => ProfileSpec::Cardiac(CardiacSpec {
+            bpm: hr,
+            duty,
+            amplitude,
+            edge_rate_per_s: edge_rate,
+            outer_loop: outer_loop.map(|o| o == OnOff::On),
+        }),
+        ProfileKind::Constant { force, rate } => ProfileSpec::Constant {
+            force,
+            rate_per_s: rate,
+        },
+        ProfileKind::Steps {
+            levels,
+            repeat,
+            rate,
+        } => ProfileSpec::Steps {
+            steps: pairs(&levels, "--levels")?
+                .into_iter()
+                .map(|(force, hold_s)| Step { force, hold_s })
+                .collect(),
+            repeat,
+            rate_per_s: rate,
+        },
+        ProfileKind::Ramps { points, repeat } => ProfileSpec::Ramps {
+            points: pairs(&points, "--points")?
+                .into_iter()
+                .map(|(t_s, force)| RampPoint { t_s, force })
+                .collect(),
+            repeat,
+        },
+    };
+    finish(send(&a.socket, Command::Profile { profile })?)
+}
+
+/// `supervisor stop`.
+pub fn stop(a: SocketArgs) -> anyhow::Result<()> {
+    finish(send(&a, Command::Stop)?)
+}
+
+/// `supervisor arm`.
+pub fn arm(a: SocketArgs) -> anyhow::Result<()> {
+    finish(send(&a, Command::Arm)?)
+}
+
+/// `supervisor status`.
+pub fn status(a: StatusArgs) -> anyhow::Result<()> {
+    let r = send(&a.socket, Command::Status)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(());
+    }
+    match r.status {
+        Some(s) => print!("{}", render(&s)),
+        None => bail!("the daemon sent no status: {}", r.error.unwrap_or_default()),
+    }
+    Ok(())
+}
+
+/// Human-readable status.
+pub fn render(s: &Status) -> String {
+    use std::fmt::Write;
+    let mut o = String::new();
+    let _ = writeln!(o, "state:        {}", s.state);
+    if let Some(f) = &s.fault {
+        let _ = writeln!(o, "fault:        {f}");
+    }
+    let _ = writeln!(
+        o,
+        "reference:    {:.4}{} (ramp {} /s), {} published",
+        s.reference,
+        if s.reference_stop { " STOP" } else { "" },
+        s.reference_rate_per_s,
+        s.references_published
+    );
+    let _ = writeln!(
+        o,
+        "profile:      {}",
+        s.profile.as_deref().unwrap_or("none")
+    );
+    if let Some(b) = s.beat {
+        let _ = writeln!(o, "beat:         {b}");
+    }
+    let _ = writeln!(
+        o,
+        "outer loop:   {} (correction {:+.4}, last contraction {})",
+        if s.outer_loop { "on" } else { "off" },
+        s.outer_loop_correction,
+        s.last_contraction
+            .map_or("-".to_string(), |c| format!("{c:.4}"))
+    );
+    let _ = writeln!(
+        o,
+        "driver:       {} / stimulator {}",
+        s.driver_state.as_deref().unwrap_or("not heard"),
+        s.stimulator_state.as_deref().unwrap_or("not heard")
+    );
+    for p in &s.processes {
+        let _ = writeln!(
+            o,
+            "  {:<12} {:<8} pid {:<8} last message {}{}",
+            p.name,
+            p.state,
+            p.pid.map_or("-".into(), |x| x.to_string()),
+            p.last_message_age_ms
+                .map_or("-".into(), |a| format!("{a:.0} ms ago")),
+            if p.detail.is_empty() {
+                String::new()
+            } else {
+                format!("  ({})", p.detail)
+            }
+        );
+    }
+    if let Some(r) = &s.recording {
+        let _ = writeln!(o, "recording:    {r}");
+    }
+    let _ = writeln!(o, "uptime:       {:.1} s", s.uptime_s);
+    for e in &s.events {
+        let _ = writeln!(o, "  event: {e}");
+    }
+    o
+}

@@ -1,0 +1,68 @@
+//! `supervisor run --config supervisor.toml`: the daemon.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use supervisor::config::{EXAMPLE, SupervisorConfig};
+use supervisor::daemon;
+
+/// Arguments of `supervisor run`.
+#[derive(Debug, clap::Args)]
+#[command(
+    after_help = "The configuration (schema fes-supervisor/1) is documented key by key in \
+deploy/etc/fes/supervisor.toml; --print-example-config prints it. The operator commands \
+(set, profile, stop, arm, status) talk to this daemon over its control socket."
+)]
+pub struct Args {
+    /// Configuration file (TOML, schema "fes-supervisor/1").
+    #[arg(long, default_value = "/etc/fes/supervisor.toml")]
+    pub config: PathBuf,
+    /// Validate the configuration and exit.
+    #[arg(long)]
+    pub check: bool,
+    /// Print the complete default configuration and exit.
+    #[arg(long)]
+    pub print_example_config: bool,
+    /// Log filter (tracing syntax), e.g. `info` or `debug`.
+    #[arg(long, default_value = "info")]
+    pub log: String,
+}
+
+/// Runs the daemon until SIGINT/SIGTERM.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.print_example_config {
+        print!("{EXAMPLE}");
+        return Ok(());
+    }
+    let cfg = SupervisorConfig::load(&args.config)?;
+    if args.check {
+        println!("{}: ok", args.config.display());
+        return Ok(());
+    }
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_new(&args.log)
+                .with_context(|| format!("--log {}", args.log))?,
+        )
+        .init();
+    let stop = rt_core::rt::signals::install_stop_handler().context("signal handlers")?;
+    let outcome = daemon::run(&cfg, stop, |socket| {
+        tracing::info!("supervisor ready; control socket {}", socket.display());
+        eprintln!("supervisor: ready (control socket {})", socket.display());
+    })?;
+    for d in &outcome.recordings {
+        eprintln!("supervisor: recording {}", d.display());
+    }
+    match outcome.fault {
+        Some(f) => {
+            eprintln!("supervisor: stopped with fault: {f}");
+            std::process::exit(3);
+        }
+        None => {
+            eprintln!("supervisor: stopped");
+            Ok(())
+        }
+    }
+}

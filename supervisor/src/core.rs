@@ -1,0 +1,532 @@
+//! The supervisor's state machine: operator commands, the profile, the outer loop, and
+//! the stop-on-fault rule, without I/O (time is passed in).
+//!
+//! ```text
+//!             arm (health ready)                 any fault
+//!  DISARMED ---------------------> ARMED ----------------------> FAULT
+//!     ^  <------------------------   |  <---------------------    |
+//!     |            stop              |   arm (cause gone)         |
+//!     +------------------------------+----------------------------+ stop keeps FAULT
+//! ```
+//!
+//! - DISARMED and FAULT publish `Reference { force: 0, FLAG_STOP }` (no pulse at all);
+//!   ARMED publishes the profile's setpoint (0 until one is given).
+//! - `set` and `profile` need ARMED; a refused command changes nothing.
+//! - A fault stops stimulation at once (reference stop, driver safe stop) and is cleared
+//!   only by an operator `arm`, which is refused while the cause persists.
+
+use std::collections::VecDeque;
+
+use rt_core::msg::Reference;
+
+use crate::contraction::{BeatMeasurement, ContractionEstimator, ContractionSettings};
+use crate::limits::ReferenceLimits;
+use crate::outer_loop::{OuterLoop, OuterLoopSettings, OuterLoopUpdate};
+use crate::profile::{Beat, ProfileEvent, ProfileRunner, ProfileSpec, Setpoint};
+use crate::protocol::Command;
+
+/// Arming state.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ArmState {
+    /// No stimulation; the driver is disarmed.
+    Disarmed,
+    /// Stimulation follows the profile.
+    Armed,
+    /// Stopped by a fault (the reason); needs an operator `arm`.
+    Fault(String),
+}
+
+impl ArmState {
+    /// `disarmed`, `armed` or `fault`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ArmState::Disarmed => "disarmed",
+            ArmState::Armed => "armed",
+            ArmState::Fault(_) => "fault",
+        }
+    }
+}
+
+/// An order for the stimulator driver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DriverOrder {
+    /// Start forwarding pulses.
+    Arm,
+    /// Stop forwarding pulses (operator stop).
+    Disarm,
+    /// Emergency stop into the driver's safe state (fault).
+    SafeStop,
+}
+
+/// A completed beat with the outer loop's reaction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BeatRecord {
+    /// What was measured.
+    pub measurement: BeatMeasurement,
+    /// What the outer loop did with it.
+    pub update: OuterLoopUpdate,
+}
+
+/// The supervisor's state.
+#[derive(Debug, Clone)]
+pub struct SupervisorCore {
+    limits: ReferenceLimits,
+    state: ArmState,
+    profile: Option<ProfileRunner>,
+    outer: OuterLoop,
+    contraction: ContractionEstimator,
+    contraction_settings: ContractionSettings,
+    last_contraction: Option<f64>,
+    latest_force_ns: u64,
+    seq: u64,
+    last: Option<Reference>,
+    orders: Vec<DriverOrder>,
+    beats: Vec<BeatRecord>,
+    beat_starts: Vec<Beat>,
+    events: VecDeque<String>,
+    new_events: Vec<String>,
+}
+
+/// Events kept for `status`.
+pub const EVENT_HISTORY: usize = 20;
+
+impl SupervisorCore {
+    /// Disarmed, no profile.
+    pub fn new(
+        limits: ReferenceLimits,
+        outer: OuterLoopSettings,
+        contraction: ContractionSettings,
+    ) -> Self {
+        Self {
+            limits,
+            state: ArmState::Disarmed,
+            profile: None,
+            outer: OuterLoop::new(outer),
+            contraction: ContractionEstimator::new(contraction),
+            contraction_settings: contraction,
+            last_contraction: None,
+            latest_force_ns: 0,
+            seq: 0,
+            last: None,
+            orders: Vec::new(),
+            beats: Vec::new(),
+            beat_starts: Vec::new(),
+            events: VecDeque::new(),
+            new_events: Vec::new(),
+        }
+    }
+
+    /// The limits in force.
+    pub fn limits(&self) -> &ReferenceLimits {
+        &self.limits
+    }
+
+    /// The arming state.
+    pub fn state(&self) -> &ArmState {
+        &self.state
+    }
+
+    /// The running profile.
+    pub fn profile(&self) -> Option<&ProfileRunner> {
+        self.profile.as_ref()
+    }
+
+    /// The outer loop.
+    pub fn outer_loop(&self) -> &OuterLoop {
+        &self.outer
+    }
+
+    /// The last measured contraction (plateau mean).
+    pub fn last_contraction(&self) -> Option<f64> {
+        self.last_contraction
+    }
+
+    /// The last reference returned by [`SupervisorCore::reference`].
+    pub fn last_reference(&self) -> Option<&Reference> {
+        self.last.as_ref()
+    }
+
+    /// Records an event (kept for status, and handed to the recorder).
+    pub fn note(&mut self, text: String) {
+        if self.events.len() == EVENT_HISTORY {
+            self.events.pop_front();
+        }
+        self.events.push_back(text.clone());
+        self.new_events.push(text);
+    }
+
+    /// Recent events, oldest first.
+    pub fn events(&self) -> impl Iterator<Item = &String> {
+        self.events.iter()
+    }
+
+    /// Takes the events noted since the last call.
+    pub fn take_new_events(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.new_events)
+    }
+
+    /// Takes the driver orders issued since the last call.
+    pub fn take_orders(&mut self) -> Vec<DriverOrder> {
+        std::mem::take(&mut self.orders)
+    }
+
+    /// Takes the beats completed since the last call.
+    pub fn take_beats(&mut self) -> Vec<BeatRecord> {
+        std::mem::take(&mut self.beats)
+    }
+
+    /// Takes the beats started since the last call.
+    pub fn take_beat_starts(&mut self) -> Vec<Beat> {
+        std::mem::take(&mut self.beat_starts)
+    }
+
+    /// Carries out an operator command at `now_ns`. `ready` is the health monitor's verdict
+    /// (needed to arm). Returns what was done, or why nothing was done.
+    pub fn command(
+        &mut self,
+        command: &Command,
+        now_ns: u64,
+        ready: Result<(), String>,
+    ) -> Result<String, String> {
+        let result = self.apply(command, now_ns, ready);
+        if matches!(command, Command::Status) {
+            return result;
+        }
+        match &result {
+            Ok(m) => self.note(format!("command {}: {m}", command.name())),
+            Err(e) => self.note(format!("command {} refused: {e}", command.name())),
+        }
+        result
+    }
+
+    fn require_armed(&self) -> Result<(), String> {
+        match &self.state {
+            ArmState::Armed => Ok(()),
+            ArmState::Disarmed => Err("not armed: run `supervisor arm` first".into()),
+            ArmState::Fault(f) => Err(format!(
+                "stimulation stopped by a fault ({f}); `supervisor arm` re-arms once the cause is gone"
+            )),
+        }
+    }
+
+    fn apply(
+        &mut self,
+        command: &Command,
+        now_ns: u64,
+        ready: Result<(), String>,
+    ) -> Result<String, String> {
+        match command {
+            Command::Status => Ok("status".into()),
+            Command::Set { force, rate_per_s } => {
+                let spec = ProfileSpec::Constant {
+                    force: *force,
+                    rate_per_s: *rate_per_s,
+                };
+                spec.validate(&self.limits).map_err(|e| e.to_string())?;
+                self.require_armed()?;
+                let rate = rate_per_s.unwrap_or(self.limits.default_rate_per_s);
+                self.start_profile(spec, now_ns);
+                Ok(format!("reference {force} at {rate} /s"))
+            }
+            Command::Profile { profile } => {
+                profile.validate(&self.limits).map_err(|e| e.to_string())?;
+                self.require_armed()?;
+                if let ProfileSpec::Cardiac(c) = profile {
+                    if let Some(on) = c.outer_loop {
+                        self.outer.set_enabled(on);
+                    }
+                    if let Some(run) = &mut self.profile
+                        && run.cardiac().is_some()
+                    {
+                        run.retune_cardiac(*c);
+                        let amplitude = self.outer.amplitude(c.amplitude, self.limits.max_force);
+                        run.set_next_amplitude(amplitude);
+                        let next = run.beat().map_or(0, |b| b.index + 1);
+                        return Ok(format!(
+                            "cardiac profile retuned from beat {next}: {}",
+                            profile.describe()
+                        ));
+                    }
+                    self.outer.reset();
+                }
+                self.start_profile(profile.clone(), now_ns);
+                Ok(format!("profile started: {}", profile.describe()))
+            }
+            Command::Stop => match &self.state {
+                ArmState::Fault(f) => Ok(format!("already stopped by a fault: {f}")),
+                _ => {
+                    self.state = ArmState::Disarmed;
+                    self.clear_profile();
+                    self.orders.push(DriverOrder::Disarm);
+                    Ok("stimulation stopped; driver disarmed".into())
+                }
+            },
+            Command::Arm => {
+                if self.state == ArmState::Armed {
+                    return Ok("already armed".into());
+                }
+                ready.map_err(|e| format!("cannot arm: {e}"))?;
+                self.state = ArmState::Armed;
+                self.clear_profile();
+                self.outer.reset();
+                self.orders.push(DriverOrder::Arm);
+                Ok("armed; reference 0 until a profile is given".into())
+            }
+            Command::OuterLoop { enabled } => {
+                self.outer.set_enabled(*enabled);
+                Ok(format!(
+                    "outer loop {}",
+                    if *enabled { "on" } else { "off" }
+                ))
+            }
+        }
+    }
+
+    fn clear_profile(&mut self) {
+        self.profile = None;
+        self.contraction.clear();
+    }
+
+    fn start_profile(&mut self, spec: ProfileSpec, now_ns: u64) {
+        self.contraction = ContractionEstimator::new(self.contraction_settings);
+        let run = ProfileRunner::start(spec, self.limits, now_ns);
+        if let Some(b) = run.first_beat() {
+            self.contraction.begin(b);
+            self.beat_starts.push(b);
+        }
+        self.profile = Some(run);
+    }
+
+    /// Stops stimulation because of a fault (reason in words). Returns false when already
+    /// in a fault (the first reason is kept).
+    pub fn fault(&mut self, reason: String) -> bool {
+        if let ArmState::Fault(_) = self.state {
+            return false;
+        }
+        self.note(format!("FAULT: {reason}; stimulation stopped"));
+        self.state = ArmState::Fault(reason);
+        self.clear_profile();
+        self.orders.push(DriverOrder::SafeStop);
+        true
+    }
+
+    /// A measured force sample (normalised) taken at `t_ns`.
+    pub fn on_force(&mut self, t_ns: u64, force: f64) {
+        self.latest_force_ns = self.latest_force_ns.max(t_ns);
+        self.contraction.add_force(t_ns, force);
+    }
+
+    /// A pulse fired at `t_ns`.
+    pub fn on_pulse(&mut self, t_ns: u64) {
+        self.contraction.add_pulse(t_ns);
+    }
+
+    /// Advances the profile and the outer loop to `now_ns`.
+    pub fn advance(&mut self, now_ns: u64) -> Option<Setpoint> {
+        let run = self.profile.as_mut()?;
+        let mut events = Vec::new();
+        let setpoint = run.advance(now_ns, &mut events);
+        for e in events {
+            if let ProfileEvent::BeatStarted(b) = e {
+                self.contraction.begin(b);
+                self.beat_starts.push(b);
+            }
+        }
+        for m in self.contraction.poll(self.latest_force_ns, now_ns) {
+            let update = self
+                .outer
+                .update(m.beat.target, m.plateau_mean, self.limits.max_force);
+            if let Some(c) = m.plateau_mean {
+                self.last_contraction = Some(c);
+            }
+            if let Some(run) = &mut self.profile {
+                let target = run.next_target().unwrap_or(m.beat.target);
+                run.set_next_amplitude(self.outer.amplitude(target, self.limits.max_force));
+            }
+            self.beats.push(BeatRecord {
+                measurement: m,
+                update,
+            });
+        }
+        Some(setpoint)
+    }
+
+    /// The reference to publish at `now_ns` (a new `seq` each call).
+    pub fn reference(&mut self, now_ns: u64) -> Reference {
+        let setpoint = self.advance(now_ns);
+        self.seq += 1;
+        let mut r = Reference::new(self.seq, now_ns, 0.0);
+        match (&self.state, setpoint) {
+            (ArmState::Armed, Some(sp)) => {
+                r.force = sp.force;
+                r.max_rate_per_s = sp.rate_per_s;
+            }
+            (ArmState::Armed, None) => {
+                r.max_rate_per_s = self.limits.max_rate_per_s;
+            }
+            _ => r.flags = Reference::FLAG_STOP,
+        }
+        self.last = Some(r);
+        r
+    }
+
+    /// When the reference next changes by itself (a profile edge), if it does.
+    pub fn next_change_ns(&self, now_ns: u64) -> Option<u64> {
+        match self.state {
+            ArmState::Armed => self.profile.as_ref()?.next_change_ns(now_ns),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profile::CardiacSpec;
+
+    const MS: u64 = 1_000_000;
+
+    fn core() -> SupervisorCore {
+        SupervisorCore::new(
+            ReferenceLimits::default(),
+            OuterLoopSettings::default(),
+            ContractionSettings::default(),
+        )
+    }
+
+    fn cardiac(amplitude: f64) -> Command {
+        Command::Profile {
+            profile: ProfileSpec::Cardiac(CardiacSpec {
+                bpm: 75.0,
+                duty: 0.4,
+                amplitude,
+                edge_rate_per_s: None,
+                outer_loop: None,
+            }),
+        }
+    }
+
+    #[test]
+    fn disarmed_publishes_stop_and_refuses_set() {
+        let mut c = core();
+        let r = c.reference(MS);
+        assert!(r.is_stop());
+        assert_eq!(r.force, 0.0);
+        let e = c
+            .command(
+                &Command::Set {
+                    force: 0.3,
+                    rate_per_s: None,
+                },
+                MS,
+                Ok(()),
+            )
+            .unwrap_err();
+        assert!(e.contains("not armed"), "{e}");
+        let e = c.command(&Command::Arm, MS, Err("rt-core: not heard from yet".into()));
+        assert_eq!(e.unwrap_err(), "cannot arm: rt-core: not heard from yet");
+        assert_eq!(c.state(), &ArmState::Disarmed);
+        assert!(c.take_orders().is_empty());
+    }
+
+    /// Invalid commands are refused with the reason and change nothing: the reference
+    /// stays exactly what it was.
+    #[test]
+    fn invalid_commands_change_nothing() {
+        let mut c = core();
+        c.command(&Command::Arm, 0, Ok(())).unwrap();
+        c.command(
+            &Command::Set {
+                force: 0.3,
+                rate_per_s: Some(2.0),
+            },
+            0,
+            Ok(()),
+        )
+        .unwrap();
+        let before = c.reference(10 * MS);
+        for bad in [
+            Command::Set {
+                force: 1.2,
+                rate_per_s: None,
+            },
+            Command::Set {
+                force: f64::NAN,
+                rate_per_s: None,
+            },
+            Command::Set {
+                force: 0.5,
+                rate_per_s: Some(500.0),
+            },
+            Command::Set {
+                force: -0.1,
+                rate_per_s: None,
+            },
+            cardiac(1.5),
+        ] {
+            assert!(
+                c.command(&bad, 15 * MS, Ok(())).is_err(),
+                "{bad:?} accepted"
+            );
+        }
+        let after = c.reference(20 * MS);
+        assert_eq!(
+            (after.force, after.max_rate_per_s, after.flags),
+            (before.force, before.max_rate_per_s, before.flags)
+        );
+        assert_eq!(after.seq, before.seq + 1);
+    }
+
+    /// A fault stops stimulation at once and orders a safe stop; `arm` is refused while
+    /// the cause persists and re-arms after.
+    #[test]
+    fn fault_stops_and_needs_rearm() {
+        let mut c = core();
+        c.command(&Command::Arm, 0, Ok(())).unwrap();
+        c.command(&cardiac(0.3), 0, Ok(())).unwrap();
+        assert_eq!(c.reference(MS).force, 0.3);
+        assert_eq!(c.take_orders(), vec![DriverOrder::Arm]);
+        assert!(c.fault("rt-core (pid 7) died".into()));
+        assert!(!c.fault("second".into()));
+        let r = c.reference(2 * MS);
+        assert!(r.is_stop());
+        assert_eq!(c.take_orders(), vec![DriverOrder::SafeStop]);
+        let e = c.command(&cardiac(0.3), 3 * MS, Ok(())).unwrap_err();
+        assert!(e.contains("rt-core (pid 7) died"), "{e}");
+        assert!(
+            c.command(&Command::Arm, 4 * MS, Err("rt-core (pid 7) died".into()))
+                .is_err()
+        );
+        c.command(&Command::Arm, 5 * MS, Ok(())).unwrap();
+        let r = c.reference(6 * MS);
+        assert!(!r.is_stop());
+        assert_eq!(r.force, 0.0);
+    }
+
+    /// The outer loop closes per beat: a muscle that gives 80 % of the reference makes
+    /// the amplitude climb towards target / 0.8.
+    #[test]
+    fn outer_loop_raises_the_amplitude_on_a_weak_muscle() {
+        let mut c = core();
+        c.command(&Command::Arm, 0, Ok(())).unwrap();
+        c.command(&cardiac(0.4), 0, Ok(())).unwrap();
+        let mut amp = 0.0f64;
+        for k in 0..(40 * 800u64) {
+            let t = k * MS;
+            let r = c.reference(t);
+            // A muscle following the reference exactly, 7 ms later, at 80 %.
+            c.on_force(t + 7 * MS, 0.8 * r.force);
+            amp = amp.max(r.force);
+        }
+        let beats = c.take_beats();
+        assert!(beats.len() >= 38, "{}", beats.len());
+        let last = beats.last().unwrap();
+        let m = last.measurement.plateau_mean.unwrap();
+        assert!((m - 0.4).abs() < 0.01, "measured {m}");
+        assert!(
+            (last.update.amplitude - 0.5).abs() < 0.01,
+            "{:?}",
+            last.update
+        );
+    }
+}

@@ -1,0 +1,433 @@
+//! `supervisor run`: the daemon's loop. It wires the pure parts ([`crate::core`],
+//! [`crate::health`]) to iceoryx2, the control socket and the recorder.
+//!
+//! Every iteration (at most every [`POLL_MS`] ms, and at each profile edge): drain
+//! StimTick, ForceSample, DriverStatus and TimingReport; list the iceoryx2 nodes when due;
+//! check health (a fault stops stimulation at once); serve operator requests; send driver
+//! orders; publish the Reference when its period is up or it changed; record; flush.
+//! Arming starts a recording run; stop or fault ends it (fsync).
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+use rt_core::msg::service::{BACKPRESSURE, open_pubsub};
+use rt_core::msg::{
+    Contract, DriverCommand, DriverCommandKind, DriverStatus, ForceSample, Reference, StimTick,
+    TimingReport,
+};
+use rt_core::rt::clock::{monotonic_ns, sleep_until};
+
+use crate::config::SupervisorConfig;
+use crate::control::{ControlServer, Pending};
+use crate::core::{ArmState, DriverOrder, SupervisorCore};
+use crate::health::{HealthMonitor, NodeObservation, Severity, proc_state};
+use crate::protocol::{Command, Response, Status};
+use crate::recording::{Recorder, RecorderSettings, utc_stamp};
+
+/// Longest sleep of the loop, ms (StimTick buffers hold 64 ms).
+pub const POLL_MS: u64 = 5;
+
+/// A daemon failure (start-up or a broken iceoryx2 port).
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// iceoryx2 node or port.
+    #[error("iceoryx2: {0}")]
+    Ipc(String),
+    /// Control socket.
+    #[error("control socket: {0}")]
+    Control(#[from] crate::control::ControlError),
+}
+
+/// How the daemon ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// Recording directories written.
+    pub recordings: Vec<PathBuf>,
+    /// The fault in force at exit, if any.
+    pub fault: Option<String>,
+}
+
+fn ipc<E: std::fmt::Debug>(what: &'static str) -> impl Fn(E) -> DaemonError {
+    move |e| DaemonError::Ipc(format!("{what}: {e:?}"))
+}
+
+fn node_id(id: &iceoryx2::identifiers::UniqueNodeId) -> u128 {
+    u128::from_str_radix(&id.to_string(), 16).unwrap_or(0)
+}
+
+/// Lists the iceoryx2 nodes of this machine (name, pid, id, dead).
+pub fn list_nodes() -> Vec<NodeObservation> {
+    let config = iceoryx2::config::Config::default();
+    let mut out = Vec::new();
+    let _ = Node::<ipc::Service>::list(&config, |state| {
+        let (view_dead, details, id) = match &state {
+            NodeState::Alive(v) => (false, v.details().clone(), node_id(v.id())),
+            NodeState::Dead(v) => (true, v.details().clone(), node_id(v.id())),
+            _ => return CallbackProgression::Continue,
+        };
+        if let Some(d) = details {
+            out.push(NodeObservation {
+                name: d.name().as_str().to_string(),
+                pid: d.process_id().value() as u32,
+                id,
+                dead: view_dead,
+            });
+        }
+        CallbackProgression::Continue
+    });
+    out
+}
+
+struct Run {
+    recorder: Option<Recorder>,
+    dirs: Vec<PathBuf>,
+    index: u32,
+}
+
+/// Runs the daemon until `stop` is set. `on_ready` is called once the ports and the
+/// socket exist.
+pub fn run(
+    cfg: &SupervisorConfig,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(&std::path::Path),
+) -> Result<Outcome, DaemonError> {
+    let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name).map_err(ipc("node"))?;
+    let prefix = cfg.ipc.prefix.as_str();
+    let ref_service = open_pubsub::<Reference>(&node, prefix).map_err(ipc("Reference"))?;
+    let ref_pub = ref_service
+        .publisher_builder()
+        .backpressure_strategy(BACKPRESSURE)
+        .create()
+        .map_err(ipc("Reference publisher"))?;
+    macro_rules! sub {
+        ($t:ty) => {{
+            let service = open_pubsub::<$t>(&node, prefix).map_err(ipc(stringify!($t)))?;
+            service
+                .subscriber_builder()
+                .buffer_size(<$t>::QOS.subscriber_buffer)
+                .history_request(<$t>::QOS.history)
+                .create()
+                .map_err(ipc(concat!(stringify!($t), " subscriber")))?
+        }};
+    }
+    let cmd_service = open_pubsub::<DriverCommand>(&node, prefix).map_err(ipc("DriverCommand"))?;
+    let cmd_pub = cmd_service
+        .publisher_builder()
+        .backpressure_strategy(BACKPRESSURE)
+        .create()
+        .map_err(ipc("DriverCommand publisher"))?;
+    let mut cmd_seq = 0u64;
+    let ticks = sub!(StimTick);
+    let forces = sub!(ForceSample);
+    let statuses = sub!(DriverStatus);
+    let timings = sub!(TimingReport);
+
+    let (tx, rx) = mpsc::channel::<Pending>();
+    let server = ControlServer::start(&cfg.control, tx)?;
+    on_ready(server.path());
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    let watchdog = sd_notify::watchdog_enabled();
+
+    let limits = cfg.reference.limits();
+    let mut core = SupervisorCore::new(limits, cfg.outer_loop, cfg.contraction);
+    let mut health = HealthMonitor::new(cfg.health.clone());
+    let start_ns = monotonic_ns();
+    let period_ns = cfg.reference.period_ms * 1_000_000;
+    let scan_ns = cfg.health.node_scan_period_ms * 1_000_000;
+    let mut next_publish = start_ns;
+    let mut next_scan = start_ns;
+    let mut next_watchdog = start_ns;
+    let mut last_state = core.state().clone();
+    let mut run = Run {
+        recorder: None,
+        dirs: Vec::new(),
+        index: 0,
+    };
+    let settings = RecorderSettings {
+        flush_period_ns: cfg.recording.flush_period_ms * 1_000_000,
+        max_record_ticks: cfg.recording.max_record_ms as usize,
+        scale_n: cfg.recording.scale_n,
+        offset_n: cfg.recording.offset_n,
+        source: cfg.recording.source.clone(),
+        protocol: serde_json::Value::Null,
+    };
+
+    loop {
+        let now = monotonic_ns();
+        let stopping = stop.load(Ordering::Relaxed);
+
+        // 1. Inputs.
+        while let Ok(Some(s)) = ticks.receive() {
+            let t = *s.payload();
+            drop(s);
+            health.on_stim_tick(&t, now);
+            if t.validate().is_ok() {
+                if t.fires() {
+                    core.on_pulse(t.t_ns);
+                }
+                record(&mut run, &mut core, |r| r.on_stim_tick(&t, now));
+            }
+        }
+        while let Ok(Some(s)) = forces.receive() {
+            let f = *s.payload();
+            drop(s);
+            health.on_force_sample(&f, now);
+            if f.validate().is_ok() {
+                core.on_force(f.t_ns, f.force);
+                record(&mut run, &mut core, |r| r.on_force(&f, now));
+            }
+        }
+        while let Ok(Some(s)) = statuses.receive() {
+            let st = *s.payload();
+            drop(s);
+            health.on_driver_status(&st, now);
+            record(&mut run, &mut core, |r| r.on_status(&st));
+        }
+        while let Ok(Some(s)) = timings.receive() {
+            let tr = *s.payload();
+            drop(s);
+            health.on_timing(&tr);
+            record(&mut run, &mut core, |r| r.on_timing(&tr));
+        }
+
+        // 2. Health.
+        if now >= next_scan {
+            next_scan = now + scan_ns;
+            health.on_nodes(&list_nodes());
+        }
+        health.check(now, &proc_state);
+        for e in health.take_events() {
+            match e.severity {
+                Severity::Fault => {
+                    if !core.fault(e.message.clone()) {
+                        core.note(format!("also: {}", e.message));
+                    }
+                    tracing::error!("{}", e.message);
+                }
+                Severity::Warning => {
+                    tracing::warn!("{}", e.message);
+                    core.note(format!("warning: {}", e.message));
+                }
+            }
+        }
+
+        // 3. Operator requests.
+        while let Ok(p) = rx.try_recv() {
+            let response = serve(&mut core, &mut health, &run, &p, now, start_ns);
+            let _ = p.reply.try_send(response);
+        }
+        if stopping && *core.state() == ArmState::Armed {
+            let _ = core.command(&Command::Stop, now, Ok(()));
+        }
+
+        // 4. Driver orders.
+        for order in core.take_orders() {
+            cmd_seq += 1;
+            let kind = match order {
+                DriverOrder::Arm => DriverCommandKind::Arm,
+                DriverOrder::Disarm => DriverCommandKind::Disarm,
+                DriverOrder::SafeStop => DriverCommandKind::SafeStop,
+            };
+            if let Err(e) = cmd_pub.send_copy(DriverCommand::new(cmd_seq, now, kind)) {
+                core.note(format!("driver order {order:?} not sent: {e}"));
+                tracing::error!("driver order {order:?} not sent: {e}");
+            }
+        }
+
+        // 5. Recording life cycle.
+        let state = core.state().clone();
+        if state != last_state {
+            if state == ArmState::Armed && cfg.recording.enabled && run.recorder.is_none() {
+                run.index += 1;
+                let name = format!("run-{}-{}-{}", utc_stamp(), std::process::id(), run.index);
+                match Recorder::create(&cfg.recording.dir, &name, settings.clone(), now) {
+                    Ok(r) => {
+                        core.note(format!("recording to {}", r.dir().display()));
+                        run.dirs.push(r.dir().to_path_buf());
+                        run.recorder = Some(r);
+                    }
+                    Err(e) => {
+                        core.fault(format!("{e}; no recording means no evidence"));
+                    }
+                }
+            }
+            last_state = core.state().clone();
+        }
+        for b in core.take_beat_starts() {
+            if let Some(r) = &mut run.recorder {
+                r.boundary(b.start_ns, format!("beat {} ({} beats/min)", b.index, b.bpm));
+            }
+        }
+        for b in core.take_beats() {
+            record(&mut run, &mut core, |r| r.on_beat(&b));
+        }
+
+        // 6. Reference.
+        let edge = core.next_change_ns(now).is_some_and(|t| t <= now);
+        let changed = core
+            .last_reference()
+            .is_none_or(|r| r.is_stop() != (*core.state() != ArmState::Armed));
+        if now >= next_publish || edge || changed {
+            let r = core.reference(now);
+            match ref_pub.send_copy(r) {
+                Ok(_) => {}
+                Err(e) => tracing::warn!("Reference not published: {e:?}"),
+            }
+            record(&mut run, &mut core, |rec| rec.on_reference(&r));
+            next_publish = now + period_ns;
+        }
+
+        // 7. Events to the recording, flush, end of a run.
+        let events = core.take_new_events();
+        for e in &events {
+            tracing::info!("{e}");
+        }
+        if let Some(rec) = &mut run.recorder {
+            let mut failed = None;
+            for e in &events {
+                if let Err(err) = rec.on_event(now, e) {
+                    failed = Some(err);
+                    break;
+                }
+            }
+            if failed.is_none()
+                && let Err(err) = rec.maybe_flush(now)
+            {
+                failed = Some(err);
+            }
+            if let Some(err) = failed {
+                run.recorder = None;
+                core.fault(format!("{err}; no recording means no evidence"));
+            }
+        }
+        if *core.state() != ArmState::Armed
+            && let Some(rec) = run.recorder.take()
+        {
+            match rec.finish(now) {
+                Ok(s) => core.note(format!(
+                    "recording closed: {} ({} records, {} ticks)",
+                    s.dir.display(),
+                    s.records,
+                    s.ticks
+                )),
+                Err(e) => core.note(format!("recording could not be closed cleanly: {e}")),
+            }
+        }
+
+        if let Some(wd) = watchdog
+            && now >= next_watchdog
+        {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+            next_watchdog = now + wd.as_nanos() as u64 / 3;
+        }
+
+        if stopping {
+            // Leave the reference stopped for rt-core and the driver disarmed, then go.
+            let t = monotonic_ns();
+            let r = core.reference(t);
+            let _ = ref_pub.send_copy(r);
+            cmd_seq += 1;
+            let _ = cmd_pub.send_copy(DriverCommand::new(cmd_seq, t, DriverCommandKind::Disarm));
+            break;
+        }
+
+        // 8. Sleep to the next event.
+        let mut wake = (now + POLL_MS * 1_000_000).min(next_publish);
+        if let Some(t) = core.next_change_ns(now) {
+            wake = wake.min(t.max(now));
+        }
+        sleep_until(wake);
+    }
+    let fault = match core.state() {
+        ArmState::Fault(f) => Some(f.clone()),
+        _ => None,
+    };
+    for e in core.take_new_events() {
+        tracing::info!("{e}");
+    }
+    drop(server);
+    Ok(Outcome {
+        recordings: run.dirs,
+        fault,
+    })
+}
+
+/// Applies `f` to the recorder of the current run; a failure ends the recording and
+/// stops stimulation.
+fn record(
+    run: &mut Run,
+    core: &mut SupervisorCore,
+    f: impl FnOnce(&mut Recorder) -> Result<(), crate::recording::RecordingError>,
+) {
+    if let Some(r) = &mut run.recorder
+        && let Err(e) = f(r)
+    {
+        run.recorder = None;
+        core.fault(format!("{e}; no recording means no evidence"));
+    }
+}
+
+fn serve(
+    core: &mut SupervisorCore,
+    health: &mut HealthMonitor,
+    run: &Run,
+    p: &Pending,
+    now: u64,
+    start_ns: u64,
+) -> Response {
+    let id = p.request.id;
+    if matches!(p.request.command, Command::Arm) {
+        health.clear_recovered(now);
+    }
+    let result = core.command(&p.request.command, now, health.ready());
+    let status = status(core, health, run, now, start_ns);
+    match result {
+        Ok(m) => Response::ok(id, m, Some(status)),
+        Err(e) => {
+            let mut r = Response::error(id, e);
+            r.status = Some(status);
+            r
+        }
+    }
+}
+
+// The daemon's state for `status`.
+fn status(
+    core: &SupervisorCore,
+    health: &HealthMonitor,
+    run: &Run,
+    now: u64,
+    start_ns: u64,
+) -> Status {
+    let last = core.last_reference();
+    let (driver_state, stimulator_state) = health.device_states();
+    Status {
+        state: core.state().name().into(),
+        fault: match core.state() {
+            ArmState::Fault(f) => Some(f.clone()),
+            _ => None,
+        },
+        uptime_s: (now - start_ns) as f64 * 1e-9,
+        reference: last.map_or(0.0, |r| r.force),
+        reference_rate_per_s: last.map_or(0.0, |r| r.max_rate_per_s),
+        reference_stop: last.is_none_or(|r| r.is_stop()),
+        references_published: last.map_or(0, |r| r.seq),
+        profile: core.profile().map(|p| p.spec().describe()),
+        beat: core.profile().and_then(|p| p.beat()).map(|b| b.index),
+        outer_loop: core.outer_loop().enabled(),
+        outer_loop_correction: core.outer_loop().correction(),
+        last_contraction: core.last_contraction(),
+        processes: health.statuses(now),
+        driver_state,
+        stimulator_state,
+        recording: run
+            .recorder
+            .as_ref()
+            .map(|r| r.dir().display().to_string())
+            .or_else(|| run.dirs.last().map(|d| d.display().to_string())),
+        events: core.events().cloned().collect(),
+    }
+}

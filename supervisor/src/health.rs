@@ -1,0 +1,950 @@
+//! Health of the stimulation chain: which process is alive, stalled or dead, and why.
+//!
+//! Watched: **rt-core** (its StimTick stream, every 1 ms, and its iceoryx2 node),
+//! **stim-driver** (its DriverStatus stream and node) and **sim-muscle**, the stimulator
+//! (the FORCE samples the driver forwards as ForceSample, the stimulator state in
+//! DriverStatus, and, when its process id is known, the process itself). Liveness combines
+//! message freshness with the state of the process: a process whose messages stop is
+//! `dead` when its process is gone (or a zombie), `stopped` when it was stopped by a
+//! signal, `stalled` otherwise; a process that published its final message and removed
+//! its node `exited`. Reported faults (DriverStatus FAULT, a watchdog trip, an EMCY code,
+//! a stimulator in FAULT, a generator fault, an invalid message) are faults of the
+//! process that reported them. Causes are attributed upstream first: when rt-core stops
+//! ticking, the driver's watchdog trip that follows is reported as its consequence.
+//!
+//! Pure: time and the process probe are passed in.
+
+use std::collections::BTreeMap;
+
+use rt_core::msg::{
+    Contract, DeviceState, DriverStatus, ForceSample, StimTick, TimingReport, TimingSource,
+};
+use serde::{Deserialize, Serialize};
+
+use crate::protocol::ProcessStatus;
+
+/// The processes of the chain.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum Process {
+    /// The pattern generator.
+    RtCore,
+    /// The stimulator driver.
+    StimDriver,
+    /// The (virtual) stimulator and muscle.
+    SimMuscle,
+}
+
+impl Process {
+    /// All, upstream first.
+    pub const ALL: [Process; 3] = [Process::RtCore, Process::StimDriver, Process::SimMuscle];
+
+    /// Process name as the operator knows it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Process::RtCore => "rt-core",
+            Process::StimDriver => "stim-driver",
+            Process::SimMuscle => "sim-muscle",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// What the operating system says about a process id.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProcState {
+    /// No such process.
+    Gone,
+    /// Terminated, not yet reaped by its parent.
+    Zombie,
+    /// Stopped by a signal (SIGSTOP, a debugger).
+    Stopped,
+    /// Running or sleeping.
+    Running,
+}
+
+/// Reads `/proc/<pid>/stat` to tell a dead process from a stopped or a running one.
+pub fn proc_state(pid: u32) -> ProcState {
+    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+        return ProcState::Gone;
+    };
+    // The state letter follows the command name, which is in parentheses and may itself
+    // contain parentheses: take the last ')'.
+    let state = stat
+        .rfind(')')
+        .and_then(|i| stat[i + 1..].split_whitespace().next());
+    match state {
+        Some("Z") | Some("X") | Some("x") => ProcState::Zombie,
+        Some("T") | Some("t") => ProcState::Stopped,
+        Some(_) => ProcState::Running,
+        None => ProcState::Gone,
+    }
+}
+
+/// An iceoryx2 node seen in a node listing.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeObservation {
+    /// Node name (`rt-core`, `stim-driver`, ...).
+    pub name: String,
+    /// Owner process id.
+    pub pid: u32,
+    /// iceoryx2's unique node id.
+    pub id: u128,
+    /// iceoryx2 reports the node dead (its process is gone without cleaning up).
+    pub dead: bool,
+}
+
+/// Health settings. Defaults suit a native bench; the UML bench relaxes them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HealthSettings {
+    /// rt-core is stalled when no StimTick came for this long, ms. Default 50.
+    pub stim_tick_timeout_ms: u64,
+    /// stim-driver is stalled when no DriverStatus came for this long, ms. Default 500.
+    pub driver_status_timeout_ms: u64,
+    /// The stimulator is silent when no ForceSample came for this long, ms. Default 100.
+    pub force_timeout_ms: u64,
+    /// Period of the iceoryx2 node listing, ms. Default 250.
+    pub node_scan_period_ms: u64,
+    /// Watch rt-core. Default true.
+    pub watch_rt_core: bool,
+    /// Watch stim-driver. Default true.
+    pub watch_stim_driver: bool,
+    /// Watch the stimulator (sim-muscle on a bench, the real stimulator on a rig) through
+    /// the forwarded force and the driver's view of it. Default true.
+    pub watch_stimulator: bool,
+    /// iceoryx2 node name of rt-core. Default "rt-core".
+    pub rt_core_node: String,
+    /// iceoryx2 node name of stim-driver. Default "stim-driver".
+    pub stim_driver_node: String,
+    /// Process id of the stimulator process, when known (the bench sets it).
+    pub stimulator_pid: Option<u32>,
+}
+
+impl Default for HealthSettings {
+    fn default() -> Self {
+        Self {
+            stim_tick_timeout_ms: 50,
+            driver_status_timeout_ms: 500,
+            force_timeout_ms: 100,
+            node_scan_period_ms: 250,
+            watch_rt_core: true,
+            watch_stim_driver: true,
+            watch_stimulator: true,
+            rt_core_node: "rt-core".into(),
+            stim_driver_node: "stim-driver".into(),
+            stimulator_pid: None,
+        }
+    }
+}
+
+impl HealthSettings {
+    /// Checks the ranges; the error names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        for (k, v, lo) in [
+            ("stim_tick_timeout_ms", self.stim_tick_timeout_ms, 2),
+            ("driver_status_timeout_ms", self.driver_status_timeout_ms, 2),
+            ("force_timeout_ms", self.force_timeout_ms, 2),
+            ("node_scan_period_ms", self.node_scan_period_ms, 10),
+        ] {
+            if !(lo..=60_000).contains(&v) {
+                return Err(format!("{k} {v} must be in [{lo}, 60000]"));
+            }
+        }
+        for (k, v) in [
+            ("rt_core_node", &self.rt_core_node),
+            ("stim_driver_node", &self.stim_driver_node),
+        ] {
+            if v.is_empty() || v.len() > 64 {
+                return Err(format!("{k} must be 1..=64 characters"));
+            }
+        }
+        Ok(())
+    }
+
+    fn watched(&self, p: Process) -> bool {
+        match p {
+            Process::RtCore => self.watch_rt_core,
+            Process::StimDriver => self.watch_stim_driver,
+            Process::SimMuscle => self.watch_stimulator,
+        }
+    }
+
+    fn timeout_ns(&self, p: Process) -> u64 {
+        1_000_000
+            * match p {
+                Process::RtCore => self.stim_tick_timeout_ms,
+                Process::StimDriver => self.driver_status_timeout_ms,
+                Process::SimMuscle => self.force_timeout_ms,
+            }
+    }
+}
+
+/// How serious an event is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Severity {
+    /// Stimulation must stop.
+    Fault,
+    /// Worth reporting; stimulation goes on.
+    Warning,
+}
+
+/// Something the monitor noticed.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HealthEvent {
+    /// Which process it concerns.
+    pub process: Process,
+    /// Fault or warning.
+    pub severity: Severity,
+    /// What happened, in words (starts with the process name).
+    pub message: String,
+}
+
+/// What a stream of messages says about a process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Condition {
+    Waiting,
+    Ok,
+    Faulted,
+}
+
+#[derive(Debug, Clone)]
+struct Watch {
+    last_ns: Option<u64>,
+    node: Option<NodeObservation>,
+    node_gone: bool,
+    condition: Condition,
+    reason: String,
+    finished: bool,
+}
+
+impl Watch {
+    fn new() -> Self {
+        Self {
+            last_ns: None,
+            node: None,
+            node_gone: false,
+            condition: Condition::Waiting,
+            reason: String::new(),
+            finished: false,
+        }
+    }
+}
+
+/// The health monitor.
+#[derive(Debug, Clone)]
+pub struct HealthMonitor {
+    settings: HealthSettings,
+    watch: [Watch; 3],
+    driver: Option<DriverStatus>,
+    timing: BTreeMap<u8, TimingReport>,
+    warned_degraded: bool,
+    last_tick_seq: u64,
+    events: Vec<HealthEvent>,
+}
+
+fn ms(ns: u64) -> f64 {
+    ns as f64 * 1e-6
+}
+
+fn state_name(s: Result<DeviceState, rt_core::msg::ValidationError>) -> String {
+    match s {
+        Ok(s) => format!("{s:?}"),
+        Err(_) => "invalid".into(),
+    }
+}
+
+/// Name of a CANopen EMCY code of the stimulator protocol.
+pub fn emcy_name(code: u16) -> String {
+    match fes_can::ErrorCode::from_raw(code.into()) {
+        Some(c) => format!("0x{code:04X} {}", c.name()),
+        None => format!("0x{code:04X}"),
+    }
+}
+
+impl HealthMonitor {
+    /// A monitor that has heard from nobody yet.
+    pub fn new(settings: HealthSettings) -> Self {
+        Self {
+            settings,
+            watch: [Watch::new(), Watch::new(), Watch::new()],
+            driver: None,
+            timing: BTreeMap::new(),
+            warned_degraded: false,
+            last_tick_seq: 0,
+            events: Vec::new(),
+        }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &HealthSettings {
+        &self.settings
+    }
+
+    fn raise(&mut self, p: Process, severity: Severity, message: String) {
+        if severity == Severity::Fault {
+            let w = &mut self.watch[p.index()];
+            if w.condition == Condition::Faulted {
+                return;
+            }
+            w.condition = Condition::Faulted;
+            w.reason = message.clone();
+        }
+        self.events.push(HealthEvent {
+            process: p,
+            severity,
+            message,
+        });
+    }
+
+    fn heard(&mut self, p: Process, now_ns: u64) {
+        let w = &mut self.watch[p.index()];
+        w.last_ns = Some(now_ns);
+        if w.condition == Condition::Waiting {
+            w.condition = Condition::Ok;
+        }
+    }
+
+    /// Takes the events raised since the last call.
+    pub fn take_events(&mut self) -> Vec<HealthEvent> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// A StimTick received at `now_ns`.
+    pub fn on_stim_tick(&mut self, tick: &StimTick, now_ns: u64) {
+        if let Err(e) = tick.validate() {
+            self.raise(
+                Process::RtCore,
+                Severity::Fault,
+                format!("rt-core sent an invalid StimTick (seq {}): {e}", tick.seq),
+            );
+            return;
+        }
+        self.heard(Process::RtCore, now_ns);
+        if self.last_tick_seq != 0 && tick.seq > self.last_tick_seq + 1 {
+            let lost = tick.seq - self.last_tick_seq - 1;
+            self.raise(
+                Process::RtCore,
+                Severity::Warning,
+                format!(
+                    "supervisor lost {lost} StimTick(s) before seq {} (slow receiver)",
+                    tick.seq
+                ),
+            );
+        }
+        self.last_tick_seq = tick.seq;
+        if tick.has(StimTick::FLAG_SOURCE_FAULT) {
+            self.raise(
+                Process::RtCore,
+                Severity::Fault,
+                format!(
+                    "rt-core: the pattern generator produced a non-finite value (tick {})",
+                    tick.seq
+                ),
+            );
+        }
+        if tick.has(StimTick::FLAG_FINAL) {
+            self.watch[Process::RtCore.index()].finished = true;
+            self.raise(
+                Process::RtCore,
+                Severity::Fault,
+                format!("rt-core stopped: final tick {} received", tick.seq),
+            );
+        }
+        if tick.has(StimTick::FLAG_DEGRADED) && !self.warned_degraded {
+            self.warned_degraded = true;
+            self.raise(
+                Process::RtCore,
+                Severity::Warning,
+                "rt-core runs best-effort (no real-time guarantee)".into(),
+            );
+        }
+    }
+
+    /// A ForceSample received at `now_ns`.
+    pub fn on_force_sample(&mut self, sample: &ForceSample, now_ns: u64) {
+        if let Err(e) = sample.validate() {
+            self.raise(
+                Process::StimDriver,
+                Severity::Fault,
+                format!(
+                    "stim-driver forwarded an invalid ForceSample (seq {}): {e}",
+                    sample.seq
+                ),
+            );
+            return;
+        }
+        self.heard(Process::SimMuscle, now_ns);
+    }
+
+    /// A DriverStatus received at `now_ns`.
+    pub fn on_driver_status(&mut self, s: &DriverStatus, now_ns: u64) {
+        if let Err(e) = s.validate() {
+            self.raise(
+                Process::StimDriver,
+                Severity::Fault,
+                format!(
+                    "stim-driver sent an invalid DriverStatus (seq {}): {e}",
+                    s.seq
+                ),
+            );
+            return;
+        }
+        self.heard(Process::StimDriver, now_ns);
+        let prev = self.driver.replace(*s);
+        let prev_trips = prev.map_or(0, |p| p.watchdog_trips);
+        let prev_code = prev.map_or(0, |p| p.fault_code);
+        let prev_rejected = prev.map_or(0, |p| p.pulses_rejected);
+        let prev_tx = prev.map_or(0, |p| p.can_tx_errors);
+        if s.watchdog_trips > prev_trips {
+            // The driver's watchdog fires when StimTicks stop: blame rt-core when it has
+            // gone quiet itself.
+            let rt = &self.watch[Process::RtCore.index()];
+            let rt_quiet = self.settings.watch_rt_core
+                && rt
+                    .last_ns
+                    .is_some_and(|t| now_ns.saturating_sub(t) > 5_000_000);
+            if rt_quiet {
+                let age = rt.last_ns.map_or(0.0, |t| ms(now_ns - t));
+                self.raise(
+                    Process::RtCore,
+                    Severity::Fault,
+                    format!(
+                        "rt-core: no StimTick for {age:.0} ms (stim-driver's watchdog tripped)"
+                    ),
+                );
+            } else {
+                self.raise(
+                    Process::StimDriver,
+                    Severity::Fault,
+                    format!(
+                        "stim-driver: watchdog tripped ({} in all)",
+                        s.watchdog_trips
+                    ),
+                );
+            }
+        }
+        if s.fault_code != 0 && s.fault_code != prev_code {
+            let severity = if s.state() == Ok(DeviceState::Fault)
+                || s.stimulator_state() == Ok(DeviceState::Fault)
+            {
+                Severity::Fault
+            } else {
+                Severity::Warning
+            };
+            let who = if s.stimulator_state() == Ok(DeviceState::Fault) {
+                Process::SimMuscle
+            } else {
+                Process::StimDriver
+            };
+            self.raise(
+                who,
+                severity,
+                format!("{}: EMCY {}", who.name(), emcy_name(s.fault_code)),
+            );
+        }
+        if s.stimulator_state() == Ok(DeviceState::Fault) {
+            self.raise(
+                Process::SimMuscle,
+                Severity::Fault,
+                format!(
+                    "sim-muscle (stimulator) in FAULT, last EMCY {}",
+                    emcy_name(s.fault_code)
+                ),
+            );
+        }
+        if s.state() == Ok(DeviceState::Fault) {
+            self.raise(
+                Process::StimDriver,
+                Severity::Fault,
+                format!(
+                    "stim-driver in FAULT (fault code {})",
+                    emcy_name(s.fault_code)
+                ),
+            );
+        }
+        if s.pulses_rejected > prev_rejected {
+            self.raise(
+                Process::StimDriver,
+                Severity::Warning,
+                format!(
+                    "stim-driver: {} pulse(s) rejected ({} in all)",
+                    s.pulses_rejected - prev_rejected,
+                    s.pulses_rejected
+                ),
+            );
+        }
+        if s.can_tx_errors > prev_tx {
+            self.raise(
+                Process::StimDriver,
+                Severity::Warning,
+                format!(
+                    "stim-driver: {} CAN transmit error(s)",
+                    s.can_tx_errors - prev_tx
+                ),
+            );
+        }
+    }
+
+    /// A TimingReport received.
+    pub fn on_timing(&mut self, r: &TimingReport) {
+        if r.validate().is_err() {
+            return;
+        }
+        let prev = self.timing.insert(r.source, *r);
+        let name = match r.source() {
+            Ok(TimingSource::RtCore) => "rt-core",
+            Ok(TimingSource::StimDriver) => "stim-driver",
+            Ok(TimingSource::SimMuscle) => "sim-muscle",
+            _ => return,
+        };
+        let p = match r.source() {
+            Ok(TimingSource::StimDriver) => Process::StimDriver,
+            Ok(TimingSource::SimMuscle) => Process::SimMuscle,
+            _ => Process::RtCore,
+        };
+        let prev_alloc = prev.map_or(0, |p| p.hot_path_allocations);
+        if r.hot_path_allocations > prev_alloc {
+            self.raise(
+                p,
+                Severity::Warning,
+                format!(
+                    "{name}: {} heap allocation(s) on the hot path",
+                    r.hot_path_allocations - prev_alloc
+                ),
+            );
+        }
+    }
+
+    /// The latest TimingReport of each source.
+    pub fn timing_reports(&self) -> impl Iterator<Item = &TimingReport> {
+        self.timing.values()
+    }
+
+    /// The latest DriverStatus.
+    pub fn driver_status(&self) -> Option<&DriverStatus> {
+        self.driver.as_ref()
+    }
+
+    /// A node listing taken at `now_ns`.
+    pub fn on_nodes(&mut self, nodes: &[NodeObservation]) {
+        for p in [Process::RtCore, Process::StimDriver] {
+            let name = match p {
+                Process::RtCore => self.settings.rt_core_node.clone(),
+                _ => self.settings.stim_driver_node.clone(),
+            };
+            let w = &mut self.watch[p.index()];
+            match &w.node {
+                None => {
+                    // Adopt the first live node of that name (prefer the newest pid).
+                    if let Some(n) = nodes
+                        .iter()
+                        .filter(|n| n.name == name && !n.dead)
+                        .max_by_key(|n| n.pid)
+                    {
+                        w.node = Some(n.clone());
+                        w.node_gone = false;
+                    }
+                }
+                Some(known) => match nodes.iter().find(|n| n.id == known.id) {
+                    Some(n) => w.node = Some(n.clone()),
+                    None => w.node_gone = true,
+                },
+            }
+        }
+    }
+
+    /// Checks freshness at `now_ns`, asking `probe` about process ids.
+    pub fn check(&mut self, now_ns: u64, probe: &dyn Fn(u32) -> ProcState) {
+        for p in Process::ALL {
+            if !self.settings.watched(p) {
+                continue;
+            }
+            let w = &self.watch[p.index()];
+            if w.condition != Condition::Ok {
+                continue;
+            }
+            let Some(last) = w.last_ns else { continue };
+            let age = now_ns.saturating_sub(last);
+            let limit = self.settings.timeout_ns(p);
+            // The process's own state, when we know its pid.
+            let pid = match p {
+                Process::SimMuscle => self.settings.stimulator_pid,
+                _ => w.node.as_ref().map(|n| n.pid),
+            };
+            let pstate = pid.map(probe);
+            let dead_now = matches!(pstate, Some(ProcState::Gone | ProcState::Zombie))
+                || w.node.as_ref().is_some_and(|n| n.dead);
+            if age <= limit && !dead_now {
+                continue;
+            }
+            // Upstream causes first: the force reaches us through the driver, so a
+            // silent stimulator behind a dead, stopped or faulted driver is the driver's
+            // fault.
+            if p == Process::SimMuscle && !dead_now && self.settings.watch_stim_driver {
+                let drv = &self.watch[Process::StimDriver.index()];
+                if drv.condition == Condition::Faulted {
+                    continue;
+                }
+                let drv_pid = drv.node.as_ref().map(|n| n.pid);
+                let drv_dead = drv.node.as_ref().is_some_and(|n| n.dead);
+                let drv_state = drv_pid.map(probe);
+                let pid_txt = drv_pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
+                let reason = match drv_state {
+                    Some(ProcState::Gone | ProcState::Zombie) => Some("died: the process is gone"),
+                    _ if drv_dead => Some("died: its iceoryx2 node is dead"),
+                    Some(ProcState::Stopped) => Some("stalled: stopped by a signal"),
+                    _ => None,
+                };
+                if let Some(reason) = reason {
+                    let message = format!(
+                        "stim-driver{pid_txt} {reason}; no force sample forwarded for {:.0} ms",
+                        ms(age)
+                    );
+                    self.raise(Process::StimDriver, Severity::Fault, message);
+                    continue;
+                }
+            }
+            let what = match p {
+                Process::RtCore => "StimTick",
+                Process::StimDriver => "DriverStatus",
+                Process::SimMuscle => "FORCE sample",
+            };
+            let pid_txt = pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
+            let message = match (pstate, dead_now) {
+                (Some(ProcState::Gone), _) => format!(
+                    "{}{pid_txt} died: the process is gone; last {what} {:.0} ms ago",
+                    p.name(),
+                    ms(age)
+                ),
+                (Some(ProcState::Zombie), _) => format!(
+                    "{}{pid_txt} died: the process has exited (zombie); last {what} {:.0} ms ago",
+                    p.name(),
+                    ms(age)
+                ),
+                (_, true) => format!(
+                    "{}{pid_txt} died: its iceoryx2 node is dead; last {what} {:.0} ms ago",
+                    p.name(),
+                    ms(age)
+                ),
+                (Some(ProcState::Stopped), _) => format!(
+                    "{}{pid_txt} stalled: stopped by a signal; no {what} for {:.0} ms (limit {:.0} ms)",
+                    p.name(),
+                    ms(age),
+                    ms(limit)
+                ),
+                _ if w.node_gone || w.finished => format!(
+                    "{}{pid_txt} exited: its node is gone; no {what} for {:.0} ms",
+                    p.name(),
+                    ms(age)
+                ),
+                _ if p == Process::SimMuscle => format!(
+                    "sim-muscle (stimulator){pid_txt} silent: no {what} forwarded for {:.0} ms (limit {:.0} ms) while stim-driver is alive",
+                    ms(age),
+                    ms(limit)
+                ),
+                _ => format!(
+                    "{}{pid_txt} stalled: process alive but no {what} for {:.0} ms (limit {:.0} ms)",
+                    p.name(),
+                    ms(age),
+                    ms(limit)
+                ),
+            };
+            self.raise(p, Severity::Fault, message);
+        }
+    }
+
+    /// Whether stimulation may be armed: every watched process heard from and not
+    /// faulted. The error lists what is missing.
+    pub fn ready(&self) -> Result<(), String> {
+        let mut problems = Vec::new();
+        for p in Process::ALL {
+            if !self.settings.watched(p) {
+                continue;
+            }
+            let w = &self.watch[p.index()];
+            match w.condition {
+                Condition::Waiting => problems.push(format!("{}: not heard from yet", p.name())),
+                Condition::Faulted => problems.push(w.reason.clone()),
+                Condition::Ok => {}
+            }
+        }
+        if problems.is_empty() {
+            Ok(())
+        } else {
+            Err(problems.join("; "))
+        }
+    }
+
+    /// Clears the fault latches of processes that are live again (messages fresher than
+    /// their timeout at `now_ns`); called on an operator re-arm.
+    pub fn clear_recovered(&mut self, now_ns: u64) {
+        for p in Process::ALL {
+            let limit = self.settings.timeout_ns(p);
+            let w = &mut self.watch[p.index()];
+            let fresh = w.last_ns.is_some_and(|t| now_ns.saturating_sub(t) <= limit);
+            if w.condition == Condition::Faulted && fresh && !w.finished {
+                w.condition = Condition::Ok;
+                w.reason.clear();
+            }
+        }
+    }
+
+    /// Per-process status at `now_ns`.
+    pub fn statuses(&self, now_ns: u64) -> Vec<ProcessStatus> {
+        Process::ALL
+            .iter()
+            .filter(|p| self.settings.watched(**p))
+            .map(|&p| {
+                let w = &self.watch[p.index()];
+                let state = match w.condition {
+                    Condition::Waiting => "waiting",
+                    Condition::Ok => "ok",
+                    Condition::Faulted if w.reason.contains(" died") => "dead",
+                    Condition::Faulted if w.reason.contains(" stalled") => "stalled",
+                    Condition::Faulted if w.reason.contains(" exited") => "exited",
+                    Condition::Faulted => "fault",
+                };
+                ProcessStatus {
+                    name: p.name().into(),
+                    state: state.into(),
+                    pid: match p {
+                        Process::SimMuscle => self.settings.stimulator_pid,
+                        _ => w.node.as_ref().map(|n| n.pid),
+                    },
+                    last_message_age_ms: w.last_ns.map(|t| ms(now_ns.saturating_sub(t))),
+                    detail: w.reason.clone(),
+                }
+            })
+            .collect()
+    }
+
+    /// Driver and stimulator states, as words.
+    pub fn device_states(&self) -> (Option<String>, Option<String>) {
+        match &self.driver {
+            Some(s) => (
+                Some(state_name(s.state())),
+                Some(state_name(s.stimulator_state())),
+            ),
+            None => (None, None),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    fn tick(seq: u64, t: u64) -> StimTick {
+        StimTick {
+            seq,
+            t_ns: t,
+            t_wake_ns: t,
+            t_publish_ns: t,
+            ref_seq: 0,
+            reference: 0.0,
+            u_cont: 0.0,
+            energy: 0.0,
+            model_force: 0.0,
+            predicted_force: 0.0,
+            phi: 0.0,
+            amplitude_ua: 0,
+            missed_periods: 0,
+            width_us: 0,
+            flags: 0,
+            pulse: 0,
+            channel: 0,
+            reserved: [0; 2],
+        }
+    }
+
+    fn status(seq: u64) -> DriverStatus {
+        DriverStatus {
+            seq,
+            t_ns: 1,
+            ticks_received: 10,
+            ticks_lost: 0,
+            pulses_sent: 0,
+            pulses_rejected: 0,
+            can_tx_errors: 0,
+            watchdog_trips: 0,
+            fault_code: 0,
+            state: DeviceState::Armed as u8,
+            stimulator_state: DeviceState::Armed as u8,
+        }
+    }
+
+    fn force(seq: u64) -> ForceSample {
+        ForceSample {
+            seq,
+            t_ns: 1,
+            stim_seq: 0,
+            force_n: 1.0,
+            force: 0.01,
+        }
+    }
+
+    fn running(_: u32) -> ProcState {
+        ProcState::Running
+    }
+
+    fn live(h: &mut HealthMonitor, t: u64) {
+        h.on_stim_tick(&tick(t / MS + 1, t), t);
+        h.on_driver_status(&status(t / MS + 1), t);
+        h.on_force_sample(&force(t / MS + 1), t);
+    }
+
+    fn nodes() -> Vec<NodeObservation> {
+        vec![
+            NodeObservation {
+                name: "rt-core".into(),
+                pid: 100,
+                id: 1,
+                dead: false,
+            },
+            NodeObservation {
+                name: "stim-driver".into(),
+                pid: 200,
+                id: 2,
+                dead: false,
+            },
+        ]
+    }
+
+    #[test]
+    fn waiting_until_heard_then_ok() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        let e = h.ready().unwrap_err();
+        assert!(e.contains("rt-core: not heard from yet"), "{e}");
+        live(&mut h, 10 * MS);
+        h.check(20 * MS, &running);
+        assert!(h.ready().is_ok());
+        assert!(h.take_events().is_empty());
+    }
+
+    /// A killed rt-core: its pid is gone; the message says who and why.
+    #[test]
+    fn dead_process_is_named_with_its_pid() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        h.on_nodes(&nodes());
+        live(&mut h, 10 * MS);
+        let probe = |pid: u32| {
+            if pid == 100 {
+                ProcState::Gone
+            } else {
+                ProcState::Running
+            }
+        };
+        h.on_driver_status(&status(50), 30 * MS);
+        h.on_force_sample(&force(50), 30 * MS);
+        h.check(30 * MS, &probe);
+        let ev = h.take_events();
+        assert_eq!(ev.len(), 1, "{ev:?}");
+        assert_eq!(ev[0].process, Process::RtCore);
+        assert_eq!(ev[0].severity, Severity::Fault);
+        assert!(
+            ev[0].message.starts_with("rt-core (pid 100) died"),
+            "{}",
+            ev[0].message
+        );
+        assert_eq!(h.statuses(30 * MS)[0].state, "dead");
+        assert!(h.ready().is_err());
+    }
+
+    /// A SIGSTOPped driver is stalled, not dead; the silent stimulator behind it is not
+    /// blamed.
+    #[test]
+    fn stopped_driver_is_stalled_and_blamed_first() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        h.on_nodes(&nodes());
+        live(&mut h, 10 * MS);
+        let probe = |pid: u32| {
+            if pid == 200 {
+                ProcState::Stopped
+            } else {
+                ProcState::Running
+            }
+        };
+        for t in (11..700).map(|k| k * MS) {
+            h.on_stim_tick(&tick(t / MS + 1, t), t);
+            h.check(t, &probe);
+        }
+        let ev = h.take_events();
+        assert_eq!(ev.len(), 1, "{ev:?}");
+        assert!(
+            ev[0].message.starts_with("stim-driver (pid 200) stalled: stopped by a signal; no force sample forwarded for 101 ms"),
+            "{}",
+            ev[0].message
+        );
+    }
+
+    /// The stimulator silent while the driver reports: the stimulator is named.
+    #[test]
+    fn silent_stimulator_is_named() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        h.on_nodes(&nodes());
+        live(&mut h, 10 * MS);
+        for t in (11..200).map(|k| k * MS) {
+            h.on_stim_tick(&tick(t / MS + 1, t), t);
+            if t % (10 * MS) == 0 {
+                h.on_driver_status(&status(t / MS), t);
+            }
+            h.check(t, &running);
+        }
+        let ev = h.take_events();
+        assert_eq!(ev.len(), 1, "{ev:?}");
+        assert!(
+            ev[0].message.starts_with("sim-muscle (stimulator) silent"),
+            "{}",
+            ev[0].message
+        );
+    }
+
+    /// The driver's watchdog trip after rt-core went quiet is rt-core's fault; an EMCY of
+    /// a faulted stimulator is the stimulator's.
+    #[test]
+    fn reported_faults_are_attributed() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        live(&mut h, 10 * MS);
+        let mut s = status(99);
+        s.watchdog_trips = 1;
+        s.state = DeviceState::Fault as u8;
+        h.on_driver_status(&s, 40 * MS);
+        let ev = h.take_events();
+        assert_eq!(ev[0].process, Process::RtCore, "{ev:?}");
+        assert!(
+            ev[0].message.contains("no StimTick for 30 ms"),
+            "{}",
+            ev[0].message
+        );
+
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        live(&mut h, 10 * MS);
+        let mut s = status(99);
+        s.fault_code = 0x8130;
+        s.stimulator_state = DeviceState::Fault as u8;
+        h.on_driver_status(&s, 11 * MS);
+        let ev = h.take_events();
+        assert_eq!(ev[0].process, Process::SimMuscle);
+        assert_eq!(ev[0].message, "sim-muscle: EMCY 0x8130 heartbeat_lost");
+        assert_eq!(ev[0].severity, Severity::Fault);
+    }
+
+    /// Re-arming clears only processes that are live again.
+    #[test]
+    fn recovered_processes_clear_on_rearm() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        live(&mut h, 10 * MS);
+        h.check(200 * MS, &running);
+        assert!(h.ready().is_err());
+        h.clear_recovered(200 * MS);
+        assert!(h.ready().is_err(), "still silent");
+        live(&mut h, 300 * MS);
+        h.clear_recovered(300 * MS);
+        assert!(h.ready().is_ok());
+    }
+}

@@ -1,0 +1,32 @@
+//! The supervisor runtime: the slow side of the FES controller (thesis 1.1, 6.6).
+//!
+//! It publishes the force reference r(t) that rt-core's pattern generator follows, from
+//! operator commands and profiles (constant, steps, ramps and the cardiac-assist square
+//! wave of thesis 1.1); closes the slow outer loop ("Controller 1") on the measured
+//! contraction of each beat; watches the health of every process of the stimulation
+//! chain and stops stimulation on any fault; records every message of a run as a
+//! `fes-dataset/1` data set; and runs the end-to-end bench.
+//!
+//! The pure parts (profiles, outer loop, contraction estimate, reference limits, the
+//! control protocol, the health rules, the supervisor state machine) take time as an
+//! argument and do no I/O, so they are tested without processes. The I/O parts are
+//! [`control`] (Unix socket), [`recording`] (files), [`daemon`] (iceoryx2) and
+//! [`bench`] (child processes).
+#![deny(missing_docs)]
+
+pub mod baseline;
+pub mod bench;
+pub mod config;
+pub mod contraction;
+pub mod control;
+pub mod core;
+pub mod daemon;
+pub mod health;
+pub mod limits;
+pub mod outer_loop;
+pub mod plots;
+pub mod profile;
+pub mod protocol;
+pub mod recording;
+pub mod simulation;
+pub mod summary;

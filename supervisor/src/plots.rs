@@ -1,0 +1,289 @@
+//! PNG figures of a run: reference, measured and model force with the pulse raster;
+//! per-beat contraction (outer loop on/off); latency percentile curves.
+
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+
+/// A drawing failure.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot draw the plot: {message}", path.display())]
+pub struct PlotError {
+    /// Output file.
+    pub path: PathBuf,
+    /// plotters' reason.
+    pub message: String,
+}
+
+fn fail(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
+    move |e| PlotError {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// Time series of a run, 1 ms apart.
+#[derive(Debug, Clone, Default)]
+pub struct RunSeries {
+    /// Sample times, s (from the start of the run).
+    pub t_s: Vec<f64>,
+    /// Reference handed to the pattern generator.
+    pub reference: Vec<f64>,
+    /// Model force (rt-core).
+    pub model: Vec<f64>,
+    /// Measured force.
+    pub measured: Vec<f64>,
+    /// Times of the pulses, s.
+    pub pulses_s: Vec<f64>,
+}
+
+/// Draws the run between `from_s` and `to_s`: pulse raster on top, reference (black),
+/// model force (blue) and measured force (red) below.
+pub fn plot_run(
+    out: &Path,
+    title: &str,
+    run: &RunSeries,
+    (from_s, to_s): (f64, f64),
+) -> Result<(), PlotError> {
+    let e = fail(out);
+    let size = (1400u32, 700u32);
+    let root = BitMapBackend::new(out, size).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let root = root.titled(title, ("sans-serif", 20)).map_err(|x| e(&x))?;
+    let (upper, lower) = root.split_vertically(size.1 * 15 / 100);
+    let mut top = ChartBuilder::on(&upper)
+        .margin_left(10)
+        .margin_right(20)
+        .y_label_area_size(70)
+        .build_cartesian_2d(from_s..to_s, 0.0..1.2)
+        .map_err(|x| e(&x))?;
+    top.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_labels(2)
+        .y_desc("pulse")
+        .draw()
+        .map_err(|x| e(&x))?;
+    top.draw_series(
+        run.pulses_s
+            .iter()
+            .filter(|t| (from_s..to_s).contains(*t))
+            .map(|&t| PathElement::new(vec![(t, 0.0), (t, 1.0)], BLACK.stroke_width(1))),
+    )
+    .map_err(|x| e(&x))?;
+    let in_window = |v: &[f64]| -> Vec<(f64, f64)> {
+        run.t_s
+            .iter()
+            .zip(v)
+            .filter(|(t, _)| (from_s..to_s).contains(*t))
+            .map(|(&t, &y)| (t, y))
+            .collect()
+    };
+    let ymax = run
+        .measured
+        .iter()
+        .chain(&run.model)
+        .chain(&run.reference)
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.1, f64::max)
+        * 1.1;
+    let mut bottom = ChartBuilder::on(&lower)
+        .margin_left(10)
+        .margin_right(20)
+        .margin_bottom(5)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(from_s..to_s, -0.05..ymax)
+        .map_err(|x| e(&x))?;
+    bottom
+        .configure_mesh()
+        .light_line_style(WHITE.mix(0.0))
+        .x_desc("time (s)")
+        .y_desc("force (normalised)")
+        .draw()
+        .map_err(|x| e(&x))?;
+    for (series, color, label) in [
+        (&run.reference, BLACK, "reference"),
+        (&run.model, BLUE, "model force (rt-core LMN)"),
+        (&run.measured, RED, "measured force"),
+    ] {
+        let c = color;
+        bottom
+            .draw_series(LineSeries::new(in_window(series), c.stroke_width(2)))
+            .map_err(|x| e(&x))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    bottom
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// One line of per-beat values.
+#[derive(Debug, Clone)]
+pub struct BeatLine {
+    /// Legend text.
+    pub label: String,
+    /// (time of the beat, s; value).
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Draws per-beat contraction lines with the target and a +-`band` fraction around it.
+pub fn plot_beats(
+    out: &Path,
+    title: &str,
+    y_desc: &str,
+    lines: &[BeatLine],
+    target: f64,
+    band: f64,
+) -> Result<(), PlotError> {
+    let e = fail(out);
+    let root = BitMapBackend::new(out, (1200, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let t_max = lines
+        .iter()
+        .flat_map(|l| l.points.iter().map(|p| p.0))
+        .fold(1.0, f64::max);
+    let y_max = lines
+        .iter()
+        .flat_map(|l| l.points.iter().map(|p| p.1))
+        .fold(target * (1.0 + 2.0 * band), f64::max)
+        * 1.05;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_max, 0.0..y_max)
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .light_line_style(WHITE.mix(0.0))
+        .x_desc("time (s)")
+        .y_desc(y_desc)
+        .draw()
+        .map_err(|x| e(&x))?;
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(0.0, target * (1.0 - band)), (t_max, target * (1.0 + band))],
+            RGBColor(220, 235, 220).filled(),
+        )))
+        .map_err(|x| e(&x))?
+        .label(format!("target +-{:.0} %", band * 100.0))
+        .legend(|(x, y)| {
+            Rectangle::new(
+                [(x, y - 5), (x + 20, y + 5)],
+                RGBColor(220, 235, 220).filled(),
+            )
+        });
+    chart
+        .draw_series(LineSeries::new(
+            vec![(0.0, target), (t_max, target)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(|x| e(&x))?;
+    let colors = [RED, BLUE, GREEN, MAGENTA];
+    for (i, l) in lines.iter().enumerate() {
+        let c = colors[i % colors.len()];
+        chart
+            .draw_series(LineSeries::new(l.points.clone(), c.stroke_width(2)))
+            .map_err(|x| e(&x))?
+            .label(l.label.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart
+            .draw_series(l.points.iter().map(|&p| Circle::new(p, 3, c.filled())))
+            .map_err(|x| e(&x))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::LowerLeft)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// One latency distribution: (percentile in [0, 100), latency in µs) points.
+#[derive(Debug, Clone)]
+pub struct LatencyCurve {
+    /// Legend text.
+    pub label: String,
+    /// Points of the percentile curve.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Percentiles drawn: 0, 50, 90, 99, 99.9, 99.99 and the steps between, as
+/// `-log10(1 - q)` on the x axis (the usual HdrHistogram percentile plot).
+pub fn percentile_grid() -> Vec<f64> {
+    (0..=80)
+        .map(|i| 1.0 - 10f64.powf(-(i as f64) / 20.0))
+        .collect()
+}
+
+/// Draws latency percentile curves (log latency axis).
+pub fn plot_latency(out: &Path, title: &str, curves: &[LatencyCurve]) -> Result<(), PlotError> {
+    let e = fail(out);
+    let root = BitMapBackend::new(out, (1200, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let y_max = curves
+        .iter()
+        .flat_map(|c| c.points.iter().map(|p| p.1))
+        .fold(10.0, f64::max)
+        * 2.0;
+    let y_min = curves
+        .iter()
+        .flat_map(|c| c.points.iter().map(|p| p.1))
+        .filter(|v| *v > 0.0)
+        .fold(y_max, f64::min)
+        .max(0.01)
+        / 2.0;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..4.0, (y_min..y_max).log_scale())
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_labels(5)
+        .x_label_formatter(&|x| format!("{}", 100.0 - 100.0 * 10f64.powf(-x)))
+        .x_desc("percentile")
+        .y_desc("latency (µs)")
+        .draw()
+        .map_err(|x| e(&x))?;
+    let colors = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
+    for (i, c) in curves.iter().enumerate() {
+        let color = colors[i % colors.len()];
+        let pts: Vec<(f64, f64)> = c
+            .points
+            .iter()
+            .map(|&(q, v)| (-(1.0 - q / 100.0).max(1e-4).log10(), v.max(y_min)))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+            .map_err(|x| e(&x))?
+            .label(c.label.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}

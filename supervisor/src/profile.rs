@@ -1,0 +1,719 @@
+//! Reference profiles: constant, steps, ramps, and the cardiac-assist square wave of
+//! thesis 1.1 ("square-wave contractions synchronised to a heart rate of 60-200
+//! beats/min with a duty cycle and an amplitude set by the outer loop").
+//!
+//! A profile is a function of time to a [`Setpoint`]: the force to head for and the rate
+//! to get there at. The supervisor publishes the setpoint as a `Reference` and rt-core
+//! ramps its target at that rate, so a ramp profile is exact at 1 ms resolution although
+//! references are published every few milliseconds. Time is passed in (ns of
+//! CLOCK_MONOTONIC); nothing here reads a clock.
+
+use serde::{Deserialize, Serialize};
+
+use crate::limits::{ReferenceLimits, Rejection};
+
+/// Heart-rate range of the cardiac profile, beats per minute (thesis 1.1: 1-3.3 Hz).
+pub const HEART_RATE_BPM: (f64, f64) = (60.0, 200.0);
+/// Duty-cycle range of the cardiac profile (fraction of the beat that contracts).
+pub const DUTY: (f64, f64) = (0.05, 0.95);
+/// Most steps or ramp points in one profile.
+pub const MAX_POINTS: usize = 1000;
+
+/// One level of a [`ProfileSpec::Steps`] profile.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Step {
+    /// Level, normalised force.
+    pub force: f64,
+    /// How long the level is held, s (the ramp towards it is part of the hold).
+    pub hold_s: f64,
+}
+
+/// One corner of a [`ProfileSpec::Ramps`] profile.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RampPoint {
+    /// Time from the start of the profile, s (the first point is at 0).
+    pub t_s: f64,
+    /// Force at that time, normalised.
+    pub force: f64,
+}
+
+/// The cardiac-assist profile (thesis 1.1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CardiacSpec {
+    /// Heart rate, beats per minute, in [60, 200].
+    pub bpm: f64,
+    /// Fraction of each beat spent contracting, in [0.05, 0.95].
+    pub duty: f64,
+    /// Target contraction amplitude, normalised force (the outer loop's target).
+    pub amplitude: f64,
+    /// Rate of the square wave's edges, normalised force per second; default: the
+    /// configured rate limit (the steepest edge allowed).
+    #[serde(default)]
+    pub edge_rate_per_s: Option<f64>,
+    /// Switch the outer loop on or off with this profile; absent: leave it as it is.
+    #[serde(default)]
+    pub outer_loop: Option<bool>,
+}
+
+impl CardiacSpec {
+    /// Beat period, ns.
+    pub fn period_ns(&self) -> u64 {
+        (60.0e9 / self.bpm).round() as u64
+    }
+
+    /// Contraction (on-phase) length, ns.
+    pub fn on_ns(&self) -> u64 {
+        (self.duty * 60.0e9 / self.bpm).round() as u64
+    }
+}
+
+/// A reference profile as the operator gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ProfileSpec {
+    /// Hold `force`, reached at `rate_per_s` (default: the configured default rate).
+    Constant {
+        /// Level, normalised force.
+        force: f64,
+        /// Ramp rate towards it, /s.
+        #[serde(default)]
+        rate_per_s: Option<f64>,
+    },
+    /// Piecewise-constant levels, each reached at `rate_per_s`.
+    Steps {
+        /// The levels in order.
+        steps: Vec<Step>,
+        /// Start again after the last step (else hold the last level).
+        #[serde(default)]
+        repeat: bool,
+        /// Ramp rate between levels, /s (default: the configured default rate).
+        #[serde(default)]
+        rate_per_s: Option<f64>,
+    },
+    /// Piecewise-linear through the points; every slope must respect the rate limit.
+    Ramps {
+        /// Corners; the first at t = 0, times increasing.
+        points: Vec<RampPoint>,
+        /// Start again after the last point (the last force must equal the first).
+        #[serde(default)]
+        repeat: bool,
+    },
+    /// Square-wave contractions synchronised to a heart rate (thesis 1.1).
+    Cardiac(CardiacSpec),
+}
+
+/// What the reference should do now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Setpoint {
+    /// Force to head for, normalised.
+    pub force: f64,
+    /// Rate to head for it at, normalised force per second (> 0).
+    pub rate_per_s: f64,
+}
+
+/// One beat of the cardiac profile, as it was run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Beat {
+    /// 0, 1, 2, ... from the start of the profile.
+    pub index: u64,
+    /// Start of the beat (rising edge begins), ns.
+    pub start_ns: u64,
+    /// Beat period, ns (60 / bpm).
+    pub period_ns: u64,
+    /// Contraction length, ns (duty x period).
+    pub on_ns: u64,
+    /// Heart rate of this beat, beats per minute.
+    pub bpm: f64,
+    /// The operator's target amplitude, normalised force.
+    pub target: f64,
+    /// The amplitude the reference had in this beat (target + outer-loop correction).
+    pub amplitude: f64,
+}
+
+impl Beat {
+    /// End of the beat, ns.
+    pub fn end_ns(&self) -> u64 {
+        self.start_ns + self.period_ns
+    }
+}
+
+impl ProfileSpec {
+    /// Checks the profile against the limits; the error says what is wrong.
+    pub fn validate(&self, limits: &ReferenceLimits) -> Result<(), Rejection> {
+        match self {
+            ProfileSpec::Constant { force, rate_per_s } => {
+                limits.check_force("force", *force)?;
+                if let Some(r) = rate_per_s {
+                    limits.check_rate("rate", *r)?;
+                }
+            }
+            ProfileSpec::Steps {
+                steps, rate_per_s, ..
+            } => {
+                count("steps", steps.len(), 1)?;
+                for (i, s) in steps.iter().enumerate() {
+                    limits.check_force(&format!("steps[{i}].force"), s.force)?;
+                    ReferenceLimits::check_duration(&format!("steps[{i}].hold_s"), s.hold_s)?;
+                }
+                if let Some(r) = rate_per_s {
+                    limits.check_rate("rate", *r)?;
+                }
+            }
+            ProfileSpec::Ramps { points, repeat } => {
+                count("points", points.len(), 2)?;
+                for (i, p) in points.iter().enumerate() {
+                    limits.check_force(&format!("points[{i}].force"), p.force)?;
+                    if !p.t_s.is_finite() {
+                        return Err(Rejection::NotFinite {
+                            what: format!("points[{i}].t_s"),
+                            value: p.t_s,
+                        });
+                    }
+                }
+                if points[0].t_s != 0.0 {
+                    return Err(Rejection::Invalid(format!(
+                        "points[0].t_s is {}: the first point must be at t = 0",
+                        points[0].t_s
+                    )));
+                }
+                for (i, w) in points.windows(2).enumerate() {
+                    let dt = w[1].t_s - w[0].t_s;
+                    if dt <= 0.0 {
+                        return Err(Rejection::Invalid(format!(
+                            "points[{}].t_s {} does not increase (previous {})",
+                            i + 1,
+                            w[1].t_s,
+                            w[0].t_s
+                        )));
+                    }
+                    ReferenceLimits::check_duration(&format!("points[{}].t_s", i + 1), w[1].t_s)?;
+                    let slope = (w[1].force - w[0].force).abs() / dt;
+                    if slope > limits.max_rate_per_s {
+                        return Err(Rejection::TooFast {
+                            what: format!("ramp from t = {} s to {} s: slope", w[0].t_s, w[1].t_s),
+                            rate_per_s: slope,
+                            max_per_s: limits.max_rate_per_s,
+                        });
+                    }
+                }
+                let (first, last) = (points[0], points[points.len() - 1]);
+                if *repeat && first.force != last.force {
+                    return Err(Rejection::Invalid(format!(
+                        "a repeating ramp profile must end where it starts (first force {}, last {})",
+                        first.force, last.force
+                    )));
+                }
+            }
+            ProfileSpec::Cardiac(c) => c.validate(limits)?,
+        }
+        Ok(())
+    }
+
+    /// Short description for status and logs.
+    pub fn describe(&self) -> String {
+        match self {
+            ProfileSpec::Constant { force, .. } => format!("constant {force}"),
+            ProfileSpec::Steps { steps, repeat, .. } => format!(
+                "steps ({} levels{})",
+                steps.len(),
+                if *repeat { ", repeating" } else { "" }
+            ),
+            ProfileSpec::Ramps { points, repeat } => format!(
+                "ramps ({} points{})",
+                points.len(),
+                if *repeat { ", repeating" } else { "" }
+            ),
+            ProfileSpec::Cardiac(c) => format!(
+                "cardiac {} beats/min, duty {}, amplitude {}",
+                c.bpm, c.duty, c.amplitude
+            ),
+        }
+    }
+}
+
+fn count(what: &str, n: usize, min: usize) -> Result<(), Rejection> {
+    if n < min || n > MAX_POINTS {
+        return Err(Rejection::Invalid(format!(
+            "{what}: {n} given, {min}..={MAX_POINTS} allowed"
+        )));
+    }
+    Ok(())
+}
+
+impl CardiacSpec {
+    /// The edge rate in use under `limits`.
+    pub fn edge_rate(&self, limits: &ReferenceLimits) -> f64 {
+        self.edge_rate_per_s.unwrap_or(limits.max_rate_per_s)
+    }
+
+    /// Checks heart rate, duty, amplitude and edge rate; the edges must fit into both
+    /// phases of the beat.
+    pub fn validate(&self, limits: &ReferenceLimits) -> Result<(), Rejection> {
+        let (lo, hi) = HEART_RATE_BPM;
+        if !self.bpm.is_finite() || !(lo..=hi).contains(&self.bpm) {
+            return Err(Rejection::Invalid(format!(
+                "heart rate {} beats/min is outside [{lo}, {hi}] (thesis 1.1: 1-3.3 Hz)",
+                self.bpm
+            )));
+        }
+        let (lo, hi) = DUTY;
+        if !self.duty.is_finite() || !(lo..=hi).contains(&self.duty) {
+            return Err(Rejection::Invalid(format!(
+                "duty {} is outside [{lo}, {hi}]",
+                self.duty
+            )));
+        }
+        limits.check_force("amplitude", self.amplitude)?;
+        let rate = self.edge_rate(limits);
+        limits.check_rate("edge rate", rate)?;
+        let edge_s = self.amplitude / rate;
+        let on_s = self.on_ns() as f64 * 1e-9;
+        let off_s = (self.period_ns() - self.on_ns()) as f64 * 1e-9;
+        if edge_s > on_s.min(off_s) {
+            return Err(Rejection::Invalid(format!(
+                "an edge of amplitude {} at {rate} /s takes {:.1} ms, longer than the {} phase ({:.1} ms): raise the edge rate or change the duty",
+                self.amplitude,
+                edge_s * 1e3,
+                if on_s <= off_s { "contraction" } else { "rest" },
+                on_s.min(off_s) * 1e3
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Runs a [`ProfileSpec`] from a start time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProfileRunner {
+    spec: ProfileSpec,
+    limits: ReferenceLimits,
+    start_ns: u64,
+    cardiac: Option<CardiacRun>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct CardiacRun {
+    /// Parameters of the running beat.
+    current: CardiacSpec,
+    /// Parameters that take over at the next beat.
+    pending: Option<CardiacSpec>,
+    /// The running beat.
+    beat: Beat,
+    /// Amplitude the next beat will use (the outer loop's latest output).
+    next_amplitude: f64,
+}
+
+/// What happened while the profile advanced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ProfileEvent {
+    /// A beat began.
+    BeatStarted(Beat),
+    /// A beat ended (at `end_ns`).
+    BeatEnded(Beat),
+}
+
+impl ProfileRunner {
+    /// Starts `spec` (already validated against `limits`) at `now_ns`.
+    pub fn start(spec: ProfileSpec, limits: ReferenceLimits, now_ns: u64) -> Self {
+        let cardiac = match &spec {
+            ProfileSpec::Cardiac(c) => Some(CardiacRun {
+                current: *c,
+                pending: None,
+                beat: Beat {
+                    index: 0,
+                    start_ns: now_ns,
+                    period_ns: c.period_ns(),
+                    on_ns: c.on_ns(),
+                    bpm: c.bpm,
+                    target: c.amplitude,
+                    amplitude: c.amplitude,
+                },
+                next_amplitude: c.amplitude,
+            }),
+            _ => None,
+        };
+        Self {
+            spec,
+            limits,
+            start_ns: now_ns,
+            cardiac,
+        }
+    }
+
+    /// The profile as given.
+    pub fn spec(&self) -> &ProfileSpec {
+        &self.spec
+    }
+
+    /// The running beat of a cardiac profile.
+    pub fn beat(&self) -> Option<Beat> {
+        self.cardiac.map(|c| c.beat)
+    }
+
+    /// Parameters of the cardiac profile in force and, if any, those waiting for the next
+    /// beat.
+    pub fn cardiac(&self) -> Option<(CardiacSpec, Option<CardiacSpec>)> {
+        self.cardiac.map(|c| (c.current, c.pending))
+    }
+
+    /// Replaces the parameters of a running cardiac profile from the next beat on (heart
+    /// rate, duty, amplitude, edge rate). Returns false when no cardiac profile runs.
+    pub fn retune_cardiac(&mut self, spec: CardiacSpec) -> bool {
+        match &mut self.cardiac {
+            Some(run) => {
+                run.pending = Some(spec);
+                run.next_amplitude = spec.amplitude;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Sets the amplitude the next beat will use (the outer loop's output).
+    pub fn set_next_amplitude(&mut self, amplitude: f64) {
+        if let Some(run) = &mut self.cardiac {
+            run.next_amplitude = amplitude;
+        }
+    }
+
+    /// The operator's target amplitude of the beat to come (pending parameters included).
+    pub fn next_target(&self) -> Option<f64> {
+        self.cardiac
+            .map(|c| c.pending.unwrap_or(c.current).amplitude)
+    }
+
+    /// Advances to `now_ns`, appending beat boundaries passed on the way to `events`, and
+    /// returns the setpoint at `now_ns`.
+    pub fn advance(&mut self, now_ns: u64, events: &mut Vec<ProfileEvent>) -> Setpoint {
+        let t_ns = now_ns.saturating_sub(self.start_ns);
+        let limits = self.limits;
+        match &self.spec {
+            ProfileSpec::Constant { force, rate_per_s } => Setpoint {
+                force: *force,
+                rate_per_s: rate_per_s.unwrap_or(limits.default_rate_per_s),
+            },
+            ProfileSpec::Steps {
+                steps,
+                repeat,
+                rate_per_s,
+            } => {
+                let rate = rate_per_s.unwrap_or(limits.default_rate_per_s);
+                let total: f64 = steps.iter().map(|s| s.hold_s).sum();
+                let mut t = t_ns as f64 * 1e-9;
+                if *repeat {
+                    t %= total;
+                }
+                let mut force = steps[steps.len() - 1].force;
+                let mut edge = 0.0;
+                for s in steps {
+                    edge += s.hold_s;
+                    if t < edge {
+                        force = s.force;
+                        break;
+                    }
+                }
+                Setpoint {
+                    force,
+                    rate_per_s: rate,
+                }
+            }
+            ProfileSpec::Ramps { points, repeat } => {
+                let total = points[points.len() - 1].t_s;
+                let mut t = t_ns as f64 * 1e-9;
+                if *repeat {
+                    t %= total;
+                }
+                let mut setpoint = Setpoint {
+                    force: points[points.len() - 1].force,
+                    rate_per_s: limits.default_rate_per_s,
+                };
+                for w in points.windows(2) {
+                    if t < w[1].t_s {
+                        let slope = (w[1].force - w[0].force).abs() / (w[1].t_s - w[0].t_s);
+                        setpoint = Setpoint {
+                            force: w[1].force,
+                            rate_per_s: if slope > 0.0 {
+                                slope
+                            } else {
+                                limits.default_rate_per_s
+                            },
+                        };
+                        break;
+                    }
+                }
+                setpoint
+            }
+            ProfileSpec::Cardiac(_) => {
+                let run = self
+                    .cardiac
+                    .as_mut()
+                    .expect("a cardiac profile always has its run state");
+                while now_ns >= run.beat.end_ns() {
+                    events.push(ProfileEvent::BeatEnded(run.beat));
+                    if let Some(p) = run.pending.take() {
+                        run.current = p;
+                    }
+                    let c = run.current;
+                    run.beat = Beat {
+                        index: run.beat.index + 1,
+                        start_ns: run.beat.end_ns(),
+                        period_ns: c.period_ns(),
+                        on_ns: c.on_ns(),
+                        bpm: c.bpm,
+                        target: c.amplitude,
+                        amplitude: run.next_amplitude,
+                    };
+                    events.push(ProfileEvent::BeatStarted(run.beat));
+                }
+                let in_beat = now_ns.saturating_sub(run.beat.start_ns);
+                let rate = run.current.edge_rate(&limits);
+                if in_beat < run.beat.on_ns {
+                    Setpoint {
+                        force: run.beat.amplitude,
+                        rate_per_s: rate,
+                    }
+                } else {
+                    Setpoint {
+                        force: 0.0,
+                        rate_per_s: rate,
+                    }
+                }
+            }
+        }
+    }
+
+    /// The first beat of a cardiac profile (to announce it when the profile starts).
+    pub fn first_beat(&self) -> Option<Beat> {
+        self.cardiac.map(|c| c.beat)
+    }
+
+    /// The next time after `now_ns` at which the setpoint changes, if any (so the caller
+    /// can publish edges on time instead of on its next period).
+    pub fn next_change_ns(&self, now_ns: u64) -> Option<u64> {
+        let t = now_ns.saturating_sub(self.start_ns);
+        let after = |edges: &[f64], period: Option<f64>| -> Option<u64> {
+            let t_s = t as f64 * 1e-9;
+            let (base, local) = match period {
+                Some(p) if p > 0.0 => ((t_s / p).floor() * p, t_s % p),
+                _ => (0.0, t_s),
+            };
+            let edge = *edges.iter().find(|&&e| e > local + 1e-9)?;
+            Some(self.start_ns + ((base + edge) * 1e9).ceil() as u64)
+        };
+        match &self.spec {
+            ProfileSpec::Constant { .. } => None,
+            ProfileSpec::Steps { steps, repeat, .. } => {
+                let total: f64 = steps.iter().map(|s| s.hold_s).sum();
+                let edges: Vec<f64> = steps
+                    .iter()
+                    .scan(0.0, |acc, s| {
+                        *acc += s.hold_s;
+                        Some(*acc)
+                    })
+                    .collect();
+                after(&edges, repeat.then_some(total))
+            }
+            ProfileSpec::Ramps { points, repeat } => {
+                let total = points[points.len() - 1].t_s;
+                let edges: Vec<f64> = points.iter().map(|p| p.t_s).collect();
+                after(&edges, repeat.then_some(total))
+            }
+            ProfileSpec::Cardiac(_) => {
+                let run = self.cardiac?;
+                let on_end = run.beat.start_ns + run.beat.on_ns;
+                if now_ns < on_end {
+                    return Some(on_end);
+                }
+                if now_ns < run.beat.end_ns() {
+                    return Some(run.beat.end_ns());
+                }
+                // Not advanced yet past the running beat: the beats after it use the
+                // pending parameters.
+                let c = run.pending.unwrap_or(run.current);
+                let (period, on) = (c.period_ns(), c.on_ns());
+                let since = now_ns - run.beat.end_ns();
+                let start = run.beat.end_ns() + since / period * period;
+                Some(if now_ns < start + on {
+                    start + on
+                } else {
+                    start + period
+                })
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    fn limits() -> ReferenceLimits {
+        ReferenceLimits::default()
+    }
+
+    fn cardiac(bpm: f64, duty: f64, amplitude: f64) -> CardiacSpec {
+        CardiacSpec {
+            bpm,
+            duty,
+            amplitude,
+            edge_rate_per_s: None,
+            outer_loop: None,
+        }
+    }
+
+    /// 75 beats/min is an 800 ms beat; duty 0.4 contracts for 320 ms: the setpoint is the
+    /// amplitude during [0, 320) ms of every beat and 0 after, and every boundary is
+    /// reported once.
+    #[test]
+    fn cardiac_square_wave_timing() {
+        let t0 = 5_000 * MS;
+        let spec = ProfileSpec::Cardiac(cardiac(75.0, 0.4, 0.3));
+        spec.validate(&limits()).unwrap();
+        let mut run = ProfileRunner::start(spec, limits(), t0);
+        let mut ev = Vec::new();
+        for k in 0..(3 * 800) {
+            let t = t0 + k * MS;
+            let sp = run.advance(t, &mut ev);
+            let in_beat = k % 800;
+            let expect = if in_beat < 320 { 0.3 } else { 0.0 };
+            assert_eq!(sp.force, expect, "at {k} ms");
+            assert_eq!(sp.rate_per_s, 50.0);
+        }
+        let ends: Vec<_> = ev
+            .iter()
+            .filter_map(|e| match e {
+                ProfileEvent::BeatEnded(b) => Some((b.index, b.start_ns - t0)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(ends, vec![(0, 0), (1, 800 * MS)]);
+        assert_eq!(run.next_change_ns(t0 + 2400 * MS), Some(t0 + 2720 * MS));
+        assert_eq!(run.next_change_ns(t0 + 2720 * MS), Some(t0 + 3200 * MS));
+    }
+
+    /// A heart-rate change takes effect at the next beat, not in the running one; the
+    /// outer loop's amplitude is latched at the beat start.
+    #[test]
+    fn heart_rate_change_waits_for_the_next_beat() {
+        let t0 = 1_000 * MS;
+        let mut run =
+            ProfileRunner::start(ProfileSpec::Cardiac(cardiac(60.0, 0.5, 0.4)), limits(), t0);
+        let mut ev = Vec::new();
+        run.advance(t0 + 100 * MS, &mut ev);
+        assert!(run.retune_cardiac(cardiac(120.0, 0.5, 0.4)));
+        run.set_next_amplitude(0.45);
+        // Still the 1000 ms beat: on until 500 ms.
+        assert_eq!(run.advance(t0 + 499 * MS, &mut ev).force, 0.4);
+        assert_eq!(run.advance(t0 + 501 * MS, &mut ev).force, 0.0);
+        assert_eq!(run.advance(t0 + 999 * MS, &mut ev).force, 0.0);
+        // Next beat at 1000 ms: 500 ms period, on for 250 ms, amplitude 0.45.
+        assert_eq!(run.advance(t0 + 1000 * MS, &mut ev).force, 0.45);
+        assert_eq!(run.advance(t0 + 1249 * MS, &mut ev).force, 0.45);
+        assert_eq!(run.advance(t0 + 1251 * MS, &mut ev).force, 0.0);
+        assert_eq!(run.advance(t0 + 1500 * MS, &mut ev).force, 0.45);
+        let b = run.beat().unwrap();
+        assert_eq!((b.index, b.period_ns, b.bpm), (2, 500 * MS, 120.0));
+    }
+
+    #[test]
+    fn steps_and_ramps_follow_their_definition() {
+        let t0 = 0;
+        let steps = ProfileSpec::Steps {
+            steps: vec![
+                Step {
+                    force: 0.2,
+                    hold_s: 1.0,
+                },
+                Step {
+                    force: 0.5,
+                    hold_s: 0.5,
+                },
+            ],
+            repeat: true,
+            rate_per_s: Some(2.0),
+        };
+        steps.validate(&limits()).unwrap();
+        let mut r = ProfileRunner::start(steps, limits(), t0);
+        let mut ev = Vec::new();
+        assert_eq!(r.advance(999 * MS, &mut ev).force, 0.2);
+        assert_eq!(r.advance(1000 * MS, &mut ev).force, 0.5);
+        assert_eq!(r.advance(1600 * MS, &mut ev).force, 0.2);
+        assert_eq!(r.advance(1600 * MS, &mut ev).rate_per_s, 2.0);
+        assert_eq!(r.next_change_ns(1600 * MS), Some(2500 * MS));
+
+        let ramps = ProfileSpec::Ramps {
+            points: vec![
+                RampPoint {
+                    t_s: 0.0,
+                    force: 0.0,
+                },
+                RampPoint {
+                    t_s: 2.0,
+                    force: 0.5,
+                },
+                RampPoint {
+                    t_s: 3.0,
+                    force: 0.5,
+                },
+            ],
+            repeat: false,
+        };
+        ramps.validate(&limits()).unwrap();
+        let mut r = ProfileRunner::start(ramps, limits(), t0);
+        let sp = r.advance(500 * MS, &mut ev);
+        assert_eq!(sp.force, 0.5);
+        assert!((sp.rate_per_s - 0.25).abs() < 1e-12);
+        assert_eq!(r.advance(2500 * MS, &mut ev).force, 0.5);
+        assert_eq!(r.advance(9000 * MS, &mut ev).force, 0.5);
+        assert_eq!(r.next_change_ns(500 * MS), Some(2000 * MS));
+        assert_eq!(r.next_change_ns(9000 * MS), None);
+    }
+
+    #[test]
+    fn invalid_profiles_say_why() {
+        let l = limits();
+        let e = ProfileSpec::Cardiac(cardiac(250.0, 0.4, 0.3))
+            .validate(&l)
+            .unwrap_err();
+        assert!(e.to_string().contains("heart rate 250"), "{e}");
+        let e = ProfileSpec::Cardiac(cardiac(75.0, 0.4, f64::NAN))
+            .validate(&l)
+            .unwrap_err();
+        assert!(e.to_string().contains("amplitude is NaN"), "{e}");
+        let slow_edges = CardiacSpec {
+            edge_rate_per_s: Some(1.0),
+            ..cardiac(75.0, 0.4, 0.5)
+        };
+        let e = ProfileSpec::Cardiac(slow_edges).validate(&l).unwrap_err();
+        assert!(e.to_string().contains("takes 500.0 ms"), "{e}");
+        let steep = ProfileSpec::Ramps {
+            points: vec![
+                RampPoint {
+                    t_s: 0.0,
+                    force: 0.0,
+                },
+                RampPoint {
+                    t_s: 0.01,
+                    force: 1.0,
+                },
+            ],
+            repeat: false,
+        };
+        let e = steep.validate(&l).unwrap_err();
+        assert!(matches!(e, Rejection::TooFast { .. }), "{e}");
+        assert!(e.to_string().contains("slope 100"), "{e}");
+        let e = ProfileSpec::Steps {
+            steps: vec![],
+            repeat: false,
+            rate_per_s: None,
+        }
+        .validate(&l)
+        .unwrap_err();
+        assert!(e.to_string().contains("steps: 0 given"), "{e}");
+    }
+}

@@ -1,0 +1,142 @@
+//! The whole chain in one process, in simulated time: the supervisor's profile and outer
+//! loop ([`crate::core`]), rt-core's reference tracking (`rt::reference`) and pattern
+//! generator (the controller file's LCN + shaper + LMN), and sim-muscle's Ding muscle
+//! (optionally fatiguing, optionally with its force sensor), 1 ms per step.
+//!
+//! It is the bench without processes, buses or clocks: deterministic, a few seconds of
+//! CPU for a minute of stimulation. The outer-loop tests and the fatigue figures of
+//! docs/bench.md use it; the bench checks the same loop across processes.
+
+use rt_core::control::file::Controller;
+use rt_core::control::pattern_generator::TickInput;
+use rt_core::rt::reference::{ReferencePolicy, ReferenceTracker};
+use sim_muscle::muscle::{Muscle, MuscleConfig};
+use sim_muscle::plant::{MusclePlant, Pulse};
+use sim_muscle::sensor::{ForceSensor, SensorConfig};
+
+use crate::contraction::ContractionSettings;
+use crate::core::{BeatRecord, SupervisorCore};
+use crate::limits::ReferenceLimits;
+use crate::outer_loop::OuterLoopSettings;
+use crate::profile::ProfileSpec;
+use crate::protocol::Command;
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct SimSettings {
+    /// The muscle (preset, fatigue, delay).
+    pub muscle: MuscleConfig,
+    /// A force sensor (offset, noise), or the exact force.
+    pub sensor: Option<SensorConfig>,
+    /// Newtons per normalised force (the model's `force_scale_n`).
+    pub scale_n: f64,
+    /// Offset removed before normalising, N (the sensor's).
+    pub offset_n: f64,
+    /// Profile run after arming.
+    pub profile: ProfileSpec,
+    /// Outer loop.
+    pub outer_loop: OuterLoopSettings,
+    /// Beat measurement.
+    pub contraction: ContractionSettings,
+    /// Reference limits.
+    pub limits: ReferenceLimits,
+    /// Simulated time, s.
+    pub seconds: f64,
+}
+
+/// A simulation failure.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The controller cannot run.
+    #[error("pattern generator: {0}")]
+    Generator(#[from] rt_core::control::pattern_generator::PatternGeneratorError),
+    /// The muscle or sensor settings are invalid.
+    #[error("muscle: {0}")]
+    Muscle(#[from] sim_muscle::ding::ParamError),
+    /// The profile or a command was refused.
+    #[error("supervisor refused: {0}")]
+    Refused(String),
+}
+
+/// Time series of a simulation (one entry per 1 ms sample).
+#[derive(Debug, Clone, Default)]
+pub struct SimResult {
+    /// Target r handed to the generator (after rt-core's ramps).
+    pub reference: Vec<f64>,
+    /// The model force (rt-core's LMN output).
+    pub model_force: Vec<f64>,
+    /// The measured force, normalised.
+    pub measured: Vec<f64>,
+    /// Pulses.
+    pub pulse: Vec<bool>,
+    /// Completed beats with the outer loop's reaction.
+    pub beats: Vec<BeatRecord>,
+}
+
+const MS: u64 = 1_000_000;
+
+/// Runs the chain for `settings.seconds`.
+pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, SimError> {
+    let mut pg = controller.pattern_generator()?;
+    let mut muscle = Muscle::new(s.muscle)?;
+    let mut sensor = match &s.sensor {
+        Some(c) => Some(ForceSensor::new(c.clone(), s.muscle.ts_s)?),
+        None => None,
+    };
+    let mut core = SupervisorCore::new(s.limits, s.outer_loop, s.contraction);
+    let mut tracker = ReferenceTracker::new(ReferencePolicy {
+        stale_after_ns: 100 * MS,
+        stale_ramp_per_s: 2.0,
+    });
+    // Start at 1 s of monotonic time so that no stamp is 0.
+    let t0 = 1_000 * MS;
+    core.command(&Command::Arm, t0, Ok(()))
+        .map_err(SimError::Refused)?;
+    core.command(
+        &Command::Profile {
+            profile: s.profile.clone(),
+        },
+        t0,
+        Ok(()),
+    )
+    .map_err(SimError::Refused)?;
+    let n = (s.seconds * 1000.0).round() as usize;
+    let mut out = SimResult {
+        reference: Vec::with_capacity(n),
+        model_force: Vec::with_capacity(n),
+        measured: Vec::with_capacity(n),
+        pulse: Vec::with_capacity(n),
+        beats: Vec::new(),
+    };
+    let mut measured_now = match &mut sensor {
+        Some(sen) => (sen.measure(0.0) - s.offset_n) / s.scale_n,
+        None => 0.0,
+    };
+    for k in 0..n as u64 {
+        let t = t0 + k * MS;
+        let r = core.reference(t);
+        // Offered once per tick, as rt-core takes the newest waiting reference.
+        let _ = tracker.offer(&r, t);
+        let target = tracker.advance(t);
+        let o = pg.tick(&TickInput {
+            reference: target.value,
+            measured_force: Some(measured_now),
+        });
+        out.reference.push(target.value);
+        out.model_force.push(o.model_force);
+        out.measured.push(measured_now);
+        out.pulse.push(o.pulse);
+        core.on_force(t, measured_now);
+        if o.pulse {
+            core.on_pulse(t);
+        }
+        let f_n = muscle.step(o.pulse.then_some(Pulse::SUPRAMAXIMAL));
+        let y_n = match &mut sensor {
+            Some(sen) => sen.measure(f_n),
+            None => f_n,
+        };
+        measured_now = (y_n - s.offset_n) / s.scale_n;
+        out.beats.extend(core.take_beats());
+    }
+    Ok(out)
+}

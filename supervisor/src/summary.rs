@@ -1,0 +1,399 @@
+//! The figures of a stimulation run, computed from its recording (so any recording,
+//! bench or rig, can be summarised again later): tracking error, pulses, contractions,
+//! the 40 Hz baseline, deadline misses and latencies.
+//!
+//! Tracking error: the LCN regulates the force `d` samples ahead (docs/control.md), so
+//! the force at tick k is compared with the reference of tick k - d:
+//! `rms = sqrt(mean((y[k] - r[k-d])^2))` over the complete beats, for the model force
+//! (StimTick `model_force`) and the measured force (the ForceSample nearest in time).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::baseline::Baseline;
+
+/// A recording that cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum SummaryError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A line is malformed.
+    #[error("{path}:{line}: {problem}")]
+    Format {
+        /// File.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// Rows of a CSV file of numbers, by column name.
+#[derive(Debug, Clone, Default)]
+pub struct Table {
+    /// Column names.
+    pub columns: Vec<String>,
+    /// Rows (empty fields are NaN).
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl Table {
+    /// Reads a CSV of numbers with a header line.
+    pub fn read(path: &Path) -> Result<Self, SummaryError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SummaryError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut lines = text.lines();
+        let columns: Vec<String> = lines
+            .next()
+            .unwrap_or_default()
+            .split(',')
+            .map(str::to_string)
+            .collect();
+        let mut rows = Vec::new();
+        for (i, l) in lines.enumerate() {
+            if l.trim().is_empty() {
+                continue;
+            }
+            let row: Result<Vec<f64>, _> = l
+                .split(',')
+                .map(|f| {
+                    if f.is_empty() {
+                        Ok(f64::NAN)
+                    } else {
+                        f.parse::<f64>()
+                    }
+                })
+                .collect();
+            let row = row.map_err(|e| SummaryError::Format {
+                path: path.to_path_buf(),
+                line: i + 2,
+                problem: e.to_string(),
+            })?;
+            if row.len() != columns.len() {
+                // A line cut by a crash: the rest of the file is not usable.
+                break;
+            }
+            rows.push(row);
+        }
+        Ok(Self { columns, rows })
+    }
+
+    /// The column `name`.
+    pub fn col(&self, name: &str) -> Vec<f64> {
+        match self.columns.iter().position(|c| c == name) {
+            Some(i) => self.rows.iter().map(|r| r[i]).collect(),
+            None => Vec::new(),
+        }
+    }
+}
+
+/// Latency figures of one process (its last TimingReport).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Latency {
+    /// Ticks counted.
+    pub ticks: u64,
+    /// Skipped periods.
+    pub misses: u64,
+    /// Wake-up lateness p50 / p99 / max, µs.
+    pub wake_us: [f64; 3],
+    /// Publish-to-receive latency p50 / p99 / max, µs.
+    pub ipc_us: [f64; 3],
+    /// Compute p99, µs.
+    pub compute_p99_us: f64,
+    /// Publish p99, µs.
+    pub publish_p99_us: f64,
+}
+
+/// The run's figures (the `--json` file; keys documented in docs/bench.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Profile time analysed, s.
+    pub duration_s: f64,
+    /// Complete contractions (beats).
+    pub contractions: u64,
+    /// RMS of model force - reference (delayed by d), normalised.
+    pub rms_error_model: f64,
+    /// RMS of measured force - reference (delayed by d), normalised.
+    pub rms_error_measured: f64,
+    /// Pulses fired by rt-core over the complete beats.
+    pub pulses: u64,
+    /// `pulses / contractions`.
+    pub pulses_per_contraction: f64,
+    /// The 40 Hz train of equal FTI: pulses per contraction.
+    pub baseline_pulses_per_contraction: f64,
+    /// The 40 Hz train's RMS tracking error, normalised.
+    pub baseline_rms_error: f64,
+    /// Full 40 Hz baseline.
+    pub baseline: Option<Baseline>,
+    /// Mean FTI of a contraction (measured), normalised force x s.
+    pub fti_per_contraction: f64,
+    /// Target amplitude.
+    pub target: f64,
+    /// Mean plateau contraction over all beats, normalised.
+    pub mean_contraction: f64,
+    /// Mean plateau contraction of the first and the last 5 beats.
+    pub first_last_contraction: [f64; 2],
+    /// Largest deviation of a beat's plateau from the target after the first 10 beats,
+    /// as a fraction of the target.
+    pub worst_deviation_after_10: f64,
+    /// Pulses the stimulator applied (DriverStatus `pulses_sent`, last), if known.
+    pub pulses_sent: Option<u64>,
+    /// Skipped periods of rt-core (its final TimingReport).
+    pub deadline_misses: u64,
+    /// rt-core wake-up lateness p99, µs.
+    pub rt_wake_p99_us: f64,
+    /// stim-driver forward latency (StimTick publish to driver receive) p99, µs.
+    pub driver_forward_p99_us: f64,
+    /// rt-core figures.
+    pub rt_core: Latency,
+    /// stim-driver figures.
+    pub stim_driver: Option<Latency>,
+    /// Whether the timings were taken inside a UML guest (functional only).
+    pub timing_functional_only: bool,
+    /// The recording directory.
+    pub recording: String,
+}
+
+fn rms(pairs: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for (a, b) in pairs {
+        if a.is_finite() && b.is_finite() {
+            s += (a - b).powi(2);
+            n += 1;
+        }
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        (s / n as f64).sqrt()
+    }
+}
+
+/// What the analysis needs besides the recording.
+pub struct AnalysisInput {
+    /// The model's delay, samples.
+    pub delay: usize,
+    /// The target amplitude.
+    pub target: f64,
+    /// Computes the 40 Hz baseline for a measured FTI per contraction and a beat
+    /// (period ms, on ms).
+    pub baseline: Option<Box<dyn Fn(f64, usize, usize) -> Baseline>>,
+    /// Timings from a UML guest.
+    pub uml: bool,
+}
+
+/// The time series of a recording (for plots).
+#[derive(Debug, Clone, Default)]
+pub struct Series {
+    /// Tick times, ns.
+    pub t_ns: Vec<u64>,
+    /// Reference per tick.
+    pub reference: Vec<f64>,
+    /// Model force per tick.
+    pub model: Vec<f64>,
+    /// Measured force nearest each tick (NaN when none within 1.5 ms).
+    pub measured: Vec<f64>,
+    /// Pulse per tick.
+    pub pulse: Vec<bool>,
+    /// Beats.
+    pub beats: Vec<BeatRow>,
+}
+
+/// One line of `beats.csv`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BeatRow {
+    /// Start, ns.
+    pub start_ns: u64,
+    /// Period, ns.
+    pub period_ns: u64,
+    /// Contraction, ns.
+    pub on_ns: u64,
+    /// Plateau mean (NaN when not measured).
+    pub plateau: f64,
+    /// Pulses in the beat.
+    pub pulses: u64,
+    /// FTI of the beat window.
+    pub fti: f64,
+}
+
+/// Reads the time series of the recording in `dir`.
+pub fn read_series(dir: &Path) -> Result<Series, SummaryError> {
+    let ticks = Table::read(&dir.join("ticks.csv"))?;
+    let force = Table::read(&dir.join("force.csv"))?;
+    let beats = Table::read(&dir.join("beats.csv"))?;
+    let t_ns: Vec<u64> = ticks.col("t_ns").iter().map(|&x| x as u64).collect();
+    let ft: Vec<u64> = force.col("t_ns").iter().map(|&x| x as u64).collect();
+    let fv = force.col("force");
+    // Nearest force sample to each tick (both sorted by time).
+    let mut measured = Vec::with_capacity(t_ns.len());
+    let mut j = 0usize;
+    for &t in &t_ns {
+        while j + 1 < ft.len() && ft[j + 1] <= t {
+            j += 1;
+        }
+        let mut best = f64::NAN;
+        let mut best_d = u64::MAX;
+        for i in [j, j + 1] {
+            if let (Some(&ti), Some(&fi)) = (ft.get(i), fv.get(i)) {
+                let d = ti.abs_diff(t);
+                if d < best_d && d <= 1_500_000 {
+                    best_d = d;
+                    best = fi;
+                }
+            }
+        }
+        measured.push(best);
+    }
+    let b: Vec<BeatRow> = {
+        let (s, p, o, m, n, f) = (
+            beats.col("start_ns"),
+            beats.col("period_ns"),
+            beats.col("on_ns"),
+            beats.col("plateau_mean"),
+            beats.col("pulses"),
+            beats.col("fti"),
+        );
+        (0..s.len())
+            .map(|i| BeatRow {
+                start_ns: s[i] as u64,
+                period_ns: p[i] as u64,
+                on_ns: o[i] as u64,
+                plateau: m[i],
+                pulses: n[i] as u64,
+                fti: f[i],
+            })
+            .collect()
+    };
+    Ok(Series {
+        t_ns,
+        reference: ticks.col("reference"),
+        model: ticks.col("model_force"),
+        measured,
+        pulse: ticks.col("pulse").iter().map(|&p| p == 1.0).collect(),
+        beats: b,
+    })
+}
+
+fn latency(row: &BTreeMap<&str, f64>) -> Latency {
+    let us = |k: &str| row.get(k).copied().unwrap_or(f64::NAN) * 1e-3;
+    Latency {
+        ticks: row.get("ticks").copied().unwrap_or(0.0) as u64,
+        misses: row.get("misses").copied().unwrap_or(0.0) as u64,
+        wake_us: [us("wake_p50_ns"), us("wake_p99_ns"), us("wake_max_ns")],
+        ipc_us: [us("ipc_p50_ns"), us("ipc_p99_ns"), us("ipc_max_ns")],
+        compute_p99_us: us("compute_p99_ns"),
+        publish_p99_us: us("publish_p99_ns"),
+    }
+}
+
+/// Summarises the recording in `dir`.
+pub fn analyse(dir: &Path, input: &AnalysisInput) -> Result<Summary, SummaryError> {
+    let s = read_series(dir)?;
+    let timing = Table::read(&dir.join("timing.csv"))?;
+    let status = Table::read(&dir.join("status.csv"))?;
+    // The last report of each source.
+    let mut last: BTreeMap<u8, BTreeMap<&str, f64>> = BTreeMap::new();
+    for r in &timing.rows {
+        let row: BTreeMap<&str, f64> = timing
+            .columns
+            .iter()
+            .map(String::as_str)
+            .zip(r.iter().copied())
+            .collect();
+        last.insert(row.get("source").copied().unwrap_or(0.0) as u8, row);
+    }
+    let rt = last.get(&1).map(latency).unwrap_or_default();
+    let drv = last.get(&2).map(latency);
+
+    // Complete beats only.
+    let (from, to) = match (s.beats.first(), s.beats.last()) {
+        (Some(a), Some(b)) => (a.start_ns, b.start_ns + b.period_ns),
+        _ => (0, 0),
+    };
+    let d = input.delay;
+    let idx: Vec<usize> = (d..s.t_ns.len())
+        .filter(|&k| s.t_ns[k] >= from && s.t_ns[k] < to)
+        .collect();
+    let rms_model = rms(idx.iter().map(|&k| (s.model[k], s.reference[k - d])));
+    let rms_measured = rms(idx.iter().map(|&k| (s.measured[k], s.reference[k - d])));
+    let pulses = idx.iter().filter(|&&k| s.pulse[k]).count() as u64;
+    let n = s.beats.len() as u64;
+    let plateaus: Vec<f64> = s
+        .beats
+        .iter()
+        .map(|b| b.plateau)
+        .filter(|x| x.is_finite())
+        .collect();
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let ftis: Vec<f64> = s
+        .beats
+        .iter()
+        .map(|b| b.fti)
+        .filter(|x| x.is_finite())
+        .collect();
+    let fti = mean(&ftis);
+    let (period_ms, on_ms) = s.beats.first().map_or((0, 0), |b| {
+        (
+            (b.period_ns / 1_000_000) as usize,
+            (b.on_ns / 1_000_000) as usize,
+        )
+    });
+    let baseline = match (&input.baseline, n > 0 && fti.is_finite()) {
+        (Some(f), true) => Some(f(fti, period_ms, on_ms)),
+        _ => None,
+    };
+    let worst = plateaus
+        .iter()
+        .skip(10)
+        .map(|p| ((p - input.target) / input.target).abs())
+        .fold(0.0, f64::max);
+    let k5 = plateaus.len().min(5);
+    Ok(Summary {
+        duration_s: (to.saturating_sub(from)) as f64 * 1e-9,
+        contractions: n,
+        rms_error_model: rms_model,
+        rms_error_measured: rms_measured,
+        pulses,
+        pulses_per_contraction: if n > 0 {
+            pulses as f64 / n as f64
+        } else {
+            f64::NAN
+        },
+        baseline_pulses_per_contraction: baseline.map_or(f64::NAN, |b| b.pulses),
+        baseline_rms_error: baseline.map_or(f64::NAN, |b| b.rms_error),
+        baseline,
+        fti_per_contraction: fti,
+        target: input.target,
+        mean_contraction: mean(&plateaus),
+        first_last_contraction: [
+            mean(&plateaus[..k5]),
+            mean(&plateaus[plateaus.len() - k5..]),
+        ],
+        worst_deviation_after_10: worst,
+        pulses_sent: status.col("pulses_sent").last().map(|&x| x as u64),
+        deadline_misses: rt.misses,
+        rt_wake_p99_us: rt.wake_us[1],
+        driver_forward_p99_us: drv.map_or(f64::NAN, |l| l.ipc_us[1]),
+        rt_core: rt,
+        stim_driver: drv,
+        timing_functional_only: input.uml,
+        recording: dir.display().to_string(),
+    })
+}

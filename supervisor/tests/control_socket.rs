@@ -1,0 +1,241 @@
+//! The control socket end to end: the real daemon, the real CLI client. Invalid operator
+//! commands are refused with a clear message and change nothing; a peer the policy does
+//! not admit is refused by its SO_PEERCRED credentials.
+
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use supervisor::config::ControlConfig;
+use supervisor::control::{ControlServer, PeerPolicy};
+use supervisor::protocol::{Response, Status};
+
+const EXE: &str = env!("CARGO_BIN_EXE_supervisor");
+
+struct Daemon {
+    child: Child,
+    dir: PathBuf,
+    socket: PathBuf,
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn daemon(tag: &str) -> Daemon {
+    let dir = std::env::temp_dir().join(format!("sv-ctl-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("supervisor.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            r#"schema = "fes-supervisor/1"
+[ipc]
+prefix = "svctl{tag}{pid}"
+node_name = "supervisor-test"
+[control]
+socket = "run/supervisor.sock"
+[health]
+watch_rt_core = false
+watch_stim_driver = false
+watch_stimulator = false
+[recording]
+dir = "rec"
+"#,
+            pid = std::process::id()
+        ),
+    )
+    .unwrap();
+    let child = Command::new(EXE)
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let socket = dir.join("run/supervisor.sock");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !socket.exists() {
+        assert!(
+            Instant::now() < deadline,
+            "the daemon did not create its socket"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Daemon { child, dir, socket }
+}
+
+fn cli(socket: &Path, args: &[&str]) -> Output {
+    Command::new(EXE)
+        .args(args)
+        .env_remove("RUST_BACKTRACE")
+        .env_remove("RUST_LIB_BACKTRACE")
+        .arg("--socket")
+        .arg(socket)
+        .output()
+        .unwrap()
+}
+
+fn status(socket: &Path) -> Status {
+    let o = cli(socket, &["status", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: Response = serde_json::from_slice(&o.stdout).unwrap();
+    r.status.unwrap()
+}
+
+/// Waits until the published reference is `force` (published every 10 ms).
+fn wait_reference(socket: &Path, force: f64) -> Status {
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let s = status(socket);
+        if s.reference == force {
+            return s;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "reference stays {} (want {force})",
+            s.reference
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn invalid_commands_are_refused_clearly_and_change_nothing() {
+    let d = daemon("inv");
+    let mode = std::fs::metadata(&d.socket).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o660, "socket mode {mode:o}");
+
+    // Not armed yet: refused with the remedy.
+    let o = cli(&d.socket, &["set", "--force", "0.3"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&o.stderr).trim(),
+        "refused: not armed: run `supervisor arm` first"
+    );
+    let o = cli(&d.socket, &["arm"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = cli(&d.socket, &["set", "--force", "0.3", "--rate", "2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let before = wait_reference(&d.socket, 0.3);
+    assert_eq!(before.reference_rate_per_s, 2.0);
+    assert_eq!(before.profile.as_deref(), Some("constant 0.3"));
+
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &["set", "--force", "1.5"],
+            "refused: force 1.5 is outside [0, 1] (normalised force)",
+        ),
+        (
+            &["set", "--force", "-0.2"],
+            "refused: force -0.2 is outside [0, 1] (normalised force)",
+        ),
+        (
+            &["set", "--force", "0.5", "--rate", "500"],
+            "refused: rate 500 /s is faster than the rate limit 50 /s (normalised force per second)",
+        ),
+        (
+            &["set", "--force", "NaN"],
+            "Error: --force NaN: must be a finite number",
+        ),
+        (
+            &["profile", "cardiac", "--hr", "250", "--amplitude", "0.3"],
+            "refused: heart rate 250 beats/min is outside [60, 200] (thesis 1.1: 1-3.3 Hz)",
+        ),
+        (
+            &["profile", "ramps", "--points", "0:0,0.01:1"],
+            "refused: ramp from t = 0 s to 0.01 s: slope 100 /s is faster than the rate limit 50 /s (normalised force per second)",
+        ),
+        (
+            &[
+                "profile",
+                "cardiac",
+                "--hr",
+                "75",
+                "--amplitude",
+                "0.5",
+                "--edge-rate",
+                "1",
+            ],
+            "refused: an edge of amplitude 0.5 at 1 /s takes 500.0 ms, longer than the contraction phase (320.0 ms): raise the edge rate or change the duty",
+        ),
+    ];
+    for (args, message) in cases {
+        let o = cli(&d.socket, args);
+        assert_ne!(o.status.code(), Some(0), "{args:?} accepted");
+        assert_eq!(
+            String::from_utf8_lossy(&o.stderr).trim(),
+            message,
+            "{args:?}"
+        );
+    }
+    // Garbage on the socket: one error line naming the problem.
+    let mut s = UnixStream::connect(&d.socket).unwrap();
+    s.write_all(b"{\"v\":1,\"command\":{\"kind\":\"set\",\"force\":0.9,\"extra\":1}}\n")
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(&s).read_line(&mut line).unwrap();
+    let r: Response = serde_json::from_str(&line).unwrap();
+    assert!(!r.ok);
+    assert!(r.error.unwrap().contains("unknown field `extra`"));
+
+    std::thread::sleep(Duration::from_millis(50));
+    let after = status(&d.socket);
+    assert_eq!(after.state, "armed");
+    assert_eq!(after.reference, before.reference);
+    assert_eq!(after.reference_rate_per_s, before.reference_rate_per_s);
+    assert_eq!(after.profile, before.profile);
+    assert!(
+        after.references_published > before.references_published,
+        "still publishing"
+    );
+
+    // A valid stop takes effect at once.
+    let o = cli(&d.socket, &["stop"]);
+    assert!(o.status.success());
+    let s = status(&d.socket);
+    assert_eq!(s.state, "disarmed");
+    assert!(s.reference_stop);
+}
+
+#[test]
+fn a_peer_the_policy_does_not_admit_is_refused() {
+    let dir = std::env::temp_dir().join(format!("sv-peer-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let cfg = ControlConfig {
+        socket: dir.join("s.sock"),
+        ..ControlConfig::default()
+    };
+    let me = nix::unistd::geteuid().as_raw();
+    let policy = PeerPolicy {
+        own_uid: me.wrapping_add(12_345),
+        uid: None,
+        gid: Some(nix::unistd::getegid().as_raw().wrapping_add(777)),
+        allow_root: false,
+    };
+    let (tx, rx) = std::sync::mpsc::channel();
+    let server = ControlServer::start_with_policy(&cfg, policy, tx).unwrap();
+    let o = cli(server.path(), &["status"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!("permission denied: uid {me} (gid")),
+        "{err}"
+    );
+    assert!(
+        rx.try_recv().is_err(),
+        "a refused peer's request reached the main loop"
+    );
+    drop(server);
+    assert!(!dir.join("s.sock").exists(), "socket removed on shutdown");
+    let _ = std::fs::remove_dir_all(&dir);
+}

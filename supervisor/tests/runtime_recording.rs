@@ -1,0 +1,223 @@
+//! The recorder: a run becomes a readable `fes-dataset/1` data set plus message streams;
+//! a crash leaves a readable data set; a full disk is an error, never a panic.
+
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use rt_core::dataset::DataSet;
+use rt_core::msg::{ForceSample, Reference, StimTick};
+use supervisor::recording::{Recorder, RecorderSettings};
+
+const MS: u64 = 1_000_000;
+const T0: u64 = 10_000 * MS;
+
+fn settings() -> RecorderSettings {
+    RecorderSettings {
+        flush_period_ns: 1_000 * MS,
+        max_record_ticks: 1000,
+        scale_n: 1.0,
+        offset_n: 0.0,
+        source: "test".into(),
+        protocol: serde_json::json!({"test": true}),
+    }
+}
+
+fn tick(k: u64) -> StimTick {
+    let t = T0 + k * MS;
+    let pulse = k % 25 == 3;
+    StimTick {
+        seq: k + 1,
+        t_ns: t,
+        t_wake_ns: t + 20_000,
+        t_publish_ns: t + 30_000,
+        ref_seq: 1,
+        reference: 0.3,
+        u_cont: 0.1,
+        energy: 0.2,
+        model_force: 0.25,
+        predicted_force: 0.3,
+        phi: 0.4,
+        amplitude_ua: if pulse { 20_000 } else { 0 },
+        missed_periods: 0,
+        width_us: if pulse { 200 } else { 0 },
+        flags: 0,
+        pulse: u8::from(pulse),
+        channel: 0,
+        reserved: [0; 2],
+    }
+}
+
+/// Force of sample k: a smooth, distinct value per sample.
+fn force(k: u64) -> f64 {
+    0.3 + 0.2 * ((k as f64) * 0.01).sin()
+}
+
+fn sample(k: u64) -> ForceSample {
+    let f = force(k);
+    ForceSample {
+        seq: k + 1,
+        // The stimulator's sample time is 0.3 ms off the tick grid.
+        t_ns: T0 + k * MS + 300_000,
+        stim_seq: k,
+        force_n: 364.0 * f + 2.0,
+        force: f,
+    }
+}
+
+fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sv-rec-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Feeds `n` ms of a run: ticks first, their force 2 ms later (as over CAN), a beat
+/// boundary every 800 ms, a reference every 10 ms.
+fn feed(r: &mut Recorder, n: u64) {
+    for k in 0..n {
+        let now = T0 + k * MS + 500_000;
+        if k % 800 == 0 {
+            r.boundary(T0 + k * MS, format!("beat {}", k / 800));
+        }
+        r.on_stim_tick(&tick(k), now).unwrap();
+        if k >= 2 {
+            r.on_force(&sample(k - 2), now).unwrap();
+        }
+        if k % 10 == 0 {
+            r.on_reference(&Reference::new(k / 10 + 1, now, 0.3)).unwrap();
+        }
+        r.maybe_flush(now).unwrap();
+    }
+}
+
+#[test]
+fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
+    let root = tempdir("ok");
+    let mut r = Recorder::create(&root, "run1", settings(), T0).unwrap();
+    feed(&mut r, 3000);
+    // The last force samples arrive, then the run ends.
+    r.on_force(&sample(2998), T0 + 3000 * MS).unwrap();
+    r.on_force(&sample(2999), T0 + 3000 * MS).unwrap();
+    r.on_event(T0 + 3000 * MS, "stop").unwrap();
+    let s = r.finish(T0 + 3001 * MS).unwrap();
+    assert_eq!(s.ticks, 3000);
+    let dir = root.join("run1");
+    assert_eq!(std::fs::metadata(&dir).unwrap().permissions().mode() & 0o777, 0o750);
+    for f in ["dataset.json", "ticks.csv", "force.csv", "events.jsonl", "record_00000.csv"] {
+        let m = std::fs::metadata(dir.join(f)).unwrap().permissions().mode() & 0o777;
+        assert_eq!(m, 0o640, "{f}: {m:o}");
+    }
+    let ds = DataSet::read(&dir).unwrap();
+    // Beats of 800 ms: records 800, 800, 800, 600 samples.
+    let lens: Vec<usize> = ds.records.iter().map(|r| r.len()).collect();
+    assert_eq!(lens, vec![800, 800, 800, 600]);
+    assert_eq!(s.records, 4);
+    let mut k = 0u64;
+    for rec in &ds.records {
+        assert!(rec.kind.starts_with("beat"), "{}", rec.kind);
+        for (i, (&p, &f)) in rec.pulse.iter().zip(&rec.force).enumerate() {
+            assert_eq!(rec.t_ms[i], i as f64);
+            assert_eq!(p, k % 25 == 3, "pulse at {k}");
+            assert_eq!(f, force(k), "force at {k}");
+            k += 1;
+        }
+    }
+    // force_n = 364 force + 2: the scale is fitted from the stream.
+    assert!((ds.header.scale_n - 364.0).abs() < 1e-6, "{}", ds.header.scale_n);
+    assert!((ds.header.offset_n - 2.0).abs() < 1e-6, "{}", ds.header.offset_n);
+    let ticks = std::fs::read_to_string(dir.join("ticks.csv")).unwrap();
+    assert_eq!(ticks.lines().count(), 3001);
+    let refs = std::fs::read_to_string(dir.join("references.csv")).unwrap();
+    assert_eq!(refs.lines().count(), 301);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A crash (the recorder dropped without `finish`) loses at most the record being
+/// written: the data set lists every completed record and reads back; the streams hold
+/// at least everything up to the last flush.
+#[test]
+fn a_crash_leaves_a_readable_data_set() {
+    let root = tempdir("crash");
+    let mut r = Recorder::create(&root, "run", settings(), T0).unwrap();
+    feed(&mut r, 2500);
+    std::mem::forget(r); // as a SIGKILL: no destructor, no flush
+    let dir = root.join("run");
+    let ds = DataSet::read(&dir).unwrap();
+    let total: usize = ds.records.iter().map(|r| r.len()).sum();
+    assert_eq!(total, 2400, "the three completed beats");
+    assert!(2500 - total <= 1000, "lost more than one record");
+    let flushed = std::fs::read_to_string(dir.join("ticks.csv")).unwrap();
+    assert!(flushed.lines().count() > 2000, "ticks flushed: {}", flushed.lines().count());
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A force sample outside the data-set range (-0.1..1.1) or a gap in the tick sequence
+/// ends the record; the data set stays valid.
+#[test]
+fn gaps_and_unrecordable_force_split_records() {
+    let root = tempdir("gap");
+    let mut r = Recorder::create(&root, "run", settings(), T0).unwrap();
+    for k in 0..600u64 {
+        if (200..210).contains(&k) {
+            continue; // ticks lost
+        }
+        let now = T0 + k * MS + 500_000;
+        r.on_stim_tick(&tick(k), now).unwrap();
+        let mut s = sample(k);
+        if k == 400 {
+            s.force = 1.5;
+            s.force_n = 364.0 * 1.5 + 2.0;
+        }
+        r.on_force(&s, now).unwrap();
+    }
+    r.finish(T0 + 700 * MS).unwrap();
+    let ds = DataSet::read(root.join("run")).unwrap();
+    let lens: Vec<usize> = ds.records.iter().map(|r| r.len()).collect();
+    assert_eq!(lens, vec![200, 190, 199]);
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A full disk is a reported error naming the file and the cause, never a panic; the
+/// recorder refuses further writes.
+#[test]
+fn disk_full_is_an_error_not_a_panic() {
+    let root = tempdir("full");
+    std::fs::create_dir_all(&root).unwrap();
+    let ok = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=96k", "tmpfs"])
+        .arg(&root)
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    assert!(
+        ok,
+        "this test mounts a 96 KiB tmpfs to fill it: it needs root (CAP_SYS_ADMIN)"
+    );
+    struct Unmount(PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(&self.0).status();
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    let _guard = Unmount(root.clone());
+    let mut r = Recorder::create(&root, "run", settings(), T0).unwrap();
+    let mut failure = None;
+    for k in 0..200_000u64 {
+        let now = T0 + k * MS;
+        let res = r
+            .on_stim_tick(&tick(k), now)
+            .and_then(|()| r.on_force(&sample(k), now))
+            .and_then(|()| r.maybe_flush(now));
+        if let Err(e) = res {
+            failure = Some(e.to_string());
+            break;
+        }
+    }
+    let e = failure.expect("96 KiB filled without an error");
+    assert!(e.contains("No space left on device"), "{e}");
+    assert!(e.starts_with("recording: cannot "), "{e}");
+    assert!(r.on_event(T0, "after").is_err(), "writes after a failure");
+    assert!(r.finish(T0).is_err());
+    let _ = Path::new("/");
+}
