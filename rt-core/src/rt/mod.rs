@@ -14,6 +14,8 @@
 //! - [`process_config`], [`runner`], [`signals`]: the rt-core process (configuration file,
 //!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM).
 //! - [`probe`]: file formats of the `rt-probe` measurement process.
+//! - [`notify`], [`logging`]: running under systemd: READY/WATCHDOG notification fed only
+//!   while the real-time loop makes progress, and logs to the journal.
 
 pub mod alloc;
 pub mod clock;
@@ -23,6 +25,8 @@ pub mod feedback;
 pub mod generator;
 pub mod histogram;
 pub mod hlog;
+pub mod logging;
+pub mod notify;
 pub mod probe;
 pub mod process_config;
 pub mod realtime;

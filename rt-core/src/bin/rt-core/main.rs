@@ -3,20 +3,23 @@
 //! A thin shell around [`rt_core::rt::runner`]: it reads and validates the configuration and
 //! the controller, creates the iceoryx2 node, starts the telemetry thread and ONE real-time
 //! thread, and on SIGINT/SIGTERM stops them cleanly (final StimTick, histograms flushed,
-//! iceoryx2 resources released, exit 0).
+//! iceoryx2 resources released, exit 0). Under systemd it logs to the journal and reports
+//! READY=1 / WATCHDOG=1 through [`rt_core::rt::notify`] while the loop makes progress.
 
+mod slowdown;
 mod source;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc;
+use std::sync::{OnceLock, mpsc};
 use std::time::SystemTime;
 
 use anyhow::{Context, anyhow};
 use clap::Parser;
 use rt_core::rt::alloc::CountingAllocator;
 use rt_core::rt::hlog::HlogWriter;
+use rt_core::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::realtime::RtError;
 use rt_core::rt::runner::{
@@ -70,6 +73,11 @@ CONFIGURATION FILE (TOML, schema \"fes-rt-core/1\"; `--print-example-config` pri
     prefix = \"fes\"            iceoryx2 service-name prefix (<prefix>/stim_tick, ...)
     notify = true             notify <prefix>/stim_tick_event after each StimTick
 
+UNDER SYSTEMD (Type=notify): READY=1 once the loop has ticked; with WatchdogSec= set,
+WATCHDOG=1 from a normal thread only while the tick count advances; logs go to the
+journal when stderr is connected to it (JOURNAL_STREAM), else to stderr. RUST_LOG
+filters the log (default info).
+
 EXIT STATUS: 0 stopped cleanly by SIGINT/SIGTERM; 1 bad configuration or run-time error;
 2 refused to start (real-time guarantee missing with on_missing_rights = \"refuse\").";
 
@@ -107,13 +115,7 @@ impl From<anyhow::Error> for Failure {
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
+    rt_core::rt::logging::init("rt-core");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     let cli = Cli::parse();
     match run(&cli) {
@@ -153,6 +155,14 @@ fn run(cli: &Cli) -> Result<(), Failure> {
         println!("{}: ok", path.display());
         return Ok(());
     }
+    let manager = ServiceManager::from_env().context("systemd notification")?;
+    let slowdown = slowdown::from_env()?;
+    if let Some(us) = slowdown {
+        warn!(
+            "TEST HOOK {}={us}: every tick busy-waits {us} us (never on a rig)",
+            slowdown::ENV_TICK_BUSY_US
+        );
+    }
 
     let stop = install_stop_handler().context("installing SIGINT/SIGTERM handlers")?;
     let hlog = match &config.telemetry.hlog {
@@ -165,6 +175,8 @@ fn run(cli: &Cli) -> Result<(), Failure> {
     let telemetry = TelemetryChannel::new(config.telemetry.queue_capacity);
     let telemetry_stop = AtomicBool::new(false);
     let telemetry_settings = TelemetrySettings::for_rt_core(&config);
+    let rt_status = OnceLock::new();
+    let loop_ended = AtomicBool::new(false);
 
     std::thread::scope(|scope| -> Result<(), Failure> {
         let (telemetry_ready_tx, telemetry_ready_rx) = mpsc::channel();
@@ -223,24 +235,78 @@ fn run(cli: &Cli) -> Result<(), Failure> {
                 .into());
         }
 
+        // systemd: READY=1 and WATCHDOG=1 while the tick count advances (normal thread).
+        let notifier = std::thread::Builder::new()
+            .name("rt-core-notify".to_owned())
+            .spawn_scoped(scope, || {
+                let settings = NotifierSettings::for_watchdog(manager.watchdog());
+                let counters = &telemetry.counters;
+                run_progress_notifier(
+                    &manager,
+                    &settings,
+                    &counters.ticks,
+                    &[stop, &loop_ended],
+                    |ticks| {
+                        format!(
+                            "{}{}; {ticks} ticks, {} missed periods",
+                            if slowdown.is_some() {
+                                "TEST SLOWDOWN; "
+                            } else {
+                                ""
+                            },
+                            rt_status.get().map_or("starting", String::as_str),
+                            counters.misses.load(Ordering::Relaxed)
+                        )
+                    },
+                )
+            })
+            .context("spawning the systemd notification thread")?;
         let rt_thread = std::thread::Builder::new()
             .name("rt-core-loop".to_owned())
             .stack_size(config.rt.thread_stack_bytes())
             .spawn_scoped(scope, || {
                 let node = node;
-                run_pattern_loop(&node, &config, source, &telemetry, stop, |status| {
+                let on_ready = |status: &rt_core::rt::RtStatus| {
                     if status.is_degraded() {
                         warn!("{status}");
                     } else {
                         info!("{status}");
                     }
+                    let _ = rt_status.set(status.to_string());
                     info!("running; SIGINT or SIGTERM stops");
-                })
+                };
+                match slowdown {
+                    None => run_pattern_loop(&node, &config, source, &telemetry, stop, on_ready),
+                    Some(us) => run_pattern_loop(
+                        &node,
+                        &config,
+                        slowdown::Slowed::new(source, us),
+                        &telemetry,
+                        stop,
+                        on_ready,
+                    ),
+                }
             })
-            .context("spawning the real-time thread")?;
-        let outcome = rt_thread
+            .context("spawning the real-time thread");
+        let rt_thread = match rt_thread {
+            Ok(t) => t,
+            Err(e) => {
+                loop_ended.store(true, Ordering::Relaxed);
+                return Err(e.into());
+            }
+        };
+        let outcome = rt_thread.join();
+        loop_ended.store(true, Ordering::Relaxed);
+        let notified = notifier
             .join()
-            .map_err(|_| anyhow!("the real-time thread panicked"))?;
+            .map_err(|_| anyhow!("the systemd notification thread panicked"))?;
+        if manager.is_present() && notified.send_errors > 0 {
+            warn!(
+                "{} systemd notifications could not be sent",
+                notified.send_errors
+            );
+        }
+        let outcome = outcome.map_err(|_| anyhow!("the real-time thread panicked"))?;
         let telemetry_result = stop_telemetry();
         match outcome {
             Ok(outcome) => {
