@@ -22,8 +22,7 @@ use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::runner::create_node;
 use socketcan::errors::{CanError, ControllerProblems};
 use socketcan::{
-    CanErrorFrame, CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket,
-    SocketOptions,
+    CanErrorFrame, CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions,
 };
 
 use crate::event::{BusErrorKind, BusEvent, SharedStatus};
@@ -169,7 +168,9 @@ fn open_socket(settings: &BusSettings) -> Result<CanSocket, BusError> {
     .into_iter()
     .map(|k| CanFilter::new(u32::from(settings.nodes.id_of(k)), mask))
     .collect();
-    socket.set_filters(&filters).map_err(err("receive filters"))?;
+    socket
+        .set_filters(&filters)
+        .map_err(err("receive filters"))?;
     socket
         .set_error_filter_accept_all()
         .map_err(err("error-frame filter"))?;
@@ -270,7 +271,9 @@ pub fn run_bus(
             Err(e)
                 if matches!(
                     e.kind(),
-                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
+                    io::ErrorKind::WouldBlock
+                        | io::ErrorKind::TimedOut
+                        | io::ErrorKind::Interrupted
                 ) => {}
             Err(e) => {
                 BusCounters::bump(&counters.read_errors);

@@ -453,11 +453,13 @@ impl DriverConfig {
             s.max_amplitude_ua,
             "a multiple of 100 uA (the bus step)",
         )?;
-        let max_amplitude_100ua = u16::try_from(s.max_amplitude_ua / AMPLITUDE_STEP_UA)
-            .map_err(|_| ConfigError::Range {
-                field: "stimulator.max_amplitude_ua",
-                value: s.max_amplitude_ua.to_string(),
-                allowed: "0..=150000",
+        let max_amplitude_100ua =
+            u16::try_from(s.max_amplitude_ua / AMPLITUDE_STEP_UA).map_err(|_| {
+                ConfigError::Range {
+                    field: "stimulator.max_amplitude_ua",
+                    value: s.max_amplitude_ua.to_string(),
+                    allowed: "0..=150000",
+                }
             })?;
         let limits = StimLimits {
             max_amplitude_100ua,
@@ -668,7 +670,8 @@ impl DriverConfig {
 mod tests {
     use super::*;
 
-    const MIN: &str = "schema = \"fes-stim-driver/1\"\n[can]\niface = \"vcan0\"\n[force]\nmax_n = 40.0\n";
+    const MIN: &str =
+        "schema = \"fes-stim-driver/1\"\n[can]\niface = \"vcan0\"\n[force]\nmax_n = 40.0\n";
 
     #[test]
     fn minimal_file_takes_the_documented_defaults() {
@@ -721,11 +724,17 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("force"), "{e}");
-        let e = DriverConfig::parse(&MIN.replace("/1", "/2")).unwrap_err().to_string();
+        let e = DriverConfig::parse(&MIN.replace("/1", "/2"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("schema"), "{e}");
-        let e = DriverConfig::parse(&format!("{MIN}bogus = 1\n")).unwrap_err().to_string();
+        let e = DriverConfig::parse(&format!("{MIN}bogus = 1\n"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("bogus"), "{e}");
-        let e = DriverConfig::parse(&MIN.replace("40.0", "-1.0")).unwrap_err().to_string();
+        let e = DriverConfig::parse(&MIN.replace("40.0", "-1.0"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("force.max_n"), "{e}");
     }
 }

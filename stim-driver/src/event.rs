@@ -10,7 +10,7 @@
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 
 use crossbeam::queue::ArrayQueue;
-use fes_can::{Emcy, NmtState, StimState, Status};
+use fes_can::{Emcy, NmtState, Status, StimState};
 use rt_core::msg::{DeviceState, ValidationError};
 
 use crate::fault::{ArmRefusal, Fault};
@@ -433,7 +433,8 @@ impl SharedStatus {
         self.stimulator_state.store(c.stimulator_state, r);
         self.last_pulse_ns.store(c.last_pulse_ns, r);
         self.last_pulse_tick_seq.store(c.last_pulse_tick_seq, r);
-        self.stimulator_pulses.store(u64::from(c.stimulator_pulses), r);
+        self.stimulator_pulses
+            .store(u64::from(c.stimulator_pulses), r);
         self.wakeups.store(c.wakeups, r);
     }
 

@@ -122,17 +122,26 @@ impl core::fmt::Display for Fault {
                 code.raw()
             ),
             Fault::StimulatorSilent { silent_ns } => {
-                write!(f, "no STATUS from the stimulator for {:.1} ms", ms(silent_ns))
+                write!(
+                    f,
+                    "no STATUS from the stimulator for {:.1} ms",
+                    ms(silent_ns)
+                )
             }
-            Fault::StimulatorReset => f.write_str("the stimulator restarted or lost its configuration"),
-            Fault::StimulatorNotOperational => {
-                f.write_str("the stimulator is not operational (NMT start not confirmed, or it left)")
+            Fault::StimulatorReset => {
+                f.write_str("the stimulator restarted or lost its configuration")
             }
+            Fault::StimulatorNotOperational => f.write_str(
+                "the stimulator is not operational (NMT start not confirmed, or it left)",
+            ),
             Fault::SafeStopCommand => f.write_str("safe stop ordered by the supervisor"),
             Fault::BusEventsLost => f.write_str("bus events lost (receive queue overflow)"),
             Fault::TxFailed { errno } => write!(f, "CAN write failed (errno {errno})"),
             Fault::ConfigRefused { detail } => {
-                write!(f, "the stimulator refused the CONFIG (limit index {detail})")
+                write!(
+                    f,
+                    "the stimulator refused the CONFIG (limit index {detail})"
+                )
             }
         }
     }

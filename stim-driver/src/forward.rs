@@ -25,7 +25,7 @@
 //! events. An NMT stop that could not be written is retried until it is; while disarmed, a
 //! STATUS that still shows the stimulator operational gets another NMT stop.
 
-use fes_can::{ErrorCode, NmtState, Nodes, StimLimits, StimState, Status};
+use fes_can::{ErrorCode, NmtState, Nodes, Status, StimLimits, StimState};
 use rt_core::msg::{Contract, DriverCommand, DriverCommandKind, StimTick};
 
 use crate::event::{
@@ -581,7 +581,9 @@ impl<T: CanTx> ForwardPath<T> {
     }
 
     fn on_status(&mut self, status: Status, now_ns: u64, ev: &mut impl EventSink) {
-        let changed = self.last_status.is_none_or(|(s, _)| s.state != status.state);
+        let changed = self
+            .last_status
+            .is_none_or(|(s, _)| s.state != status.state);
         self.last_status = Some((status, now_ns));
         self.counters.stimulator_state = stimulator_device_state(status.state) as u8;
         self.counters.stimulator_pulses = status.pulses_delivered;
@@ -593,7 +595,10 @@ impl<T: CanTx> ForwardPath<T> {
         }
         let operational = matches!(status.state, StimState::Armed | StimState::Stimulating);
         match self.mode {
-            Mode::Armed { since_ns, confirmed } => {
+            Mode::Armed {
+                since_ns,
+                confirmed,
+            } => {
                 if Some(status.config_id) != self.config_id() {
                     self.stimulator_lost(now_ns, ev);
                     return;
@@ -629,7 +634,10 @@ impl<T: CanTx> ForwardPath<T> {
                     ok &= self.control(ControlFrame::Config(page), now_ns, ev);
                 }
                 if ok {
-                    self.config = ConfigState::Configuring { id, sent_ns: now_ns };
+                    self.config = ConfigState::Configuring {
+                        id,
+                        sent_ns: now_ns,
+                    };
                     ev.emit(DriverEvent::BringUp(BringUp::ConfigSent { config_id: id }));
                 }
             }
@@ -637,7 +645,9 @@ impl<T: CanTx> ForwardPath<T> {
                 if status.config_id == id && status.state == StimState::PreOperational =>
             {
                 self.config = ConfigState::Confirmed { id };
-                ev.emit(DriverEvent::BringUp(BringUp::ConfigConfirmed { config_id: id }));
+                ev.emit(DriverEvent::BringUp(BringUp::ConfigConfirmed {
+                    config_id: id,
+                }));
             }
             ConfigState::Confirmed { id } if status.config_id != id => {
                 self.stimulator_lost(now_ns, ev);

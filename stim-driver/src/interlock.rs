@@ -258,7 +258,10 @@ impl core::fmt::Display for Violation {
             Violation::AmplitudeCeiling {
                 amplitude_ua,
                 max_ua,
-            } => write!(f, "amplitude {amplitude_ua} uA above the ceiling {max_ua} uA"),
+            } => write!(
+                f,
+                "amplitude {amplitude_ua} uA above the ceiling {max_ua} uA"
+            ),
             Violation::WidthCeiling { width_us, max_us } => {
                 write!(f, "width {width_us} us above the ceiling {max_us} us")
             }
@@ -532,12 +535,13 @@ impl Interlocks {
                 window_ns: l.rate_window_ns,
             });
         }
-        let amplitude_100ua = u16::try_from(tick.amplitude_ua / AMPLITUDE_STEP_UA).map_err(|_| {
-            Violation::AmplitudeCeiling {
-                amplitude_ua: tick.amplitude_ua,
-                max_ua: l.max_amplitude_ua,
-            }
-        })?;
+        let amplitude_100ua =
+            u16::try_from(tick.amplitude_ua / AMPLITUDE_STEP_UA).map_err(|_| {
+                Violation::AmplitudeCeiling {
+                    amplitude_ua: tick.amplitude_ua,
+                    max_ua: l.max_amplitude_ua,
+                }
+            })?;
         Ok(PulseCommand {
             tick_seq: tick.seq,
             t_ns: tick.t_ns,

@@ -27,7 +27,7 @@ pub mod forward;
 pub mod interlock;
 pub mod liveness;
 pub mod output;
-pub mod telemetry;
 pub mod systemd;
+pub mod telemetry;
 pub mod tx;
 pub mod txstamp;

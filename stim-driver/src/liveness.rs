@@ -13,8 +13,8 @@
 //! forward thread reads the outcome from an atomic.
 
 use iceoryx2::node::NodeState;
-use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use rt_core::msg::StimTick;
 use rt_core::msg::service::{ServiceError, open_pubsub};

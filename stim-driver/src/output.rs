@@ -7,8 +7,8 @@
 //! written (the caller keeps retrying the stop; the handle can no longer pulse).
 
 use fes_can::{
-    AliveCounter, Config, EncodeError, Frame, Heartbeat, Message, Nmt, NmtCommand, NmtState,
-    Nodes, Pulse,
+    AliveCounter, Config, EncodeError, Frame, Heartbeat, Message, Nmt, NmtCommand, NmtState, Nodes,
+    Pulse,
 };
 
 use crate::interlock::PulseCommand;
@@ -222,10 +222,7 @@ mod tests {
     #[test]
     fn arm_sends_nmt_start_and_pulses_carry_fresh_counters() {
         let nodes = Nodes::DEFAULT;
-        let d = Disarmed::new(
-            CountingSink::new(nodes.id_of(MessageKind::Pulse)),
-            nodes,
-        );
+        let d = Disarmed::new(CountingSink::new(nodes.id_of(MessageKind::Pulse)), nodes);
         let mut a = d.arm().unwrap();
         let start = a.tx().last.unwrap();
         assert_eq!(

@@ -82,7 +82,9 @@ impl WatchdogFeeder {
     /// True when a keep-alive is due at `now` and `progress` has advanced since the last one
     /// (the caller then sends it).
     pub fn due(&mut self, now: Instant, progress: u64) -> bool {
-        let time = self.last_sent.is_none_or(|t| now.duration_since(t) >= self.every);
+        let time = self
+            .last_sent
+            .is_none_or(|t| now.duration_since(t) >= self.every);
         if time && progress != self.last_progress {
             self.last_sent = Some(now);
             self.last_progress = progress;

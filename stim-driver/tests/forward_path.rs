@@ -6,7 +6,7 @@ use std::cell::{Cell, RefCell};
 use std::rc::Rc;
 
 use fes_can::{
-    Emcy, ErrorCode, Frame, Message, NmtCommand, NmtState, Nodes, StimLimits, StimState, Status,
+    Emcy, ErrorCode, Frame, Message, NmtCommand, NmtState, Nodes, Status, StimLimits, StimState,
 };
 use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
@@ -325,14 +325,22 @@ fn arming_checks_every_precondition_and_sends_nmt_start() {
     assert!(now > t_status);
     // Another configuration reported.
     r.bus_event(status(StimState::PreOperational, 9));
-    assert_eq!(r.fp.state(), DriverState::Starting, "config lost: brought up again");
+    assert_eq!(
+        r.fp.state(),
+        DriverState::Starting,
+        "config lost: brought up again"
+    );
     r.bus_event(status(StimState::PreOperational, 9));
     r.bus_event(status(StimState::PreOperational, 10));
     assert_eq!(r.fp.state(), DriverState::Disarmed);
     assert_eq!(r.fp.config_id(), Some(10));
     // A stale command.
     r.cmd_seq += 1;
-    let old = DriverCommand::new(r.cmd_seq, r.now - s.command_max_age_ns - 1, DriverCommandKind::Arm);
+    let old = DriverCommand::new(
+        r.cmd_seq,
+        r.now - s.command_max_age_ns - 1,
+        DriverCommandKind::Arm,
+    );
     r.fp.on_command(&old, r.now, &mut r.ev);
     assert_eq!(refusal(&r), Some(ArmRefusal::StaleCommand));
     // A command from the future.
@@ -344,7 +352,10 @@ fn arming_checks_every_precondition_and_sends_nmt_start() {
     bad.command = 7;
     r.advance(MS);
     r.fp.on_command(&bad, r.now, &mut r.ev);
-    assert!(matches!(r.ev.last(), Some(DriverEvent::CommandInvalid { .. })));
+    assert!(matches!(
+        r.ev.last(),
+        Some(DriverEvent::CommandInvalid { .. })
+    ));
     r.bus.clear();
     r.advance(MS);
     r.tick(false);
@@ -373,14 +384,13 @@ fn armed_pulses_reach_the_bus_once_in_order_with_counters() {
         assert_eq!(usize::from(p.alive_counter), i % 16);
         assert_eq!((p.amplitude_100ua, p.width_us, p.channel), (200, 200, 0));
     }
-    let sent: Vec<u64> = r
-        .ev
-        .iter()
-        .filter_map(|e| match e {
-            DriverEvent::PulseSent { tick_seq, .. } => Some(*tick_seq),
-            _ => None,
-        })
-        .collect();
+    let sent: Vec<u64> =
+        r.ev.iter()
+            .filter_map(|e| match e {
+                DriverEvent::PulseSent { tick_seq, .. } => Some(*tick_seq),
+                _ => None,
+            })
+            .collect();
     assert_eq!(sent, expected);
     assert_eq!(r.fp.counters().pulses_sent, 10);
 }
@@ -397,7 +407,11 @@ fn watchdog_trips_exactly_after_the_timeout_and_stays_stopped() {
     r.bus.clear();
     r.at(last + s.tick_timeout_ns);
     r.poll();
-    assert_eq!(r.fp.state(), DriverState::Armed, "not at the timeout itself");
+    assert_eq!(
+        r.fp.state(),
+        DriverState::Armed,
+        "not at the timeout itself"
+    );
     r.at(last + s.tick_timeout_ns + 1);
     r.poll();
     assert_eq!(
@@ -406,7 +420,10 @@ fn watchdog_trips_exactly_after_the_timeout_and_stays_stopped() {
             silent_ns: s.tick_timeout_ns + 1
         })
     );
-    assert_eq!(r.bus.nmt(), vec![(last + s.tick_timeout_ns + 1, NmtCommand::Stop)]);
+    assert_eq!(
+        r.bus.nmt(),
+        vec![(last + s.tick_timeout_ns + 1, NmtCommand::Stop)]
+    );
     assert_eq!(r.fp.counters().watchdog_trips, 1);
     assert_eq!(r.fp.counters().fault_code, 0xFF21);
     // The publisher resumes (after a 100 ms stall): nothing is forwarded, no burst, and
@@ -493,7 +510,11 @@ fn stimulator_emcy_reset_silence_and_unconfirmed_start_trip() {
         0,
         0,
     )));
-    assert_eq!(r.fp.state(), DriverState::Armed, "'no error' is not a fault");
+    assert_eq!(
+        r.fp.state(),
+        DriverState::Armed,
+        "'no error' is not a fault"
+    );
     r.bus_event(BusEvent::Emcy(Emcy::new(
         ErrorCode::MinIpiViolation,
         StimState::Armed,
@@ -535,7 +556,7 @@ fn stimulator_emcy_reset_silence_and_unconfirmed_start_trip() {
     for _ in 0..(s.arm_confirm_ns / MS) + 1 {
         r.advance(MS);
         r.tick(false);
-        if r.now % (10 * MS) == 0 {
+        if r.now.is_multiple_of(10 * MS) {
             let id = r.config_id;
             r.bus_event(status(StimState::PreOperational, id));
         }
@@ -598,7 +619,11 @@ fn bus_off_a_down_interface_and_lost_events_trip() {
     }
     let mut r = Rig::armed(settings());
     r.bus_event(BusEvent::BusError(BusErrorKind::ErrorPassive));
-    assert_eq!(r.fp.state(), DriverState::Armed, "error-passive is reported only");
+    assert_eq!(
+        r.fp.state(),
+        DriverState::Armed,
+        "error-passive is reported only"
+    );
 }
 
 #[test]
@@ -616,7 +641,11 @@ fn a_dropped_pulse_is_counted_and_does_not_trip() {
     r.tick(true);
     let p = r.bus.pulses();
     assert_eq!(p.len(), 1);
-    assert_eq!((p[0].1.seq, p[0].1.alive_counter), (1, 0), "no gap left behind");
+    assert_eq!(
+        (p[0].1.seq, p[0].1.alive_counter),
+        (1, 0),
+        "no gap left behind"
+    );
 }
 
 #[test]

@@ -258,7 +258,10 @@ pub fn run(
         }
         for b in core.take_beat_starts() {
             if let Some(r) = &mut run.recorder {
-                r.boundary(b.start_ns, format!("beat {} ({} beats/min)", b.index, b.bpm));
+                r.boundary(
+                    b.start_ns,
+                    format!("beat {} ({} beats/min)", b.index, b.bpm),
+                );
             }
         }
         for b in core.take_beats() {

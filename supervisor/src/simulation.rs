@@ -80,7 +80,7 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
     let mut pg = controller.pattern_generator()?;
     let mut muscle = Muscle::new(s.muscle)?;
     let mut sensor = match &s.sensor {
-        Some(c) => Some(ForceSensor::new(c.clone(), s.muscle.ts_s)?),
+        Some(c) => Some(ForceSensor::new(*c, s.muscle.ts_s)?),
         None => None,
     };
     let mut core = SupervisorCore::new(s.limits, s.outer_loop, s.contraction);

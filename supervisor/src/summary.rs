@@ -180,15 +180,18 @@ fn rms(pairs: impl Iterator<Item = (f64, f64)>) -> f64 {
     }
 }
 
+/// Computes the 40 Hz baseline from a measured FTI per contraction and a beat (period ms,
+/// on ms).
+pub type BaselineFn = Box<dyn Fn(f64, usize, usize) -> Baseline>;
+
 /// What the analysis needs besides the recording.
 pub struct AnalysisInput {
     /// The model's delay, samples.
     pub delay: usize,
     /// The target amplitude.
     pub target: f64,
-    /// Computes the 40 Hz baseline for a measured FTI per contraction and a beat
-    /// (period ms, on ms).
-    pub baseline: Option<Box<dyn Fn(f64, usize, usize) -> Baseline>>,
+    /// Computes the 40 Hz baseline (see [`BaselineFn`]).
+    pub baseline: Option<BaselineFn>,
     /// Timings from a UML guest.
     pub uml: bool,
 }

@@ -84,7 +84,8 @@ fn feed(r: &mut Recorder, n: u64) {
             r.on_force(&sample(k - 2), now).unwrap();
         }
         if k % 10 == 0 {
-            r.on_reference(&Reference::new(k / 10 + 1, now, 0.3)).unwrap();
+            r.on_reference(&Reference::new(k / 10 + 1, now, 0.3))
+                .unwrap();
         }
         r.maybe_flush(now).unwrap();
     }
@@ -102,8 +103,17 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
     let s = r.finish(T0 + 3001 * MS).unwrap();
     assert_eq!(s.ticks, 3000);
     let dir = root.join("run1");
-    assert_eq!(std::fs::metadata(&dir).unwrap().permissions().mode() & 0o777, 0o750);
-    for f in ["dataset.json", "ticks.csv", "force.csv", "events.jsonl", "record_00000.csv"] {
+    assert_eq!(
+        std::fs::metadata(&dir).unwrap().permissions().mode() & 0o777,
+        0o750
+    );
+    for f in [
+        "dataset.json",
+        "ticks.csv",
+        "force.csv",
+        "events.jsonl",
+        "record_00000.csv",
+    ] {
         let m = std::fs::metadata(dir.join(f)).unwrap().permissions().mode() & 0o777;
         assert_eq!(m, 0o640, "{f}: {m:o}");
     }
@@ -123,8 +133,16 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         }
     }
     // force_n = 364 force + 2: the scale is fitted from the stream.
-    assert!((ds.header.scale_n - 364.0).abs() < 1e-6, "{}", ds.header.scale_n);
-    assert!((ds.header.offset_n - 2.0).abs() < 1e-6, "{}", ds.header.offset_n);
+    assert!(
+        (ds.header.scale_n - 364.0).abs() < 1e-6,
+        "{}",
+        ds.header.scale_n
+    );
+    assert!(
+        (ds.header.offset_n - 2.0).abs() < 1e-6,
+        "{}",
+        ds.header.offset_n
+    );
     let ticks = std::fs::read_to_string(dir.join("ticks.csv")).unwrap();
     assert_eq!(ticks.lines().count(), 3001);
     let refs = std::fs::read_to_string(dir.join("references.csv")).unwrap();
@@ -147,7 +165,11 @@ fn a_crash_leaves_a_readable_data_set() {
     assert_eq!(total, 2400, "the three completed beats");
     assert!(2500 - total <= 1000, "lost more than one record");
     let flushed = std::fs::read_to_string(dir.join("ticks.csv")).unwrap();
-    assert!(flushed.lines().count() > 2000, "ticks flushed: {}", flushed.lines().count());
+    assert!(
+        flushed.lines().count() > 2000,
+        "ticks flushed: {}",
+        flushed.lines().count()
+    );
     let _ = std::fs::remove_dir_all(&root);
 }
 

@@ -32,10 +32,8 @@ struct FakeManager {
 impl FakeManager {
     fn new(tag: &str) -> Self {
         // sun_path holds at most 107 bytes: keep the socket in the (short) temp dir.
-        let path = std::env::temp_dir().join(format!(
-            "fes-notify-{tag}-{}.sock",
-            std::process::id()
-        ));
+        let path =
+            std::env::temp_dir().join(format!("fes-notify-{tag}-{}.sock", std::process::id()));
         let _ = std::fs::remove_file(&path);
         let socket = UnixDatagram::bind(&path).expect("bind the fake notify socket");
         socket
@@ -211,7 +209,10 @@ fn ready_then_fed_watchdog_while_ticking_then_stopping() {
         "READY carries the real-time status and the tick count: {first:?}"
     );
     assert_eq!(
-        messages.iter().filter(|(_, m)| m.contains("READY=1")).count(),
+        messages
+            .iter()
+            .filter(|(_, m)| m.contains("READY=1"))
+            .count(),
         1
     );
     let fed = feeds(&messages);
@@ -220,7 +221,10 @@ fn ready_then_fed_watchdog_while_ticking_then_stopping() {
     assert!(fed.len() >= 15, "{} feeds in 3 s", fed.len());
     let max_gap = fed.windows(2).map(|w| w[1] - w[0]).max().expect("feeds");
     println!("largest gap between feeds: {max_gap:?} (watchdog {watchdog:?})");
-    assert!(max_gap < watchdog, "a gap of {max_gap:?} would trip systemd");
+    assert!(
+        max_gap < watchdog,
+        "a gap of {max_gap:?} would trip systemd"
+    );
     let last = &messages.last().expect("messages").1;
     assert!(last.starts_with("STOPPING=1\n"), "last message {last:?}");
 }
@@ -246,7 +250,10 @@ fn a_watchdog_meant_for_another_process_is_not_fed() {
     print(&messages);
     assert!(status.success());
     assert!(messages.iter().any(|(_, m)| m.contains("READY=1")));
-    assert!(feeds(&messages).is_empty(), "fed a watchdog that is not ours");
+    assert!(
+        feeds(&messages).is_empty(),
+        "fed a watchdog that is not ours"
+    );
 }
 
 #[test]

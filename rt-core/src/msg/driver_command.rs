@@ -150,6 +150,10 @@ mod tests {
         ] {
             assert_eq!(DriverCommandKind::try_from(k as u8), Ok(k));
         }
-        assert_eq!(DriverCommand::QOS.history, 0, "an old Arm must never replay");
+        assert_eq!(
+            DriverCommand::QOS.history,
+            0,
+            "an old Arm must never replay"
+        );
     }
 }
