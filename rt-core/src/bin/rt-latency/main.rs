@@ -10,7 +10,9 @@
 //! 3. After rt-core has exited, `cyclictest` runs with the same period, priority and core for
 //!    N seconds (never concurrently on the same core).
 //! 4. One table (p50 / p99 / p99.9 / max), tick and miss counts, and the ratios of our
-//!    wake-up lateness to cyclictest's; `--json` writes the same as JSON.
+//!    wake-up lateness to cyclictest's; `--json` writes the same as JSON, and
+//!    `cyclictest.hlog` (tag `cyclictest`) holds cyclictest's merged histogram next to the
+//!    per-round `rt-core-N.hlog` / `rt-probe-N.hlog`.
 
 mod cyclictest;
 
@@ -30,7 +32,7 @@ use rt_core::msg::service::open_pubsub;
 use rt_core::rt::MissingRightsPolicy;
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::merge_by_tag;
+use rt_core::rt::hlog::{HlogWriter, merge_by_tag};
 use rt_core::rt::probe::ProbeSummary;
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::runner::create_node;
@@ -335,6 +337,21 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         }
     }
     drop(_load);
+    if let Some(h) = &cyclic {
+        let path = out("cyclictest.hlog");
+        let mut log = HlogWriter::create(
+            &path,
+            "cyclictest (rt-tests), merged rounds, bucket middles",
+            std::time::SystemTime::now(),
+        )?;
+        log.write(
+            &h.to_latency_histogram(),
+            "cyclictest",
+            Duration::ZERO,
+            Duration::from_secs(cli.seconds),
+        )?;
+        log.flush()?;
+    }
     let RoundTotals {
         wake,
         input,
