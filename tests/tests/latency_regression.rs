@@ -5,8 +5,7 @@
 //!   that states a nonsensical tolerance, is an error (exit 2), not a pass;
 //! - the CI short run: the real rt-core loop against cyclictest, with and without load,
 //!   5 s each (debug binaries: `cargo test` has built them; the ratios compare the
-//!   loop's wake-ups with cyclictest's and barely depend on the optimisation level;
-//!   the loop thread gets a larger stack, which the unoptimised rt-core needs),
+//!   loop's wake-ups with cyclictest's and barely depend on the optimisation level),
 //!   passes against the stored baseline `tests/latency-baseline.json` and writes the
 //!   report, plot, summary and interval logs;
 //! - the same suite with the test-only slowdown (`FES_TEST_TICK_BUSY_US=1100`: each tick
@@ -41,7 +40,7 @@ fn run(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
 }
 
 /// A baseline with binary-exact numbers: limits are exact by hand and in f64.
-fn write_baseline(dir: &Path, tolerance_p99: f64, with_load: bool) -> PathBuf {
+fn write_baseline(dir: &Path, tolerance_p99: f64, with_load: bool, min_tail: u64) -> PathBuf {
     let load = if with_load {
         r#", "load": {"ratio_p99": 1.5, "ratio_p999": 1.25}"#
     } else {
@@ -51,10 +50,13 @@ fn write_baseline(dir: &Path, tolerance_p99: f64, with_load: bool) -> PathBuf {
         r#"{{"schema": "fes-latency-baseline/1", "measured": "test",
             "tolerance": {{"ratio_p99_factor": {tolerance_p99}, "ratio_p999_factor": 2.0,
                           "overrun_rate_factor": 3.0, "overrun_rate_floor": 0.002,
-                          "compute_p99_us_max": 50.0, "hot_path_allocations_max": 0}},
+                          "compute_p99_us_max": 50.0, "hot_path_allocations_max": 0,
+                          "min_tail_samples": {min_tail}}},
             "conditions": {{"no_load": {{"ratio_p99": 1.25, "ratio_p999": 0.75}}{load}}}}}"#
     );
-    let path = dir.join(format!("baseline-{tolerance_p99}-{with_load}.json"));
+    let path = dir.join(format!(
+        "baseline-{tolerance_p99}-{with_load}-{min_tail}.json"
+    ));
     std::fs::write(&path, text).expect("write baseline");
     path
 }
@@ -130,7 +132,8 @@ fn compare(summary: &Path, baseline: &Path) -> (Option<i32>, String) {
 fn the_gate_applies_the_stated_tolerance() {
     let scratch = Scratch::new("latency-gate");
     let dir = &scratch.path;
-    let baseline = write_baseline(dir, 1.5, true);
+    // 1024 ticks: one sample beyond p99.9, so `min_tail_samples` 1 lets it be judged.
+    let baseline = write_baseline(dir, 1.5, true, 1);
     // Limits by hand: ratio_p99 1.5 * 1.25 = 1.875 (no_load), 1.5 * 1.5 = 2.25 (load);
     // ratio_p999 2 * max(0.75, 1) = 2.0 (no_load: a baseline below parity does not
     // tighten), 2 * 1.25 = 2.5 (load); overrun rate max(0.002, 3 * 2/1024) = 6/1024, i.e.
@@ -213,14 +216,48 @@ fn the_gate_applies_the_stated_tolerance() {
     assert_eq!(code, Some(1), "{out}");
     assert!(out.contains("FAIL: regressed: load.ratio_p99\n"), "{out}");
 
+    // With too few samples beyond p99.9 (1 < 2) the p99.9 ratio is not judged.
+    let strict_tail = write_baseline(dir, 1.5, true, 2);
+    let s = write_summary(dir, "tail", over[1].1, Some(GOOD));
+    let (code, out) = compare(&s, &strict_tail);
+    assert_eq!(code, Some(0), "{out}");
+    assert_eq!(
+        out.matches("not judged (too few tail samples)").count(),
+        2,
+        "{out}"
+    );
+
+    // With 3 or more rounds the median of the per-round p99 ratios is judged instead of
+    // the pooled one (here pooled 3.0, over its limit; median 1.875, at it).
+    let text = std::fs::read_to_string(write_summary(
+        dir,
+        "rounds",
+        Figures {
+            ratio_p99: 3.0,
+            ..GOOD
+        },
+        None,
+    ))
+    .expect("summary")
+    .replacen(
+        r#""rounds": 1,"#,
+        r#""rounds": 5, "ratio_p99_round_median": 1.875,"#,
+        1,
+    );
+    let s = dir.join("rounds.json");
+    std::fs::write(&s, text).expect("rewrite");
+    let (code, out) = compare(&s, &baseline);
+    assert_eq!(code, Some(0), "{out}");
+    assert!(out.contains("no_load  ratio_p99_rounds"), "{out}");
+
     // A baseline without the loaded condition cannot judge a loaded run.
-    let no_load_only = write_baseline(dir, 1.5, false);
+    let no_load_only = write_baseline(dir, 1.5, false, 1);
     let s = write_summary(dir, "both", GOOD, Some(GOOD));
     let (code, out) = compare(&s, &no_load_only);
     assert_eq!(code, Some(2), "{out}");
     assert!(out.contains("no 'load' condition"), "{out}");
     // A factor below 1 would fail the baseline's own run: refused, naming the key.
-    let bad = write_baseline(dir, 0.9, true);
+    let bad = write_baseline(dir, 0.9, true, 1);
     let (code, out) = compare(&s, &bad);
     assert_eq!(code, Some(2), "{out}");
     assert!(out.contains("tolerance.ratio_p99_factor = 0.9"), "{out}");
@@ -252,23 +289,6 @@ fn short_run_passes_and_a_slowed_tick_is_caught() {
             "--out-dir".to_owned(),
             out.display().to_string(),
         ]
-    };
-
-    // rt-latency's test-pattern source with a larger stack: the debug rt-core (opt-level
-    // 0) overflows the default 1.25 MiB loop-thread stack (256 KiB prefault + 1 MiB) once
-    // references and a subscriber arrive; the release build does not. Everything else is
-    // what `scripts/latency-regression` measures.
-    let config = scratch.path.join("rt-core-debug.toml");
-    std::fs::write(
-        &config,
-        "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 20\n\
-         [rt]\nprefault_stack_bytes = 2097152\n",
-    )
-    .expect("write config");
-    let common = |out: &Path| {
-        let mut args = common(out);
-        args.extend(["--config".to_owned(), config.display().to_string()]);
-        args
     };
 
     // The CI short form: 5 s of rt-core and 5 s of cyclictest per condition.

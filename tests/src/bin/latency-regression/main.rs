@@ -22,7 +22,7 @@ use std::process::{Command, ExitCode};
 use anyhow::{Context, bail};
 use clap::Parser;
 use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::merge_by_tag;
+use rt_core::rt::hlog::{merge_by_tag, read_intervals};
 
 use gate::{Baseline, Check};
 use summary::{Condition, ConditionSummary, DRIVER_FORWARD_ABSENT, SUMMARY_SCHEMA, Summary};
@@ -43,7 +43,7 @@ struct Cli {
     /// Only the unloaded condition.
     #[arg(long)]
     no_load: bool,
-    /// Alternating rounds per condition (default: about 2 s rounds up to 20 s, else 10 s).
+    /// Alternating rounds per condition (default: 1 s rounds up to 20 s, else 10 s).
     #[arg(long)]
     rounds: Option<u64>,
     /// Core of the real-time loop and cyclictest.
@@ -129,13 +129,12 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         (_, true) => vec![Condition::NoLoad],
         _ => vec![Condition::NoLoad, Condition::Load],
     };
-    // Rounds of about 2 s in a short run (several alternations, while rt-core's start-up,
-    // which can take a good part of a second on a loaded machine, stays a small share of
-    // each), 10 s rounds in a long one.
+    // 1 s rounds in a short run (as many alternations as possible, so that both sides
+    // see the same hypervisor stalls), 10 s rounds in a long one.
     let rounds = cli
         .rounds
         .unwrap_or(if cli.seconds <= 20 {
-            cli.seconds / 2
+            cli.seconds
         } else {
             cli.seconds.div_ceil(10)
         })
@@ -179,7 +178,8 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         if !status.success() {
             bail!("rt-latency ({}) failed: {status}", condition.key());
         }
-        let s = ConditionSummary::from_rt_latency_json(&json)?;
+        let mut s = ConditionSummary::from_rt_latency_json(&json)?;
+        s.ratio_p99_round_median = round_median_ratio_p99(&dir, s.rounds)?;
         panels.push(plot::Panel {
             title: match condition {
                 Condition::NoLoad => "no load".to_owned(),
@@ -241,6 +241,50 @@ fn test_slowdown() -> anyhow::Result<Option<u64>> {
         Err(std::env::VarError::NotPresent) => Ok(None),
         Err(e) => bail!("FES_TEST_TICK_BUSY_US: {e}"),
     }
+}
+
+/// The median over the rounds of wake-up p99 / cyclictest p99, each pair from one round
+/// (`rt-core-N.hlog` and interval N of `cyclictest.hlog`, whose values are already the
+/// middles of cyclictest's microsecond buckets); `None` without cyclictest.
+fn round_median_ratio_p99(dir: &Path, rounds: u64) -> anyhow::Result<Option<f64>> {
+    let path = dir.join("cyclictest.hlog");
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let cyclic: Vec<_> = read_intervals(&path)?
+        .into_iter()
+        .filter(|i| i.tag == "cyclictest")
+        .collect();
+    if cyclic.len() as u64 != rounds {
+        bail!(
+            "{}: {} cyclictest intervals for {rounds} rounds",
+            path.display(),
+            cyclic.len()
+        );
+    }
+    let mut ratios = Vec::new();
+    for (round, interval) in cyclic.iter().enumerate() {
+        let file = dir.join(format!("rt-core-{round}.hlog"));
+        let wake = merge_by_tag(&file)?
+            .remove("wake")
+            .with_context(|| format!("{}: no 'wake' intervals", file.display()))?;
+        let mut theirs = LatencyHistogram::new();
+        theirs.add_raw(&interval.histogram);
+        let theirs = theirs.quantile_ns(0.99);
+        if wake.count() > 0 && theirs > 0 {
+            ratios.push(wake.quantile_ns(0.99) as f64 / theirs as f64);
+        }
+    }
+    if ratios.is_empty() {
+        return Ok(None);
+    }
+    ratios.sort_by(f64::total_cmp);
+    let n = ratios.len();
+    Ok(Some(if n % 2 == 1 {
+        ratios[n / 2]
+    } else {
+        (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
+    }))
 }
 
 /// The percentile curves of one condition, from rt-latency's interval logs.
@@ -310,6 +354,15 @@ fn check_line(c: &Check) -> String {
         c.key,
         c.value,
         c.limit,
-        if c.passed { "ok" } else { "REGRESSED" }
+        verdict(c)
     )
+}
+
+/// A check's verdict in words.
+fn verdict(c: &Check) -> &'static str {
+    match (c.judged, c.passed) {
+        (false, _) => "not judged (too few tail samples)",
+        (true, true) => "ok",
+        (true, false) => "REGRESSED",
+    }
 }

@@ -57,6 +57,10 @@ pub fn print_table(summary: &Summary) {
             ratio(s.ratio_p99),
             ratio(s.ratio_p999)
         );
+        println!(
+            "median over rounds of the per-round p99 ratio: {}",
+            ratio(s.ratio_p99_round_median)
+        );
     }
     if let Some(note) = &summary.driver_forward_note {
         println!("driver forward path: {note}");
@@ -136,7 +140,8 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
             md,
             "\n{} ticks, {} missed periods in {} late wake-ups; cyclictest {} of {} samples at \
              or above one period; hot-path heap allocations {}; probe lost {}. \
-             Ratio of wake-up lateness to cyclictest's: **p99 {}, p99.9 {}**.\n\n\
+             Ratio of wake-up lateness to cyclictest's: **p99 {}, p99.9 {}** (median over the \
+             rounds of the per-round p99 ratio: {}).\n\n\
              cyclictest: `{}`\n",
             s.ticks,
             s.misses,
@@ -147,6 +152,7 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
             s.probe_lost,
             ratio(s.ratio_p99),
             ratio(s.ratio_p999),
+            ratio(s.ratio_p99_round_median),
             s.cyclictest_command.as_deref().unwrap_or("not run")
         );
     }
@@ -173,7 +179,11 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
                     c.key,
                     c.value,
                     c.limit,
-                    if c.passed { "ok" } else { "**REGRESSED**" }
+                    if c.passed {
+                        crate::verdict(c)
+                    } else {
+                        "**REGRESSED**"
+                    }
                 );
             }
         }

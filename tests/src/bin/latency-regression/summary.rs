@@ -73,6 +73,11 @@ pub struct ConditionSummary {
     pub ratio_p99: Option<f64>,
     /// Wake-up lateness p99.9 over cyclictest's.
     pub ratio_p999: Option<f64>,
+    /// The median over the rounds of each round's wake-up p99 over the same round's
+    /// cyclictest p99 (rounds are adjacent in time: a burst of host noise that falls on
+    /// one side of one round moves one of them, not the median).
+    #[serde(default)]
+    pub ratio_p99_round_median: Option<f64>,
     /// cyclictest's sample count.
     pub cyclictest_samples: u64,
     /// cyclictest's samples at least one period late.
