@@ -230,7 +230,7 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
         .map_err(Failure::Config)?;
     let stop = install_stop_handler()
         .context("installing SIGINT/SIGTERM handlers")
-        .map_err(|e| Failure::Run(e))?;
+        .map_err(Failure::Run)?;
     let hlog = match &config.telemetry.hlog {
         Some(p) => Some(
             HlogWriter::create(p, "stim-driver timing", SystemTime::now())
