@@ -271,11 +271,11 @@ struct Timing {
 impl Timing {
     fn for_backend(b: Backend) -> Self {
         match b {
-            // The values of the supervisor's bench in UML: the guest, on a loaded host,
-            // stalls for hundreds of ms at times.
+            // The guest, on a loaded host, stalls for hundreds of ms at times (a whole
+            // second was seen with a load average of 10 on 2 cores).
             Backend::Uml => Self {
                 watchdog_ticks: 500,
-                stim_watchdog_ms: 1000,
+                stim_watchdog_ms: 3000,
                 arm_ms: 2000,
                 // Below the 20 ms IPI of the trains: after a stall of the guest the driver
                 // refuses a late pulse rather than sending two back to back.
@@ -648,195 +648,230 @@ pub fn driver_on_the_bus(can: &CanEnv) {
         .unwrap_or_else(|| panic!("the driver did not come up disarmed\n{}", tail(&log)));
     println!("driver up, stimulator configured, disarmed");
 
-    // --- 1. 10 s at 50 Hz: every decision on the bus once, in order, applied. ---------
-    let mut p = Publisher::start(&prefix, "p20:10000");
-    op.arm(slow(2000), &log);
-    let start = tap.len();
-    let before = last_status_pulses(&tap.frames()).expect("STATUS seen");
-    let rejected_before = op.status().unwrap().pulses_rejected;
-    p.go();
-    let decisions = p.finish(Duration::from_secs(60));
-    let s = op
-        .wait_state(slow(1000), |s| s.state() == Ok(DeviceState::Fault))
-        .expect("the final tick puts the driver in its safe state");
-    assert_eq!(
-        fault_code(&s),
-        0xFF25,
-        "the final tick, not another fault: {s:?}\n{}",
-        tail(&log)
-    );
-    std::thread::sleep(Duration::from_millis(100));
-    let frames = tap.frames();
-    let pulses: Vec<Pulse> = frames[start..].iter().filter_map(is_pulse).collect();
-    assert_eq!(decisions.len(), 500);
-    let js = decisions_on_bus(&pulses, &decisions);
-    for w in pulses.windows(2) {
-        assert_eq!(w[1].seq, w[0].seq.wrapping_add(1), "PULSE seq consecutive");
-    }
-    let refused = s.pulses_rejected - rejected_before;
-    if uml {
-        // The guest stalls for tens of ms under load: a pulse that would leave more than
-        // max_pulse_delay late is refused, and must then be reported, not lost.
-        assert_eq!(
-            js.len() as u64 + refused,
-            500,
-            "on the bus or reported: {s:?}"
-        );
-    } else {
-        assert_eq!(
-            js,
-            (0..500).collect::<Vec<u64>>(),
-            "every decision once, in order"
-        );
-    }
-    let after = last_status_pulses(&frames).expect("STATUS");
-    assert_eq!(
-        u64::from(after.wrapping_sub(before) & 0xFF_FFFF),
-        js.len() as u64,
-        "the stimulator applied every PULSE (STATUS pulses_delivered)"
-    );
-    println!(
-        "10 s run: 500 decisions -> {} PULSE frames in order, each applied by the stimulator; \
-         {refused} refused as late and reported",
-        js.len()
-    );
-
-    // --- 2. a burst violating the minimum IPI: only the legal pulses. -----------------
-    let mut p = Publisher::start(&prefix, "p20:100,p1:12,p20:100");
-    op.arm(slow(2000), &log);
-    let start = tap.len();
-    p.go();
-    let decisions = p.finish(Duration::from_secs(30));
-    op.wait_state(slow(1000), |s| s.state() == Ok(DeviceState::Fault))
-        .expect("safe state after the final tick");
-    std::thread::sleep(Duration::from_millis(50));
-    let frames = tap.frames();
-    let pulses: Vec<Pulse> = frames[start..].iter().filter_map(is_pulse).collect();
-    let js = decisions_on_bus(&pulses, &decisions);
-    let legal = greedy_legal(&decisions, 2 * MS);
-    let t_of = |j: u64| decisions.iter().find(|d| d.j == j).unwrap().t_ns;
-    for w in js.windows(2) {
-        assert!(
-            t_of(w[1]) >= t_of(w[0]) + 2 * MS,
-            "pulses {} and {} less than 2 ms apart on the bus",
-            w[0],
-            w[1]
-        );
-    }
-    if uml {
-        // Late pulses (beyond max_pulse_delay) may be refused in the guest too.
-        assert!(js.iter().all(|j| legal.contains(j)), "{js:?} vs {legal:?}");
-    } else {
-        assert_eq!(js, legal, "exactly the legal subset");
-    }
-    assert_eq!(
-        legal.len(),
-        10 + 6 + 5,
-        "the greedy rule keeps every other burst pulse"
-    );
-    println!(
-        "burst: {} decisions, {} legal, {} on the bus",
-        decisions.len(),
-        legal.len(),
-        js.len()
-    );
-
-    // --- 3. publisher stalled 100 ms: stop, no burst after, stopped until re-armed. ----
-    // 100 ms on a native bus; in the guest it must outlast the longer watchdog.
-    let stall_ms = 100.max(2 * t.watchdog_ticks + 100);
-    let mut p = Publisher::start(&prefix, &format!("p20:300,s{stall_ms},p20:4000"));
-    op.arm(slow(2000), &log);
-    let start = tap.len();
-    p.go();
-    let (stop_at, _) = tap
-        .wait_for(start, Duration::from_secs(10), is_stop)
-        .expect("NMT stop after the stall");
-    std::thread::sleep(Duration::from_millis(300));
-    let frames = tap.frames();
-    assert_eq!(
-        frames[stop_at..].iter().filter_map(is_pulse).count(),
-        0,
-        "no PULSE after the stop while the publisher runs again"
-    );
-    let s = op.status().unwrap();
-    assert_eq!(s.state(), Ok(DeviceState::Fault));
-    assert_eq!(fault_code(&s), 0xFF21, "tick timeout");
-    let rearm_at = tap.len();
-    op.arm(slow(2000), &log);
-    tap.wait_for(rearm_at, Duration::from_secs(5), |f| is_pulse(f).is_some())
-        .expect("pulses again after the re-arm");
-    let _ = p.finish(Duration::from_secs(30));
-    println!("stall: stopped, no burst, resumed only after re-arm");
-
-    // --- 4. publisher SIGKILLed: NMT stop within the watchdog + 1 tick. ----------------
-    // Started only now: its polling costs CPU a loaded guest does not have to spare.
-    let watch = TickWatch::start(&prefix);
-    let reps = 5;
-    let mut latencies_ms = Vec::new();
-    for _ in 0..reps {
-        let mut p = Publisher::start(&prefix, "p20:1000000");
-        op.arm(slow(3000), &log);
-        p.go();
-        std::thread::sleep(Duration::from_millis(200));
-        let start = tap.len();
-        p.kill();
-        let (i, stop) = tap
-            .wait_for(start, Duration::from_secs(5), is_stop)
-            .expect("NMT stop after SIGKILL");
-        let last_tick = watch.last_publish_ns.load(Ordering::Relaxed);
-        let ms = (clocks.ns(stop.at) as f64 - last_tick as f64) / 1e6;
-        latencies_ms.push(ms);
-        std::thread::sleep(Duration::from_millis(100));
-        assert_eq!(
-            tap.frames()[i..].iter().filter_map(is_pulse).count(),
-            0,
-            "no PULSE after the stop"
-        );
-        op.wait_state(slow(500), |s| s.state() == Ok(DeviceState::Fault))
-            .expect("safe state");
-    }
-    let bound = (t.watchdog_ticks + 1 + t.margin_ms) as f64;
-    println!(
-        "SIGKILL -> NMT stop, ms after the last StimTick ({} runs, watchdog {} ms + 1 tick, \
-         allowed {bound} ms): {latencies_ms:.3?}",
-        reps, t.watchdog_ticks
-    );
-    for ms in &latencies_ms {
-        assert!(*ms > 0.0 && *ms <= bound, "{ms} ms");
-    }
-
-    // --- 5. the interface goes down mid-run. ----------------------------------------------
-    let p = {
-        let mut p = Publisher::start(&prefix, "p20:1000000");
-        op.arm(slow(3000), &log);
-        p.go();
-        p
+    // STIM_DRIVER_TEST_ONLY=4,5 runs only those scenarios (all by default).
+    let only = std::env::var("STIM_DRIVER_TEST_ONLY").ok();
+    let want = |n: u32| {
+        only.as_deref()
+            .is_none_or(|v| v.split(',').any(|x| x.trim() == n.to_string()))
     };
-    std::thread::sleep(Duration::from_millis(300));
-    // candump ends when the interface goes down: compare what it saw up to here.
-    let pulses_seen = tap.frames().iter().filter_map(is_pulse).count();
-    ip_link(&can.iface, "down");
-    let s = op
-        .wait_state(slow(1000), |s| s.state() == Ok(DeviceState::Fault))
-        .unwrap_or_else(|| panic!("no safe state after link down\n{}", tail(&log)));
-    assert_eq!(fault_code(&s), 0xFF26, "link down: {s:?}");
-    std::thread::sleep(Duration::from_millis(200));
-    assert!(driver.try_wait().unwrap().is_none(), "the driver survives");
-    ip_link(&can.iface, "up");
-    drop(tap);
-    tap = Tap::open(&can.iface).expect("tap");
-    std::thread::sleep(Duration::from_millis(300));
-    assert_eq!(
-        tap.frames().iter().filter_map(is_pulse).count(),
-        0,
-        "no PULSE once the link is back, before a re-arm"
-    );
-    op.arm(slow(5000), &log);
-    tap.wait_for(0, Duration::from_secs(5), |f| is_pulse(f).is_some())
-        .expect("pulses again after the re-arm");
-    p.kill();
-    println!("link down: safe state, driver alive, resumed only after re-arm");
+    let mut pulses_seen = None;
 
+    // --- 1. 10 s at 50 Hz: every decision on the bus once, in order, applied. ---------
+    if want(1) {
+        let mut p = Publisher::start(&prefix, "p20:10000");
+        op.arm(slow(2000), &log);
+        let start = tap.len();
+        let before = last_status_pulses(&tap.frames()).expect("STATUS seen");
+        let rejected_before = op.status().unwrap().pulses_rejected;
+        p.go();
+        let decisions = p.finish(Duration::from_secs(60));
+        let s = op
+            .wait_state(slow(1000), |s| s.state() == Ok(DeviceState::Fault))
+            .expect("the final tick puts the driver in its safe state");
+        assert_eq!(
+            fault_code(&s),
+            0xFF25,
+            "the final tick, not another fault: {s:?}\n{}",
+            tail(&log)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+        let frames = tap.frames();
+        let pulses: Vec<Pulse> = frames[start..].iter().filter_map(is_pulse).collect();
+        assert_eq!(decisions.len(), 500);
+        let js = decisions_on_bus(&pulses, &decisions);
+        for w in pulses.windows(2) {
+            assert_eq!(w[1].seq, w[0].seq.wrapping_add(1), "PULSE seq consecutive");
+        }
+        let refused = s.pulses_rejected - rejected_before;
+        if uml {
+            // The guest stalls for tens of ms under load: a pulse that would leave more than
+            // max_pulse_delay late is refused, and must then be reported, not lost.
+            assert_eq!(
+                js.len() as u64 + refused,
+                500,
+                "on the bus or reported: {s:?}"
+            );
+        } else {
+            assert_eq!(
+                js,
+                (0..500).collect::<Vec<u64>>(),
+                "every decision once, in order"
+            );
+        }
+        let after = last_status_pulses(&frames).expect("STATUS");
+        assert_eq!(
+            u64::from(after.wrapping_sub(before) & 0xFF_FFFF),
+            js.len() as u64,
+            "the stimulator applied every PULSE (STATUS pulses_delivered)"
+        );
+        println!(
+            "10 s run: 500 decisions -> {} PULSE frames in order, each applied by the stimulator; \
+         {refused} refused as late and reported",
+            js.len()
+        );
+    }
+    // --- 2. a burst violating the minimum IPI: only the legal pulses. -----------------
+    if want(2) {
+        let mut p = Publisher::start(&prefix, "p20:100,p1:12,p20:100");
+        op.arm(slow(2000), &log);
+        let start = tap.len();
+        p.go();
+        let decisions = p.finish(Duration::from_secs(30));
+        op.wait_state(slow(1000), |s| s.state() == Ok(DeviceState::Fault))
+            .expect("safe state after the final tick");
+        std::thread::sleep(Duration::from_millis(50));
+        let frames = tap.frames();
+        let pulses: Vec<Pulse> = frames[start..].iter().filter_map(is_pulse).collect();
+        let js = decisions_on_bus(&pulses, &decisions);
+        let legal = greedy_legal(&decisions, 2 * MS);
+        let t_of = |j: u64| decisions.iter().find(|d| d.j == j).unwrap().t_ns;
+        for w in js.windows(2) {
+            assert!(
+                t_of(w[1]) >= t_of(w[0]) + 2 * MS,
+                "pulses {} and {} less than 2 ms apart on the bus",
+                w[0],
+                w[1]
+            );
+        }
+        if uml {
+            // Late pulses (beyond max_pulse_delay) may be refused in the guest too.
+            assert!(js.iter().all(|j| legal.contains(j)), "{js:?} vs {legal:?}");
+        } else {
+            assert_eq!(js, legal, "exactly the legal subset");
+        }
+        assert_eq!(
+            legal.len(),
+            10 + 6 + 5,
+            "the greedy rule keeps every other burst pulse"
+        );
+        println!(
+            "burst: {} decisions, {} legal, {} on the bus",
+            decisions.len(),
+            legal.len(),
+            js.len()
+        );
+    }
+    // --- 3. publisher stalled 100 ms: stop, no burst after, stopped until re-armed. ----
+    if want(3) {
+        // 100 ms on a native bus; in the guest it must outlast the longer watchdog.
+        let stall_ms = 100.max(2 * t.watchdog_ticks + 100);
+        let mut p = Publisher::start(&prefix, &format!("p20:300,s{stall_ms},p20:4000"));
+        op.arm(slow(2000), &log);
+        let start = tap.len();
+        p.go();
+        let (stop_at, _) = tap
+            .wait_for(start, Duration::from_secs(10), is_stop)
+            .expect("NMT stop after the stall");
+        std::thread::sleep(Duration::from_millis(300));
+        let frames = tap.frames();
+        assert_eq!(
+            frames[stop_at..].iter().filter_map(is_pulse).count(),
+            0,
+            "no PULSE after the stop while the publisher runs again"
+        );
+        let s = op.status().unwrap();
+        assert_eq!(s.state(), Ok(DeviceState::Fault));
+        assert_eq!(fault_code(&s), 0xFF21, "tick timeout");
+        let rearm_at = tap.len();
+        op.arm(slow(2000), &log);
+        tap.wait_for(rearm_at, Duration::from_secs(5), |f| is_pulse(f).is_some())
+            .expect("pulses again after the re-arm");
+        let _ = p.finish(Duration::from_secs(30));
+        println!("stall: stopped, no burst, resumed only after re-arm");
+    }
+    // --- 4. publisher SIGKILLed: NMT stop within the watchdog + 1 tick. ----------------
+    if want(4) {
+        // Started only now: its polling costs CPU a loaded guest does not have to spare.
+        let watch = TickWatch::start(&prefix);
+        let reps = 5;
+        let mut latencies_ms = Vec::new();
+        let mut voided = Vec::new();
+        for _ in 0..2 * reps {
+            if latencies_ms.len() == reps {
+                break;
+            }
+            let mut p = Publisher::start(&prefix, "p20:1000000");
+            op.arm(slow(3000), &log);
+            p.go();
+            std::thread::sleep(Duration::from_millis(200));
+            let start = tap.len();
+            // A run in which the driver tripped before the kill (in a stalled guest: the
+            // stimulator's EMCY, a stale tick) measures nothing: it is reported, not counted.
+            let armed = op
+                .status()
+                .filter(|s| matches!(s.state(), Ok(DeviceState::Armed | DeviceState::Stimulating)))
+                .is_some()
+                && !tap.frames()[..start].iter().rev().take(50).any(is_stop);
+            p.kill();
+            if !armed {
+                voided.push(op.status().map_or(0, |s| fault_code(&s)));
+                op.wait_state(slow(500), |s| s.state() == Ok(DeviceState::Fault));
+                continue;
+            }
+            let (i, stop) = tap
+                .wait_for(start, Duration::from_secs(5), is_stop)
+                .unwrap_or_else(|| panic!("no NMT stop after SIGKILL\n{}", tail(&log)));
+            let last_tick = watch.last_publish_ns.load(Ordering::Relaxed);
+            let ms = (clocks.ns(stop.at) as f64 - last_tick as f64) / 1e6;
+            latencies_ms.push(ms);
+            std::thread::sleep(Duration::from_millis(100));
+            assert_eq!(
+                tap.frames()[i..].iter().filter_map(is_pulse).count(),
+                0,
+                "no PULSE after the stop"
+            );
+            op.wait_state(slow(500), |s| s.state() == Ok(DeviceState::Fault))
+                .expect("safe state");
+        }
+        println!("SIGKILL runs voided by an earlier trip (fault codes): {voided:04x?}");
+        assert!(
+            latencies_ms.len() >= 3,
+            "too few valid SIGKILL runs: {voided:04x?}"
+        );
+        let bound = (t.watchdog_ticks + 1 + t.margin_ms) as f64;
+        println!(
+            "SIGKILL -> NMT stop, ms after the last StimTick ({} runs, watchdog {} ms + 1 tick, \
+         allowed {bound} ms): {latencies_ms:.3?}",
+            latencies_ms.len(),
+            t.watchdog_ticks
+        );
+        for ms in &latencies_ms {
+            assert!(*ms > 0.0 && *ms <= bound, "{ms} ms");
+        }
+    }
+    // --- 5. the interface goes down mid-run. ----------------------------------------------
+    if want(5) {
+        let p = {
+            let mut p = Publisher::start(&prefix, "p20:1000000");
+            op.arm(slow(3000), &log);
+            p.go();
+            p
+        };
+        std::thread::sleep(Duration::from_millis(300));
+        // candump ends when the interface goes down: compare what it saw up to here.
+        pulses_seen = Some(tap.frames().iter().filter_map(is_pulse).count());
+        ip_link(&can.iface, "down");
+        let s = op
+            .wait_state(slow(1000), |s| s.state() == Ok(DeviceState::Fault))
+            .unwrap_or_else(|| panic!("no safe state after link down\n{}", tail(&log)));
+        assert_eq!(fault_code(&s), 0xFF26, "link down: {s:?}");
+        std::thread::sleep(Duration::from_millis(200));
+        assert!(driver.try_wait().unwrap().is_none(), "the driver survives");
+        ip_link(&can.iface, "up");
+        drop(tap);
+        tap = Tap::open(&can.iface).expect("tap");
+        std::thread::sleep(Duration::from_millis(300));
+        assert_eq!(
+            tap.frames().iter().filter_map(is_pulse).count(),
+            0,
+            "no PULSE once the link is back, before a re-arm"
+        );
+        op.arm(slow(5000), &log);
+        tap.wait_for(0, Duration::from_secs(5), |f| is_pulse(f).is_some())
+            .expect("pulses again after the re-arm");
+        p.kill();
+        println!("link down: safe state, driver alive, resumed only after re-arm");
+    }
     // --- SIGTERM: NMT stop, exit 0. ----------------------------------------------------
     let start = tap.len();
     nix::sys::signal::kill(
@@ -859,11 +894,12 @@ pub fn driver_on_the_bus(can: &CanEnv) {
     let dump = std::fs::read_to_string(&candump_out).unwrap();
     let needle = format!(" {pulse_id:03X}#");
     let dumped = dump.lines().filter(|l| l.contains(&needle)).count();
-    let on_tap = pulses_seen;
-    assert!(
-        dumped >= on_tap,
-        "candump saw {dumped} PULSE frames, the tap {on_tap}"
-    );
+    if let Some(on_tap) = pulses_seen {
+        assert!(
+            dumped >= on_tap,
+            "candump saw {dumped} PULSE frames, the tap {on_tap}"
+        );
+    }
     let summary = stimulator.stop();
     println!(
         "candump -L: {dumped} PULSE frames; stimulator: {} pulses applied, {} missed ticks",
