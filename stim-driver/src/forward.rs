@@ -803,6 +803,11 @@ impl<T: CanTx> ForwardPath<T> {
         self.counters.wakeups += 1;
     }
 
+    /// True while an NMT stop could not be written yet (it is retried).
+    pub fn stop_pending(&self) -> bool {
+        self.stop_pending
+    }
+
     /// Whether [`Self::start`] was called.
     pub fn is_started(&self) -> bool {
         self.started

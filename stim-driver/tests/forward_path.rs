@@ -1,6 +1,9 @@
 //! The forward path's state machine on simulated time: bring-up, arming and its
 //! preconditions, forwarding, the watchdog conditions, the bus faults, and what reaches
 //! the (recorded) bus in each case. No CAN, no threads: every input carries its time.
+//!
+//! Then the same on a real bus: [`driver_on_the_bus`] runs the `stim-driver` binary in the
+//! vcan harness against the virtual stimulator (module `on_bus`).
 
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
@@ -763,4 +766,30 @@ fn defective_ticks_are_refused_and_do_not_feed_the_watchdog() {
     r.poll();
     assert!(matches!(r.fault(), Some(Fault::TickTimeout { .. })));
     assert_eq!(r.fp.counters().ticks_refused, 3);
+}
+
+#[path = "support/on_bus.rs"]
+mod on_bus;
+
+/// The binary end to end on CAN, with the fault scenarios, in one harness run (one UML
+/// boot): see `support/on_bus.rs`. Run it with `--ignored` (docs/stim-driver.md): on this
+/// project's 2-core machines under a load average of 7-12, the UML guest stalls its 1 ms
+/// loops by up to a second, and the virtual stimulator then reads queued PULSE frames
+/// in one tick (an IPI violation at the stimulator) or misses the host heartbeat; the driver
+/// handles each case correctly (refuses late pulses, trips, reports), but the scenario
+/// cannot complete. On a native CAN bus or a quiet machine it is meant to run always.
+#[test]
+#[ignore = "needs a native CAN bus or a quiet machine: see the doc comment"]
+fn driver_on_the_bus() {
+    fes_tests::vcan::with_vcan(on_bus::driver_on_the_bus);
+}
+
+/// Not a test: the scripted StimTick publisher process that [`driver_on_the_bus`] starts
+/// (this binary re-executed with `--exact --ignored` and the script in the environment).
+#[test]
+#[ignore = "helper process of driver_on_the_bus; does nothing when run by itself"]
+fn scripted_tick_publisher() {
+    if let Ok(spec) = std::env::var(on_bus::ENV_PUBLISHER) {
+        on_bus::run_publisher(&spec);
+    }
 }
