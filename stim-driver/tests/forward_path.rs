@@ -768,6 +768,36 @@ fn defective_ticks_are_refused_and_do_not_feed_the_watchdog() {
     assert_eq!(r.fp.counters().ticks_refused, 3);
 }
 
+#[test]
+fn a_restarted_generator_is_followed_once_nothing_is_forwarded() {
+    let mut r = Rig::armed(settings());
+    for _ in 0..5 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    // rt-core restarts: `seq` from 1 again. Armed, its ticks are refused as out of order
+    // (they are no sign of life) and the watchdog trips after 3 ticks.
+    r.tick_seq = 0;
+    for _ in 0..4 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    assert!(
+        matches!(r.fault(), Some(Fault::TickTimeout { .. })),
+        "{:?}",
+        r.fp.state()
+    );
+    assert_eq!(r.fp.counters().ticks_refused, 4);
+    // Not armed, the new order is taken up: its ticks are valid and an Arm succeeds.
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    assert_eq!(r.fp.counters().ticks_refused, 4, "no more refusals");
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+}
+
 #[path = "support/on_bus.rs"]
 mod on_bus;
 

@@ -597,6 +597,35 @@ fn tail(log: &Path) -> String {
     lines[lines.len().saturating_sub(40)..].join("\n")
 }
 
+/// Each thread of process `pid`: name, state and where it sleeps (for a hang's report).
+fn threads(pid: u32) -> String {
+    let mut out = String::new();
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return format!("process {pid} is gone");
+    };
+    for t in tasks.flatten() {
+        let p = t.path();
+        let read = |f: &str| std::fs::read_to_string(p.join(f)).unwrap_or_default();
+        let stat = read("stat");
+        let state = stat
+            .rsplit(')')
+            .next()
+            .unwrap_or("")
+            .split_whitespace()
+            .next()
+            .unwrap_or("?")
+            .to_owned();
+        out.push_str(&format!(
+            "{} {} {} {}\n",
+            t.file_name().to_string_lossy(),
+            read("comm").trim(),
+            state,
+            read("wchan")
+        ));
+    }
+    out
+}
+
 fn ip_link(iface: &str, state: &str) {
     let ok = Command::new("ip")
         .args(["link", "set", iface, state])
@@ -810,7 +839,13 @@ pub fn driver_on_the_bus(can: &CanEnv) {
             }
             let (i, stop) = tap
                 .wait_for(start, Duration::from_secs(5), is_stop)
-                .unwrap_or_else(|| panic!("no NMT stop after SIGKILL\n{}", tail(&log)));
+                .unwrap_or_else(|| {
+                    panic!(
+                        "no NMT stop after SIGKILL\n{}\n{}",
+                        tail(&log),
+                        threads(driver.id())
+                    )
+                });
             let last_tick = watch.last_publish_ns.load(Ordering::Relaxed);
             let ms = (clocks.ns(stop.at) as f64 - last_tick as f64) / 1e6;
             latencies_ms.push(ms);
