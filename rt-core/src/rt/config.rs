@@ -88,8 +88,15 @@ impl RtConfig {
         Ok(())
     }
 
-    /// Stack size the real-time thread should be spawned with.
+    /// Stack size the real-time thread should be spawned with: the prefaulted part plus
+    /// [`RtConfig::THREAD_STACK_HEADROOM_BYTES`].
     pub fn thread_stack_bytes(&self) -> usize {
-        self.prefault_stack_bytes + 1024 * 1024
+        self.prefault_stack_bytes + Self::THREAD_STACK_HEADROOM_BYTES
     }
+
+    /// Stack beyond the prefaulted part, as much as a default main thread has (8 MiB). The
+    /// loop thread creates its iceoryx2 ports itself (before the hot path), and iceoryx2's
+    /// set-up keeps large fixed-capacity containers on the stack; with 1 MiB the loop
+    /// thread overflowed in debug builds while other iceoryx2 processes were running.
+    pub const THREAD_STACK_HEADROOM_BYTES: usize = 8 * 1024 * 1024;
 }
