@@ -80,6 +80,8 @@ pub struct StackOptions {
     pub fatigue: bool,
     /// Outer loop at start.
     pub outer_loop: bool,
+    /// Outer-loop gain per beat (None: the supervisor's default).
+    pub outer_gain: Option<f64>,
     /// iceoryx2 prefix (unique per bench).
     pub prefix: String,
 }
@@ -263,7 +265,7 @@ prefix = "{prefix}"
 socket = "{socket}"
 
 [outer_loop]
-enabled = {outer}
+enabled = {outer}{gain}
 
 [contraction]
 delay_ms = {delay}.0
@@ -281,6 +283,9 @@ source = "supervisor bench"
 "#,
                 socket = socket.display(),
                 outer = opts.outer_loop,
+                gain = opts
+                    .outer_gain
+                    .map_or(String::new(), |g| format!("\ngain = {g:?}")),
                 dir = d.display(),
             ),
         )?;

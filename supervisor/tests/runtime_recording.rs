@@ -325,6 +325,7 @@ fn kill_one(bins: &Path, can: &fes_tests::vcan::CanEnv, victim: &str) {
         uml,
         fatigue: false,
         outer_loop: true,
+        outer_gain: None,
         prefix: format!("kill{}{}", std::process::id(), &victim[..3]),
     })
     .unwrap_or_else(|e| panic!("{victim}: the stack did not start: {e}"));

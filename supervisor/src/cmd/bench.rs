@@ -29,8 +29,10 @@ use super::client::OnOff;
 /// Arguments of `supervisor bench`.
 #[derive(Debug, Clone, clap::Args)]
 #[command(
+    args_override_self = true,
     after_help = "Example: supervisor bench --seconds 30 --hr 75 --json bench.json\n\
-The README's `scripts/bench` builds everything and runs this with --seconds 30."
+The README's `scripts/bench` builds everything and runs this with --seconds 30 (a later \
+option overrides an earlier one, so `scripts/bench --seconds 60` works)."
 )]
 pub struct Args {
     /// Length of the cardiac profile, s.
@@ -48,6 +50,9 @@ pub struct Args {
     /// Outer loop (thesis Controller 1).
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub outer_loop: OnOff,
+    /// Outer-loop integral gain per beat, (0, 1] (default: the supervisor's, 0.3).
+    #[arg(long)]
+    pub outer_gain: Option<f64>,
     /// Fatigue in the simulated muscle (Ding 2003).
     #[arg(long)]
     pub fatigue: bool,
@@ -77,6 +82,9 @@ fn check(a: &Args) -> anyhow::Result<()> {
     if !(a.plot_window_s.is_finite() && a.plot_window_s > 0.0) {
         bail!("--plot-window-s {} must be > 0", a.plot_window_s);
     }
+    outer_settings(a)
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--outer-gain: {e}"))?;
     let spec = ProfileSpec::Cardiac(cardiac(a));
     spec.validate(&supervisor::limits::ReferenceLimits::default())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -87,6 +95,15 @@ fn check(a: &Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+fn outer_settings(a: &Args) -> supervisor::outer_loop::OuterLoopSettings {
+    let d = supervisor::outer_loop::OuterLoopSettings::default();
+    supervisor::outer_loop::OuterLoopSettings {
+        enabled: a.outer_loop == OnOff::On,
+        gain: a.outer_gain.unwrap_or(d.gain),
+        ..d
+    }
 }
 
 fn cardiac(a: &Args) -> CardiacSpec {
@@ -166,6 +183,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
         uml,
         fatigue: a.fatigue,
         outer_loop: a.outer_loop == OnOff::On,
+        outer_gain: a.outer_gain,
         prefix,
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
@@ -315,10 +333,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
             scale_n,
             offset_n: 0.0,
             profile: ProfileSpec::Cardiac(cardiac(a)),
-            outer_loop: supervisor::outer_loop::OuterLoopSettings {
-                enabled: a.outer_loop == OnOff::On,
-                ..Default::default()
-            },
+            outer_loop: outer_settings(a),
             contraction: supervisor::contraction::ContractionSettings {
                 delay_ms: delay as f64,
                 ..Default::default()
@@ -328,6 +343,24 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         },
     )?;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
+    let beats_csv = out.join("beats.csv");
+    let mut text =
+        String::from("index,start_s,plateau_mean,peak,fti,pulses,correction,next_amplitude\n");
+    for b in &run.beats {
+        let m = &b.measurement;
+        text += &format!(
+            "{},{:.3},{},{:.6},{:.6},{},{:.6},{:.6}\n",
+            m.beat.index,
+            (m.beat.start_ns - supervisor::simulation::T0_NS) as f64 * 1e-9,
+            m.plateau_mean.map_or(String::new(), |p| format!("{p:.6}")),
+            m.peak,
+            m.fti,
+            m.pulses,
+            b.update.correction,
+            b.update.amplitude
+        );
+    }
+    std::fs::write(&beats_csv, text).with_context(|| format!("write {}", beats_csv.display()))?;
     let series = run.series();
     let none = Latency {
         wake_us: [f64::NAN; 3],
@@ -353,6 +386,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     );
     let plots = draw(&series, out, &summary, a, delay, false)?;
     print_summary(&summary, &plots, &[]);
+    println!("  per beat: {}", beats_csv.display());
     write_json(&summary, &plots, a)
 }
 
