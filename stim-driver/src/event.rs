@@ -463,6 +463,11 @@ impl SharedStatus {
         }
     }
 
+    /// The forward loop's wake-up count (its progress, for the systemd watchdog).
+    pub fn wakeups(&self) -> &AtomicU64 {
+        &self.wakeups
+    }
+
     /// The publisher liveness last stored.
     pub fn liveness(&self) -> Liveness {
         Liveness::from_u8(self.liveness.load(Ordering::Relaxed))
