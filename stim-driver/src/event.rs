@@ -125,15 +125,16 @@ impl core::fmt::Display for DriverState {
     }
 }
 
-/// The stimulator's state as `DriverStatus.stimulator_state` encodes it. `DeviceState` has
-/// no "stopped": a stopped stimulator (output off until NMT start) is reported as `Fault`.
+/// The stimulator's state as `DriverStatus.stimulator_state` encodes it: a stopped
+/// stimulator (output off until NMT start) is `Stopped`, not a fault.
 pub const fn stimulator_device_state(state: StimState) -> DeviceState {
     match state {
         StimState::Boot => DeviceState::Boot,
         StimState::PreOperational => DeviceState::PreOperational,
         StimState::Armed => DeviceState::Armed,
         StimState::Stimulating => DeviceState::Stimulating,
-        StimState::Stopped | StimState::Fault => DeviceState::Fault,
+        StimState::Stopped => DeviceState::Stopped,
+        StimState::Fault => DeviceState::Fault,
     }
 }
 

@@ -446,6 +446,7 @@ fn device_state_name(state: u8) -> &'static str {
         Ok(DeviceState::PreOperational) => "disarmed",
         Ok(DeviceState::Armed | DeviceState::Stimulating) => "ARMED",
         Ok(DeviceState::Fault) => "SAFE STATE / fault",
+        Ok(DeviceState::Stopped) => "stopped",
         Ok(DeviceState::Unknown) | Err(_) => "unknown",
     }
 }
