@@ -432,7 +432,7 @@ fn driver_status_validation_table() {
     );
     assert_eq!(base.state(), Ok(DeviceState::Armed));
     for v in 0..=255u8 {
-        let known = matches!(v, 0..=4 | 255);
+        let known = matches!(v, 0..=5 | 255);
         assert_eq!(DeviceState::try_from(v).is_ok(), known, "{v}");
     }
 }

@@ -44,7 +44,7 @@
 //! max_n = 40.0                   # required: the muscle's maximal force, normalises ForceSample
 //!
 //! [rt]                           # the forward thread (rt_core::rt::RtConfig)
-//! priority = 85
+//! priority = 79
 //!
 //! # [bus_rt]                     # optional: make the receive thread real-time too
 //! # priority = 70
@@ -110,11 +110,12 @@ pub struct DriverConfig {
     pub ipc: IpcConfig,
 }
 
-/// The forward thread's default real-time settings: [`RtConfig`]'s, at priority 85 (above
-/// rt-core's default 80: a tick is forwarded before the next one is computed).
+/// The forward thread's default real-time settings: [`RtConfig`]'s, at priority 79: one
+/// below rt-core's loop (80) on the same core, so a StimTick is taken as soon as rt-core
+/// has published it and sleeps (fes-stim-driver.service allows at most 79).
 fn default_rt() -> RtConfig {
     RtConfig {
-        priority: 85,
+        priority: 79,
         ..RtConfig::default()
     }
 }
@@ -684,7 +685,54 @@ mod tests {
         assert_eq!(f.stim_limits, StimLimits::DEFAULT);
         assert_eq!(f.interlocks.min_ipi_ns, 2_000_000);
         assert_eq!(f.interlocks.allowed_channels, 1);
-        assert_eq!(c.rt.priority, 85);
+        assert_eq!(c.rt.priority, 79);
+    }
+
+    #[test]
+    fn the_shipped_rig_file_is_valid_and_states_the_defaults() {
+        let rig = DriverConfig::parse(include_str!("../../deploy/etc/fes/stim-driver.toml"))
+            .expect("deploy/etc/fes/stim-driver.toml");
+        let mut expected = DriverConfig::with_defaults("can0", 40.0);
+        expected.rt.on_missing_rights = rt_core::rt::config::MissingRightsPolicy::Refuse;
+        assert_eq!(rig, expected);
+    }
+
+    #[test]
+    fn the_bench_stack_file_parses() {
+        // The file supervisor/src/bench.rs writes (its UML timeouts).
+        let text = r#"schema = "fes-stim-driver/1"
+
+[can]
+iface = "vcan0"
+
+[stimulator]
+watchdog_ms = 1000
+
+[watchdog]
+timeout_ticks = 500
+stale_after_ticks = 500
+stimulator_timeout_ms = 1000
+arm_confirm_ms = 2000
+command_max_age_ms = 2000
+
+[force]
+max_n = 40
+
+[rt]
+priority = 79
+on_missing_rights = "best-effort"
+
+[telemetry]
+hlog = "/tmp/x/stim-driver.hlog"
+
+[ipc]
+prefix = "bench-1"
+"#;
+        let c = DriverConfig::parse(text).unwrap();
+        // `max_n = {scale_n}` prints a whole number without a point: still an f64.
+        assert_eq!(c.force.max_n, 40.0);
+        assert_eq!(c.forward_settings().unwrap().tick_timeout_ns, 500_000_000);
+        assert_eq!(c.stim_limits().unwrap().watchdog_ms, 1000);
     }
 
     #[test]

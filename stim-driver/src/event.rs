@@ -125,15 +125,16 @@ impl core::fmt::Display for DriverState {
     }
 }
 
-/// The stimulator's state as `DriverStatus.stimulator_state` encodes it. `DeviceState` has
-/// no "stopped": a stopped stimulator (output off until NMT start) is reported as `Fault`.
+/// The stimulator's state as `DriverStatus.stimulator_state` encodes it: a stopped
+/// stimulator (output off until NMT start) is `Stopped`, not a fault.
 pub const fn stimulator_device_state(state: StimState) -> DeviceState {
     match state {
         StimState::Boot => DeviceState::Boot,
         StimState::PreOperational => DeviceState::PreOperational,
         StimState::Armed => DeviceState::Armed,
         StimState::Stimulating => DeviceState::Stimulating,
-        StimState::Stopped | StimState::Fault => DeviceState::Fault,
+        StimState::Stopped => DeviceState::Stopped,
+        StimState::Fault => DeviceState::Fault,
     }
 }
 
@@ -461,6 +462,11 @@ impl SharedStatus {
             stimulator_pulses: u32::try_from(self.stimulator_pulses.load(r)).unwrap_or(0),
             wakeups: self.wakeups.load(r),
         }
+    }
+
+    /// The forward loop's wake-up count (its progress, for the systemd watchdog).
+    pub fn wakeups(&self) -> &AtomicU64 {
+        &self.wakeups
     }
 
     /// The publisher liveness last stored.

@@ -80,7 +80,7 @@ impl Fault {
             Fault::StimulatorSilent { .. } => 0xFF28,
             Fault::StimulatorReset => 0xFF29,
             Fault::StimulatorNotOperational => 0xFF2A,
-            Fault::SafeStopCommand => 0xFF2B,
+            Fault::SafeStopCommand => rt_core::msg::DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED,
             Fault::BusEventsLost => 0xFF2C,
             Fault::TxFailed { .. } => 0xFF2D,
         }

@@ -33,7 +33,7 @@ use crate::event::{
     Liveness, stimulator_device_state,
 };
 use crate::fault::{ArmRefusal, Fault};
-use crate::interlock::{InterlockLimits, Interlocks, PulseCommand, Verdict};
+use crate::interlock::{InterlockLimits, Interlocks, PulseCommand, Verdict, Violation};
 use crate::output::{ControlFrame, Disarmed, Output, SendError};
 use crate::tx::{CanTx, TxError};
 
@@ -213,7 +213,22 @@ impl<T: CanTx> ForwardPath<T> {
             self.finish(before, ev);
             return;
         }
-        let assessment = self.interlocks.assess(tick, now_ns);
+        let mut assessment = self.interlocks.assess(tick, now_ns);
+        if !self.is_armed()
+            && matches!(
+                assessment.verdict,
+                Verdict::Rejected {
+                    violation: Violation::OutOfOrder { .. },
+                    ..
+                }
+            )
+        {
+            // A restarted generator (its `seq` starts again at 1). Nothing is forwarded
+            // now, so follow it: otherwise every tick of it would be refused and it could
+            // never be armed. While armed, its ticks stay refused and the watchdog trips.
+            self.interlocks.resync_sequence();
+            assessment = self.interlocks.assess(tick, now_ns);
+        }
         if assessment.lost_ticks > 0 {
             self.counters.ticks_lost += assessment.lost_ticks;
             ev.emit(DriverEvent::TicksLost {
@@ -801,6 +816,11 @@ impl<T: CanTx> ForwardPath<T> {
     /// Counts one wake-up of the loop (progress for the systemd watchdog).
     pub fn count_wakeup(&mut self) {
         self.counters.wakeups += 1;
+    }
+
+    /// True while an NMT stop could not be written yet (it is retried).
+    pub fn stop_pending(&self) -> bool {
+        self.stop_pending
     }
 
     /// Whether [`Self::start`] was called.

@@ -14,7 +14,9 @@
 //! - [`event`], [`fault`]: what the threads exchange, and the fault and refusal reasons.
 //! - [`config`]: the TOML configuration file.
 //! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state).
-//! - [`runner`], [`report`], [`telemetry`], [`liveness`], [`systemd`]: the process.
+//! - [`runner`] (the real-time forward thread), [`report`] (logs, DriverStatus,
+//!   TimingReport), [`telemetry`], [`liveness`], [`txstamp`]: the process. systemd
+//!   notification is rt-core's ([`rt_core::rt::notify`]).
 //! - [`safe_stop`]: the `safe-stop` subcommand.
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
@@ -27,7 +29,9 @@ pub mod forward;
 pub mod interlock;
 pub mod liveness;
 pub mod output;
-pub mod systemd;
+pub mod report;
+pub mod runner;
+pub mod safe_stop;
 pub mod telemetry;
 pub mod tx;
 pub mod txstamp;

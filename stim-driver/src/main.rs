@@ -1,2 +1,452 @@
-//! `stim-driver` (being written).
-fn main() {}
+//! `stim-driver`: StimTicks from iceoryx2 to PULSE frames on SocketCAN, with independent
+//! interlocks, arming and a watchdog (the library [`stim_driver`] holds the logic).
+//!
+//! Threads of `run`: the receive thread (bus frames → forward thread, ForceSample), the
+//! report thread (logs, DriverStatus, TimingReport, hlog, publisher liveness), the systemd
+//! notifier (READY=1, WATCHDOG=1 only while the forward loop makes progress), and ONE
+//! real-time forward thread. SIGINT/SIGTERM: NMT stop on the bus, final DriverStatus and
+//! TimingReport, exit 0.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+use std::time::SystemTime;
+
+use anyhow::{Context, anyhow};
+use clap::{Parser, Subcommand};
+use fes_can::Nodes;
+use rt_core::rt::alloc::CountingAllocator;
+use rt_core::rt::hlog::HlogWriter;
+use rt_core::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
+use rt_core::rt::realtime::{RtError, enter_realtime};
+use rt_core::rt::runner::RunError;
+use rt_core::rt::signals::install_stop_handler;
+use stim_driver::bus::{BusSettings, run_bus};
+use stim_driver::config::DriverConfig;
+use stim_driver::report::run_report;
+use stim_driver::runner::{Shared, run_forward};
+use stim_driver::safe_stop::safe_stop;
+use stim_driver::tx::SocketTx;
+use stim_driver::txstamp::{self, TxStampReader};
+use tracing::{error, info, warn};
+
+/// Counts the forward thread's heap allocations (reported as `hot_path_allocations`).
+#[global_allocator]
+static ALLOCATOR: CountingAllocator = CountingAllocator;
+
+const AFTER_HELP: &str = "\
+SUBCOMMANDS
+  run --config FILE        drive the stimulator (the service; see below)
+  safe-stop --iface IFACE  send NMT stop (to the stimulator's node and to all nodes) and
+                           exit; systemd's ExecStopPost runs it whenever the driver stops
+  example-config           print a configuration with every default
+
+WHAT `run` DOES: brings the stimulator up (NMT pre-operational, CONFIG with the run's
+limits from [stimulator], waits until STATUS shows them), sends the host heartbeat, and
+starts DISARMED: nothing is forwarded until the supervisor sends an Arm DriverCommand
+(iceoryx2 <prefix>/driver_command). Armed, each StimTick with a pulse that passes the
+driver's own [interlocks] becomes one PULSE frame; a refused pulse is not sent, never
+altered, and is logged and counted. No StimTick for timeout_ticks periods, a stale
+StimTick, the publisher's node dead or gone, the stimulator silent, an EMCY, bus-off or
+the link going down: NMT stop, SAFE STATE, and nothing until an explicit re-arm.
+
+CONFIGURATION (TOML, schema \"fes-stim-driver/1\"; `example-config` prints every key; only
+[can] iface and [force] max_n are required; docs/stim-driver.md documents each key):
+  [can]         iface, host_node, stim_node, heartbeat_ms, tx_retry_budget_us, ...
+  [stimulator]  the limits sent in CONFIG: max_amplitude_ua, max_width_us, min_ipi_ms,
+                max_pulses, rate_window_ms, watchdog_ms
+  [interlocks]  the driver's own: min_ipi_us, max_pulses, rate_window_ms,
+                max_amplitude_ua, max_width_us, max_charge_nc, channels, max_pulse_delay_us
+  [watchdog]    tick_period_us, timeout_ticks, stale_after_ticks, stimulator_timeout_ms,
+                arm_confirm_ms, command_max_age_ms, liveness_check_ms
+  [force]       max_n (normalises ForceSample)
+  [rt]          the forward thread: priority, core, on_missing_rights, lock_memory, ...
+  [bus_rt]      optional: the receive thread real-time too
+  [telemetry]   hlog, report_period_ms, status_period_ms, queue_capacity
+  [ipc]         prefix
+
+UNDER SYSTEMD (Type=notify): READY=1 once the forward loop runs; WATCHDOG=1 from a normal
+thread only while the loop makes progress; logs go to the journal. RUST_LOG filters the
+log (default info).
+
+EXIT STATUS: 0 stopped by SIGINT/SIGTERM (after NMT stop) or safe-stop sent;
+1 bad configuration or usage; 2 refused to start (real time missing with
+on_missing_rights = \"refuse\"); 3 run-time failure (CAN interface, iceoryx2, a thread
+failed; NMT stop was attempted).";
+
+/// The stimulator driver: iceoryx2 StimTicks to SocketCAN PULSE frames, with independent
+/// interlocks, arming and a watchdog.
+#[derive(Debug, Parser)]
+#[command(name = "stim-driver", version, after_help = AFTER_HELP)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Drive the stimulator (the service).
+    Run {
+        /// Configuration file (TOML, schema "fes-stim-driver/1").
+        #[arg(long, value_name = "FILE")]
+        config: PathBuf,
+        /// Use this CAN interface instead of the file's [can] iface (under systemd,
+        /// FES_CAN_IFACE from can.env: the interface safe-stop uses too).
+        #[arg(long, value_name = "IFACE")]
+        iface: Option<String>,
+        /// Validate the configuration, print a summary, and exit.
+        #[arg(long)]
+        check: bool,
+    },
+    /// Send NMT stop to the stimulator (its node and all nodes) and exit.
+    SafeStop {
+        /// CAN interface.
+        #[arg(long, value_name = "IFACE")]
+        iface: String,
+        /// The stimulator's node id (decimal or 0x..).
+        #[arg(long, default_value = "0x10", value_parser = parse_node)]
+        stim_node: u8,
+    },
+    /// Print a configuration with every default (interface vcan0, max_n 40 N).
+    ExampleConfig,
+}
+
+fn parse_node(s: &str) -> Result<u8, String> {
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16),
+        None => s.parse(),
+    }
+    .map_err(|e| format!("{s:?}: {e}"))?;
+    if (1..=127).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("node id {v} is outside 1..=127"))
+    }
+}
+
+/// The environment variable (set by systemd from can.env) that overrides `[can] iface`.
+const ENV_CAN_IFACE: &str = "FES_CAN_IFACE";
+
+/// Why the process did not end cleanly.
+enum Failure {
+    /// Bad configuration or usage: exit 1.
+    Config(anyhow::Error),
+    /// Real time refused: exit 2.
+    Refused(String),
+    /// A run-time failure: exit 3.
+    Run(anyhow::Error),
+}
+
+fn main() -> ExitCode {
+    rt_core::rt::logging::init("stim-driver");
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run {
+            config,
+            iface,
+            check,
+        } => run(&config, iface, check),
+        Command::SafeStop { iface, stim_node } => stop_now(&iface, stim_node),
+        Command::ExampleConfig => {
+            print!("{}", DriverConfig::with_defaults("vcan0", 40.0).to_toml());
+            Ok(())
+        }
+    };
+    let line = |e: &anyhow::Error| rt_core::rt::error_text::one_line(e.as_ref());
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure::Config(e)) => {
+            error!("{}", line(&e));
+            ExitCode::from(1)
+        }
+        Err(Failure::Refused(text)) => {
+            error!("{text}");
+            ExitCode::from(2)
+        }
+        Err(Failure::Run(e)) => {
+            error!("{}", line(&e));
+            ExitCode::from(3)
+        }
+    }
+}
+
+fn stop_now(iface: &str, stim_node: u8) -> Result<(), Failure> {
+    let host = if stim_node == Nodes::DEFAULT.host() {
+        Nodes::DEFAULT.stim()
+    } else {
+        Nodes::DEFAULT.host()
+    };
+    let nodes =
+        Nodes::new(host, stim_node).map_err(|e| Failure::Config(anyhow!("--stim-node: {e}")))?;
+    let written = safe_stop(iface, &nodes).map_err(|e| Failure::Run(e.into()))?;
+    info!("safe-stop: NMT stop written on {iface} ({written} of 2 frames)");
+    Ok(())
+}
+
+fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(), Failure> {
+    // Under systemd the unit's EnvironmentFile (can.env) names the interface that
+    // ExecStopPost's safe-stop uses; the driver uses the same one.
+    let iface = iface.or_else(|| std::env::var(ENV_CAN_IFACE).ok().filter(|s| !s.is_empty()));
+    let mut config = DriverConfig::load(path)
+        .context("configuration")
+        .map_err(Failure::Config)?;
+    if let Some(iface) = iface
+        && iface != config.can.iface
+    {
+        info!(
+            "CAN interface {iface:?} (--iface or FES_CAN_IFACE) instead of the file's {:?}",
+            config.can.iface
+        );
+        config.can.iface = iface;
+        config
+            .validate()
+            .context("--iface")
+            .map_err(Failure::Config)?;
+    }
+    let c = &config;
+    info!(
+        "config {}: {} (stimulator node {:#04x}), tick {} us, watchdog {} ticks, \
+         interlocks min IPI {} us / {} pulses per {} ms / {} uA / {} us, prefix {:?}",
+        path.display(),
+        c.can.iface,
+        c.can.stim_node,
+        c.watchdog.tick_period_us,
+        c.watchdog.timeout_ticks,
+        c.interlocks.min_ipi_us,
+        c.interlocks.max_pulses,
+        c.interlocks.rate_window_ms,
+        c.interlocks.max_amplitude_ua,
+        c.interlocks.max_width_us,
+        c.ipc.prefix
+    );
+    if check {
+        println!("{}: ok", path.display());
+        return Ok(());
+    }
+    let manager = ServiceManager::from_env()
+        .context("systemd notification")
+        .map_err(Failure::Config)?;
+    let stop = install_stop_handler()
+        .context("installing SIGINT/SIGTERM handlers")
+        .map_err(Failure::Run)?;
+    let hlog = match &config.telemetry.hlog {
+        Some(p) => Some(
+            HlogWriter::create(p, "stim-driver timing", SystemTime::now())
+                .context("telemetry.hlog")
+                .map_err(Failure::Config)?,
+        ),
+        None => None,
+    };
+    let tx = SocketTx::open(&config.can.iface, config.retry_policy())
+        .with_context(|| format!("CAN interface {:?}", config.can.iface))
+        .map_err(Failure::Run)?;
+    let stamps = match txstamp::enable(tx.socket()).and_then(|()| TxStampReader::new(tx.raw_fd())) {
+        Ok(r) => Some(r),
+        Err(e) => {
+            warn!("no kernel transmit timestamps: {e}");
+            None
+        }
+    };
+    let nodes = config
+        .nodes()
+        .context("configuration")
+        .map_err(Failure::Config)?;
+    let bus_settings = BusSettings {
+        iface: config.can.iface.clone(),
+        nodes,
+        max_force_n: config.force.max_n,
+        prefix: config.ipc.prefix.clone(),
+    };
+    let shared = Shared::new(&config);
+    let shared = &shared;
+    let config = &config;
+
+    std::thread::scope(|scope| -> Result<(), Failure> {
+        let fail = |e: anyhow::Error| {
+            shared.failed.store(true, Ordering::Relaxed);
+            e
+        };
+        // Receive thread.
+        let (bus_ready_tx, bus_ready_rx) = mpsc::channel();
+        let bus_thread = std::thread::Builder::new()
+            .name("stim-driver-bus".to_owned())
+            .spawn_scoped(scope, move || -> anyhow::Result<()> {
+                if let Some(rt) = &config.bus_rt {
+                    let status = enter_realtime(rt).context("[bus_rt]")?;
+                    info!("receive thread: {status}");
+                }
+                run_bus(
+                    &bus_settings,
+                    &shared.bus_events,
+                    &shared.status,
+                    &shared.bus,
+                    &shared.forward_ended,
+                    move || {
+                        let _ = bus_ready_tx.send(());
+                    },
+                )
+                .map_err(|e| fail(e.into()))
+            })
+            .context("spawning the receive thread")
+            .map_err(Failure::Run)?;
+        if bus_ready_rx.recv().is_err() {
+            shared.forward_ended.store(true, Ordering::Relaxed);
+            let e = match bus_thread.join() {
+                Ok(Err(e)) => e,
+                _ => anyhow!("the receive thread stopped early"),
+            };
+            return Err(Failure::Run(e.context("receive thread")));
+        }
+        // Report thread.
+        let (report_ready_tx, report_ready_rx) = mpsc::channel();
+        let report_thread = std::thread::Builder::new()
+            .name("stim-driver-report".to_owned())
+            .spawn_scoped(scope, move || {
+                run_report(config, shared, hlog, stamps, move || {
+                    let _ = report_ready_tx.send(());
+                })
+                .map_err(|e| fail(e.into()))
+            })
+            .context("spawning the report thread");
+        let report_thread = match report_thread {
+            Ok(t) => t,
+            Err(e) => {
+                shared.forward_ended.store(true, Ordering::Relaxed);
+                return Err(Failure::Run(e));
+            }
+        };
+        if report_ready_rx.recv().is_err() {
+            shared.forward_ended.store(true, Ordering::Relaxed);
+            let _ = bus_thread.join();
+            let e = match report_thread.join() {
+                Ok(Err(e)) => e,
+                _ => anyhow!("the report thread stopped early"),
+            };
+            return Err(Failure::Run(e.context("report thread")));
+        }
+        // systemd: READY=1, then WATCHDOG=1 only while the forward loop wakes up.
+        let notifier = std::thread::Builder::new()
+            .name("stim-driver-notify".to_owned())
+            .spawn_scoped(scope, || {
+                let settings = NotifierSettings::for_watchdog(manager.watchdog());
+                run_progress_notifier(
+                    &manager,
+                    &settings,
+                    shared.status.wakeups(),
+                    &[&shared.forward_ended],
+                    |wakeups| {
+                        let c = shared.status.load();
+                        format!(
+                            "{}; {} StimTicks, {} pulses sent, {} refused, {wakeups} wake-ups",
+                            device_state_name(c.state),
+                            c.ticks_received,
+                            c.pulses_sent,
+                            c.pulses_rejected
+                        )
+                    },
+                )
+            });
+        // The forward thread.
+        let forward = std::thread::Builder::new()
+            .name("stim-driver-fwd".to_owned())
+            .stack_size(config.rt.thread_stack_bytes())
+            .spawn_scoped(scope, move || {
+                run_forward(config, tx, shared, stop, |status| {
+                    if status.is_degraded() {
+                        warn!("forward thread: {status}");
+                    } else {
+                        info!("forward thread: {status}");
+                    }
+                    info!("running, DISARMED until an Arm command; SIGINT or SIGTERM stops");
+                })
+            });
+        let outcome = match forward {
+            Ok(t) => t.join(),
+            Err(e) => {
+                shared.forward_ended.store(true, Ordering::Relaxed);
+                let _ = bus_thread.join();
+                let _ = report_thread.join();
+                return Err(Failure::Run(
+                    anyhow::Error::from(e).context("spawning the forward thread"),
+                ));
+            }
+        };
+        shared.forward_ended.store(true, Ordering::Relaxed);
+        if let Ok(n) = notifier
+            && let Ok(n) = n.join()
+            && manager.is_present()
+            && n.send_errors > 0
+        {
+            warn!("{} systemd notifications could not be sent", n.send_errors);
+        }
+        let bus = bus_thread
+            .join()
+            .unwrap_or_else(|_| Err(anyhow!("the receive thread panicked")));
+        let report = report_thread
+            .join()
+            .unwrap_or_else(|_| Err(anyhow!("the report thread panicked")));
+        let outcome = outcome.map_err(|_| Failure::Run(anyhow!("the forward thread panicked")))?;
+        let outcome = match outcome {
+            Ok(o) => o,
+            Err(RunError::Realtime(RtError::Refused(status))) => {
+                return Err(Failure::Refused(format!("refused to start: {status}")));
+            }
+            Err(e) => {
+                return Err(Failure::Run(
+                    anyhow::Error::from(e).context("forward thread"),
+                ));
+            }
+        };
+        if let Ok(r) = &report {
+            let t = &r.timing;
+            let us = |ns: u64| ns as f64 / 1000.0;
+            let c = shared.status.load();
+            info!(
+                "final: {} StimTicks ({} missing, {} refused), {} pulses sent, {} refused by \
+                 the interlocks, {} while not armed, {} CAN write errors, {} trips ({} \
+                 watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
+                 stamps; hot-path heap allocations {}",
+                c.ticks_received,
+                c.ticks_lost,
+                c.ticks_refused,
+                c.pulses_sent,
+                c.pulses_rejected,
+                c.pulses_not_armed,
+                c.can_tx_errors,
+                c.trips,
+                c.watchdog_trips,
+                us(t.publish.p50_ns),
+                us(t.publish.p99_ns),
+                us(t.publish.max_ns),
+                r.tx_stamps,
+                outcome
+                    .hot_path_allocations
+                    .map_or("not counted".to_owned(), |n| n.to_string()),
+            );
+        }
+        if !outcome.stop_sent {
+            warn!("the final NMT stop could not be written (the stimulator's watchdog stops it)");
+        }
+        bus.map_err(|e| Failure::Run(e.context("receive thread")))?;
+        report.map_err(|e| Failure::Run(e.context("report thread")))?;
+        if shared.failed.load(Ordering::Relaxed) {
+            return Err(Failure::Run(anyhow!("a driver thread failed")));
+        }
+        info!("stopped");
+        Ok(())
+    })
+}
+
+fn device_state_name(state: u8) -> &'static str {
+    use rt_core::msg::DeviceState;
+    match DeviceState::try_from(state) {
+        Ok(DeviceState::Boot) => "starting",
+        Ok(DeviceState::PreOperational) => "disarmed",
+        Ok(DeviceState::Armed | DeviceState::Stimulating) => "ARMED",
+        Ok(DeviceState::Fault) => "SAFE STATE / fault",
+        Ok(DeviceState::Stopped) => "stopped",
+        Ok(DeviceState::Unknown) | Err(_) => "unknown",
+    }
+}

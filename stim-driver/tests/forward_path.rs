@@ -1,6 +1,9 @@
 //! The forward path's state machine on simulated time: bring-up, arming and its
 //! preconditions, forwarding, the watchdog conditions, the bus faults, and what reaches
 //! the (recorded) bus in each case. No CAN, no threads: every input carries its time.
+//!
+//! Then the same on a real bus: [`driver_on_the_bus`] runs the `stim-driver` binary in the
+//! vcan harness against the virtual stimulator (module `on_bus`).
 
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
@@ -763,4 +766,60 @@ fn defective_ticks_are_refused_and_do_not_feed_the_watchdog() {
     r.poll();
     assert!(matches!(r.fault(), Some(Fault::TickTimeout { .. })));
     assert_eq!(r.fp.counters().ticks_refused, 3);
+}
+
+#[test]
+fn a_restarted_generator_is_followed_once_nothing_is_forwarded() {
+    let mut r = Rig::armed(settings());
+    for _ in 0..5 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    // rt-core restarts: `seq` from 1 again. Armed, its ticks are refused as out of order
+    // (they are no sign of life) and the watchdog trips after 3 ticks.
+    r.tick_seq = 0;
+    for _ in 0..4 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    assert!(
+        matches!(r.fault(), Some(Fault::TickTimeout { .. })),
+        "{:?}",
+        r.fp.state()
+    );
+    assert_eq!(r.fp.counters().ticks_refused, 4);
+    // Not armed, the new order is taken up: its ticks are valid and an Arm succeeds.
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    assert_eq!(r.fp.counters().ticks_refused, 4, "no more refusals");
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+}
+
+#[path = "support/on_bus.rs"]
+mod on_bus;
+
+/// The binary end to end on CAN, with the fault scenarios, in one harness run (one UML
+/// boot): see `support/on_bus.rs`. Run it with `--ignored` (docs/stim-driver.md): on this
+/// project's 2-core machines under a load average of 7-12, the UML guest stalls its 1 ms
+/// loops by up to a second, and the virtual stimulator then reads queued PULSE frames
+/// in one tick (an IPI violation at the stimulator) or misses the host heartbeat; the driver
+/// handles each case correctly (refuses late pulses, trips, reports), but the scenario
+/// cannot complete. On a native CAN bus or a quiet machine it is meant to run always.
+#[test]
+#[ignore = "needs a native CAN bus or a quiet machine: see the doc comment"]
+fn driver_on_the_bus() {
+    fes_tests::vcan::with_vcan(on_bus::driver_on_the_bus);
+}
+
+/// Not a test: the scripted StimTick publisher process that [`driver_on_the_bus`] starts
+/// (this binary re-executed with `--exact --ignored` and the script in the environment).
+#[test]
+#[ignore = "helper process of driver_on_the_bus; does nothing when run by itself"]
+fn scripted_tick_publisher() {
+    if let Ok(spec) = std::env::var(on_bus::ENV_PUBLISHER) {
+        on_bus::run_publisher(&spec);
+    }
 }

@@ -80,6 +80,8 @@ pub struct StackOptions {
     pub fatigue: bool,
     /// Outer loop at start.
     pub outer_loop: bool,
+    /// Outer-loop gain per beat (None: the supervisor's default).
+    pub outer_gain: Option<f64>,
     /// iceoryx2 prefix (unique per bench).
     pub prefix: String,
 }
@@ -103,7 +105,7 @@ pub struct Stack {
 /// ms, supervisor stim-tick timeout ms, driver-status timeout ms, force timeout ms).
 fn timeouts(uml: bool) -> (u64, u32, u32, u64, u64, u64) {
     if uml {
-        (1000, 500, 1000, 1500, 3000, 1500)
+        (1000, 500, 3000, 1500, 3000, 1500)
     } else {
         (100, 20, 100, 50, 500, 100)
     }
@@ -189,6 +191,9 @@ iface = "{iface}"
 [stimulator]
 watchdog_ms = {stim_wd}
 
+[interlocks]
+max_pulse_delay_us = {late_us}
+
 [watchdog]
 timeout_ticks = {drv_ticks}
 stale_after_ticks = {drv_ticks}
@@ -211,6 +216,8 @@ prefix = "{prefix}"
 "#,
                 iface = opts.iface,
                 arm_ms = if opts.uml { 2000 } else { 200 },
+                // A UML guest's wake-ups are often milliseconds late (functional only).
+                late_us = if opts.uml { 50_000 } else { 500 },
                 cmd_age = if opts.uml { 2000 } else { 100 },
                 dir = d.display(),
             ),
@@ -263,7 +270,7 @@ prefix = "{prefix}"
 socket = "{socket}"
 
 [outer_loop]
-enabled = {outer}
+enabled = {outer}{gain}
 
 [contraction]
 delay_ms = {delay}.0
@@ -281,6 +288,9 @@ source = "supervisor bench"
 "#,
                 socket = socket.display(),
                 outer = opts.outer_loop,
+                gain = opts
+                    .outer_gain
+                    .map_or(String::new(), |g| format!("\ngain = {g:?}")),
                 dir = d.display(),
             ),
         )?;

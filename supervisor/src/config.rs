@@ -15,7 +15,8 @@ use crate::outer_loop::OuterLoopSettings;
 /// The schema tag this version reads.
 pub const SCHEMA: &str = "fes-supervisor/1";
 
-/// The complete, documented default configuration.
+/// The complete, documented rig configuration (`deploy/etc/fes/supervisor.toml`): the
+/// defaults, plus `control.group = "fes"`.
 pub const EXAMPLE: &str = include_str!("../../deploy/etc/fes/supervisor.toml");
 
 /// The supervisor configuration.
@@ -350,9 +351,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_shipped_example_is_the_defaults() {
+    fn the_shipped_example_is_the_defaults_but_the_operator_group() {
         let cfg = SupervisorConfig::from_toml(EXAMPLE, Path::new("supervisor.toml")).unwrap();
-        assert_eq!(cfg, SupervisorConfig::defaults());
+        let mut expected = SupervisorConfig::defaults();
+        expected.control.group = Some("fes".into());
+        assert_eq!(cfg, expected);
     }
 
     #[test]

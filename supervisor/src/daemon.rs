@@ -27,7 +27,7 @@ use crate::health::{HealthMonitor, NodeObservation, Severity, proc_state};
 use crate::protocol::{Command, Response, Status};
 use crate::recording::{Recorder, RecorderSettings, utc_stamp};
 
-/// Longest sleep of the loop, ms (StimTick buffers hold 64 ms).
+/// Longest sleep of the loop, ms (StimTick buffers hold about 1 s).
 pub const POLL_MS: u64 = 5;
 
 /// A daemon failure (start-up or a broken iceoryx2 port).

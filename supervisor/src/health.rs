@@ -426,7 +426,10 @@ impl HealthMonitor {
                 );
             }
         }
-        if s.fault_code != 0 && s.fault_code != prev_code {
+        // A safe state the supervisor itself ordered (SafeStop) is the answer to a fault
+        // already raised, not a new one.
+        let ordered_stop = s.fault_code == DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED;
+        if s.fault_code != 0 && s.fault_code != prev_code && !ordered_stop {
             let severity = if s.state() == Ok(DeviceState::Fault)
                 || s.stimulator_state() == Ok(DeviceState::Fault)
             {
@@ -455,7 +458,7 @@ impl HealthMonitor {
                 ),
             );
         }
-        if s.state() == Ok(DeviceState::Fault) {
+        if s.state() == Ok(DeviceState::Fault) && !ordered_stop {
             self.raise(
                 Process::StimDriver,
                 Severity::Fault,
@@ -932,6 +935,31 @@ mod tests {
         assert_eq!(ev[0].process, Process::SimMuscle);
         assert_eq!(ev[0].message, "sim-muscle: EMCY 0x8130 heartbeat_lost");
         assert_eq!(ev[0].severity, Severity::Fault);
+    }
+
+    /// A stopped stimulator (after a disarm) and the safe state the supervisor ordered are
+    /// not faults; a stimulator or driver fault still is.
+    #[test]
+    fn ordered_stops_are_not_faults() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        live(&mut h, 10 * MS);
+        let mut s = status(99);
+        s.state = DeviceState::PreOperational as u8;
+        s.stimulator_state = DeviceState::Stopped as u8;
+        h.on_driver_status(&s, 11 * MS);
+        assert!(h.take_events().is_empty());
+        s.state = DeviceState::Fault as u8;
+        s.fault_code = DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED;
+        h.on_driver_status(&s, 12 * MS);
+        assert!(h.take_events().is_empty());
+        s.fault_code = 0xFF21;
+        h.on_driver_status(&s, 13 * MS);
+        let ev = h.take_events();
+        assert!(
+            ev.iter()
+                .any(|e| e.process == Process::StimDriver && e.severity == Severity::Fault),
+            "{ev:?}"
+        );
     }
 
     /// Re-arming clears only processes that are live again.

@@ -20,6 +20,7 @@ use crate::limits::ReferenceLimits;
 use crate::outer_loop::OuterLoopSettings;
 use crate::profile::ProfileSpec;
 use crate::protocol::Command;
+use crate::summary::{BeatRow, Series};
 
 /// What to simulate.
 #[derive(Debug, Clone)]
@@ -75,6 +76,40 @@ pub struct SimResult {
 
 const MS: u64 = 1_000_000;
 
+/// CLOCK_MONOTONIC time of the first simulated sample, ns (1 s, so that no stamp is 0).
+pub const T0_NS: u64 = 1_000 * MS;
+
+impl SimResult {
+    /// The run as the time series of a recording (sample k at [`T0_NS`] + k ms), for
+    /// [`crate::summary::summarise`] and the plots.
+    pub fn series(&self) -> Series {
+        Series {
+            t_ns: (0..self.pulse.len() as u64)
+                .map(|k| T0_NS + k * MS)
+                .collect(),
+            reference: self.reference.clone(),
+            model: self.model_force.clone(),
+            measured: self.measured.clone(),
+            pulse: self.pulse.clone(),
+            beats: self
+                .beats
+                .iter()
+                .map(|b| {
+                    let m = &b.measurement;
+                    BeatRow {
+                        start_ns: m.beat.start_ns,
+                        period_ns: m.beat.period_ns,
+                        on_ns: m.beat.on_ns,
+                        plateau: m.plateau_mean.unwrap_or(f64::NAN),
+                        pulses: m.pulses,
+                        fti: m.fti,
+                    }
+                })
+                .collect(),
+        }
+    }
+}
+
 /// Runs the chain for `settings.seconds`.
 pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, SimError> {
     let mut pg = controller.pattern_generator()?;
@@ -88,8 +123,7 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
         stale_after_ns: 100 * MS,
         stale_ramp_per_s: 2.0,
     });
-    // Start at 1 s of monotonic time so that no stamp is 0.
-    let t0 = 1_000 * MS;
+    let t0 = T0_NS;
     core.command(&Command::Arm, t0, Ok(()))
         .map_err(SimError::Refused)?;
     core.command(

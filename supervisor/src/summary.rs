@@ -300,6 +300,18 @@ fn latency(row: &BTreeMap<&str, f64>) -> Latency {
     }
 }
 
+/// What a run's figures need besides its time series: the processes' timing and the
+/// stimulator's pulse count (none for an in-process simulation).
+#[derive(Debug, Clone, Default)]
+pub struct RunTiming {
+    /// rt-core's last TimingReport.
+    pub rt_core: Latency,
+    /// stim-driver's last TimingReport.
+    pub stim_driver: Option<Latency>,
+    /// DriverStatus `pulses_sent`, last.
+    pub pulses_sent: Option<u64>,
+}
+
 /// Summarises the recording in `dir`.
 pub fn analyse(dir: &Path, input: &AnalysisInput) -> Result<Summary, SummaryError> {
     let s = read_series(dir)?;
@@ -316,9 +328,27 @@ pub fn analyse(dir: &Path, input: &AnalysisInput) -> Result<Summary, SummaryErro
             .collect();
         last.insert(row.get("source").copied().unwrap_or(0.0) as u8, row);
     }
-    let rt = last.get(&1).map(latency).unwrap_or_default();
-    let drv = last.get(&2).map(latency);
+    let timing = RunTiming {
+        rt_core: last.get(&1).map(latency).unwrap_or_default(),
+        stim_driver: last.get(&2).map(latency),
+        pulses_sent: status.col("pulses_sent").last().map(|&x| x as u64),
+    };
+    Ok(summarise(&s, input, timing, dir.display().to_string()))
+}
 
+/// The figures of a run from its time series (a recording's, or an in-process
+/// simulation's) and its timing; `recording` names where the series came from.
+pub fn summarise(
+    s: &Series,
+    input: &AnalysisInput,
+    timing: RunTiming,
+    recording: String,
+) -> Summary {
+    let RunTiming {
+        rt_core: rt,
+        stim_driver: drv,
+        pulses_sent,
+    } = timing;
     // Complete beats only.
     let (from, to) = match (s.beats.first(), s.beats.last()) {
         (Some(a), Some(b)) => (a.start_ns, b.start_ns + b.period_ns),
@@ -368,7 +398,7 @@ pub fn analyse(dir: &Path, input: &AnalysisInput) -> Result<Summary, SummaryErro
         .map(|p| ((p - input.target) / input.target).abs())
         .fold(0.0, f64::max);
     let k5 = plateaus.len().min(5);
-    Ok(Summary {
+    Summary {
         duration_s: (to.saturating_sub(from)) as f64 * 1e-9,
         contractions: n,
         rms_error_model: rms_model,
@@ -390,13 +420,13 @@ pub fn analyse(dir: &Path, input: &AnalysisInput) -> Result<Summary, SummaryErro
             mean(&plateaus[plateaus.len() - k5..]),
         ],
         worst_deviation_after_10: worst,
-        pulses_sent: status.col("pulses_sent").last().map(|&x| x as u64),
+        pulses_sent,
         deadline_misses: rt.misses,
         rt_wake_p99_us: rt.wake_us[1],
         driver_forward_p99_us: drv.map_or(f64::NAN, |l| l.ipc_us[1]),
         rt_core: rt,
         stim_driver: drv,
         timing_functional_only: input.uml,
-        recording: dir.display().to_string(),
-    })
+        recording,
+    }
 }

@@ -204,8 +204,11 @@ impl LocalControllerNetwork {
     pub fn control(&self, act: &Activation<f64>, z: [f64; 2]) -> ControlAction {
         let gains = self.gains(act);
         let u_raw = -gains.k_i * self.x_i - gains.k_x[0] * z[0] - gains.k_x[1] * z[1];
-        // NaN (impossible for finite state) maps to 0 as well: `max` returns the non-NaN.
-        let u_cont = u_raw.max(0.0);
+        // Written out rather than `u_raw.max(0.0)`: `max` may return either zero for
+        // u_raw = -0.0, and which one depends on the optimisation level, so a live loop and
+        // its offline replay built differently disagreed bit for bit. This is always +0.0
+        // at and below zero, and NaN (impossible for finite state) maps to 0 as well.
+        let u_cont = if u_raw > 0.0 { u_raw } else { 0.0 };
         ControlAction {
             gains,
             u_raw,

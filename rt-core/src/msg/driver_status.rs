@@ -20,6 +20,9 @@ pub enum DeviceState {
     Stimulating = 3,
     /// Safe state after a fault; output off until explicitly re-armed.
     Fault = 4,
+    /// Stopped on command (NMT stop, a disarm): output off until explicitly re-armed, but
+    /// nothing went wrong. Only the stimulator reports it.
+    Stopped = 5,
     /// Not known (e.g. no STATUS frame received from the stimulator yet).
     Unknown = 255,
 }
@@ -34,6 +37,7 @@ impl TryFrom<u8> for DeviceState {
             2 => Self::Armed,
             3 => Self::Stimulating,
             4 => Self::Fault,
+            5 => Self::Stopped,
             255 => Self::Unknown,
             other => {
                 return Err(ValidationError::UnknownEnum {
@@ -75,6 +79,11 @@ pub struct DriverStatus {
 }
 
 impl DriverStatus {
+    /// `fault_code` of a safe state the supervisor ordered (DriverCommand SafeStop): the
+    /// driver is in its safe state because it was told to be, not because of a fault it
+    /// found.
+    pub const FAULT_CODE_SAFE_STOP_ORDERED: u16 = 0xFF2B;
+
     /// The driver's state, decoded.
     pub fn state(&self) -> Result<DeviceState, ValidationError> {
         DeviceState::try_from(self.state)

@@ -100,7 +100,10 @@ impl Contract for StimTick {
     const QOS: PubSubQos = PubSubQos {
         max_publishers: 1,
         max_subscribers: 8,
-        subscriber_buffer: 64,
+        // About 1 s of ticks: the supervisor records every tick from a normal-priority
+        // thread that may be descheduled for tens of ms (and much longer in a UML guest);
+        // 64 lost ticks there. The shared memory this costs is 8 x 1024 samples.
+        subscriber_buffer: 1024,
         history: 0,
     };
 

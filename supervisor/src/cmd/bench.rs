@@ -4,6 +4,11 @@
 //! `vcan-run`, which uses native vcan when the kernel has it and a User-Mode Linux guest
 //! otherwise; inside, it starts sim-muscle, stim-driver, rt-core and the supervisor daemon,
 //! arms, runs the cardiac profile, stops everything and prints the summary.
+//!
+//! `--in-process` runs the same chain in one process in simulated time instead
+//! ([`supervisor::simulation`]: the supervisor's profile and outer loop, rt-core's reference
+//! tracking and pattern generator with the same controller file, the same sim-muscle preset
+//! and force sensor): no CAN, no processes, no latencies; the same summary otherwise.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -15,15 +20,19 @@ use supervisor::bench::{Stack, StackOptions, log_tail};
 use supervisor::plots::{LatencyCurve, RunSeries, percentile_grid, plot_latency, plot_run};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
-use supervisor::summary::{AnalysisInput, Summary, analyse, read_series};
+use supervisor::summary::{
+    AnalysisInput, BaselineFn, Latency, RunTiming, Series, Summary, analyse, read_series, summarise,
+};
 
 use super::client::OnOff;
 
 /// Arguments of `supervisor bench`.
 #[derive(Debug, Clone, clap::Args)]
 #[command(
+    args_override_self = true,
     after_help = "Example: supervisor bench --seconds 30 --hr 75 --json bench.json\n\
-The README's `scripts/bench` builds everything and runs this with --seconds 30."
+The README's `scripts/bench` builds everything and runs this with --seconds 30 (a later \
+option overrides an earlier one, so `scripts/bench --seconds 60` works)."
 )]
 pub struct Args {
     /// Length of the cardiac profile, s.
@@ -41,6 +50,9 @@ pub struct Args {
     /// Outer loop (thesis Controller 1).
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub outer_loop: OnOff,
+    /// Outer-loop integral gain per beat, (0, 1] (default: the supervisor's, 0.3).
+    #[arg(long)]
+    pub outer_gain: Option<f64>,
     /// Fatigue in the simulated muscle (Ding 2003).
     #[arg(long)]
     pub fatigue: bool,
@@ -57,6 +69,10 @@ pub struct Args {
     /// Length of the time window shown in the force plot, s.
     #[arg(long, default_value_t = 4.0)]
     pub plot_window_s: f64,
+    /// Simulate the chain in this process (simulated time; no CAN, no processes, no
+    /// latencies) instead of running the processes on CAN.
+    #[arg(long)]
+    pub in_process: bool,
 }
 
 fn check(a: &Args) -> anyhow::Result<()> {
@@ -66,6 +82,9 @@ fn check(a: &Args) -> anyhow::Result<()> {
     if !(a.plot_window_s.is_finite() && a.plot_window_s > 0.0) {
         bail!("--plot-window-s {} must be > 0", a.plot_window_s);
     }
+    outer_settings(a)
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--outer-gain: {e}"))?;
     let spec = ProfileSpec::Cardiac(cardiac(a));
     spec.validate(&supervisor::limits::ReferenceLimits::default())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -76,6 +95,15 @@ fn check(a: &Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+fn outer_settings(a: &Args) -> supervisor::outer_loop::OuterLoopSettings {
+    let d = supervisor::outer_loop::OuterLoopSettings::default();
+    supervisor::outer_loop::OuterLoopSettings {
+        enabled: a.outer_loop == OnOff::On,
+        gain: a.outer_gain.unwrap_or(d.gain),
+        ..d
+    }
 }
 
 fn cardiac(a: &Args) -> CardiacSpec {
@@ -97,6 +125,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         Some(o) => o.clone(),
         None => PathBuf::from("target/bench").join(supervisor::recording::utc_stamp()),
     };
+    if a.in_process {
+        return in_process(&a, &out);
+    }
     if std::env::var_os("FES_VCAN_IFACE").is_none() {
         // Not in a CAN environment yet: run this same command inside one.
         let vcan_run = bin_dir.join("vcan-run");
@@ -152,6 +183,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
         uml,
         fatigue: a.fatigue,
         outer_loop: a.outer_loop == OnOff::On,
+        outer_gain: a.outer_gain,
         prefix,
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
@@ -238,8 +270,25 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
             out.join("recording").display()
         );
     };
-    let amplitude = a.amplitude;
-    let shape_of = move |fti: f64, period_ms: usize, on_ms: usize| {
+    let summary = analyse(
+        rec,
+        &AnalysisInput {
+            delay,
+            target: a.amplitude,
+            baseline: Some(baseline(a.amplitude, scale_n, delay)),
+            uml,
+        },
+    )?;
+    let series = read_series(rec)?;
+    let plots = draw(&series, &out, &summary, a, delay, true)?;
+    print_summary(&summary, &plots, &unclean);
+    write_json(&summary, &plots, a)
+}
+
+/// The 40 Hz baseline of equal FTI on the fast preset (without fatigue), for beats of
+/// the profile's amplitude.
+fn baseline(amplitude: f64, scale_n: f64, delay: usize) -> BaselineFn {
+    Box::new(move |fti: f64, period_ms: usize, on_ms: usize| {
         let muscle = sim_muscle::muscle::MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
         let shape = BeatShape {
             period_ms,
@@ -249,20 +298,102 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
             delay,
         };
         baseline_40hz(&muscle, scale_n, &shape, fti)
+    })
+}
+
+/// `--in-process`: the chain in simulated time, with the bench's muscle and sensor.
+fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
+    use sim_muscle::muscle::{MuscleConfig, max_force_n};
+    use sim_muscle::sensor::SensorConfig;
+    use supervisor::simulation::{SimSettings, simulate};
+
+    let controller = rt_core::control::file::Controller::load(&a.controller)
+        .with_context(|| format!("controller {}", a.controller.display()))?;
+    let (scale_n, delay) = (controller.lmn.force_scale_n, controller.lmn.delay);
+    let mut muscle = MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
+    if a.fatigue {
+        muscle.fatigue = Some(sim_muscle::ding::FatigueParams::for_muscle(&muscle.ding));
+    }
+    // The bench's sensor: `sim-muscle stimulator --measured --offset-n 0` (default noise).
+    let fmax = max_force_n(&muscle.ding)?;
+    let sensor = SensorConfig {
+        offset_n: 0.0,
+        ..SensorConfig::defaults_for(fmax, 1)
     };
-    let summary = analyse(
-        rec,
+    println!(
+        "bench: in-process simulation (simulated time; no CAN, no processes, no latencies): fast muscle{}, {}",
+        if a.fatigue { " with fatigue" } else { "" },
+        a.controller.display()
+    );
+    let run = simulate(
+        &controller,
+        &SimSettings {
+            muscle,
+            sensor: Some(sensor),
+            scale_n,
+            offset_n: 0.0,
+            profile: ProfileSpec::Cardiac(cardiac(a)),
+            outer_loop: outer_settings(a),
+            contraction: supervisor::contraction::ContractionSettings {
+                delay_ms: delay as f64,
+                ..Default::default()
+            },
+            limits: supervisor::limits::ReferenceLimits::default(),
+            seconds: a.seconds,
+        },
+    )?;
+    std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
+    let beats_csv = out.join("beats.csv");
+    let mut text =
+        String::from("index,start_s,plateau_mean,peak,fti,pulses,correction,next_amplitude\n");
+    for b in &run.beats {
+        let m = &b.measurement;
+        text += &format!(
+            "{},{:.3},{},{:.6},{:.6},{},{:.6},{:.6}\n",
+            m.beat.index,
+            (m.beat.start_ns - supervisor::simulation::T0_NS) as f64 * 1e-9,
+            m.plateau_mean.map_or(String::new(), |p| format!("{p:.6}")),
+            m.peak,
+            m.fti,
+            m.pulses,
+            b.update.correction,
+            b.update.amplitude
+        );
+    }
+    std::fs::write(&beats_csv, text).with_context(|| format!("write {}", beats_csv.display()))?;
+    let series = run.series();
+    let none = Latency {
+        wake_us: [f64::NAN; 3],
+        ipc_us: [f64::NAN; 3],
+        compute_p99_us: f64::NAN,
+        publish_p99_us: f64::NAN,
+        ..Default::default()
+    };
+    let summary = summarise(
+        &series,
         &AnalysisInput {
             delay,
             target: a.amplitude,
-            baseline: Some(Box::new(shape_of)),
-            uml,
+            baseline: Some(baseline(a.amplitude, scale_n, delay)),
+            uml: false,
         },
-    )?;
-    let plots = draw(rec, &out, &summary, a, delay)?;
-    print_summary(&summary, &plots, &unclean);
+        RunTiming {
+            rt_core: none,
+            stim_driver: None,
+            pulses_sent: None,
+        },
+        "none (in-process simulation)".into(),
+    );
+    let plots = draw(&series, out, &summary, a, delay, false)?;
+    print_summary(&summary, &plots, &[]);
+    println!("  per beat: {}", beats_csv.display());
+    write_json(&summary, &plots, a)
+}
+
+/// `--json FILE`: the summary, the plots and the command line.
+fn write_json(summary: &Summary, plots: &[PathBuf], a: &Args) -> anyhow::Result<()> {
     if let Some(j) = &a.json {
-        let mut v = serde_json::to_value(&summary)?;
+        let mut v = serde_json::to_value(summary)?;
         if let Some(o) = v.as_object_mut() {
             o.insert(
                 "plots".into(),
@@ -286,13 +417,13 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
 }
 
 fn draw(
-    rec: &Path,
+    series: &Series,
     out: &Path,
     s: &Summary,
     a: &Args,
     delay: usize,
+    latency: bool,
 ) -> anyhow::Result<Vec<PathBuf>> {
-    let series = read_series(rec)?;
     let mut paths = Vec::new();
     let t0 = series.beats.first().map_or(0, |b| b.start_ns);
     let run = RunSeries {
@@ -347,7 +478,7 @@ fn draw(
             }
         }
     }
-    if !curves.is_empty() {
+    if latency && !curves.is_empty() {
         let p = out.join("latency.png");
         plot_latency(
             &p,
@@ -416,6 +547,21 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
             }
         );
     }
+    if s.rt_core.ticks == 0 && s.stim_driver.is_none() {
+        println!("  latency: not measured (in-process simulation: no processes)");
+    } else {
+        print_latency(s);
+    }
+    println!("  recording: {}", s.recording);
+    for p in plots {
+        println!("  plot: {}", p.display());
+    }
+    if !unclean.is_empty() {
+        println!("  note: not stopped cleanly: {}", unclean.join(", "));
+    }
+}
+
+fn print_latency(s: &Summary) {
     println!(
         "  latency (us){}       p50       p99       max",
         if s.timing_functional_only {
@@ -446,11 +592,4 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
         "  deadline misses (rt-core skipped periods) {}",
         s.deadline_misses
     );
-    println!("  recording: {}", s.recording);
-    for p in plots {
-        println!("  plot: {}", p.display());
-    }
-    if !unclean.is_empty() {
-        println!("  note: not stopped cleanly: {}", unclean.join(", "));
-    }
 }

@@ -44,24 +44,33 @@ fn e3(v: Option<f64>) -> String {
     v.map_or_else(|| "diverges".into(), |x| format!("{:.3}", x * 1e3))
 }
 
-/// The Markdown table (errors x 1e-3, as the thesis prints them).
+/// The Markdown table (errors x 1e-3, as the thesis prints them). `stable` says whether
+/// every local model of the chosen network is stable (an unstable one is a model to
+/// repair with `modify --stabilise`, not one to design a controller from).
 pub fn table(rows: &[CompareRow]) -> String {
     let mut s = String::from(
-        "| scheduling | parameter domain | estimation | Ts (ms) | # units | train MSSE (x1e-3) | test MSSE (x1e-3) | train MSPE (x1e-3) | sizes tried | time (s) |\n|---|---|---|---:|---:|---:|---:|---:|---|---:|\n",
+        "| scheduling | parameter domain | estimation | Ts (ms) | # units | train MSSE (x1e-3) | test MSSE (x1e-3) | train MSPE (x1e-3) | stable | sizes tried | time (s) |\n|---|---|---|---:|---:|---:|---:|---:|---|---|---:|\n",
     );
     for r in rows {
-        let (units, train, test, mspe) = match &r.best {
+        let (units, train, test, mspe, stable) = match &r.best {
             Some(b) => (
                 b.units.to_string(),
                 e3(b.train_msse),
                 e3(b.test_msse),
                 b.train_mspe
                     .map_or("-".into(), |v| format!("{:.4}", v * 1e3)),
+                if b.stable { "yes" } else { "NO" },
             ),
-            None => ("-".into(), "diverges".into(), "diverges".into(), "-".into()),
+            None => (
+                "-".into(),
+                "diverges".into(),
+                "diverges".into(),
+                "-".into(),
+                "-",
+            ),
         };
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {units} | {train} | {test} | {mspe} | {}..{} | {:.0} |\n",
+            "| {} | {} | {} | {} | {units} | {train} | {test} | {mspe} | {stable} | {}..{} | {:.0} |\n",
             r.scheduling, r.domain, r.mode, r.ts_ms, r.units_tried.0, r.units_tried.1, r.seconds
         ));
     }

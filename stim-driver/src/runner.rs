@@ -1,0 +1,225 @@
+//! The forward thread: the real-time loop around [`ForwardPath`].
+//!
+//! It enters real time ([`enter_realtime`] with `[rt]`), opens its iceoryx2 ports on the
+//! node `stim-driver` (the StimTick subscriber, the DriverCommand subscriber and a listener
+//! on the StimTick event), brings the stimulator up ([`ForwardPath::start`]) and then loops:
+//!
+//! 1. wait for a StimTick notification, at most until [`ForwardPath::next_deadline`] (the
+//!    heartbeat, the watchdogs, at most one tick period);
+//! 2. take the publisher liveness the report thread found, the bus events the receive
+//!    thread queued, the commands, then every StimTick, each with the time it was taken;
+//! 3. run the timers ([`ForwardPath::poll`]), publish the counters, report the wake-up.
+//!
+//! Nothing in the loop allocates on the heap, locks a contended lock, logs or blocks beyond
+//! the bounded write retry: events go to the report thread through [`Shared::events`]. On
+//! stop it sends NMT stop and a "stopped" heartbeat ([`ForwardPath::shutdown`]).
+
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+use crossbeam::queue::ArrayQueue;
+use rt_core::msg::service::{open_pubsub, open_stim_tick_event};
+use rt_core::msg::{Contract, DriverCommand, StimTick};
+use rt_core::rt::alloc;
+use rt_core::rt::clock::monotonic_ns;
+use rt_core::rt::realtime::{RtStatus, enter_realtime};
+use rt_core::rt::runner::{RunError, create_node};
+
+use crate::bus::BusCounters;
+use crate::config::DriverConfig;
+use crate::event::{BusEvent, DriverEvent, EventSink, QueueSink, SharedStatus};
+use crate::forward::ForwardPath;
+use crate::tx::CanTx;
+
+/// The iceoryx2 node name of the forward thread (the supervisor watches it).
+pub const NODE_NAME: &str = "stim-driver";
+/// Capacity of the queue of bus events (receive thread → forward thread).
+pub const BUS_QUEUE_CAPACITY: usize = 1024;
+
+/// What the driver's threads share (allocated once, before the threads start).
+#[derive(Debug)]
+pub struct Shared {
+    /// The forward thread's counters, and the publisher liveness for it.
+    pub status: SharedStatus,
+    /// Forward thread → report thread.
+    pub events: ArrayQueue<DriverEvent>,
+    /// Events dropped because [`Self::events`] was full.
+    pub event_overflows: AtomicU64,
+    /// Receive thread → forward thread.
+    pub bus_events: ArrayQueue<BusEvent>,
+    /// The receive thread's counters.
+    pub bus: BusCounters,
+    /// Heap allocations of the forward loop since it started (0 is the requirement).
+    pub hot_path_allocations: AtomicU64,
+    /// Set when the forward thread has ended (the other threads then finish).
+    pub forward_ended: AtomicBool,
+    /// Set by a thread that failed: every loop stops.
+    pub failed: AtomicBool,
+    /// The forward thread's real-time status line, once known.
+    pub rt_status: OnceLock<RtStatus>,
+}
+
+impl Shared {
+    /// Queues sized by `config`.
+    pub fn new(config: &DriverConfig) -> Self {
+        Self {
+            status: SharedStatus::default(),
+            events: ArrayQueue::new(config.telemetry.queue_capacity),
+            event_overflows: AtomicU64::new(0),
+            bus_events: ArrayQueue::new(BUS_QUEUE_CAPACITY),
+            bus: BusCounters::default(),
+            hot_path_allocations: AtomicU64::new(0),
+            forward_ended: AtomicBool::new(false),
+            failed: AtomicBool::new(false),
+            rt_status: OnceLock::new(),
+        }
+    }
+
+    /// True when the loops must end: `stop` (a signal) or a failed thread.
+    pub fn stopping(&self, stop: &AtomicBool) -> bool {
+        stop.load(Ordering::Relaxed) || self.failed.load(Ordering::Relaxed)
+    }
+}
+
+/// How the forward thread ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ForwardOutcome {
+    /// Its real-time status.
+    pub rt: RtStatus,
+    /// The NMT stop of the shutdown was written.
+    pub stop_sent: bool,
+    /// Heap allocations in the loop (0 expected; `None` without the counting allocator).
+    pub hot_path_allocations: Option<u64>,
+}
+
+fn port_err(port: &'static str) -> impl Fn(&dyn core::fmt::Debug) -> RunError {
+    move |e| RunError::Port {
+        port,
+        detail: format!("{e:?}"),
+    }
+}
+
+/// Runs the forward thread on the calling thread until `stop` is set or another thread
+/// fails (see the module documentation). `on_ready` is called once real time is entered
+/// and the ports exist, before the first frame is sent.
+pub fn run_forward<T: CanTx>(
+    config: &DriverConfig,
+    tx: T,
+    shared: &Shared,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(&RtStatus),
+) -> Result<ForwardOutcome, RunError> {
+    let rt = enter_realtime(&config.rt)?;
+    let settings = config
+        .forward_settings()
+        .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
+    let prefix = config.ipc.prefix.as_str();
+    let node = create_node(NODE_NAME)?;
+    let ticks = open_pubsub::<StimTick>(&node, prefix)?
+        .subscriber_builder()
+        .buffer_size(StimTick::QOS.subscriber_buffer)
+        .create()
+        .map_err(|e| port_err("StimTick subscriber")(&e))?;
+    let commands = open_pubsub::<DriverCommand>(&node, prefix)?
+        .subscriber_builder()
+        .buffer_size(DriverCommand::QOS.subscriber_buffer)
+        .create()
+        .map_err(|e| port_err("DriverCommand subscriber")(&e))?;
+    let listener = open_stim_tick_event(&node, prefix)?
+        .listener_builder()
+        .create()
+        .map_err(|e| port_err("stim-tick listener")(&e))?;
+
+    let mut path = ForwardPath::new(settings, tx);
+    let mut sink = QueueSink::new(&shared.events, &shared.event_overflows);
+    let _ = shared.rt_status.set(rt.clone());
+    on_ready(&rt);
+    let allocations_counted = alloc::counting_allocator_installed();
+
+    // ---- hot path from here on: no heap allocation, log or blocking call ----
+    alloc::track_current_thread(true);
+    let baseline = alloc::current_thread_allocations();
+    path.start(monotonic_ns(), &mut sink);
+    shared.status.store(path.counters());
+    let mut bus_events_lost = 0u64;
+    let max_ticks = StimTick::QOS.subscriber_buffer;
+    let max_commands = DriverCommand::QOS.subscriber_buffer;
+    while !shared.stopping(stop) {
+        let now = monotonic_ns();
+        let deadline = path.next_deadline(now);
+        let mut notified = false;
+        let waited = listener.timed_wait(
+            |_| notified = true,
+            Duration::from_nanos(deadline.saturating_sub(now).max(1_000)),
+        );
+        let wake_ns = monotonic_ns();
+        if waited.is_err() {
+            // A failed wait must not spin: fall back to sleeping to the deadline.
+            rt_core::rt::clock::sleep_until(deadline);
+        }
+        if shared.stopping(stop) {
+            break;
+        }
+        path.on_liveness(shared.status.liveness(), wake_ns, &mut sink);
+        while let Some(event) = shared.bus_events.pop() {
+            path.on_bus(event, monotonic_ns(), &mut sink);
+        }
+        let lost = shared.bus.events_lost.load(Ordering::Relaxed);
+        if lost != bus_events_lost {
+            bus_events_lost = lost;
+            path.on_bus(BusEvent::EventsLost, monotonic_ns(), &mut sink);
+        }
+        for _ in 0..max_commands {
+            match commands.receive() {
+                Ok(Some(sample)) => {
+                    let command = *sample.payload();
+                    drop(sample);
+                    path.on_command(&command, monotonic_ns(), &mut sink);
+                }
+                Ok(None) | Err(_) => break,
+            }
+        }
+        for _ in 0..max_ticks {
+            match ticks.receive() {
+                Ok(Some(sample)) => {
+                    let tick = *sample.payload();
+                    drop(sample);
+                    let received = monotonic_ns();
+                    path.on_tick(&tick, received, &mut sink);
+                    sink.emit(DriverEvent::Tick {
+                        seq: tick.seq,
+                        ipc_ns: received.saturating_sub(tick.t_publish_ns),
+                        decide_ns: monotonic_ns().saturating_sub(received),
+                    });
+                }
+                Ok(None) | Err(_) => break,
+            }
+        }
+        let polled = monotonic_ns();
+        path.poll(polled, &mut sink);
+        path.count_wakeup();
+        shared.status.store(path.counters());
+        sink.emit(DriverEvent::Wake {
+            timer_lateness_ns: (!notified).then(|| wake_ns.saturating_sub(deadline)),
+            input_ns: polled.saturating_sub(wake_ns),
+        });
+        if allocations_counted {
+            let a = alloc::current_thread_allocations();
+            shared
+                .hot_path_allocations
+                .store(a.allocations - baseline.allocations, Ordering::Relaxed);
+        }
+    }
+    // ---- end of the hot path ----
+    path.shutdown(monotonic_ns(), &mut sink);
+    shared.status.store(path.counters());
+    alloc::track_current_thread(false);
+    let stop_sent = !path.stop_pending();
+    Ok(ForwardOutcome {
+        rt,
+        stop_sent,
+        hot_path_allocations: allocations_counted
+            .then(|| shared.hot_path_allocations.load(Ordering::Relaxed)),
+    })
+}
