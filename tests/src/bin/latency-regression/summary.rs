@@ -10,11 +10,13 @@ use serde::{Deserialize, Serialize};
 /// Schema tag of the summary.
 pub const SUMMARY_SCHEMA: &str = "fes-latency-summary/1";
 
-/// Why `driver_forward_us` is absent (until stim-driver's `run` measures its forward
-/// path against the real loop).
-pub const DRIVER_FORWARD_ABSENT: &str = "not measured: the stim-driver binary on main has \
-no `run` subcommand yet (stim-driver/src/main.rs is a stub); its forward path is \
-benchmarked by the driver's own suite on a counting sink";
+/// Why `driver_forward_us` is absent: `stim-driver run` reached main too late to be wired
+/// in, and it needs a CAN interface, which a kernel without CAN (this VM, CI) only has
+/// inside the User-Mode Linux guest.
+pub const DRIVER_FORWARD_ABSENT: &str = "not measured by this suite yet: `stim-driver run` \
+landed on main after the suite was built and needs a CAN interface (vcan0; here only inside \
+the UML guest of vcan-run); the driver writes its own forward-path histograms \
+(docs/stim-driver.md)";
 
 /// p50 / p99 / p99.9 / max, µs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
