@@ -6,10 +6,12 @@
 //!   supervisor) and stops what depends on a stopped unit (driver -> rt-core, stimulator);
 //! - the real-time settings of the units agree with the shipped configuration files;
 //! - the safety, iceoryx2 and hardening settings are there;
-//! - the installer keeps the operator's configuration and rejects bad options.
-//!
-//! The boot under a real systemd (ordering, watchdog) is `systemd_boot.rs`.
+//! - the installer keeps the operator's configuration and rejects bad options;
+//! - `notify`: the real rt-core binary against a fake service manager (READY, watchdog
+//!   feeding only while the loop ticks, STOPPING), in one test binary with the above.
 
+#[path = "systemd_units/notify.rs"]
+mod notify;
 mod systemd_support;
 
 use std::collections::{BTreeMap, BTreeSet};

@@ -7,6 +7,7 @@
 use std::process::Command;
 
 use anyhow::{Context, bail};
+use rt_core::rt::histogram::LatencyHistogram;
 
 /// cyclictest's result.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -83,6 +84,30 @@ impl CyclictestHistogram {
     /// Samples with latency >= `us`.
     pub fn at_least(&self, us: usize) -> u64 {
         self.counts.iter().skip(us).sum::<u64>() + self.overflows
+    }
+
+    /// The same samples as a [`LatencyHistogram`] in ns, each at the middle of its
+    /// whole-microsecond bucket (`b + 0.5` µs, as the ratios compare), overflows at the
+    /// maximum; written to `cyclictest.hlog` so that every curve is read the same way.
+    pub fn to_latency_histogram(&self) -> LatencyHistogram {
+        let mut raw = hdrhistogram::Histogram::<u64>::new_with_bounds(
+            LatencyHistogram::LOWEST_NS,
+            LatencyHistogram::HIGHEST_NS,
+            LatencyHistogram::SIGNIFICANT_DIGITS,
+        )
+        .expect("constant HdrHistogram bounds are valid");
+        let mut record = |ns: u64, n: u64| {
+            if n > 0 {
+                let _ = raw.record_n(ns.min(LatencyHistogram::HIGHEST_NS), n);
+            }
+        };
+        for (bucket, &count) in self.counts.iter().enumerate() {
+            record(bucket as u64 * 1000 + 500, count);
+        }
+        record(self.max_us * 1000, self.overflows);
+        let mut h = LatencyHistogram::new();
+        h.add_raw(&raw);
+        h
     }
 
     /// The bucket (µs, truncated) holding quantile `q`; a quantile among the overflows

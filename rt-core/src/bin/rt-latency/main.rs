@@ -3,14 +3,18 @@
 //! 1. Optional background load on another core (`stress-ng --cpu 1 --taskset <other>`),
 //!    kept running for both measurements.
 //! 2. `rt-probe` (a subscriber process, same core, one priority below) is started; then the
-//!    real `rt-core` binary runs for N seconds with the same period, priority and core,
+//!    real `rt-core` binary runs for N seconds (from its sd_notify READY=1, i.e. its first
+//!    tick) with the same period, priority and core,
 //!    while a reference publisher (a supervisor stand-in) steps the reference every second.
 //!    rt-core writes wake-up lateness, input, compute and publish times to `rt-core.hlog`; the probe
 //!    writes publish-to-receive latency to `rt-probe.hlog`.
 //! 3. After rt-core has exited, `cyclictest` runs with the same period, priority and core for
 //!    N seconds (never concurrently on the same core).
 //! 4. One table (p50 / p99 / p99.9 / max), tick and miss counts, and the ratios of our
-//!    wake-up lateness to cyclictest's; `--json` writes the same as JSON.
+//!    wake-up lateness to cyclictest's; `--json` writes the same as JSON, and
+//!    `cyclictest.hlog` (tag `cyclictest`, one interval per round) holds cyclictest's
+//!    histograms next to the
+//!    per-round `rt-core-N.hlog` / `rt-probe-N.hlog`.
 
 mod cyclictest;
 
@@ -30,7 +34,7 @@ use rt_core::msg::service::open_pubsub;
 use rt_core::rt::MissingRightsPolicy;
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::merge_by_tag;
+use rt_core::rt::hlog::{HlogWriter, merge_by_tag};
 use rt_core::rt::probe::ProbeSummary;
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::runner::create_node;
@@ -303,6 +307,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let mut total = RoundTotals::default();
     let mut cyclic: Option<CyclictestHistogram> = None;
     let mut cyclic_cmd = None;
+    let mut cyclic_rounds: Vec<(u64, CyclictestHistogram)> = Vec::new();
     for round in 0..rounds {
         let seconds =
             cli.seconds / rounds + u64::from(round + 1 == rounds) * (cli.seconds % rounds);
@@ -327,6 +332,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             let text = cyclictest::run(&args)?;
             std::fs::write(out(&format!("cyclictest-{round}.txt")), &text)?;
             let h = CyclictestHistogram::parse(&text)?;
+            cyclic_rounds.push((seconds, h.clone()));
             match &mut cyclic {
                 Some(all) => all.merge(&h),
                 None => cyclic = Some(h),
@@ -335,6 +341,22 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         }
     }
     drop(_load);
+    if !cyclic_rounds.is_empty() {
+        // One interval per round (its start = the round's offset in cyclictest time).
+        let path = out("cyclictest.hlog");
+        let mut log = HlogWriter::create(
+            &path,
+            "cyclictest (rt-tests), one interval per round, bucket middles",
+            std::time::SystemTime::now(),
+        )?;
+        let mut start = Duration::ZERO;
+        for (seconds, h) in &cyclic_rounds {
+            let length = Duration::from_secs(*seconds);
+            log.write(&h.to_latency_histogram(), "cyclictest", start, length)?;
+            start += length;
+        }
+        log.flush()?;
+    }
     let RoundTotals {
         wake,
         input,
@@ -475,15 +497,23 @@ fn measure_rt_core(
     let measured = std::thread::scope(|s| -> anyhow::Result<()> {
         let publisher = s.spawn(|| publish_references(&prefix, &stop_references));
         let result = (|| -> anyhow::Result<()> {
+            // rt-core says READY=1 (sd_notify) once its loop ticks; the round's time runs
+            // from then, not from the spawn (start-up, mlockall included, can take seconds
+            // on a loaded machine).
+            let ready = ReadySocket::bind(&cli.out_dir, round)?;
             let mut rt_core = Guarded {
                 name: "rt-core",
                 child: Command::new(rt_core_bin)
                     .arg("--config")
                     .arg(&config_path)
+                    .env("NOTIFY_SOCKET", &ready.path)
+                    .env_remove("WATCHDOG_USEC")
+                    .env_remove("WATCHDOG_PID")
                     .spawn()
                     .context("starting rt-core")?,
             };
-            let end = Instant::now() + Duration::from_secs(seconds) + Duration::from_millis(200);
+            ready.wait(&mut rt_core, Duration::from_secs(30))?;
+            let end = Instant::now() + Duration::from_secs(seconds);
             while Instant::now() < end {
                 if let Some(status) = rt_core.child.try_wait()? {
                     bail!("rt-core exited early ({status}); see its log above");
@@ -537,6 +567,52 @@ fn measure_rt_core(
         received: summary.received,
         lost: summary.lost,
     })
+}
+
+/// The datagram socket rt-core notifies (`NOTIFY_SOCKET`), to learn when it ticks.
+struct ReadySocket {
+    socket: std::os::unix::net::UnixDatagram,
+    path: PathBuf,
+}
+
+impl ReadySocket {
+    fn bind(out_dir: &std::path::Path, round: u64) -> anyhow::Result<Self> {
+        // sun_path holds at most 107 bytes: an absolute path in the out directory if it
+        // fits, else in the temp directory.
+        let name = format!("notify-{}-{round}.sock", std::process::id());
+        let mut path = std::path::absolute(out_dir.join(&name))?;
+        if path.as_os_str().len() > 100 {
+            path = std::env::temp_dir().join(format!("rt-latency-{name}"));
+        }
+        let _ = std::fs::remove_file(&path);
+        let socket = std::os::unix::net::UnixDatagram::bind(&path)
+            .with_context(|| format!("binding {}", path.display()))?;
+        socket.set_read_timeout(Some(Duration::from_millis(50)))?;
+        Ok(Self { socket, path })
+    }
+
+    /// Waits for READY=1, failing if rt-core exits first or `timeout` passes.
+    fn wait(&self, rt_core: &mut Guarded, timeout: Duration) -> anyhow::Result<()> {
+        let deadline = Instant::now() + timeout;
+        let mut buf = [0u8; 4096];
+        while Instant::now() < deadline {
+            if let Ok(n) = self.socket.recv(&mut buf)
+                && buf[..n].split(|&b| b == b'\n').any(|l| l == b"READY=1")
+            {
+                return Ok(());
+            }
+            if let Some(status) = rt_core.child.try_wait()? {
+                bail!("rt-core exited before it was ready ({status}); see its log above");
+            }
+        }
+        bail!("rt-core did not report READY=1 within {timeout:?}")
+    }
+}
+
+impl Drop for ReadySocket {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
 }
 
 fn read_trim(path: &str) -> String {

@@ -11,8 +11,6 @@
 //! rt-core runs without real-time rights here (RLIMIT_RTPRIO 0 and CAP_SYS_NICE dropped,
 //! best-effort policy), so the slowed loop busy-waits at normal priority.
 
-mod systemd_support;
-
 use std::io::Read;
 use std::os::unix::net::UnixDatagram;
 use std::os::unix::process::CommandExt;
@@ -20,7 +18,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use systemd_support::{Scratch, build_stack};
+use crate::systemd_support::{Scratch, build_stack};
 
 /// A fake service manager: the socket rt-core notifies.
 struct FakeManager {
