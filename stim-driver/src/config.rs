@@ -488,6 +488,14 @@ impl DriverConfig {
             i.max_width_us,
             "1..=1000 (the bus range)",
         )?;
+        // Above the stimulator's own limit the interlock guards nothing (a typo such as
+        // 4000000000 uA was accepted before; found by the bad-input sweep).
+        range(
+            i.max_amplitude_ua <= self.stimulator.max_amplitude_ua,
+            "interlocks.max_amplitude_ua",
+            i.max_amplitude_ua,
+            "<= stimulator.max_amplitude_ua",
+        )?;
         let limits = InterlockLimits {
             min_ipi_ns: u64::from(i.min_ipi_us) * US,
             max_pulses: i.max_pulses,
