@@ -25,7 +25,7 @@
 //! min_ipi_us = 2000              # on grid times
 //! max_pulses = 100               # in any window of rate_window_ms
 //! rate_window_ms = 1000
-//! max_amplitude_ua = 100000
+//! max_amplitude_ua = 100000      # <= stimulator.max_amplitude_ua
 //! max_width_us = 500
 //! max_charge_nc = 40000          # amplitude x width per phase
 //! channels = [0]
