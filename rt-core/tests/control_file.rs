@@ -213,3 +213,88 @@ fn a_negative_gain_model_needs_the_explicit_override() {
     let file: ControllerFile = serde_json::from_str(&c.to_json_string().unwrap()).unwrap();
     assert!(file.design.allow_negative_gain);
 }
+
+mod json_mutation;
+
+/// Cases of the controller-file fuzz target: about 2.5 s in a debug build on one core.
+const CONTROLLER_FUZZ_CASES: u32 = 2500;
+
+/// Fuzz target (issue 10): a designed controller's valid file, mutated as in the model-file
+/// target. The loader must return an error value, or a controller whose file re-loads to the
+/// same gains and whose pattern generator builds; a panic fails the test. Non-UTF-8 inputs
+/// go through `Controller::load`, whose error must name the file.
+#[test]
+fn mutated_files_are_rejected_or_load_a_valid_controller() {
+    use json_mutation::{Mutation, Tally, apply, mutation, scratch_file};
+    use proptest::test_runner::{Config, TestCaseError, TestRunner};
+    use proptest::{prop_assert, prop_assert_eq};
+    use std::cell::RefCell;
+
+    let doc = document();
+    let same = apply(
+        &doc,
+        &Mutation {
+            structural: vec![],
+            bytes: None,
+        },
+    );
+    assert_eq!(serde_json::from_slice::<Value>(&same).unwrap(), doc);
+    let tally = RefCell::new(Tally::default());
+    let started = std::time::Instant::now();
+    let mut runner = TestRunner::new(Config {
+        cases: CONTROLLER_FUZZ_CASES,
+        failure_persistence: None,
+        ..Config::default()
+    });
+    let result = runner.run(&mutation(), |m| {
+        let bytes = apply(&doc, &m);
+        let mut t = tally.borrow_mut();
+        t.cases += 1;
+        let loaded = match std::str::from_utf8(&bytes) {
+            Ok(text) => Controller::from_json_str(text),
+            Err(_) => {
+                t.non_utf8 += 1;
+                let path = scratch_file("controller", &bytes);
+                let r = Controller::load(&path);
+                if let Err(e) = &r {
+                    let msg = e.to_string();
+                    prop_assert!(msg.contains("fuzz-controller"), "names no path: {}", msg);
+                }
+                r
+            }
+        };
+        match loaded {
+            Err(_) => t.rejected += 1,
+            Ok(c) => {
+                t.accepted += 1;
+                let text = c
+                    .to_json_string()
+                    .map_err(|e| TestCaseError::fail(format!("accepted, not writable: {e}")))?;
+                let back = Controller::from_json_str(&text)
+                    .map_err(|e| TestCaseError::fail(format!("accepted, not re-loadable: {e}")))?;
+                prop_assert_eq!(back.gains(), c.gains());
+                c.pattern_generator()
+                    .map_err(|e| TestCaseError::fail(format!("accepted, no generator: {e}")))?;
+            }
+        }
+        Ok(())
+    });
+    let t = tally.into_inner();
+    eprintln!(
+        "controller file fuzz: {} cases in {:.2?} ({} accepted and valid, {} rejected, {} non-UTF-8)",
+        t.cases,
+        started.elapsed(),
+        t.accepted,
+        t.rejected,
+        t.non_utf8
+    );
+    std::fs::remove_file(
+        std::env::temp_dir().join(format!("fuzz-controller-{}.json", std::process::id())),
+    )
+    .ok();
+    result.unwrap();
+    assert!(
+        t.rejected > t.cases / 2,
+        "mutations should mostly break the file: {t:?}"
+    );
+}

@@ -543,13 +543,44 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
             "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\ntypo = 1\n",
             "typo",
         ),
+        // The bad-input sweep (issue 10): NaN, infinity, negative, huge, truncated.
+        (
+            "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\n[reference]\nstale_ramp_per_s = nan\n",
+            "reference.stale_ramp_per_s",
+        ),
+        (
+            "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\n[reference]\nstale_ramp_per_s = inf\n",
+            "reference.stale_ramp_per_s",
+        ),
+        (
+            "schema = \"fes-rt-core/1\"\nperiod_us = -1000\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\n",
+            "period_us",
+        ),
+        (
+            "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\n[rt]\nprefault_stack_bytes = 99999999999\n",
+            "prefault_stack_bytes",
+        ),
+        (
+            "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pat",
+            "TOML",
+        ),
     ];
+    let mut cases: Vec<(Vec<u8>, &str)> = cases
+        .iter()
+        .map(|(t, n)| (t.as_bytes().to_vec(), *n))
+        .collect();
+    cases.push((
+        b"schema = \"fes-rt-core/1\"\n# \xff\xfe\n".to_vec(),
+        "UTF-8",
+    ));
     for (text, needle) in cases {
         let path = dir.path("bad.toml");
-        std::fs::write(&path, text).unwrap();
+        std::fs::write(&path, &text).unwrap();
+        let text = String::from_utf8_lossy(&text);
         let (status, stderr) = start_rt_core(&path, false).finish(Duration::from_secs(10));
         assert_eq!(status.code(), Some(1), "{text}\n{stderr}");
         assert!(stderr.contains(needle), "expected {needle:?} in:\n{stderr}");
+        assert!(!stderr.contains("panicked"), "{text}\n{stderr}");
     }
     let (status, stderr) =
         start_rt_core(&dir.path("missing.toml"), false).finish(Duration::from_secs(10));

@@ -25,7 +25,7 @@
 //! min_ipi_us = 2000              # on grid times
 //! max_pulses = 100               # in any window of rate_window_ms
 //! rate_window_ms = 1000
-//! max_amplitude_ua = 100000
+//! max_amplitude_ua = 100000      # <= stimulator.max_amplitude_ua
 //! max_width_us = 500
 //! max_charge_nc = 40000          # amplitude x width per phase
 //! channels = [0]
@@ -487,6 +487,14 @@ impl DriverConfig {
             "interlocks.max_width_us",
             i.max_width_us,
             "1..=1000 (the bus range)",
+        )?;
+        // Above the stimulator's own limit the interlock guards nothing (a typo such as
+        // 4000000000 uA was accepted before; found by the bad-input sweep).
+        range(
+            i.max_amplitude_ua <= self.stimulator.max_amplitude_ua,
+            "interlocks.max_amplitude_ua",
+            i.max_amplitude_ua,
+            "<= stimulator.max_amplitude_ua",
         )?;
         let limits = InterlockLimits {
             min_ipi_ns: u64::from(i.min_ipi_us) * US,

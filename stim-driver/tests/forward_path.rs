@@ -823,3 +823,122 @@ fn scripted_tick_publisher() {
         on_bus::run_publisher(&spec);
     }
 }
+
+/// Bad-input sweep of the binary's configuration (issue 10, item 3): each malformed file
+/// makes `run --config FILE --check` exit 1 with a short message naming the problem and no
+/// panic. `--check` opens no bus, so nothing can reach one.
+#[test]
+fn malformed_configurations_are_refused_clearly_without_a_panic() {
+    use std::process::Command;
+    const EXE: &str = env!("CARGO_BIN_EXE_stim-driver");
+    let example = Command::new(EXE).arg("example-config").output().unwrap();
+    assert!(example.status.success());
+    let good = String::from_utf8(example.stdout).unwrap();
+    let dir = std::env::temp_dir().join(format!("stim-driver-badcfg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let edit = |from: &str, to: &str| {
+        assert!(good.contains(from), "example has no {from:?}");
+        good.replacen(from, to, 1).into_bytes()
+    };
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "schema",
+            edit("fes-stim-driver/1", "fes-stim-driver/9"),
+            "fes-stim-driver/9",
+        ),
+        ("nan", edit("max_n = 40.0", "max_n = nan"), "max_n"),
+        ("inf", edit("max_n = 40.0", "max_n = inf"), "max_n"),
+        ("negative", edit("max_n = 40.0", "max_n = -1.0"), "max_n"),
+        (
+            "negative time",
+            edit("watchdog_ms = 100", "watchdog_ms = -100"),
+            "watchdog_ms",
+        ),
+        (
+            "zero time",
+            edit("tick_period_us = 1000", "tick_period_us = 0"),
+            "tick_period_us",
+        ),
+        (
+            "huge",
+            edit(
+                "max_pulses = 100\nrate",
+                "max_pulses = 99999999999999\nrate",
+            ),
+            "max_pulses",
+        ),
+        (
+            "huge amplitude",
+            edit(
+                "max_amplitude_ua = 100000\nmax_width_us = 500\nmax_charge",
+                "max_amplitude_ua = 4000000000\nmax_width_us = 500\nmax_charge",
+            ),
+            "max_amplitude_ua",
+        ),
+        (
+            "channel",
+            edit("channels = [0]", "channels = [99]"),
+            "channels",
+        ),
+        ("unknown key", edit("[force]", "[force]\ntypo = 1"), "typo"),
+        (
+            "truncated",
+            good.as_bytes()[..good.len() / 3].to_vec(),
+            "configuration",
+        ),
+        (
+            "non-UTF-8",
+            [
+                &good.as_bytes()[..40],
+                &[0xFF, 0xFE][..],
+                &good.as_bytes()[40..],
+            ]
+            .concat(),
+            "UTF-8",
+        ),
+    ];
+    for (name, bytes, needle) in cases {
+        let path = dir.join("bad.toml");
+        std::fs::write(&path, &bytes).unwrap();
+        let out = Command::new(EXE)
+            .args(["run", "--check", "--config"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        eprintln!("{name}: {}", stderr.trim());
+        assert_eq!(out.status.code(), Some(1), "{name}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{name}: {stderr}");
+        assert!(
+            stderr.contains(needle),
+            "{name}: expected {needle:?} in {stderr}"
+        );
+        assert!(stderr.lines().count() <= 6, "{name}: not short: {stderr}");
+    }
+    let missing = dir.join("missing.toml");
+    let out = Command::new(EXE)
+        .args(["run", "--check", "--config"])
+        .arg(&missing)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("missing.toml") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    // The good file passes the same check (the sweep is not refusing everything).
+    let path = dir.join("good.toml");
+    std::fs::write(&path, &good).unwrap();
+    let out = Command::new(EXE)
+        .args(["run", "--check", "--config"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

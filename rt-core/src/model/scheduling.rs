@@ -36,6 +36,20 @@ pub enum SchedulingError {
     /// The sampling period is not a finite positive number.
     #[error("sampling period Ts = {0} s must be finite and > 0")]
     SamplingPeriod(f64),
+    /// The discretised prefilter is not finite (parameters far outside any muscle's range).
+    #[error(
+        "prefilter w_n = {wn} rad/s, zeta = {zeta}, K = {gain} cannot be discretised at Ts = {ts} s: Phi or Gamma is not finite"
+    )]
+    Discretisation {
+        /// K.
+        gain: f64,
+        /// w_n.
+        wn: f64,
+        /// zeta.
+        zeta: f64,
+        /// Ts.
+        ts: f64,
+    },
 }
 
 /// How phi is obtained, as stored in the model file (`scheduling`).
@@ -134,10 +148,14 @@ impl Prefilter {
             (a[1][1] * pm[0] - a[0][1] * pm[1]) / det,
             (-a[1][0] * pm[0] + a[0][0] * pm[1]) / det,
         ];
+        let dc_gain = gain / det;
+        if !(phi.iter().flatten().chain(&gamma).all(|v| v.is_finite()) && dc_gain.is_finite()) {
+            return Err(SchedulingError::Discretisation { gain, wn, zeta, ts });
+        }
         Ok(Self {
             phi,
             gamma,
-            dc_gain: gain / det,
+            dc_gain,
         })
     }
 
@@ -199,8 +217,24 @@ pub fn expm2(a: [[f64; 2]; 2], t: f64) -> [[f64; 2]; 2] {
             t * (1.0 + z / 6.0 + z * z / 120.0 + z * z * z / 5040.0),
         )
     } else if q2 > 0.0 {
+        // e^{mu t} cosh(q t) as (e^{(mu+q)t} + e^{(mu-q)t})/2: the product form gives
+        // 0 * inf = NaN for a heavily overdamped A (|mu| t in the hundreds).
+        // The roots mu +- q, the smaller one from Vieta (r r' = det A) so that it keeps its
+        // precision when |mu| >> q - |mu|.
         let q = q2.sqrt();
-        ((q * t).cosh(), (q * t).sinh() / q)
+        let big = if mu <= 0.0 { mu - q } else { mu + q };
+        let small = det / big;
+        let (plus, minus) = if mu <= 0.0 {
+            (small, big)
+        } else {
+            (big, small)
+        };
+        let (ep, em) = ((plus * t).exp(), (minus * t).exp());
+        let (ec, es) = (0.5 * (ep + em), 0.5 * (ep - em) / q);
+        return [
+            [ec + es * (a[0][0] - mu), es * a[0][1]],
+            [es * a[1][0], ec + es * (a[1][1] - mu)],
+        ];
     } else {
         let q = (-q2).sqrt();
         ((q * t).cos(), (q * t).sin() / q)
@@ -249,6 +283,33 @@ mod tests {
             sum = mul(sum, sum);
         }
         sum
+    }
+
+    /// A heavily over-damped A (|mu| t = 800, beyond exp's range) gave 0 * inf = NaN.
+    /// Independent truth: tr expm(A t) = e^{r1 t} + e^{r2 t} with the roots from Vieta
+    /// (r1 = mu - q, r2 = det A / r1) and det expm(A t) = e^{tr(A) t} (Liouville).
+    #[test]
+    fn expm2_stays_finite_when_heavily_over_damped() {
+        for (a, t) in [
+            ([[0.0, 1.0], [-2500.0, -1.6e6]], 1e-3),
+            ([[0.0, 1.0], [-2500.0, -4.3e11]], 1e-3),
+        ] {
+            let e = expm2(a, t);
+            assert!(e.iter().flatten().all(|v| v.is_finite()), "{e:?}");
+            let mu = 0.5 * a[1][1];
+            let det = -a[1][0];
+            let r1 = mu - (mu * mu - det).sqrt();
+            let r2 = det / r1;
+            let trace = (r1 * t).exp() + (r2 * t).exp();
+            assert!(
+                (e[0][0] + e[1][1] - trace).abs() < 1e-12,
+                "{e:?} vs {trace}"
+            );
+            let d = e[0][0] * e[1][1] - e[0][1] * e[1][0];
+            assert!(d.abs() < 1e-15, "{d}");
+        }
+        let p = Prefilter::new(25_000.0, 50.0, 4.294_967_296e9, 1e-3).unwrap();
+        assert!(p.transition().iter().flatten().all(|v| v.is_finite()));
     }
 
     #[test]
