@@ -183,13 +183,18 @@ fn all_structures() -> Vec<Lmn> {
 }
 
 fn sim(lmn: &Lmn) -> Vec<f64> {
-    let net = lmn.network().unwrap();
+    try_sim(lmn).unwrap()
+}
+
+/// Simulates a fixed irregular pulse train from rest (the error says which step failed).
+fn try_sim(lmn: &Lmn) -> Result<Vec<f64>, String> {
+    let net = lmn.network().map_err(|e| format!("no network: {e}"))?;
     let u: Vec<f64> = (0..1500)
         .map(|k| if k % 17 == 0 || k % 29 == 0 { 1.0 } else { 0.0 })
         .collect();
     let mut y = vec![0.0; u.len()];
-    simulate(&net, &u, &mut y).unwrap();
-    y
+    simulate(&net, &u, &mut y).map_err(|e| format!("cannot simulate: {e}"))?;
+    Ok(y)
 }
 
 /// save -> load -> identical parameters and bit-identical simulation, for every structure.
@@ -282,6 +287,55 @@ fn lenient_loader_reports_instability() {
     assert!((report[2].radius - (1.0 + TS * 9.96)).abs() < 1e-9);
     assert!(report[2].poles.iter().any(|p| (p.re - 9.96).abs() < 1e-6));
     assert!(lmn.network().is_ok());
+}
+
+/// Finite but absurd parameters are refused (their simulated force overflows), and so is a
+/// model that cannot start: one with no rest state, even when opened for repair.
+#[test]
+fn rejects_huge_parameters_and_a_model_without_a_rest_state() {
+    let msg = reject(|v| v["units"][1]["c"][0] = Value::from(1e13));
+    assert_names(&msg, &["units[1].c[0]", "1e13", "exceeds"]);
+    let msg = reject(|v| v["units"][0]["dy"] = Value::from(-2e12));
+    assert_names(&msg, &["units[0].dy", "exceeds"]);
+    // ARX(1) units with a = -1: A(1) = 1 + a = 0 at every phi, so no equilibrium exists.
+    let unit = ArxUnit {
+        a: [-1.0, 0.0, 0.0],
+        b: [0.01, 0.0, 0.0],
+        d: 0.001,
+    };
+    let singular = base(
+        LocalModelSet::ArxShift {
+            order: 1,
+            units: vec![unit; 2],
+        },
+        2,
+    );
+    let text = file::to_json_string(&singular).unwrap();
+    // Two stable direct-form local models (poles -150 and -20, and those of unit 0) whose
+    // half-and-half interpolation has complex poles of radius ~200 at Ts = 1 ms.
+    let mut coupled = all_structures().remove(0);
+    if let LocalModelSet::SsDirect(u) = &mut coupled.local {
+        u[1].a[0][1] = 4294967296.0;
+    }
+    assert!(coupled.stability().iter().all(|s| s.stable));
+    let msg = file::from_json_str(&file::to_json_string(&coupled).unwrap(), Stability::Require)
+        .unwrap_err()
+        .to_string();
+    assert_names(
+        &msg,
+        &["local models are stable but their interpolation", "phi ="],
+    );
+    for stability in [Stability::Require, Stability::Report] {
+        let msg = file::from_json_str(&text, stability)
+            .unwrap_err()
+            .to_string();
+        let expected = if stability == Stability::Require {
+            "unstable"
+        } else {
+            "no rest state"
+        };
+        assert_names(&msg, &[expected]);
+    }
 }
 
 #[test]
@@ -465,9 +519,11 @@ fn mutated_files_are_rejected_or_load_a_valid_model() {
                 t.accepted += 1;
                 lmn.validate(Stability::Require)
                     .map_err(|e| TestCaseError::fail(format!("accepted but invalid: {e}")))?;
-                // Finding (not asserted): validation bounds no magnitudes, so a gain of
-                // 1e308 passes and simulates to an infinite force. Counted and shown.
-                if !sim(&lmn).iter().all(|v| v.is_finite()) {
+                // Accepted means runnable: a rest state exists and the magnitude bound
+                // keeps the simulated force finite.
+                let y = try_sim(&lmn)
+                    .map_err(|e| TestCaseError::fail(format!("accepted but {e} ({m:?})")))?;
+                if !y.iter().all(|v| v.is_finite()) {
                     t.non_finite += 1;
                     if t.example.is_empty() {
                         t.example = format!("{m:?}");
@@ -494,6 +550,10 @@ fn mutated_files_are_rejected_or_load_a_valid_model() {
     )
     .ok();
     result.unwrap();
+    assert_eq!(
+        t.non_finite, 0,
+        "accepted models with a non-finite force: {t:?}"
+    );
     assert!(
         t.rejected > t.cases / 2,
         "the mutations should mostly break the file: {t:?}"

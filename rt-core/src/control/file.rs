@@ -340,6 +340,10 @@ impl Controller {
         for (i, (stored, design)) in file.units.iter().zip(&c.units).enumerate() {
             compare_unit(i, stored, design)?;
         }
+        // Valid means runnable: the pattern generator of the file's mode must build (e.g.
+        // the measured-force mode needs an input delay of at least one sample).
+        c.pattern_generator()
+            .map_err(|e| invalid("mode", e.to_string()))?;
         Ok(c)
     }
 }

@@ -405,6 +405,10 @@ pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError>
         provenance,
     };
     lmn.validate(stability)?;
+    if stability == Stability::Report {
+        // `Require` checks it inside `validate`; a file opened for repair must still run.
+        lmn.check_rest_state()?;
+    }
     Ok(lmn)
 }
 

@@ -182,6 +182,15 @@ pub enum LmnError {
     },
 }
 
+/// Largest magnitude accepted for any local-model parameter: far above any identified value
+/// (forces are normalised; delta-domain ARX coefficients scale as Ts^-n, 1e9 for n = 3 at
+/// Ts = 1 ms) and far below overflow, so an edited or corrupted file cannot load as a model
+/// whose simulated force overflows to infinity.
+pub const MAX_PARAMETER_MAGNITUDE: f64 = 1e12;
+
+/// Scheduling values at which the interpolated model's stability is checked on load.
+pub const FROZEN_STABILITY_POINTS: usize = 201;
+
 fn invalid(field: impl Into<String>, problem: impl Into<String>) -> LmnError {
     LmnError::Invalid {
         field: field.into(),
@@ -282,13 +291,24 @@ impl Lmn {
         let ts = self.ts;
         let finite = |i: usize, name: &str, vals: &[f64]| -> Result<(), LmnError> {
             for (j, v) in vals.iter().enumerate() {
-                if !v.is_finite() {
-                    let field = if vals.len() == 1 {
+                let field = || {
+                    if vals.len() == 1 {
                         format!("units[{i}].{name}")
                     } else {
                         format!("units[{i}].{name}[{j}]")
-                    };
-                    return Err(invalid(field, format!("{v} is not a finite number")));
+                    }
+                };
+                if !v.is_finite() {
+                    return Err(invalid(field(), format!("{v} is not a finite number")));
+                }
+                if v.abs() > MAX_PARAMETER_MAGNITUDE {
+                    return Err(invalid(
+                        field(),
+                        format!(
+                            "|{v:e}| exceeds {MAX_PARAMETER_MAGNITUDE:e}: no muscle model of \
+                             normalised force has a parameter this large"
+                        ),
+                    ));
                 }
             }
             Ok(())
@@ -410,8 +430,40 @@ impl Lmn {
                     });
                 }
             }
+            self.check_frozen_stability()?;
+            self.check_rest_state()?;
         }
         Ok(())
+    }
+
+    /// The network builds and has a rest state (the initial state of every simulation,
+    /// replay and RT run). A model that passes the per-parameter checks can still fail
+    /// here, e.g. an output-scheduled network whose interpolated A(1) is singular on the
+    /// whole valid range; such a model cannot be run, so it is not a valid model file.
+    pub fn check_rest_state(&self) -> Result<(), LmnError> {
+        self.network()?
+            .rest_state()
+            .map(|_| ())
+            .map_err(|e| invalid("units", e.to_string()))
+    }
+
+    /// Every local model is stable *and* so is their interpolation at every frozen
+    /// scheduling value ([`Network::frozen_stability_radius`] on
+    /// [`FROZEN_STABILITY_POINTS`] points).
+    fn check_frozen_stability(&self) -> Result<(), LmnError> {
+        let (radius, phi) = self
+            .network()?
+            .frozen_stability_radius(FROZEN_STABILITY_POINTS);
+        if radius < 1.0 {
+            return Ok(());
+        }
+        Err(invalid(
+            "units",
+            format!(
+                "the local models are stable but their interpolation at phi = {phi:.4} is not \
+                 (max pole radius {radius:.6} >= 1)"
+            ),
+        ))
     }
 
     /// The state-space local models in direct form (`None` for ARX structures or parallel

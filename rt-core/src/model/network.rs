@@ -398,6 +398,35 @@ impl<S: Scalar> Network<S> {
 }
 
 impl Network<f64> {
+    /// Frozen-scheduling stability: the largest pole radius of the interpolated model
+    /// (eq. 2.16 / 2.26: max |1 + Ts p| in state space, max |z| for ARX) over `points`
+    /// scheduling values spread evenly across the valid range, and the phi where it occurs.
+    /// Stable local models do not make their interpolation stable (a convex combination of
+    /// stable matrices can be unstable), so a usable network needs this below 1 as well;
+    /// it is necessary, not sufficient, for stability under fast-changing scheduling.
+    pub fn frozen_stability_radius(&self, points: usize) -> (f64, f64) {
+        let (lo, hi) = self.validity.valid_range();
+        let mut worst = (0.0_f64, lo);
+        for g in 0..points.max(2) {
+            let phi = lo + (hi - lo) * g as f64 / (points.max(2) - 1) as f64;
+            let act = self.validity.eval(phi);
+            let radius = match &self.local {
+                LocalModels::StateSpace(u) => act.interpolate(|i| u[i]).stability_radius(self.ts),
+                LocalModels::Arx { order, units } => {
+                    super::arx::shift_poles(&act.interpolate(|i| units[i]), *order)
+                        .iter()
+                        .map(|z| z.norm())
+                        .fold(0.0, f64::max)
+                }
+            };
+            // NaN (a non-finite interpolation) counts as unstable.
+            if !(radius <= worst.0) {
+                worst = (radius, phi);
+            }
+        }
+        worst
+    }
+
     /// The same network in another scalar type, every parameter mapped through `f` (e.g. to
     /// constant [`crate::num::Dual`]s); the identification code seeds its parameters itself.
     pub fn cast<T: Scalar>(&self, f: impl Fn(f64) -> T + Copy) -> Network<T> {
