@@ -420,8 +420,16 @@ impl Network<f64> {
                 }
             };
             // NaN (a non-finite interpolation) counts as unstable.
-            if !(radius <= worst.0) {
+            if radius.is_nan() || radius > worst.0 {
+                let radius = if radius.is_nan() {
+                    f64::INFINITY
+                } else {
+                    radius
+                };
                 worst = (radius, phi);
+                if radius.is_infinite() {
+                    break;
+                }
             }
         }
         worst
