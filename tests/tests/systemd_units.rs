@@ -8,8 +8,11 @@
 //! - the safety, iceoryx2 and hardening settings are there;
 //! - the installer keeps the operator's configuration and rejects bad options;
 //! - `notify`: the real rt-core binary against a fake service manager (READY, watchdog
-//!   feeding only while the loop ticks, STOPPING), in one test binary with the above.
+//!   feeding only while the loop ticks, STOPPING), in one test binary with the above;
+//! - `boot` (`#[ignore]`d, minutes): the units booted by a real systemd in a UML guest.
 
+#[path = "systemd_units/boot.rs"]
+mod boot;
 #[path = "systemd_units/notify.rs"]
 mod notify;
 mod systemd_support;

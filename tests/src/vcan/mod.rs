@@ -29,6 +29,7 @@ mod native;
 mod process;
 mod shell;
 mod uml;
+pub use uml::{MODULES as UML_CAN_MODULES, MODULES_ROOT as UML_MODULES_ROOT};
 
 /// Set in a prepared environment: the CAN interface to use ("inside" mode).
 pub const ENV_IFACE: &str = "FES_VCAN_IFACE";

@@ -21,13 +21,14 @@ use super::{
 };
 
 /// Kernel modules the guest loads, in dependency order (relative to the modules' `kernel/`).
-const MODULES: [&str; 4] = [
+pub const MODULES: [&str; 4] = [
     "net/can/can.ko",
     "net/can/can-raw.ko",
     "drivers/net/can/dev/can-dev.ko",
     "drivers/net/can/vcan.ko",
 ];
-const MODULES_ROOT: &str = "/usr/lib/uml/modules";
+/// Where the Debian user-mode-linux package puts the guest's modules.
+pub const MODULES_ROOT: &str = "/usr/lib/uml/modules";
 /// Marker prefix of the lines the guest script prints for the host.
 pub(crate) const MARK: &str = "@@FES-VCAN-";
 /// Guest memory unless `FES_UML_MEM` says otherwise.
