@@ -37,7 +37,8 @@ systemctl start fes.target
 say start $?
 state started
 wait_for fes-rt-core ActiveState active 60 || say fail "rt-core not active within 60 s"
-wait_for fes-supervisor ActiveState active 30 || say fail "supervisor not active within 30 s"
+wait_for fes-supervisor ActiveState active 90 || say fail "supervisor not active within 90 s"
+say supervisor-restarts "$(prop fes-supervisor NRestarts)"
 state up
 
 # Watchdog: stop rt-core's process; systemd must kill it (WatchdogSec=2) and restart it.
