@@ -32,6 +32,18 @@ pub const LINK_CHECK_NS: u64 = 10_000_000;
 /// Read timeout of the receive socket (the longest the thread sleeps).
 pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
 
+/// The event a decoded stimulator message gives the forward thread: STATUS, EMCY and the
+/// stimulator's heartbeat; `None` for the rest (FORCE is republished on iceoryx2 instead,
+/// host messages are not the stimulator's).
+pub fn forward_event(message: &Message) -> Option<BusEvent> {
+    match message {
+        Message::Status(s) => Some(BusEvent::Status(*s)),
+        Message::Emcy(e) => Some(BusEvent::Emcy(*e)),
+        Message::StimHeartbeat(h) => Some(BusEvent::StimHeartbeat(h.state)),
+        _ => None,
+    }
+}
+
 /// Classifies a CAN error frame (the most severe condition it reports).
 pub fn classify_error_frame(frame: CanErrorFrame) -> BusErrorKind {
     let class = frame.error_bits();
@@ -260,10 +272,11 @@ pub fn run_bus(
                             BusCounters::bump(&counters.publish_errors);
                         }
                     }
-                    Ok(Message::Status(s)) => push(BusEvent::Status(s)),
-                    Ok(Message::Emcy(e)) => push(BusEvent::Emcy(e)),
-                    Ok(Message::StimHeartbeat(h)) => push(BusEvent::StimHeartbeat(h.state)),
-                    Ok(_) => {}
+                    Ok(message) => {
+                        if let Some(event) = forward_event(&message) {
+                            push(event);
+                        }
+                    }
                     Err(_) => BusCounters::bump(&counters.decode_errors),
                 }
             }

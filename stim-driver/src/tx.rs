@@ -4,7 +4,8 @@
 //! receives (its filter drops everything, so its receive queue cannot fill), on which a
 //! full transmit queue (`ENOBUFS`, `EAGAIN`) is retried within a short, configured budget
 //! and then dropped and reported, so the forward path never blocks on the bus.
-//! [`CountingSink`] stands in for the bus in benchmarks and tests.
+//! [`CountingSink`] stands in for the bus in benchmarks and tests, and [`DatagramTx`] (a
+//! Unix socket pair) in the latency suite's forward-path measurement on hosts without CAN.
 
 use std::io;
 use std::os::fd::{AsRawFd, RawFd};
@@ -120,40 +121,151 @@ impl CanTx for SocketTx {
                 errno: libc::EINVAL,
             });
         };
-        let start = monotonic_ns();
-        let deadline = start + self.retry.budget_ns;
-        let mut attempts = 0u32;
-        let mut write_ns = 0;
-        loop {
-            attempts += 1;
-            let before = monotonic_ns();
-            let result = self.socket.write_frame(&can_frame);
-            let after = monotonic_ns();
-            write_ns += after - before;
-            match result {
-                Ok(()) => {
-                    return Ok(TxDone {
-                        retries: attempts - 1,
-                        written_ns: after,
-                        write_ns,
-                    });
-                }
-                Err(e) => {
-                    let errno = e.raw_os_error().unwrap_or(libc::EIO);
-                    match classify(errno) {
-                        Classified::LinkDown => return Err(TxError::LinkDown { errno }),
-                        Classified::Other => return Err(TxError::Failed { errno }),
-                        Classified::QueueFull => {
-                            let next = after + self.retry.interval_ns;
-                            if next > deadline {
-                                return Err(TxError::Dropped { attempts });
-                            }
-                            sleep_until(next);
-                        }
-                    }
-                }
+        let socket = &self.socket;
+        write_with_retry(&self.retry, || {
+            socket
+                .write_frame(&can_frame)
+                .map_err(|e| e.raw_os_error().unwrap_or(libc::EIO))
+        })
+    }
+}
+
+/// Calls `write` (one attempt; `Err(errno)` on failure) until it succeeds, retrying a full
+/// transmit queue (`ENOBUFS`, `EAGAIN`) every `retry.interval_ns` within `retry.budget_ns`.
+fn write_with_retry(
+    retry: &RetryPolicy,
+    mut write: impl FnMut() -> Result<(), i32>,
+) -> Result<TxDone, TxError> {
+    let start = monotonic_ns();
+    let deadline = start + retry.budget_ns;
+    let mut attempts = 0u32;
+    let mut write_ns = 0;
+    loop {
+        attempts += 1;
+        let before = monotonic_ns();
+        let result = write();
+        let after = monotonic_ns();
+        write_ns += after - before;
+        match result {
+            Ok(()) => {
+                return Ok(TxDone {
+                    retries: attempts - 1,
+                    written_ns: after,
+                    write_ns,
+                });
             }
+            Err(errno) => match classify(errno) {
+                Classified::LinkDown => return Err(TxError::LinkDown { errno }),
+                Classified::Other => return Err(TxError::Failed { errno }),
+                Classified::QueueFull => {
+                    let next = after + retry.interval_ns;
+                    if next > deadline {
+                        return Err(TxError::Dropped { attempts });
+                    }
+                    sleep_until(next);
+                }
+            },
         }
+    }
+}
+
+/// Bytes of a frame on a [`DatagramTx`]: identifier (2, little-endian), DLC, 8 data bytes.
+pub const DATAGRAM_LEN: usize = 11;
+
+/// A bus stand-in for measuring the forward path on a host without CAN: frames go as
+/// [`DATAGRAM_LEN`]-byte datagrams over a non-blocking Unix `SOCK_SEQPACKET` socket pair,
+/// with the same retry policy and timing as [`SocketTx`] (one system call per frame into a
+/// kernel queue, as a CAN write). The other end is a [`DatagramPeer`].
+#[derive(Debug)]
+pub struct DatagramTx {
+    fd: std::os::fd::OwnedFd,
+    retry: RetryPolicy,
+}
+
+/// The receiving end of a [`DatagramTx`] (where a virtual stimulator reads the frames).
+#[derive(Debug)]
+pub struct DatagramPeer {
+    fd: std::os::fd::OwnedFd,
+}
+
+/// A connected pair: the driver's transmit side and the stimulator's end.
+pub fn datagram_bus(retry: RetryPolicy) -> io::Result<(DatagramTx, DatagramPeer)> {
+    use nix::sys::socket::{AddressFamily, SockFlag, SockType, socketpair};
+    let (a, b) = socketpair(
+        AddressFamily::Unix,
+        SockType::SeqPacket,
+        None,
+        SockFlag::SOCK_NONBLOCK | SockFlag::SOCK_CLOEXEC,
+    )
+    .map_err(io::Error::from)?;
+    Ok((DatagramTx { fd: a, retry }, DatagramPeer { fd: b }))
+}
+
+impl CanTx for DatagramTx {
+    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        if frame.dlc > 8 || frame.id > 0x7FF {
+            return Err(TxError::Failed {
+                errno: libc::EINVAL,
+            });
+        }
+        let mut bytes = [0u8; DATAGRAM_LEN];
+        bytes[..2].copy_from_slice(&frame.id.to_le_bytes());
+        bytes[2] = frame.dlc;
+        bytes[3..].copy_from_slice(&frame.data);
+        let fd = self.fd.as_raw_fd();
+        write_with_retry(&self.retry, || {
+            // SAFETY: `bytes` is a live buffer of DATAGRAM_LEN bytes; `fd` is owned by self.
+            let n = unsafe { libc::send(fd, bytes.as_ptr().cast(), bytes.len(), 0) };
+            if n == DATAGRAM_LEN as isize {
+                Ok(())
+            } else if n < 0 {
+                Err(io::Error::last_os_error()
+                    .raw_os_error()
+                    .unwrap_or(libc::EIO))
+            } else {
+                Err(libc::EIO)
+            }
+        })
+    }
+}
+
+impl DatagramPeer {
+    /// The next frame, if one is queued (never blocks; `None` also once the transmit side
+    /// is closed). A datagram of the wrong size or with an impossible identifier or DLC is
+    /// an `InvalidData` error.
+    pub fn try_recv(&self) -> io::Result<Option<Frame>> {
+        let mut bytes = [0u8; DATAGRAM_LEN + 1];
+        // SAFETY: `bytes` is a live, writable buffer of its length; `fd` is owned by self.
+        let n = unsafe {
+            libc::recv(
+                self.fd.as_raw_fd(),
+                bytes.as_mut_ptr().cast(),
+                bytes.len(),
+                libc::MSG_DONTWAIT,
+            )
+        };
+        if n < 0 {
+            let e = io::Error::last_os_error();
+            return match e.kind() {
+                io::ErrorKind::WouldBlock => Ok(None),
+                _ => Err(e),
+            };
+        }
+        if n == 0 {
+            // The transmit side is closed (a SOCK_SEQPACKET end of stream).
+            return Ok(None);
+        }
+        let id = u16::from_le_bytes([bytes[0], bytes[1]]);
+        let dlc = bytes[2];
+        if n != DATAGRAM_LEN as isize || id > 0x7FF || dlc > 8 {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                format!("bad datagram: {n} bytes, id {id:#x}, dlc {dlc}"),
+            ));
+        }
+        let mut data = [0u8; 8];
+        data.copy_from_slice(&bytes[3..DATAGRAM_LEN]);
+        Ok(Some(Frame { id, dlc, data }))
     }
 }
 
@@ -211,6 +323,52 @@ mod tests {
         assert!(matches!(classify(libc::ENETDOWN), Classified::LinkDown));
         assert!(matches!(classify(libc::ENODEV), Classified::LinkDown));
         assert!(matches!(classify(libc::EIO), Classified::Other));
+    }
+
+    #[test]
+    fn datagram_bus_carries_frames_exactly_and_reports_a_full_queue() {
+        let retry = RetryPolicy {
+            budget_ns: 0,
+            interval_ns: 0,
+        };
+        let (mut tx, rx) = datagram_bus(retry).unwrap();
+        assert!(rx.try_recv().unwrap().is_none());
+        let f = Frame {
+            id: 0x210,
+            dlc: 3,
+            data: [9, 8, 7, 0, 0, 0, 0, 0],
+        };
+        let done = tx.send(&f).unwrap();
+        assert_eq!(done.retries, 0);
+        assert!(done.written_ns > 0);
+        assert_eq!(rx.try_recv().unwrap(), Some(f));
+        assert!(rx.try_recv().unwrap().is_none());
+        // Nobody reads: the queue fills and, with no retry budget, the frame is dropped.
+        let mut sent = 0u64;
+        let error = loop {
+            match tx.send(&f) {
+                Ok(_) => sent += 1,
+                Err(e) => break e,
+            }
+            assert!(sent < 1_000_000, "the queue never filled");
+        };
+        assert_eq!(error, TxError::Dropped { attempts: 1 });
+        let mut received = 0u64;
+        while let Some(g) = rx.try_recv().unwrap() {
+            assert_eq!(g, f);
+            received += 1;
+        }
+        assert_eq!(received, sent);
+        // Impossible frames are refused before the write.
+        let bad = Frame { id: 0x800, ..f };
+        assert!(matches!(tx.send(&bad), Err(TxError::Failed { .. })));
+        // A closed peer: the write fails with a clear errno, not a hang.
+        let (tx2, rx2) = datagram_bus(retry).unwrap();
+        drop(rx);
+        assert!(matches!(tx.send(&f), Err(TxError::Failed { .. })));
+        // A closed transmit side reads as nothing queued.
+        drop(tx2);
+        assert_eq!(rx2.try_recv().unwrap(), None);
     }
 
     #[test]

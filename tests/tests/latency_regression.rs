@@ -69,6 +69,8 @@ struct Figures {
     overruns: u64,
     compute_p99: f64,
     allocations: u64,
+    /// The driver's hot-path allocations; `None`: no driver measured.
+    driver_allocations: Option<u64>,
 }
 
 const GOOD: Figures = Figures {
@@ -77,6 +79,7 @@ const GOOD: Figures = Figures {
     overruns: 0,
     compute_p99: 2.0,
     allocations: 0,
+    driver_allocations: None,
 };
 
 fn condition_json(f: Figures) -> String {
@@ -84,7 +87,7 @@ fn condition_json(f: Figures) -> String {
     format!(
         r#"{{"ticks": 1024, "misses": {o}, "overruns": {o}, "wake_us": {w},
             "compute_us": {{"p50": 1.0, "p99": {c}, "p999": {c}, "max": {c}}},
-            "ipc_us": {w}, "driver_forward_us": null, "cyclictest_us": {w},
+            "ipc_us": {w}, "driver_forward_us": null, "driver": {d}, "cyclictest_us": {w},
             "ratio_p99": {r99}, "ratio_p999": {r999},
             "cyclictest_samples": 1024, "cyclictest_over_period": 2,
             "hot_path_allocations": {a}, "probe_lost": 0, "input_us": {w},
@@ -95,7 +98,10 @@ fn condition_json(f: Figures) -> String {
         c = f.compute_p99,
         r99 = f.ratio_p99,
         r999 = f.ratio_p999,
-        a = f.allocations
+        a = f.allocations,
+        d = f.driver_allocations.map_or("null".to_owned(), |n| {
+            format!(r#"{{"pulses_sent": 10, "hot_path_allocations": {n}}}"#)
+        })
     )
 }
 
@@ -144,6 +150,7 @@ fn the_gate_applies_the_stated_tolerance() {
         overruns: 6,
         compute_p99: 50.0,
         allocations: 0,
+        driver_allocations: Some(0),
     };
     let load_at_limits = Figures {
         ratio_p99: 2.25,
@@ -154,9 +161,9 @@ fn the_gate_applies_the_stated_tolerance() {
     let (code, out) = compare(&s, &baseline);
     assert_eq!(code, Some(0), "every value at its limit passes:\n{out}");
     assert!(out.contains("PASS"), "{out}");
-    assert_eq!(out.matches(" ok").count(), 10, "5 checks x 2 conditions");
+    assert_eq!(out.matches(" ok").count(), 12, "6 checks x 2 conditions");
 
-    let over: [(&str, Figures); 5] = [
+    let over: [(&str, Figures); 6] = [
         (
             "no_load.ratio_p99",
             Figures {
@@ -189,6 +196,13 @@ fn the_gate_applies_the_stated_tolerance() {
             "no_load.hot_path_allocations",
             Figures {
                 allocations: 1,
+                ..GOOD
+            },
+        ),
+        (
+            "no_load.driver_allocations",
+            Figures {
+                driver_allocations: Some(1),
                 ..GOOD
             },
         ),
@@ -333,7 +347,29 @@ fn short_run_passes_and_a_slowed_tick_is_caught() {
                 "{condition}.{key} percentiles are ordered"
             );
         }
-        assert!(c["driver_forward_us"].is_null());
+        // The driver's forward path: the test pattern fires every 20 ticks, and every
+        // PULSE written reached the virtual stimulator (a pulse written in the tick before
+        // a round's final tick may be cancelled by the safe stop that answers it).
+        let d = &c["driver_forward_us"];
+        assert!(
+            d["p50"].as_f64() <= d["p99"].as_f64()
+                && d["p99"].as_f64() <= d["p999"].as_f64()
+                && d["p999"].as_f64() <= d["max"].as_f64()
+                && d["p50"].as_f64().is_some_and(|v| v > 0.0),
+            "{condition}.driver_forward_us: {d}"
+        );
+        let driver = &c["driver"];
+        let sent = driver["pulses_sent"].as_u64().expect("pulses_sent");
+        let applied = driver["stimulator_pulses"].as_u64().expect("applied");
+        let rounds = c["rounds"].as_u64().expect("rounds");
+        assert!(sent >= 50, "{condition}: {sent} pulses written: {driver}");
+        assert!(
+            applied <= sent && applied + rounds >= sent,
+            "{condition}: {sent} written, {applied} applied"
+        );
+        // Refusals (a pulse come too late after a host stall, a stale tick and the trip
+        // that answers it) are the driver doing its job; they are reported, not judged.
+        assert!(out_dir.join(condition).join("driver-0.hlog").is_file());
         // The ratio is wake p99 over the middle of cyclictest's microsecond bucket.
         let expected = c["wake_us"]["p99"].as_f64().expect("wake")
             / (c["cyclictest_us"]["p99"].as_f64().expect("cyclictest") + 0.5);

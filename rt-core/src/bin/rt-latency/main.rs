@@ -41,6 +41,9 @@ use rt_core::rt::runner::create_node;
 use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
 use serde::Serialize;
 
+/// The driver's hlog tag for StimTick publish → PULSE written (stim-driver's telemetry).
+const TAG_TICK_TO_CAN: &str = "tick_to_can";
+
 use cyclictest::CyclictestHistogram;
 
 /// Runs the real rt-core loop for N seconds with a subscriber process measuring IPC latency,
@@ -84,6 +87,11 @@ struct Cli {
     /// Skip the cyclictest comparison.
     #[arg(long)]
     no_cyclictest: bool,
+    /// Also measure the stim-driver's forward path: run `driver-latency` (the driver's
+    /// real forward thread on a socket-pair bus with a virtual stimulator; fes-tests) at
+    /// the probe's place, one priority below rt-core, and move the probe one lower.
+    #[arg(long)]
+    driver: bool,
     /// Alternate rt-core and cyclictest in this many rounds (each `seconds / rounds` long),
     /// so that both see the same background on a shared machine. Default: 10 s rounds.
     #[arg(long)]
@@ -140,6 +148,10 @@ struct Results {
     probe_received: u64,
     probe_lost: u64,
     probe_core: usize,
+    /// StimTick publish → PULSE written by the driver (`--driver`).
+    driver_forward_us: Option<Percentiles>,
+    /// The driver's counters summed over the rounds (`--driver`).
+    driver: Option<DriverTotals>,
     hot_path_allocations: u64,
     queue_overflows: u64,
     seconds: u64,
@@ -151,6 +163,41 @@ struct Results {
     cyclictest_command: Option<String>,
     kernel: String,
     sched_rt_runtime_us: String,
+}
+
+/// The driver's counters (`driver-latency`'s summary), summed over the rounds.
+#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
+#[serde(default)]
+struct DriverTotals {
+    ticks_received: u64,
+    ticks_lost: u64,
+    ticks_refused: u64,
+    pulses_sent: u64,
+    pulses_rejected: u64,
+    pulses_not_armed: u64,
+    stimulator_pulses: u64,
+    can_tx_errors: u64,
+    trips: u64,
+    watchdog_trips: u64,
+    arms: u64,
+    hot_path_allocations: u64,
+}
+
+impl DriverTotals {
+    fn add(&mut self, o: &DriverTotals) {
+        self.ticks_received += o.ticks_received;
+        self.ticks_lost += o.ticks_lost;
+        self.ticks_refused += o.ticks_refused;
+        self.pulses_sent += o.pulses_sent;
+        self.pulses_rejected += o.pulses_rejected;
+        self.pulses_not_armed += o.pulses_not_armed;
+        self.stimulator_pulses += o.stimulator_pulses;
+        self.can_tx_errors += o.can_tx_errors;
+        self.trips += o.trips;
+        self.watchdog_trips += o.watchdog_trips;
+        self.arms += o.arms;
+        self.hot_path_allocations += o.hot_path_allocations;
+    }
 }
 
 fn main() -> std::process::ExitCode {
@@ -235,8 +282,8 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     if cli.seconds == 0 {
         bail!("--seconds must be at least 1");
     }
-    if !(2..=99).contains(&cli.priority) {
-        bail!("--priority must be in 2..=99 (the probe runs one below)");
+    if !(3..=99).contains(&cli.priority) {
+        bail!("--priority must be in 3..=99 (the probe and the driver run below it)");
     }
     let cores = core_affinity::get_core_ids().unwrap_or_default();
     if !cores.iter().any(|c| c.id == cli.core) {
@@ -251,6 +298,11 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let out = |name: &str| cli.out_dir.join(name);
     let rt_core_bin = sibling_binary("rt-core")?;
     let probe_bin = sibling_binary("rt-probe")?;
+    let driver_bin = if cli.driver {
+        Some(sibling_binary("driver-latency")?)
+    } else {
+        None
+    };
 
     // rt-core configuration (per round: its own prefix and interval log).
     let mut config = match &cli.config {
@@ -319,6 +371,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             seconds,
             &rt_core_bin,
             &probe_bin,
+            driver_bin.as_deref(),
         )?);
         if !cli.no_cyclictest {
             let args = cyclictest::command_line(
@@ -371,6 +424,8 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         queue_overflows,
         received,
         lost,
+        driver_forward,
+        driver,
     } = total;
 
     let wake_p = Percentiles::from_histogram(&wake);
@@ -397,6 +452,8 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         probe_received: received,
         probe_core: cli.probe_core.unwrap_or(cli.core),
         probe_lost: lost,
+        driver_forward_us: driver.map(|_| Percentiles::from_histogram(&driver_forward)),
+        driver,
         hot_path_allocations,
         queue_overflows,
         seconds: cli.seconds,
@@ -433,6 +490,8 @@ struct RoundTotals {
     queue_overflows: u64,
     received: u64,
     lost: u64,
+    driver_forward: LatencyHistogram,
+    driver: Option<DriverTotals>,
 }
 
 impl RoundTotals {
@@ -450,6 +509,10 @@ impl RoundTotals {
         self.queue_overflows += r.queue_overflows;
         self.received += r.received;
         self.lost += r.lost;
+        self.driver_forward.add(&r.driver_forward);
+        if let Some(d) = &r.driver {
+            self.driver.get_or_insert_default().add(d);
+        }
     }
 }
 
@@ -462,6 +525,7 @@ fn measure_rt_core(
     seconds: u64,
     rt_core_bin: &std::path::Path,
     probe_bin: &std::path::Path,
+    driver_bin: Option<&std::path::Path>,
 ) -> anyhow::Result<RoundTotals> {
     let out = |name: &str| cli.out_dir.join(name);
     let mut config = base.clone();
@@ -483,7 +547,7 @@ fn measure_rt_core(
             .arg("--summary")
             .arg(&probe_summary)
             .arg("--priority")
-            .arg((cli.priority - 1).to_string())
+            .arg((cli.priority - 1 - u8::from(driver_bin.is_some())).to_string())
             .arg("--core")
             .arg(cli.probe_core.unwrap_or(cli.core).to_string())
             .stdout(Stdio::piped())
@@ -491,6 +555,42 @@ fn measure_rt_core(
             .context("starting rt-probe")?,
     };
     wait_for_ready(&mut probe)?;
+    // The driver sits where the deployment puts it: one priority below rt-core, on the
+    // probe's core; its virtual stimulator (hardware, in reality) on another core.
+    let driver_hlog = out(&format!("driver-{round}.hlog"));
+    let driver_summary = out(&format!("driver-{round}.json"));
+    let mut driver = match driver_bin {
+        Some(bin) => {
+            let core = cli.probe_core.unwrap_or(cli.core);
+            let mut cmd = Command::new(bin);
+            cmd.arg("--prefix")
+                .arg(&config.ipc.prefix)
+                .arg("--hlog")
+                .arg(&driver_hlog)
+                .arg("--summary")
+                .arg(&driver_summary)
+                .arg("--priority")
+                .arg((cli.priority - 1).to_string())
+                .arg("--core")
+                .arg(core.to_string())
+                .stdout(Stdio::piped());
+            if let Some(other) = core_affinity::get_core_ids()
+                .unwrap_or_default()
+                .iter()
+                .map(|c| c.id)
+                .find(|&c| c != core)
+            {
+                cmd.arg("--stim-core").arg(other.to_string());
+            }
+            let mut d = Guarded {
+                name: "driver-latency",
+                child: cmd.spawn().context("starting driver-latency")?,
+            };
+            wait_for_ready(&mut d)?;
+            Some(d)
+        }
+        None => None,
+    };
 
     let stop_references = AtomicBool::new(false);
     let prefix = config.ipc.prefix.clone();
@@ -533,7 +633,24 @@ fn measure_rt_core(
         result
     });
     let probe_status = probe.wait(Duration::from_secs(10));
+    let driver_status = driver
+        .as_mut()
+        .map(|d| d.terminate(Duration::from_secs(10)));
     measured?;
+    let driver_totals = match driver_status {
+        Some(status) => {
+            let status = status?;
+            if !status.success() {
+                bail!("driver-latency ended with {status}");
+            }
+            let totals: DriverTotals = serde_json::from_slice(
+                &std::fs::read(&driver_summary).context("reading the driver summary")?,
+            )
+            .context("parsing the driver summary")?;
+            Some(totals)
+        }
+        None => None,
+    };
     let probe_status = probe_status?;
     if !probe_status.success() {
         bail!("rt-probe ended with {probe_status}");
@@ -566,6 +683,13 @@ fn measure_rt_core(
         queue_overflows: timing.queue_overflows,
         received: summary.received,
         lost: summary.lost,
+        driver_forward: match &driver_totals {
+            Some(_) => merge_by_tag(&driver_hlog)?
+                .remove(TAG_TICK_TO_CAN)
+                .unwrap_or_default(),
+            None => LatencyHistogram::new(),
+        },
+        driver: driver_totals,
     })
 }
 
@@ -621,13 +745,14 @@ fn read_trim(path: &str) -> String {
         .unwrap_or_else(|_| "unknown".to_owned())
 }
 
-/// Waits for the probe's `ready` line (it has subscribed).
+/// Waits for the `ready` line of a subscriber process (rt-probe, driver-latency).
 fn wait_for_ready(probe: &mut Guarded) -> anyhow::Result<()> {
+    let name = probe.name;
     let stdout = probe
         .child
         .stdout
         .take()
-        .ok_or_else(|| anyhow!("rt-probe stdout not captured"))?;
+        .ok_or_else(|| anyhow!("{name} stdout not captured"))?;
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         let mut lines = BufReader::new(stdout).lines();
@@ -638,8 +763,8 @@ fn wait_for_ready(probe: &mut Guarded) -> anyhow::Result<()> {
     });
     match rx.recv_timeout(Duration::from_secs(10)) {
         Ok(Some(Ok(line))) if line.trim() == "ready" => Ok(()),
-        Ok(other) => bail!("rt-probe did not report ready: {other:?}"),
-        Err(_) => bail!("rt-probe did not report ready within 10 s"),
+        Ok(other) => bail!("{name} did not report ready: {other:?}"),
+        Err(_) => bail!("{name} did not report ready within 10 s"),
     }
 }
 
@@ -694,6 +819,9 @@ fn print_table(r: &Results) {
     row("publish (+notify)", &r.publish_us);
     row("ipc publish->receive", &r.ipc_us);
     row("  of which receive", &r.receive_us);
+    if let Some(d) = &r.driver_forward_us {
+        row("driver StimTick->PULSE write", d);
+    }
     if let Some(c) = &r.cyclictest_us {
         row("cyclictest latency", c);
     }
@@ -707,6 +835,22 @@ fn print_table(r: &Results) {
         r.hot_path_allocations,
         r.queue_overflows
     );
+    if let Some(d) = &r.driver {
+        println!(
+            "driver: {} StimTicks ({} lost, {} refused), {} PULSE written, {} refused by its interlocks, {} while not armed, stimulator applied {}, {} write errors, {} trips ({} arms), hot-path heap allocations {}",
+            d.ticks_received,
+            d.ticks_lost,
+            d.ticks_refused,
+            d.pulses_sent,
+            d.pulses_rejected,
+            d.pulses_not_armed,
+            d.stimulator_pulses,
+            d.can_tx_errors,
+            d.trips,
+            d.arms,
+            d.hot_path_allocations
+        );
+    }
     if let (Some(p99), Some(p999)) = (r.ratio_p99, r.ratio_p999) {
         println!(
             "cyclictest: {} samples, {} at or above one period; wake/cyclictest ratio p99 {:.2}, p99.9 {:.2}",

@@ -138,7 +138,7 @@ pub struct Check {
     /// The condition.
     pub condition: Condition,
     /// What is compared (`ratio_p99`, `ratio_p999`, `overrun_rate`, `compute_us.p99`,
-    /// `hot_path_allocations`).
+    /// `hot_path_allocations`, `driver_allocations`).
     pub key: String,
     /// The measured value.
     pub value: f64,
@@ -215,6 +215,17 @@ pub fn compare(
             s.hot_path_allocations as f64,
             t.hot_path_allocations_max as f64,
         );
+        if let Some(n) = s
+            .driver
+            .as_ref()
+            .and_then(|d| d["hot_path_allocations"].as_u64())
+        {
+            check(
+                "driver_allocations",
+                n as f64,
+                t.hot_path_allocations_max as f64,
+            );
+        }
     }
     Ok(checks)
 }

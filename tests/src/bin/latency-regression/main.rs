@@ -25,7 +25,7 @@ use rt_core::rt::histogram::LatencyHistogram;
 use rt_core::rt::hlog::{merge_by_tag, read_intervals};
 
 use gate::{Baseline, Check};
-use summary::{Condition, ConditionSummary, DRIVER_FORWARD_ABSENT, SUMMARY_SCHEMA, Summary};
+use summary::{Condition, ConditionSummary, DRIVER_FORWARD_METHOD, SUMMARY_SCHEMA, Summary};
 
 /// The latency regression suite: rt-core's loop against cyclictest, with and without
 /// load, compared with a stored baseline.
@@ -161,7 +161,8 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
             .arg("--out-dir")
             .arg(&dir)
             .arg("--json")
-            .arg(&json);
+            .arg(&json)
+            .arg("--driver");
         if condition == Condition::Load {
             cmd.arg("--load");
         }
@@ -195,7 +196,7 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         ratio_p99: Summary::worst(&measured, |c| c.ratio_p99),
         ratio_p999: Summary::worst(&measured, |c| c.ratio_p999),
         conditions: measured,
-        driver_forward_note: Some(DRIVER_FORWARD_ABSENT.to_owned()),
+        driver_forward_note: Some(DRIVER_FORWARD_METHOD.to_owned()),
         test_slowdown_us: slowdown,
         kernel: read_trim("/proc/sys/kernel/osrelease"),
         load_average: [load_before, read_trim("/proc/loadavg")],
@@ -317,6 +318,23 @@ fn curves(dir: &Path, rounds: u64) -> anyhow::Result<Vec<plot::Curve>> {
         curves.push(plot::Curve {
             name: name.to_owned(),
             histogram,
+        });
+    }
+    // The driver's own log also has `ipc` and `compute` tags (its view): only its forward
+    // latency is plotted.
+    let mut forward = LatencyHistogram::new();
+    for r in 0..rounds {
+        let file = dir.join(format!("driver-{r}.hlog"));
+        if file.is_file()
+            && let Some(h) = merge_by_tag(&file)?.remove("tick_to_can")
+        {
+            forward.add(&h);
+        }
+    }
+    if forward.count() > 0 {
+        curves.push(plot::Curve {
+            name: "driver StimTick -> PULSE written".to_owned(),
+            histogram: forward,
         });
     }
     Ok(curves)

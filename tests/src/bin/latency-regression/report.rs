@@ -61,10 +61,34 @@ pub fn print_table(summary: &Summary) {
             "median over rounds of the per-round p99 ratio: {}",
             ratio(s.ratio_p99_round_median)
         );
+        if let Some(d) = &s.driver {
+            println!("driver: {}", driver_line(d));
+        }
     }
     if let Some(note) = &summary.driver_forward_note {
         println!("driver forward path: {note}");
     }
+}
+
+/// The driver's counters in one line.
+fn driver_line(d: &serde_json::Value) -> String {
+    let n = |k: &str| d[k].as_u64().map_or("?".to_owned(), |v| v.to_string());
+    format!(
+        "{} StimTicks ({} lost, {} refused), {} PULSE written, {} refused by its interlocks, \
+         {} while not armed, {} applied by the stimulator, {} write errors, {} trips ({} arms), \
+         {} hot-path heap allocations",
+        n("ticks_received"),
+        n("ticks_lost"),
+        n("ticks_refused"),
+        n("pulses_sent"),
+        n("pulses_rejected"),
+        n("pulses_not_armed"),
+        n("stimulator_pulses"),
+        n("can_tx_errors"),
+        n("trips"),
+        n("arms"),
+        n("hot_path_allocations"),
+    )
 }
 
 /// Prints the gate; returns whether every check passed.
@@ -159,12 +183,18 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
     if let Some(note) = &summary.driver_forward_note {
         let _ = writeln!(md, "Driver forward path: {note}.\n");
     }
+    for (c, s) in &summary.conditions {
+        if let Some(d) = &s.driver {
+            let _ = writeln!(md, "Driver, {}: {}.\n", c.key(), driver_line(d));
+        }
+    }
     let _ = writeln!(md, "![latency by percentile](percentiles.png)\n");
     let _ = writeln!(
         md,
         "Interval logs (HdrHistogram `.hlog`, ns): `<condition>/rt-core-N.hlog` (tags wake, \
          input, compute, publish), `<condition>/rt-probe-N.hlog` (ipc, receive), \
-         `<condition>/cyclictest.hlog`.\n"
+         `<condition>/cyclictest.hlog`, `<condition>/driver-N.hlog` (tick_to_can, can_write, \
+         and the driver's own ipc, compute, input, wake).\n"
     );
     match checks {
         Some(checks) => {

@@ -10,13 +10,11 @@ use serde::{Deserialize, Serialize};
 /// Schema tag of the summary.
 pub const SUMMARY_SCHEMA: &str = "fes-latency-summary/1";
 
-/// Why `driver_forward_us` is absent: `stim-driver run` reached main too late to be wired
-/// in, and it needs a CAN interface, which a kernel without CAN (this VM, CI) only has
-/// inside the User-Mode Linux guest.
-pub const DRIVER_FORWARD_ABSENT: &str = "not measured by this suite yet: `stim-driver run` \
-landed on main after the suite was built and needs a CAN interface (vcan0; here only inside \
-the UML guest of vcan-run); the driver writes its own forward-path histograms \
-(docs/stim-driver.md)";
+/// How `driver_forward_us` is measured (`driver_forward_note`): this host has no CAN.
+pub const DRIVER_FORWARD_METHOD: &str = "driver-latency (fes-tests): the stim-driver's own \
+forward and report threads, SCHED_FIFO one below rt-core on the probe's core, with the CAN \
+socket replaced by a Unix SOCK_SEQPACKET pair (one send per frame) to sim-muscle's virtual \
+stimulator on the other core; StimTick publish -> PULSE written (hlog tag tick_to_can)";
 
 /// p50 / p99 / p99.9 / max, µs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -67,8 +65,13 @@ pub struct ConditionSummary {
     pub compute_us: Percentiles,
     /// Publish to receive, measured by the subscriber process.
     pub ipc_us: Percentiles,
-    /// Driver forward path (StimTick received to frame written); `None` when not measured.
+    /// Driver forward path (StimTick published to PULSE written); `None` when not measured.
+    #[serde(default)]
     pub driver_forward_us: Option<Percentiles>,
+    /// The driver's counters over the rounds (rt-latency's `driver`: ticks, pulses written
+    /// and refused, stimulator-applied pulses, trips, re-arms, hot-path allocations).
+    #[serde(default)]
+    pub driver: Option<serde_json::Value>,
     /// cyclictest's latency on the same core, priority and period, in the same run.
     pub cyclictest_us: Option<Percentiles>,
     /// Wake-up lateness p99 over cyclictest's.
@@ -103,16 +106,15 @@ pub struct ConditionSummary {
 }
 
 impl ConditionSummary {
-    /// Reads `rt-latency --json` output; the driver forward path stays absent.
+    /// Reads `rt-latency --json` output.
     pub fn from_rt_latency_json(path: &Path) -> anyhow::Result<Self> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let mut value: serde_json::Value =
+        let value: serde_json::Value =
             serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-        let Some(object) = value.as_object_mut() else {
+        if !value.is_object() {
             bail!("{}: not a JSON object", path.display());
-        };
-        object.insert("driver_forward_us".to_owned(), serde_json::Value::Null);
+        }
         serde_json::from_value(value)
             .with_context(|| format!("{}: not an rt-latency result", path.display()))
     }
@@ -129,7 +131,7 @@ pub struct Summary {
     pub ratio_p99: Option<f64>,
     /// The largest `ratio_p999` over the conditions.
     pub ratio_p999: Option<f64>,
-    /// Why `driver_forward_us` is absent, when it is.
+    /// How `driver_forward_us` was measured ([`DRIVER_FORWARD_METHOD`]).
     pub driver_forward_note: Option<String>,
     /// `FES_TEST_TICK_BUSY_US` when the test-only slowdown was on.
     pub test_slowdown_us: Option<u64>,
