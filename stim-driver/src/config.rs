@@ -38,7 +38,8 @@
 //! stimulator_timeout_ms = 100    # no STATUS for this long -> NMT stop (and no arming)
 //! arm_confirm_ms = 100           # NMT start must show in STATUS within this
 //! command_max_age_ms = 100       # an older Arm is refused
-//! liveness_check_ms = 20         # how often the publisher's node is checked
+//! liveness_check_ms = 20         # how often the publishers' nodes are checked
+//! supervisor_watch = true        # the supervisor's node dead or gone while armed -> NMT stop
 //!
 //! [force]
 //! max_n = 40.0                   # required: the muscle's maximal force, normalises ForceSample
@@ -237,7 +238,8 @@ impl Default for InterlockConfig {
     }
 }
 
-/// `[watchdog]`. Defaults: 1 ms period, 3 ticks, 3 ticks, 100 ms, 100 ms, 100 ms, 20 ms.
+/// `[watchdog]`. Defaults: 1 ms period, 3 ticks, 3 ticks, 100 ms, 100 ms, 100 ms, 20 ms,
+/// supervisor watched.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WatchdogConfig {
@@ -255,6 +257,10 @@ pub struct WatchdogConfig {
     pub command_max_age_ms: u32,
     /// Period of the publisher-liveness check, ms (1..=1000).
     pub liveness_check_ms: u32,
+    /// Watch the supervisor too: while armed, its node (the DriverCommand publisher) dead
+    /// or gone trips the safe state, and an Arm is refused while it is seen dead. On by
+    /// default: without the supervisor nobody watches health, records, or can stop.
+    pub supervisor_watch: bool,
 }
 
 impl Default for WatchdogConfig {
@@ -267,6 +273,7 @@ impl Default for WatchdogConfig {
             arm_confirm_ms: 100,
             command_max_age_ms: 100,
             liveness_check_ms: 20,
+            supervisor_watch: true,
         }
     }
 }
@@ -656,6 +663,7 @@ impl DriverConfig {
             command_max_age_ns: u64::from(w.command_max_age_ms) * MS,
             bringup_retry_ns: u64::from(self.can.bringup_retry_ms) * MS,
             max_wait_ns: period_ns,
+            supervisor_watch: w.supervisor_watch,
         })
     }
 

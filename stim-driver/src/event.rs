@@ -59,7 +59,8 @@ pub enum BusEvent {
     EventsLost,
 }
 
-/// Liveness of the StimTick publisher (checked by the report thread through iceoryx2).
+/// Liveness of a service's publisher — the StimTick publisher (rt-core) or the
+/// DriverCommand publisher (the supervisor) — checked by the report thread through iceoryx2.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
 pub enum Liveness {
@@ -295,6 +296,8 @@ pub enum DriverEvent {
     Bus(BusEvent),
     /// The StimTick publisher's liveness changed.
     Liveness(Liveness),
+    /// The supervisor's (DriverCommand publisher's) liveness changed.
+    SupervisorLiveness(Liveness),
     /// A pending NMT stop was (re)sent.
     StopResent,
     /// Shutdown: NMT stop and a final heartbeat.
@@ -412,6 +415,8 @@ pub struct SharedStatus {
     /// Liveness of the StimTick publisher (a [`Liveness`] as `u8`), written by the report
     /// thread, read by the forward thread.
     pub liveness: AtomicU8,
+    /// Liveness of the DriverCommand publisher (the supervisor), likewise.
+    pub supervisor_liveness: AtomicU8,
 }
 
 impl SharedStatus {
@@ -477,6 +482,16 @@ impl SharedStatus {
     /// Stores the publisher liveness (report thread).
     pub fn set_liveness(&self, l: Liveness) {
         self.liveness.store(l as u8, Ordering::Relaxed);
+    }
+
+    /// The supervisor's liveness last stored.
+    pub fn supervisor_liveness(&self) -> Liveness {
+        Liveness::from_u8(self.supervisor_liveness.load(Ordering::Relaxed))
+    }
+
+    /// Stores the supervisor's liveness (report thread).
+    pub fn set_supervisor_liveness(&self, l: Liveness) {
+        self.supervisor_liveness.store(l as u8, Ordering::Relaxed);
     }
 }
 

@@ -50,6 +50,11 @@ pub enum Fault {
     StimulatorNotOperational,
     /// The supervisor ordered a safe stop.
     SafeStopCommand,
+    /// The supervisor's iceoryx2 node (the DriverCommand publisher) is dead: nobody is
+    /// left to stop the stimulation, watch health, or record.
+    SupervisorDead,
+    /// The DriverCommand service has no publisher any more (the supervisor left).
+    SupervisorGone,
     /// A bus event was lost (the queue from the receive thread overflowed).
     BusEventsLost,
     /// A frame could not be written for a reason other than a full queue or a down link.
@@ -83,18 +88,22 @@ impl Fault {
             Fault::SafeStopCommand => rt_core::msg::DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED,
             Fault::BusEventsLost => 0xFF2C,
             Fault::TxFailed { .. } => 0xFF2D,
+            Fault::SupervisorDead => 0xFF2E,
+            Fault::SupervisorGone => 0xFF2F,
         }
     }
 
     /// True for the watchdog conditions counted in `DriverStatus.watchdog_trips`: the
-    /// generator side (ticks missing, stale, its node dead or gone) and the stimulator side
-    /// (silent).
+    /// generator side (ticks missing, stale, its node dead or gone), the supervisor's node
+    /// dead or gone, and the stimulator side (silent).
     pub const fn is_watchdog(&self) -> bool {
         matches!(
             self,
             Fault::TickTimeout { .. }
                 | Fault::PublisherDead
                 | Fault::PublisherGone
+                | Fault::SupervisorDead
+                | Fault::SupervisorGone
                 | Fault::StaleTick { .. }
                 | Fault::StimulatorSilent { .. }
         )
@@ -135,6 +144,12 @@ impl core::fmt::Display for Fault {
                 "the stimulator is not operational (NMT start not confirmed, or it left)",
             ),
             Fault::SafeStopCommand => f.write_str("safe stop ordered by the supervisor"),
+            Fault::SupervisorDead => {
+                f.write_str("watchdog: the supervisor's node (DriverCommand publisher) is dead")
+            }
+            Fault::SupervisorGone => {
+                f.write_str("watchdog: the supervisor left (no DriverCommand publisher)")
+            }
             Fault::BusEventsLost => f.write_str("bus events lost (receive queue overflow)"),
             Fault::TxFailed { errno } => write!(f, "CAN write failed (errno {errno})"),
             Fault::ConfigRefused { detail } => {
@@ -167,6 +182,8 @@ pub enum ArmRefusal {
     NoTicks,
     /// The StimTick publisher is not alive.
     PublisherNotAlive,
+    /// The supervisor's node was last seen dead (the command came from a stale sample).
+    SupervisorDead,
     /// The generator has published its final tick.
     GeneratorStopped,
     /// The command was older than the age limit, from the future, or not newer than the
@@ -188,6 +205,7 @@ impl core::fmt::Display for ArmRefusal {
             ),
             ArmRefusal::NoTicks => f.write_str("no valid StimTick within the watchdog time"),
             ArmRefusal::PublisherNotAlive => f.write_str("the StimTick publisher is not alive"),
+            ArmRefusal::SupervisorDead => f.write_str("the supervisor's node is dead"),
             ArmRefusal::GeneratorStopped => f.write_str("the generator has stopped (final tick)"),
             ArmRefusal::StaleCommand => {
                 f.write_str("the command is stale, from the future, or not newer than the last")
@@ -217,6 +235,8 @@ mod tests {
             Fault::SafeStopCommand,
             Fault::BusEventsLost,
             Fault::TxFailed { errno: 5 },
+            Fault::SupervisorDead,
+            Fault::SupervisorGone,
         ];
         let mut codes: Vec<u16> = faults.iter().map(Fault::code).collect();
         assert!(codes.iter().all(|c| (0xFF21..=0xFF2F).contains(c)));

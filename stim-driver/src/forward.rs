@@ -63,6 +63,8 @@ pub struct ForwardSettings {
     /// Longest sleep of the loop, ns: bus events and liveness changes are acted on at the
     /// latest this long after they arrive.
     pub max_wait_ns: u64,
+    /// Trip when the supervisor's node dies or leaves while armed ([`ForwardPath::on_supervisor_liveness`]).
+    pub supervisor_watch: bool,
 }
 
 /// A pending NMT stop is not re-sent more often than this, ns.
@@ -110,6 +112,7 @@ pub struct ForwardPath<T: CanTx> {
     last_valid_tick_ns: Option<u64>,
     generator_stopped: bool,
     liveness: Liveness,
+    supervisor: Liveness,
     last_status: Option<(Status, u64)>,
     last_command_t_ns: u64,
 }
@@ -136,6 +139,7 @@ impl<T: CanTx> ForwardPath<T> {
             last_valid_tick_ns: None,
             generator_stopped: false,
             liveness: Liveness::Unknown,
+            supervisor: Liveness::Unknown,
             last_status: None,
             last_command_t_ns: 0,
         }
@@ -480,6 +484,11 @@ impl<T: CanTx> ForwardPath<T> {
         if self.liveness != Liveness::Alive {
             return Some(ArmRefusal::PublisherNotAlive);
         }
+        // The command itself proves a publisher existed when it was sent; a node seen
+        // dead means it came from a sample its dead sender left behind.
+        if s.supervisor_watch && self.supervisor == Liveness::Dead {
+            return Some(ArmRefusal::SupervisorDead);
+        }
         if self.generator_stopped {
             return Some(ArmRefusal::GeneratorStopped);
         }
@@ -692,6 +701,31 @@ impl<T: CanTx> ForwardPath<T> {
             match liveness {
                 Liveness::Dead => self.trip(Fault::PublisherDead, now_ns, ev),
                 Liveness::NoPublisher => self.trip(Fault::PublisherGone, now_ns, ev),
+                Liveness::Alive | Liveness::Unknown => {}
+            }
+        }
+        self.finish(before, ev);
+    }
+
+    /// Takes the supervisor's liveness (its DriverCommand publisher's node) the report
+    /// thread found. With `supervisor_watch`, while armed: dead → [`Fault::SupervisorDead`],
+    /// no publisher → [`Fault::SupervisorGone`]. Nothing re-arms when it comes back.
+    pub fn on_supervisor_liveness(
+        &mut self,
+        liveness: Liveness,
+        now_ns: u64,
+        ev: &mut impl EventSink,
+    ) {
+        if liveness == self.supervisor {
+            return;
+        }
+        let before = self.state();
+        self.supervisor = liveness;
+        ev.emit(DriverEvent::SupervisorLiveness(liveness));
+        if self.settings.supervisor_watch && self.is_armed() {
+            match liveness {
+                Liveness::Dead => self.trip(Fault::SupervisorDead, now_ns, ev),
+                Liveness::NoPublisher => self.trip(Fault::SupervisorGone, now_ns, ev),
                 Liveness::Alive | Liveness::Unknown => {}
             }
         }

@@ -1,4 +1,5 @@
-//! Liveness of the StimTick publisher through iceoryx2 0.10.
+//! Liveness of a service's publishers through iceoryx2 0.10: the StimTick publisher
+//! (rt-core) and the DriverCommand publisher (the supervisor).
 //!
 //! iceoryx2 keeps each service's ports in its dynamic configuration
 //! (`PortFactory::dynamic_config().list_publishers`, each with the `UniqueNodeId` of the
@@ -7,7 +8,10 @@
 //! cleaning up (SIGKILL, a crash), while a clean exit removes the publisher from the list.
 //! A dead node's stale resources are removed here (`DeadNodeView`'s
 //! `try_remove_stale_resources`), which frees the service's single publisher slot for a
-//! restarted rt-core.
+//! restarted rt-core (or supervisor).
+//!
+//! With several publishers (only DriverCommand can have more than one), the service is
+//! alive when any publisher's node is alive, dead when none is alive and one is dead.
 //!
 //! This does file-system work, so it runs on the normal-priority report thread; the
 //! forward thread reads the outcome from an atomic.
@@ -16,14 +20,17 @@ use iceoryx2::node::NodeState;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
-use rt_core::msg::StimTick;
+use rt_core::msg::Contract;
 use rt_core::msg::service::{ServiceError, open_pubsub};
 
 use crate::event::Liveness;
 
-/// Checks the StimTick publisher of one service.
-pub struct LivenessMonitor {
-    service: PortFactory<ipc::Service, StimTick, ()>,
+/// Publishers looked at per check (the services here have one, DriverCommand a few).
+const MAX_PUBLISHERS_CHECKED: usize = 8;
+
+/// Checks the publishers of one service carrying `T`.
+pub struct LivenessMonitor<T: Contract> {
+    service: PortFactory<ipc::Service, T, ()>,
     config: iceoryx2::config::Config,
 }
 
@@ -36,28 +43,45 @@ pub struct LivenessCheck {
     pub cleaned_up: bool,
 }
 
-impl LivenessMonitor {
-    /// Opens (or creates) the StimTick service under `prefix` through `node`.
+impl<T: Contract> LivenessMonitor<T> {
+    /// Opens (or creates) the `T` service under `prefix` through `node`.
     pub fn new(node: &Node<ipc::Service>, prefix: &str) -> Result<Self, ServiceError> {
         Ok(Self {
-            service: open_pubsub::<StimTick>(node, prefix)?,
+            service: open_pubsub::<T>(node, prefix)?,
             config: node.config().clone(),
         })
     }
 
-    /// Looks at the publisher now.
+    /// Looks at the publishers now (see the module documentation).
     pub fn check(&self) -> LivenessCheck {
-        let mut publisher_node = None;
+        let mut nodes = [None; MAX_PUBLISHERS_CHECKED];
+        let mut n = 0;
         self.service.dynamic_config().list_publishers(|p| {
-            publisher_node = Some(p.node_id);
-            CallbackProgression::Stop
+            nodes[n] = Some(p.node_id);
+            n += 1;
+            if n == MAX_PUBLISHERS_CHECKED {
+                CallbackProgression::Stop
+            } else {
+                CallbackProgression::Continue
+            }
         });
-        let Some(node_id) = publisher_node else {
-            return LivenessCheck {
-                liveness: Liveness::NoPublisher,
-                cleaned_up: false,
-            };
+        let mut result = LivenessCheck {
+            liveness: Liveness::NoPublisher,
+            cleaned_up: false,
         };
+        for node_id in nodes.iter().flatten() {
+            let one = self.check_node(*node_id);
+            result.cleaned_up |= one.cleaned_up;
+            result.liveness = match (result.liveness, one.liveness) {
+                (Liveness::Alive, _) | (_, Liveness::Alive) => Liveness::Alive,
+                (Liveness::Dead, _) | (_, Liveness::Dead) => Liveness::Dead,
+                (_, l) => l,
+            };
+        }
+        result
+    }
+
+    fn check_node(&self, node_id: iceoryx2::identifiers::UniqueNodeId) -> LivenessCheck {
         match Node::<ipc::Service>::state_of(&self.config, node_id) {
             Ok(Some(NodeState::Alive(_))) => LivenessCheck {
                 liveness: Liveness::Alive,

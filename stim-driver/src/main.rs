@@ -59,7 +59,7 @@ CONFIGURATION (TOML, schema \"fes-stim-driver/1\"; `example-config` prints every
   [interlocks]  the driver's own: min_ipi_us, max_pulses, rate_window_ms,
                 max_amplitude_ua, max_width_us, max_charge_nc, channels, max_pulse_delay_us
   [watchdog]    tick_period_us, timeout_ticks, stale_after_ticks, stimulator_timeout_ms,
-                arm_confirm_ms, command_max_age_ms, liveness_check_ms
+                arm_confirm_ms, command_max_age_ms, liveness_check_ms, supervisor_watch
   [force]       max_n (normalises ForceSample)
   [rt]          the forward thread: priority, core, on_missing_rights, lock_memory, ...
   [bus_rt]      optional: the receive thread real-time too

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use fes_can::{Message, MessageKind, Nodes};
 use rt_core::msg::service::{BACKPRESSURE, open_pubsub};
-use rt_core::msg::{DeviceState, DriverStatus, TimingReport};
+use rt_core::msg::{DeviceState, DriverCommand, DriverStatus, StimTick, TimingReport};
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::hlog::HlogWriter;
 use rt_core::rt::runner::{RunError, create_node};
@@ -123,6 +123,12 @@ pub fn log_event(event: &DriverEvent) {
             emcy.seq
         ),
         DriverEvent::Bus(bus) => warn!("bus: {bus:?}"),
+        DriverEvent::SupervisorLiveness(l) => match l {
+            Liveness::Alive => info!("supervisor (DriverCommand publisher) alive"),
+            Liveness::Unknown => warn!("supervisor liveness unknown"),
+            Liveness::Dead => warn!("the supervisor's node is DEAD"),
+            Liveness::NoPublisher => warn!("no supervisor (no DriverCommand publisher)"),
+        },
         DriverEvent::Liveness(l) => match l {
             Liveness::Alive => info!("StimTick publisher alive"),
             Liveness::Unknown => warn!("StimTick publisher liveness unknown"),
@@ -179,7 +185,8 @@ pub fn run_report(
         .backpressure_strategy(BACKPRESSURE)
         .create()
         .map_err(|e| port("TimingReport publisher")(&e))?;
-    let liveness = LivenessMonitor::new(&node, prefix)?;
+    let liveness = LivenessMonitor::<StimTick>::new(&node, prefix)?;
+    let supervisor = LivenessMonitor::<DriverCommand>::new(&node, prefix)?;
     let nodes: Nodes = config
         .nodes()
         .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
@@ -271,6 +278,11 @@ pub fn run_report(
             shared.status.set_liveness(check.liveness);
             if check.cleaned_up {
                 warn!("removed the dead StimTick publisher's stale iceoryx2 resources");
+            }
+            let check = supervisor.check();
+            shared.status.set_supervisor_liveness(check.liveness);
+            if check.cleaned_up {
+                warn!("removed the dead supervisor's stale iceoryx2 resources");
             }
         }
         if changed || now >= next_status {

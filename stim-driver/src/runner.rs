@@ -162,6 +162,7 @@ pub fn run_forward<T: CanTx>(
             break;
         }
         path.on_liveness(shared.status.liveness(), wake_ns, &mut sink);
+        path.on_supervisor_liveness(shared.status.supervisor_liveness(), wake_ns, &mut sink);
         while let Some(event) = shared.bus_events.pop() {
             path.on_bus(event, monotonic_ns(), &mut sink);
         }

@@ -504,6 +504,79 @@ fn publisher_death_and_disappearance_trip() {
 }
 
 #[test]
+fn supervisor_death_and_disappearance_trip_and_stay_tripped() {
+    for (l, f) in [
+        (Liveness::Dead, Fault::SupervisorDead),
+        (Liveness::NoPublisher, Fault::SupervisorGone),
+    ] {
+        let mut r = Rig::armed(settings());
+        r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+        assert_eq!(r.fp.state(), DriverState::Armed, "alive changes nothing");
+        r.bus.clear();
+        r.advance(MS);
+        r.fp.on_supervisor_liveness(l, r.now, &mut r.ev);
+        assert_eq!(r.fault(), Some(f));
+        assert!(f.is_watchdog());
+        assert_eq!(r.fp.counters().fault_code, f.code());
+        assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+        // Ticks keep coming: nothing is sent, and the supervisor coming back re-arms
+        // nothing by itself.
+        r.bus.clear();
+        r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+        for _ in 0..20 {
+            r.advance(MS);
+            r.tick(true);
+        }
+        assert!(r.bus.pulses().is_empty());
+        assert_eq!(r.fault(), Some(f));
+        // A live supervisor's Arm re-arms.
+        r.command(DriverCommandKind::Arm);
+        assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+    }
+}
+
+#[test]
+fn supervisor_watch_refuses_an_arm_while_dead_and_can_be_turned_off() {
+    // Disarmed, supervisor seen dead: an Arm (a sample it left behind) is refused.
+    let mut r = Rig::configured(settings());
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Dead, r.now, &mut r.ev);
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Disarmed);
+    assert!(r.ev.iter().any(|e| matches!(
+        e,
+        DriverEvent::ArmRefused {
+            refusal: ArmRefusal::SupervisorDead,
+            ..
+        }
+    )));
+    // Not yet checked, or no publisher listed yet (the check lags the command): accepted.
+    for l in [Liveness::Unknown, Liveness::NoPublisher] {
+        let mut r = Rig::configured(settings());
+        r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+        r.fp.on_supervisor_liveness(l, r.now, &mut r.ev);
+        for _ in 0..3 {
+            r.advance(MS);
+            r.tick(false);
+        }
+        r.command(DriverCommandKind::Arm);
+        assert_eq!(r.fp.state(), DriverState::Armed, "{l:?}: {:?}", r.ev);
+    }
+    // Watch off: the supervisor's death changes nothing.
+    let mut s = settings();
+    s.supervisor_watch = false;
+    let mut r = Rig::armed(s);
+    r.fp.on_supervisor_liveness(Liveness::Dead, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::NoPublisher, r.now, &mut r.ev);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    assert!(settings().supervisor_watch, "on by default");
+}
+
+#[test]
 fn stimulator_emcy_reset_silence_and_unconfirmed_start_trip() {
     let s = settings();
     let mut r = Rig::armed(s);
