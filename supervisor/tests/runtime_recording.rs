@@ -425,7 +425,11 @@ fn kill_one(bins: &Path, can: &fes_tests::vcan::CanEnv, victim: &str) {
         eprintln!(
             "kill {victim}: stimulator out of operation {} after SIGKILL{}",
             stopped.map_or("never".to_owned(), |ms| format!("{ms:.1} ms")),
-            if uml { " (UML guest: functional only)" } else { "" }
+            if uml {
+                " (UML guest: functional only)"
+            } else {
+                ""
+            }
         );
     }
     // The recording up to that moment reads back as a data set.

@@ -1,9 +1,10 @@
 //! The stimulator's own pulse interlocks: output channel, amplitude and width ceilings,
 //! minimum inter-pulse interval and maximum pulse count over a sliding window.
 //!
-//! Time is counted in stimulator ticks (1 ms). A pulse accepted while tick `k` is the next
-//! tick to run is applied at tick `k`; its IPI is `k` minus the tick of the last applied
-//! pulse, and the rate window covers ticks `k - window + 1 ..= k`.
+//! Time is counted in stimulator ticks (1 ms). A pulse is applied at the first tick after
+//! its frame arrived (`k`); its IPI is `k` minus the tick of the last pulse applied or
+//! accepted and still waiting, and the rate window covers ticks `k - window + 1 ..= k`,
+//! counting both.
 
 use fes_can::{ErrorCode, Pulse, StimLimits};
 
@@ -83,13 +84,13 @@ impl Interlock {
         self.applied.newest()
     }
 
-    /// Checks `pulse` for application at tick `tick` under `limits`; `pending` says a
-    /// pulse is already waiting for that tick.
+    /// Checks `pulse` for application at tick `tick` under `limits`; `queued` are the
+    /// ticks of the pulses accepted and still waiting (in order, none after `tick`).
     pub fn check(
         &self,
         pulse: &Pulse,
         tick: u64,
-        pending: bool,
+        queued: &[u64],
         limits: &StimLimits,
     ) -> Result<(), Refusal> {
         if pulse.channel >= self.channels {
@@ -110,11 +111,8 @@ impl Interlock {
                 detail: pulse.width_us,
             });
         }
-        let ipi = if pending {
-            Some(0)
-        } else {
-            self.applied.newest().map(|last| tick.saturating_sub(last))
-        };
+        let last = queued.last().copied().or(self.applied.newest());
+        let ipi = last.map(|last| tick.saturating_sub(last));
         if let Some(ipi) = ipi
             && ipi < u64::from(limits.min_ipi_ms)
         {
@@ -123,9 +121,9 @@ impl Interlock {
                 detail: u16::try_from(ipi).unwrap_or(u16::MAX),
             });
         }
-        let in_window = self
-            .applied
-            .count_within(tick, u64::from(limits.rate_window_ms));
+        let window = u64::from(limits.rate_window_ms);
+        let in_window = self.applied.count_within(tick, window)
+            + queued.iter().filter(|&&t| t + window > tick).count();
         if in_window >= usize::from(limits.max_pulses) {
             return Err(Refusal {
                 code: ErrorCode::RateViolation,
@@ -196,16 +194,16 @@ mod tests {
     #[test]
     fn ceilings_are_inclusive() {
         let i = Interlock::new(1);
-        assert_eq!(i.check(&pulse(300, 400), 0, false, &limits()), Ok(()));
+        assert_eq!(i.check(&pulse(300, 400), 0, &[], &limits()), Ok(()));
         assert_eq!(
-            i.check(&pulse(301, 400), 0, false, &limits()),
+            i.check(&pulse(301, 400), 0, &[], &limits()),
             Err(Refusal {
                 code: ErrorCode::AmplitudeCeiling,
                 detail: 301
             })
         );
         assert_eq!(
-            i.check(&pulse(300, 401), 0, false, &limits()),
+            i.check(&pulse(300, 401), 0, &[], &limits()),
             Err(Refusal {
                 code: ErrorCode::WidthCeiling,
                 detail: 401
@@ -214,7 +212,7 @@ mod tests {
         let mut p = pulse(1, 1);
         p.channel = 1;
         assert_eq!(
-            i.check(&p, 0, false, &limits()),
+            i.check(&p, 0, &[], &limits()),
             Err(Refusal {
                 code: ErrorCode::ChannelInvalid,
                 detail: 1
@@ -227,16 +225,16 @@ mod tests {
         let mut i = Interlock::new(1);
         i.record(10);
         assert_eq!(
-            i.check(&pulse(1, 1), 12, false, &limits()),
+            i.check(&pulse(1, 1), 12, &[], &limits()),
             Err(Refusal {
                 code: ErrorCode::MinIpiViolation,
                 detail: 2
             })
         );
-        assert_eq!(i.check(&pulse(1, 1), 13, false, &limits()), Ok(()));
+        assert_eq!(i.check(&pulse(1, 1), 13, &[], &limits()), Ok(()));
         // A pulse already waiting for the tick makes the IPI zero.
         assert_eq!(
-            i.check(&pulse(1, 1), 13, true, &limits()),
+            i.check(&pulse(1, 1), 13, &[13], &limits()),
             Err(Refusal {
                 code: ErrorCode::MinIpiViolation,
                 detail: 0
@@ -258,7 +256,7 @@ mod tests {
                 .iter()
                 .filter(|&&a| a + u64::from(l.rate_window_ms) > t)
                 .count();
-            let r = i.check(&pulse(1, 1), t, false, &l);
+            let r = i.check(&pulse(1, 1), t, &[], &l);
             assert_eq!(r.is_ok(), direct < 4, "tick {t}: {r:?}, {direct} in window");
             if r.is_ok() {
                 i.record(t);

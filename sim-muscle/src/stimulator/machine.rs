@@ -7,7 +7,10 @@
 //! and is left only by an explicit NMT command, never by itself.
 //!
 //! Timing: ticks are 1 ms apart. Frames received before tick `k` are handled before it;
-//! an accepted PULSE is applied to the plant at tick `k`. At each tick the stimulator
+//! an accepted PULSE is applied to the plant at tick `k`. Frames are handled with their
+//! arrival time (the adapter passes the kernel's receive timestamp): a PULSE that arrived
+//! during tick period `j` of a stall of the loop is applied at tick `j` in the catch-up
+//! that follows (`PendingPulses`), as the hardware would have, instead of all at once. At each tick the stimulator
 //! publishes FORCE (the force at the tick's time, before this tick's pulse), steps the
 //! plant one sample, and sends STATUS every 10 ms and its heartbeat every heartbeat period.
 
@@ -20,6 +23,7 @@ use fes_can::{
 
 use super::interlock::{Interlock, no_looser_than};
 use super::outbox::Outbox;
+use super::pending::{PENDING_CAPACITY, PendingPulses};
 use super::watchdog::HeartbeatWatchdog;
 use crate::plant::{self, MusclePlant};
 
@@ -116,6 +120,8 @@ pub struct TickReport {
     pub force_n: f64,
     /// The pulse applied at this tick.
     pub applied: Option<Pulse>,
+    /// Pulses applied at the missed ticks caught up before this one (a stall of the loop).
+    pub caught_up_pulses: u32,
     /// State after the tick.
     pub state: StimState,
 }
@@ -145,7 +151,8 @@ pub struct Stimulator {
     alive: AliveCheck,
     seq: SequenceCheck,
     interlock: Interlock,
-    pending: Option<Pulse>,
+    pending: PendingPulses,
+    grid_origin_ns: Option<u64>,
     next_tick: u64,
     force_n: f64,
     watchdog: HeartbeatWatchdog,
@@ -185,7 +192,8 @@ impl Stimulator {
             alive: AliveCheck::new(),
             seq: SequenceCheck::new(),
             interlock: Interlock::new(settings.channels),
-            pending: None,
+            pending: PendingPulses::new(),
+            grid_origin_ns: None,
             next_tick: 0,
             force_n: 0.0,
             watchdog: HeartbeatWatchdog::new(settings.ceiling.watchdog_ms, now_ns),
@@ -233,9 +241,18 @@ impl Stimulator {
         self.next_tick
     }
 
-    /// True when an accepted pulse waits for the next tick.
+    /// True when an accepted pulse waits for its tick.
     pub const fn has_pending_pulse(&self) -> bool {
-        self.pending.is_some()
+        !self.pending.is_empty()
+    }
+
+    /// The tick a pulse that arrived at `arrival_ns` is applied at: the tick period it
+    /// arrived in, and never before the next tick to run. Before the first tick (no grid
+    /// yet), the next tick.
+    fn arrival_tick(&self, arrival_ns: u64) -> u64 {
+        self.grid_origin_ns
+            .map_or(self.next_tick, |o| arrival_ns.saturating_sub(o) / TICK_NS)
+            .max(self.next_tick)
     }
 
     /// Off-bus counters.
@@ -286,7 +303,7 @@ impl Stimulator {
     /// Output off: an accepted pulse that has not been applied yet is cancelled and
     /// reported (a command is never dropped silently).
     fn output_off(&mut self, out: &mut Outbox) {
-        if let Some(p) = self.pending.take() {
+        while let Some(p) = self.pending.pop() {
             let id = self.pulse_id();
             self.reject(ErrorCode::WrongState, p.seq, id, out);
         }
@@ -341,7 +358,7 @@ impl Stimulator {
         match self.settings.nodes.decode(id, data) {
             Err(e) => self.reject_undecodable(kind, data, e, out),
             Ok(Message::Nmt(m)) => self.on_nmt(now_ns, m.command, m.node, out),
-            Ok(Message::Pulse(p)) => self.on_pulse(p, out),
+            Ok(Message::Pulse(p)) => self.on_pulse(now_ns, p, out),
             Ok(Message::Config(c)) => self.on_config(&c, out),
             Ok(Message::HostHeartbeat(_)) => self.watchdog.feed(now_ns),
             Ok(_) => {}
@@ -431,7 +448,7 @@ impl Stimulator {
         self.assembler.clear();
     }
 
-    fn on_pulse(&mut self, p: Pulse, out: &mut Outbox) {
+    fn on_pulse(&mut self, arrival_ns: u64, p: Pulse, out: &mut Outbox) {
         if !self.operational() {
             let id = self.pulse_id();
             return self.reject(ErrorCode::WrongState, p.seq, id, out);
@@ -447,11 +464,18 @@ impl Stimulator {
         if let Err(e) = self.seq.check(p.seq) {
             return self.reject(ErrorCode::SequenceError, p.seq, e.last, out);
         }
+        let tick = self.arrival_tick(arrival_ns);
         match self
             .interlock
-            .check(&p, self.next_tick, self.pending.is_some(), &self.limits)
+            .check(&p, tick, self.pending.ticks(), &self.limits)
         {
-            Ok(()) => self.pending = Some(p),
+            Ok(()) => {
+                if !self.pending.push(tick, p) {
+                    // More pulses waiting than a 64 ms stall can hold: refuse, never drop.
+                    let detail = u16::try_from(PENDING_CAPACITY).unwrap_or(u16::MAX);
+                    self.reject(ErrorCode::RateViolation, p.seq, detail, out);
+                }
+            }
             Err(r) => self.reject(r.code, p.seq, r.detail, out),
         }
     }
@@ -496,11 +520,25 @@ impl Stimulator {
             self.next_heartbeat_ns = tick.nominal_ns + ms_to_ns(self.settings.heartbeat_ms);
         }
         let k = tick.index.max(self.next_tick);
+        if self.grid_origin_ns.is_none() {
+            self.grid_origin_ns = Some(tick.nominal_ns.saturating_sub(k * TICK_NS));
+        }
         let missed = k - self.next_tick;
+        let mut caught_up_pulses = 0;
         if missed > 0 {
             self.diagnostics.missed_ticks += missed;
-            for _ in 0..missed.min(MAX_CATCH_UP_STEPS) {
-                self.force_n = plant.step(None);
+            let first = k - missed.min(MAX_CATCH_UP_STEPS);
+            // Pulses for ticks beyond the catch-up horizon are cancelled and reported.
+            while self.pending.ticks().first().is_some_and(|&t| t < first) {
+                if let Some(p) = self.pending.pop() {
+                    let id = self.pulse_id();
+                    self.reject(ErrorCode::WrongState, p.seq, id, out);
+                }
+            }
+            for j in first..k {
+                let p = self.pending.take_due(j);
+                caught_up_pulses += u32::from(p.is_some());
+                self.apply(j, p, plant);
             }
         }
 
@@ -528,15 +566,8 @@ impl Stimulator {
             self.enter_fault(ErrorCode::Generic, 0, out);
         }
 
-        let applied = self.pending.take();
-        if applied.is_some() {
-            self.interlock.record(k);
-            self.pulses_delivered = self.pulses_delivered.wrapping_add(1);
-        }
-        self.force_n = plant.step(applied.map(|p| plant::Pulse {
-            amplitude_ma: p.amplitude_ma(),
-            width_us: f64::from(p.width_us),
-        }));
+        let applied = self.pending.take_due(k);
+        self.apply(k, applied, plant);
 
         if self.operational() {
             let recent = self
@@ -573,8 +604,22 @@ impl Stimulator {
         TickReport {
             force_n: published_n,
             applied,
+            caught_up_pulses,
             state: self.state,
         }
+    }
+
+    /// Steps the plant one sample at tick `k`, applying `pulse` (recorded for the
+    /// interlocks and counted).
+    fn apply(&mut self, k: u64, pulse: Option<Pulse>, plant: &mut dyn MusclePlant) {
+        if pulse.is_some() {
+            self.interlock.record(k);
+            self.pulses_delivered = self.pulses_delivered.wrapping_add(1);
+        }
+        self.force_n = plant.step(pulse.map(|p| plant::Pulse {
+            amplitude_ma: p.amplitude_ma(),
+            width_us: f64::from(p.width_us),
+        }));
     }
 
     /// Orderly shutdown (SIGINT/SIGTERM): output off, stopped, a final STATUS and heartbeat.

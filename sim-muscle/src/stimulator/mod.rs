@@ -24,6 +24,7 @@ mod clock;
 pub mod interlock;
 pub mod machine;
 pub mod outbox;
+pub mod pending;
 mod record;
 mod socket_loop;
 pub mod test_plant;

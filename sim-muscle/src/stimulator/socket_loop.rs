@@ -1,6 +1,13 @@
 //! The thin adapter between a SocketCAN interface and the state machine: a 1 ms
 //! absolute-time loop that drains received frames into [`Stimulator::on_frame`], runs
 //! [`Stimulator::tick`] and sends what the machine produced.
+//!
+//! Each frame is handed over with its arrival time: the kernel's receive timestamp
+//! (`SO_TIMESTAMPNS`, CLOCK_REALTIME) mapped onto CLOCK_MONOTONIC ([`arrival_ns`]), so a
+//! stall of this process (a loaded host, a User-Mode Linux guest) does not make pulses
+//! that arrived properly spaced look like a burst. Without a timestamp, or with one that
+//! cannot be right (in the future, or older than [`MAX_RX_AGE_NS`]: CLOCK_REALTIME was
+//! stepped), the read time is used.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -14,6 +21,28 @@ use super::machine::{Settings, Stimulator, TICK_NS, Tick};
 use super::outbox::Outbox;
 use super::record::{Recorder, TickRecord};
 use crate::plant::MusclePlant;
+
+/// The oldest receive timestamp believed, ns: older means CLOCK_REALTIME was stepped
+/// between the frame's arrival and its read (a stall this long is also a watchdog fault).
+pub const MAX_RX_AGE_NS: u64 = 1_000_000_000;
+
+/// A frame's arrival on CLOCK_MONOTONIC: the receive timestamp `rx_real_ns`
+/// (CLOCK_REALTIME) taken back from the two clocks read together at the read
+/// (`real_now_ns`, `mono_now_ns`). Falls back to `mono_now_ns` (see the module docs).
+pub fn arrival_ns(rx_real_ns: Option<u64>, real_now_ns: u64, mono_now_ns: u64) -> u64 {
+    match rx_real_ns {
+        Some(rx) if rx <= real_now_ns && real_now_ns - rx <= MAX_RX_AGE_NS => {
+            mono_now_ns.saturating_sub(real_now_ns - rx)
+        }
+        _ => mono_now_ns,
+    }
+}
+
+fn unix_ns(t: std::time::SystemTime) -> Option<u64> {
+    t.duration_since(std::time::UNIX_EPOCH)
+        .ok()
+        .and_then(|d| u64::try_from(d.as_nanos()).ok())
+}
 
 /// What a run did, for the final log line and tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -92,6 +121,9 @@ fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<CanSocket> {
     socket
         .set_nonblocking(true)
         .context("making the CAN socket non-blocking")?;
+    if let Err(e) = socket.set_recv_timestamp(true) {
+        tracing::warn!("no kernel receive timestamps ({e}): frames are timed when read");
+    }
     Ok(socket)
 }
 
@@ -177,15 +209,18 @@ pub fn run_loop(
         let nominal = t0 + k * TICK_NS;
 
         loop {
-            match socket.read_frame() {
-                Ok(CanFrame::Error(e)) => {
+            match socket.read_frame_with_timestamps() {
+                Ok((CanFrame::Error(e), _)) => {
                     let code = classify_error_frame(e.error_bits(), e.data());
                     stim.on_bus_error(code, (e.error_bits() & 0xFFFF) as u16, &mut out);
                 }
-                Ok(frame) => {
+                Ok((frame, stamps)) => {
                     summary.frames_rx += 1;
                     if !frame.is_extended() && !frame.is_remote_frame() {
-                        stim.on_frame(now, frame.raw_id(), frame.data(), &mut out);
+                        let real_now = unix_ns(std::time::SystemTime::now()).unwrap_or(0);
+                        let at =
+                            arrival_ns(stamps.socket.and_then(unix_ns), real_now, monotonic_ns());
+                        stim.on_frame(at, frame.raw_id(), frame.data(), &mut out);
                     }
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
@@ -253,6 +288,25 @@ pub fn run_loop(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn arrival_times_come_from_the_receive_timestamp_or_the_read() {
+        let (real, mono) = (1_700_000_000_000_000_000, 5_000_000_000);
+        // 40 ms before the read, on the realtime clock: 40 ms before on the monotonic one.
+        assert_eq!(
+            arrival_ns(Some(real - 40_000_000), real, mono),
+            mono - 40_000_000
+        );
+        assert_eq!(arrival_ns(Some(real), real, mono), mono);
+        // No timestamp, one from the future, one too old (the clock was stepped): read time.
+        assert_eq!(arrival_ns(None, real, mono), mono);
+        assert_eq!(arrival_ns(Some(real + 1), real, mono), mono);
+        assert_eq!(arrival_ns(Some(real - MAX_RX_AGE_NS - 1), real, mono), mono);
+        assert_eq!(
+            arrival_ns(Some(real - MAX_RX_AGE_NS), real, mono),
+            mono - MAX_RX_AGE_NS
+        );
+    }
 
     #[test]
     fn error_frames_map_to_canopen_codes() {

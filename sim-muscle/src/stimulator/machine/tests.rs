@@ -789,3 +789,86 @@ fn advance_skips_to_the_next_grid_point() {
     assert_eq!(advance(100, 10, 100), 110);
     assert_eq!(advance(100, 10, 135), 140);
 }
+
+/// Frames read late but stamped with their arrival: a stall of the stimulator's loop
+/// (its process not scheduled) must not turn properly spaced pulses into a burst, and
+/// pulses that really were sent too close stay violations.
+#[test]
+fn a_stalled_loop_applies_pulses_at_their_arrival_ticks() {
+    let mut b = Bench::new();
+    b.operational();
+    b.run(1, true);
+    // Ticks 1..=59 never run; meanwhile pulses arrive at ticks 10, 30 and 50 and the host
+    // heartbeat every 10 ms, all read at once when the loop wakes for tick 60.
+    let at = |tick: u64| T0 + TICK_NS + tick * TICK_NS + 300_000;
+    let mut sent = Vec::new();
+    for t in (10..60).step_by(10) {
+        let hb = Message::HostHeartbeat(Heartbeat {
+            state: NmtState::Operational,
+        })
+        .encode()
+        .unwrap();
+        b.stim
+            .on_frame(at(t), u32::from(hb.id), hb.payload(), &mut b.out);
+        if t % 20 == 10 {
+            let p = b.next_pulse(100, 100);
+            let f = Message::Pulse(p).encode().unwrap();
+            b.stim
+                .on_frame(at(t), u32::from(f.id), f.payload(), &mut b.out);
+            sent.push(p);
+        }
+    }
+    b.collect();
+    assert!(b.emcys().is_empty(), "{:?}", b.emcys());
+    assert!(b.stim.has_pending_pulse());
+    b.tick = 60;
+    let report = b.stim.tick(
+        Tick {
+            index: 60,
+            nominal_ns: b.now(),
+            now_ns: b.now(),
+        },
+        &mut b.plant,
+        &mut b.out,
+    );
+    b.collect();
+    assert_eq!(report.caught_up_pulses, 3);
+    assert_eq!(report.applied, None);
+    assert_eq!(b.plant.pulses(), 3);
+    assert_eq!(b.stim.pulses_delivered(), 3);
+    assert!(!b.stim.has_pending_pulse());
+    assert_eq!(b.stim.state(), StimState::Stimulating);
+    // The charge integrator saw the three pulses (FORCE after the catch-up).
+    b.run(1, true);
+    let f = *b.forces().last().unwrap();
+    let expected: f64 = sent.iter().map(charge_uc).sum();
+    assert!((f.force_n() - expected).abs() < 1e-3, "{f:?} vs {expected}");
+
+    // Two pulses that arrived 1 ms apart (min IPI 2 ms) and were read together later:
+    // the second is refused, as on time.
+    let base = b.tick + 20;
+    let p1 = b.next_pulse(100, 100);
+    let p2 = b.next_pulse(100, 100);
+    for (p, t) in [(p1, base), (p2, base + 1)] {
+        let f = Message::Pulse(p).encode().unwrap();
+        b.stim
+            .on_frame(at(t), u32::from(f.id), f.payload(), &mut b.out);
+    }
+    b.collect();
+    assert_eq!(
+        b.last_emcy(),
+        Emcy::new(
+            ErrorCode::MinIpiViolation,
+            StimState::Stimulating,
+            p2.seq,
+            1
+        )
+    );
+    // A stop that arrived after them cancels what has not been applied, and reports it.
+    let before = b.plant.pulses();
+    b.nmt(NmtCommand::Stop);
+    assert!(!b.stim.has_pending_pulse());
+    assert_eq!(b.last_emcy().code, ErrorCode::WrongState);
+    b.run(30, true);
+    assert_eq!(b.plant.pulses(), before);
+}
