@@ -405,9 +405,13 @@ source = "supervisor bench"
 
     /// The supervisor's status.
     pub fn status(&self) -> Result<Status, BenchError> {
-        self.command(Command::Status)?
-            .status
-            .ok_or_else(|| BenchError::Process("status without state".into()))
+        let r = self.command(Command::Status)?;
+        r.status.ok_or_else(|| {
+            BenchError::Process(format!(
+                "status without state: {}",
+                r.error.as_deref().unwrap_or("no reason given")
+            ))
+        })
     }
 
     /// Waits until the supervisor has heard from every process (or `timeout`).

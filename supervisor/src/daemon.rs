@@ -193,7 +193,18 @@ pub fn run(
             record(&mut run, &mut core, |r| r.on_timing(&tr));
         }
 
-        // 2. Health.
+        // 2. Operator requests, served before the health check so that a fault found
+        //    below reaches the driver (SafeStop) and rt-core (the zero Reference) in this
+        //    same pass, before any status shows it.
+        while let Ok(p) = rx.try_recv() {
+            let response = serve(&mut core, &mut health, &run, &p, now, start_ns);
+            let _ = p.reply.try_send(response);
+        }
+        if stopping && *core.state() == ArmState::Armed {
+            let _ = core.command(&Command::Stop, now, Ok(()));
+        }
+
+        // 3. Health.
         if now >= next_scan {
             next_scan = now + scan_ns;
             health.on_nodes(&list_nodes());
@@ -212,15 +223,6 @@ pub fn run(
                     core.note(format!("warning: {}", e.message));
                 }
             }
-        }
-
-        // 3. Operator requests.
-        while let Ok(p) = rx.try_recv() {
-            let response = serve(&mut core, &mut health, &run, &p, now, start_ns);
-            let _ = p.reply.try_send(response);
-        }
-        if stopping && *core.state() == ArmState::Armed {
-            let _ = core.command(&Command::Stop, now, Ok(()));
         }
 
         // 4. Driver orders.
