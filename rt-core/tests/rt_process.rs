@@ -621,3 +621,100 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
     assert_eq!(status.code(), Some(1));
     assert!(stderr.contains("missing.toml"), "{stderr}");
 }
+
+/// Fault injection: slow consumers on rt-core's output services. Subscribers that never
+/// read StimTick or TimingReport (in this process) and a whole subscriber process stopped
+/// with SIGSTOP must not block the publisher: with iceoryx2's safe overflow the loop keeps
+/// its period, a live subscriber still receives every tick, and SIGTERM ends it cleanly.
+#[test]
+fn slow_and_stopped_consumers_never_block_the_loop() {
+    let dir = Scratch::new("slowconsumer");
+    let stopped_dir = Scratch::new("slowconsumer-stopped");
+    let prefix = prefix("slowconsumer");
+    let path = write_config(&dir, &config(&prefix, 4));
+    let node = create_node("test-slow-consumer").unwrap();
+    let _never_read_ticks = open_pubsub::<StimTick>(&node, &prefix)
+        .unwrap()
+        .subscriber_builder()
+        .create()
+        .unwrap();
+    let _never_read_reports = open_pubsub::<TimingReport>(&node, &prefix)
+        .unwrap()
+        .subscriber_builder()
+        .create()
+        .unwrap();
+    let stopped = start_probe(&stopped_dir, &prefix);
+    stopped.signal(Signal::SIGSTOP);
+    let probe = start_probe(&dir, &prefix);
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| feed_references(&prefix, 0.5, &stop));
+        let rt = start_rt_core(&path, false);
+        std::thread::sleep(Duration::from_millis(1500));
+        rt.signal(Signal::SIGTERM);
+        let (status, stderr) = rt.finish(Duration::from_secs(10));
+        stop.store(true, Ordering::Relaxed);
+        assert!(status.success(), "rt-core: {status}\n{stderr}");
+    });
+    let (status, _) = probe.finish(Duration::from_secs(10));
+    assert!(
+        status.success(),
+        "the live probe did not see the final tick"
+    );
+    stopped.signal(Signal::SIGCONT);
+    stopped.signal(Signal::SIGKILL);
+    let summary = read_summary(&dir);
+    let ticks = read_ticks(&dir);
+    assert!(ticks.len() > 500, "only {} ticks in 1.5 s", ticks.len());
+    assert_eq!(
+        (summary.first_seq, summary.lost, summary.invalid),
+        (1, 0, 0)
+    );
+    let report = summary.rt_core.expect("timing report");
+    assert_eq!(report.hot_path_allocations, 0);
+    // The loop kept its grid: no more missed periods than a loaded CI machine causes
+    // anyway (a blocked publisher would miss them all).
+    assert!(
+        report.misses * 10 < report.ticks,
+        "{} missed of {}",
+        report.misses,
+        report.ticks
+    );
+}
+
+/// Fault injection: iceoryx2 resources left stale by a SIGKILLed rt-core. A new rt-core
+/// with the same services starts (the dead node's StimTick publisher slot is reclaimed)
+/// and a subscriber receives its ticks from seq 1.
+#[test]
+fn a_restart_after_sigkill_reclaims_the_stale_services() {
+    let dir = Scratch::new("stalerestart");
+    let prefix = prefix("stalerestart");
+    let path = write_config(&dir, &config(&prefix, 4));
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| feed_references(&prefix, 0.5, &stop));
+        let first = start_rt_core(&path, false);
+        std::thread::sleep(Duration::from_millis(700));
+        first.signal(Signal::SIGKILL);
+        let (status, _) = first.finish(Duration::from_secs(10));
+        assert!(!status.success(), "killed");
+        let probe = start_probe(&dir, &prefix);
+        let second = start_rt_core(&path, false);
+        std::thread::sleep(Duration::from_millis(1000));
+        second.signal(Signal::SIGTERM);
+        let (status, stderr) = second.finish(Duration::from_secs(10));
+        stop.store(true, Ordering::Relaxed);
+        assert!(
+            status.success(),
+            "the restarted rt-core: {status}\n{stderr}"
+        );
+        let (status, _) = probe.finish(Duration::from_secs(10));
+        assert!(status.success(), "the probe did not see the final tick");
+    });
+    let summary = read_summary(&dir);
+    assert_eq!(
+        (summary.first_seq, summary.lost, summary.invalid),
+        (1, 0, 0)
+    );
+    assert!(read_ticks(&dir).len() > 300);
+}
