@@ -239,3 +239,109 @@ fn a_peer_the_policy_does_not_admit_is_refused() {
     assert!(!dir.join("s.sock").exists(), "socket removed on shutdown");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Bad-input sweep of the daemon's configuration file (issue 10, item 3): each malformed
+/// file is refused by `supervisor run --check` with exit status 1 and a message naming the
+/// problem, without a panic, and without creating the control socket or the recording
+/// directory it names.
+#[test]
+fn malformed_configurations_are_refused_by_name_and_create_nothing() {
+    let dir = std::env::temp_dir().join(format!("sv-badcfg-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let example = Command::new(EXE)
+        .args(["run", "--print-example-config"])
+        .output()
+        .unwrap();
+    assert!(example.status.success());
+    let good = String::from_utf8(example.stdout)
+        .unwrap()
+        .replace("/run/fes/supervisor.sock", "run/sv.sock")
+        .replace("/var/lib/fes/recordings", "recordings")
+        .replace("group = \"fes\"", "# group");
+    let check = |name: &str, bytes: &[u8]| -> (Option<i32>, String) {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let out = Command::new(EXE)
+            .args(["run", "--check", "--config"])
+            .arg(&path)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = check("good.toml", good.as_bytes());
+    assert_eq!(code, Some(0), "the example itself is valid: {err}");
+    let edit = |from: &str, to: &str| {
+        assert!(good.contains(from), "the example has {from:?}");
+        good.replacen(from, to, 1).into_bytes()
+    };
+    let truncated = {
+        let at = good.find("\"fes-supervisor\"").expect("the source key") + 5;
+        good.as_bytes()[..at].to_vec()
+    };
+    let mut non_utf8 = good.clone().into_bytes();
+    non_utf8.extend_from_slice(b"\n# \xff\xfe\n");
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            "nan",
+            edit("max_force = 1.0", "max_force = nan"),
+            "reference.max_force: NaN",
+        ),
+        (
+            "inf",
+            edit("gain = 0.3 ", "gain = inf "),
+            "outer_loop.gain: inf",
+        ),
+        (
+            "negative-time",
+            edit("period_ms = 10 ", "period_ms = -5 "),
+            "integer `-5`",
+        ),
+        (
+            "huge",
+            edit("max_record_ms = 1000 ", "max_record_ms = 99999999999 "),
+            "recording.max_record_ms: 99999999999 must be in [100, 60000]",
+        ),
+        (
+            "zero-flush",
+            edit("flush_period_ms = 1000 ", "flush_period_ms = 0 "),
+            "recording.flush_period_ms: 0",
+        ),
+        (
+            "schema",
+            edit("fes-supervisor/1", "fes-supervisor/2"),
+            "schema: `fes-supervisor/2` is not `fes-supervisor/1`",
+        ),
+        (
+            "no-schema",
+            edit("schema = ", "# schema = "),
+            "schema: missing",
+        ),
+        (
+            "world-writable",
+            edit("mode = 0o660", "mode = 0o666"),
+            "control.mode: 0o666",
+        ),
+        (
+            "unknown-key",
+            edit("enabled = true\ngain", "enabled = true\nbogus = 1\ngain"),
+            "unknown field `bogus`",
+        ),
+        ("truncated", truncated, "TOML parse error"),
+        ("non-utf8", non_utf8, "valid UTF-8"),
+        ("empty", Vec::new(), "schema: missing"),
+    ];
+    for (name, bytes, fragment) in &cases {
+        let (code, err) = check(&format!("{name}.toml"), bytes);
+        assert_eq!(code, Some(1), "{name}: exit status 1 expected\n{err}");
+        assert!(err.contains(fragment), "{name}: {fragment:?} not in\n{err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+    }
+    // Nothing was created next to the files: no socket directory, no recordings.
+    assert!(!dir.join("run").exists() && !dir.join("recordings").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
