@@ -126,6 +126,17 @@ pub struct TickReport {
     pub state: StimState,
 }
 
+/// A pulse applied at a missed tick in the catch-up after a stall of the loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CaughtUp {
+    /// The tick it was applied at.
+    pub tick: u64,
+    /// The plant's force at that tick, before the pulse (N; not sent as FORCE).
+    pub force_n: f64,
+    /// The pulse.
+    pub pulse: Pulse,
+}
+
 /// Counters that are not on the bus, for logs and tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Diagnostics {
@@ -152,6 +163,8 @@ pub struct Stimulator {
     seq: SequenceCheck,
     interlock: Interlock,
     pending: PendingPulses,
+    caught_up: [Option<CaughtUp>; PENDING_CAPACITY],
+    caught_up_len: usize,
     grid_origin_ns: Option<u64>,
     next_tick: u64,
     force_n: f64,
@@ -193,6 +206,8 @@ impl Stimulator {
             seq: SequenceCheck::new(),
             interlock: Interlock::new(settings.channels),
             pending: PendingPulses::new(),
+            caught_up: [None; PENDING_CAPACITY],
+            caught_up_len: 0,
             grid_origin_ns: None,
             next_tick: 0,
             force_n: 0.0,
@@ -239,6 +254,12 @@ impl Stimulator {
     /// The tick an accepted pulse would be applied at.
     pub const fn next_tick(&self) -> u64 {
         self.next_tick
+    }
+
+    /// The pulses the last [`Self::tick`] applied at missed ticks, in tick order (for the
+    /// record: the adapter writes a row for each).
+    pub fn caught_up(&self) -> impl Iterator<Item = &CaughtUp> {
+        self.caught_up[..self.caught_up_len].iter().flatten()
     }
 
     /// True when an accepted pulse waits for its tick.
@@ -525,6 +546,7 @@ impl Stimulator {
         }
         let missed = k - self.next_tick;
         let mut caught_up_pulses = 0;
+        self.caught_up_len = 0;
         if missed > 0 {
             self.diagnostics.missed_ticks += missed;
             let first = k - missed.min(MAX_CATCH_UP_STEPS);
@@ -537,6 +559,16 @@ impl Stimulator {
             }
             for j in first..k {
                 let p = self.pending.take_due(j);
+                if let Some(pulse) = p
+                    && self.caught_up_len < PENDING_CAPACITY
+                {
+                    self.caught_up[self.caught_up_len] = Some(CaughtUp {
+                        tick: j,
+                        force_n: self.force_n,
+                        pulse,
+                    });
+                    self.caught_up_len += 1;
+                }
                 caught_up_pulses += u32::from(p.is_some());
                 self.apply(j, p, plant);
             }

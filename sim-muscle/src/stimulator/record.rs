@@ -22,7 +22,8 @@ pub struct TickRecord {
     pub late_ns: u64,
     /// State after the tick.
     pub state: StimState,
-    /// Force published at this tick (N).
+    /// Force published at this tick (N); for a tick caught up after a stall (a row only
+    /// when a pulse was applied there), the plant force at that tick, not sent as FORCE.
     pub force_n: f64,
     /// The pulse applied at this tick: (seq, amplitude mA, width us).
     pub pulse: Option<(u16, f64, u16)>,

@@ -256,6 +256,18 @@ pub fn run_loop(
             state = report.state;
         }
         if let Some(r) = recorder.as_mut() {
+            // Pulses applied at ticks the loop missed (a stall) get their own rows, so
+            // the record lists every delivered pulse at the tick it was applied.
+            for c in stim.caught_up() {
+                r.push(TickRecord {
+                    tick: c.tick,
+                    nominal_ns: t0 + c.tick * TICK_NS,
+                    late_ns: now.saturating_sub(t0 + c.tick * TICK_NS),
+                    state: report.state,
+                    force_n: c.force_n,
+                    pulse: Some((c.pulse.seq, c.pulse.amplitude_ma(), c.pulse.width_us)),
+                });
+            }
             r.push(TickRecord {
                 tick: k,
                 nominal_ns: nominal,

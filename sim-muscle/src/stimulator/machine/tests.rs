@@ -833,6 +833,15 @@ fn a_stalled_loop_applies_pulses_at_their_arrival_ticks() {
     );
     b.collect();
     assert_eq!(report.caught_up_pulses, 3);
+    let caught: Vec<(u64, u16)> = b.stim.caught_up().map(|c| (c.tick, c.pulse.seq)).collect();
+    assert_eq!(
+        caught,
+        sent.iter()
+            .zip([10, 30, 50])
+            .map(|(p, t)| (t, p.seq))
+            .collect::<Vec<_>>(),
+        "each applied at the tick period it arrived in"
+    );
     assert_eq!(report.applied, None);
     assert_eq!(b.plant.pulses(), 3);
     assert_eq!(b.stim.pulses_delivered(), 3);
