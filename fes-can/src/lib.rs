@@ -19,6 +19,7 @@ pub mod counter;
 pub mod crc;
 pub mod desc;
 pub mod error;
+pub mod hostbus;
 pub mod ids;
 pub mod message;
 pub mod table;

@@ -3,6 +3,10 @@
 //! [`ForceSample`] on iceoryx2, and hands STATUS, EMCY, heartbeats, error frames and link
 //! changes to the forward thread through a preallocated lock-free queue.
 //!
+//! On the host bus (`hostbus:<dir>`, [`fes_can::hostbus`]) it holds the driver station's
+//! socket and applies the same identifier filter itself; error frames there are the ones
+//! a tap injects, and the link is always up.
+//!
 //! Its socket accepts exactly FORCE, STATUS, EMCY and the stimulator heartbeat (standard
 //! data frames) plus every error frame (`CAN_RAW_ERR_FILTER` = all), so bus-off,
 //! error-passive and controller problems arrive as frames. A read failing with `ENETDOWN`
@@ -15,6 +19,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
+use fes_can::hostbus::{self, HostBus, Station};
 use fes_can::{Message, MessageKind, Nodes};
 use rt_core::msg::service::{BACKPRESSURE, ServiceError, open_pubsub};
 use rt_core::msg::{Contract, ForceSample};
@@ -158,8 +163,32 @@ pub enum BusError {
     Ipc(String),
 }
 
-/// The receive socket: the stimulator's frames and every error frame.
-fn open_socket(settings: &BusSettings) -> Result<CanSocket, BusError> {
+/// The stimulator's message kinds the receive socket accepts.
+const ACCEPTED: [MessageKind; 4] = [
+    MessageKind::Force,
+    MessageKind::Status,
+    MessageKind::Emcy,
+    MessageKind::StimHeartbeat,
+];
+
+/// The receive socket: the stimulator's frames and every error frame, on a CAN interface
+/// or on the host bus ([`fes_can::hostbus`]).
+enum RxSocket {
+    Can(CanSocket),
+    Host(HostBus),
+}
+
+/// One read.
+enum Rx {
+    /// A standard data frame that passed the filter: identifier and payload.
+    Data(u16, [u8; 8], usize),
+    /// An error frame, classified.
+    Error(BusErrorKind),
+    /// Nothing before the timeout, or a frame to ignore.
+    Nothing,
+}
+
+fn open_socket(settings: &BusSettings) -> Result<RxSocket, BusError> {
     let err = |what| {
         let iface = settings.iface.clone();
         move |source| BusError::Socket {
@@ -168,18 +197,18 @@ fn open_socket(settings: &BusSettings) -> Result<CanSocket, BusError> {
             source,
         }
     };
+    if let Some(dir) = hostbus::bus_dir(&settings.iface) {
+        return HostBus::open(dir, Station::Driver, Some(READ_TIMEOUT))
+            .map(RxSocket::Host)
+            .map_err(err("host bus"));
+    }
     let socket = CanSocket::open(&settings.iface).map_err(err("open"))?;
     // Match the 11-bit identifier and require the EFF and RTR flags clear.
     let mask = 0x7FF | libc::CAN_EFF_FLAG | libc::CAN_RTR_FLAG;
-    let filters: Vec<CanFilter> = [
-        MessageKind::Force,
-        MessageKind::Status,
-        MessageKind::Emcy,
-        MessageKind::StimHeartbeat,
-    ]
-    .into_iter()
-    .map(|k| CanFilter::new(u32::from(settings.nodes.id_of(k)), mask))
-    .collect();
+    let filters: Vec<CanFilter> = ACCEPTED
+        .into_iter()
+        .map(|k| CanFilter::new(u32::from(settings.nodes.id_of(k)), mask))
+        .collect();
     socket
         .set_filters(&filters)
         .map_err(err("receive filters"))?;
@@ -189,7 +218,63 @@ fn open_socket(settings: &BusSettings) -> Result<CanSocket, BusError> {
     socket
         .set_read_timeout(READ_TIMEOUT)
         .map_err(err("read timeout"))?;
-    Ok(socket)
+    Ok(RxSocket::Can(socket))
+}
+
+impl RxSocket {
+    /// Reads one frame, waiting at most [`READ_TIMEOUT`].
+    fn read(&self, nodes: &Nodes) -> io::Result<Rx> {
+        match self {
+            RxSocket::Can(socket) => match socket.read_frame() {
+                Ok(CanFrame::Error(e)) => Ok(Rx::Error(classify_error_frame(e))),
+                Ok(CanFrame::Data(frame)) => {
+                    let mut data = [0u8; 8];
+                    let n = frame.data().len().min(8);
+                    data[..n].copy_from_slice(&frame.data()[..n]);
+                    Ok(Rx::Data(frame.raw_id() as u16, data, n))
+                }
+                Ok(CanFrame::Remote(_)) => Ok(Rx::Nothing),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock
+                            | io::ErrorKind::TimedOut
+                            | io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    Ok(Rx::Nothing)
+                }
+                Err(e) => Err(e),
+            },
+            RxSocket::Host(bus) => match bus.recv() {
+                Ok(Some(r)) if r.frame.is_error() => {
+                    let class = r.frame.can_id & !hostbus::ERR_FLAG;
+                    Ok(CanErrorFrame::new_error(class, r.frame.payload())
+                        .map_or(Rx::Error(BusErrorKind::Other { class }), |e| {
+                            Rx::Error(classify_error_frame(e))
+                        }))
+                }
+                Ok(Some(r)) => Ok(match r.frame.standard_id() {
+                    // The same filter as the CAN socket's.
+                    Some(id) if ACCEPTED.iter().any(|k| nodes.id_of(*k) == id) => {
+                        Rx::Data(id, r.frame.data, r.frame.payload().len())
+                    }
+                    _ => Rx::Nothing,
+                }),
+                Ok(None) => Ok(Rx::Nothing),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => Ok(Rx::Nothing),
+                Err(e) => Err(e),
+            },
+        }
+    }
+
+    /// The interface's link state (the host bus is always up).
+    fn link_is_up(&self, iface: &str) -> Option<bool> {
+        match self {
+            RxSocket::Can(socket) => link_is_up(socket.as_raw_fd(), iface).ok(),
+            RxSocket::Host(_) => None,
+        }
+    }
 }
 
 /// Runs the receive thread until `stop` is set. `on_ready` is called once the socket and
@@ -225,7 +310,7 @@ pub fn run_bus(
         let now = monotonic_ns();
         if now >= next_link_check {
             next_link_check = now + LINK_CHECK_NS;
-            if let Ok(up) = link_is_up(socket.as_raw_fd(), &settings.iface)
+            if let Some(up) = socket.link_is_up(&settings.iface)
                 && up != link_up
             {
                 link_up = up;
@@ -236,14 +321,14 @@ pub fn run_bus(
                 });
             }
         }
-        match socket.read_frame() {
-            Ok(CanFrame::Error(e)) => {
+        match socket.read(&settings.nodes) {
+            Ok(Rx::Error(kind)) => {
                 BusCounters::bump(&counters.error_frames);
-                push(BusEvent::BusError(classify_error_frame(e)));
+                push(BusEvent::BusError(kind));
             }
-            Ok(CanFrame::Data(frame)) => {
+            Ok(Rx::Data(id, data, len)) => {
                 BusCounters::bump(&counters.frames);
-                match settings.nodes.decode(frame.raw_id(), frame.data()) {
+                match settings.nodes.decode(u32::from(id), &data[..len]) {
                     Ok(Message::Force(f)) => {
                         if let Some(last) = last_frame_seq {
                             let gap = f.seq.wrapping_sub(last).wrapping_sub(1);
@@ -280,14 +365,11 @@ pub fn run_bus(
                     Err(_) => BusCounters::bump(&counters.decode_errors),
                 }
             }
-            Ok(CanFrame::Remote(_)) => {}
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::WouldBlock
-                        | io::ErrorKind::TimedOut
-                        | io::ErrorKind::Interrupted
-                ) => {}
+            Ok(Rx::Nothing) => {}
+            Err(e) if e.kind() == io::ErrorKind::InvalidData => {
+                // A host-bus datagram that is not a CAN frame.
+                BusCounters::bump(&counters.decode_errors);
+            }
             Err(e) => {
                 BusCounters::bump(&counters.read_errors);
                 if matches!(

@@ -531,12 +531,20 @@ impl DriverConfig {
             });
         }
         let c = &self.can;
-        range(
-            !c.iface.is_empty() && c.iface.len() < 16 && !c.iface.contains(['/', ' ']),
-            "can.iface",
-            &c.iface,
-            "an interface name of 1..=15 characters",
-        )?;
+        match fes_can::hostbus::bus_dir(&c.iface) {
+            Some(dir) => range(
+                fes_can::hostbus::validate_dir(dir).is_ok(),
+                "can.iface",
+                &c.iface,
+                "hostbus:<absolute directory of at most 91 bytes> (the host bus)",
+            )?,
+            None => range(
+                !c.iface.is_empty() && c.iface.len() < 16 && !c.iface.contains(['/', ' ']),
+                "can.iface",
+                &c.iface,
+                "an interface name of 1..=15 characters, or hostbus:<directory>",
+            )?,
+        }
         self.nodes()?;
         range(
             (1..=1000).contains(&c.heartbeat_ms),
@@ -784,6 +792,19 @@ prefix = "bench-1"
         .unwrap_err()
         .to_string();
         assert!(e.contains("both use node id"), "{e}");
+        // The host bus: an absolute directory short enough for a socket address.
+        let iface = |i: &str| MIN.replace("vcan0", i);
+        assert!(DriverConfig::parse(&iface("hostbus:/run/fes/bus")).is_ok());
+        for bad in [
+            "hostbus:relative",
+            "hostbus:",
+            &format!("hostbus:/{}", "d".repeat(100)),
+            "can0/x",
+            "sixteen_chars_xx",
+        ] {
+            let e = DriverConfig::parse(&iface(bad)).unwrap_err().to_string();
+            assert!(e.contains("can.iface"), "{bad}: {e}");
+        }
         let e = DriverConfig::parse("schema = \"fes-stim-driver/1\"\n[can]\niface = \"vcan0\"\n")
             .unwrap_err()
             .to_string();

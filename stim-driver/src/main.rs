@@ -27,7 +27,7 @@ use stim_driver::config::DriverConfig;
 use stim_driver::report::run_report;
 use stim_driver::runner::{Shared, run_forward};
 use stim_driver::safe_stop::safe_stop;
-use stim_driver::tx::SocketTx;
+use stim_driver::tx::BusTx;
 use stim_driver::txstamp::{self, TxStampReader};
 use tracing::{error, info, warn};
 
@@ -239,13 +239,24 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
         ),
         None => None,
     };
-    let tx = SocketTx::open(&config.can.iface, config.retry_policy())
+    let tx = BusTx::open(&config.can.iface, config.retry_policy())
         .with_context(|| format!("CAN interface {:?}", config.can.iface))
         .map_err(Failure::Run)?;
-    let stamps = match txstamp::enable(tx.socket()).and_then(|()| TxStampReader::new(tx.raw_fd())) {
-        Ok(r) => Some(r),
-        Err(e) => {
-            warn!("no kernel transmit timestamps: {e}");
+    let stamps = match &tx {
+        BusTx::Can(tx) => {
+            match txstamp::enable(tx.socket()).and_then(|()| TxStampReader::new(tx.raw_fd())) {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    warn!("no kernel transmit timestamps: {e}");
+                    None
+                }
+            }
+        }
+        BusTx::Host(_) => {
+            warn!(
+                "{}: the host bus (Unix datagrams, no CAN): for tests and benches on hosts without SocketCAN",
+                config.can.iface
+            );
             None
         }
     };

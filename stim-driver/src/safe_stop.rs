@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use fes_can::{EncodeError, Message, Nmt, NmtCommand, Nodes};
 
-use crate::tx::{CanTx, RetryPolicy, SocketTx, TxError};
+use crate::tx::{BusTx, CanTx, RetryPolicy, TxError};
 
 /// How long each frame is retried while the transmit queue is full.
 pub const RETRY_BUDGET: Duration = Duration::from_millis(200);
@@ -85,7 +85,7 @@ pub fn safe_stop(iface: &str, nodes: &Nodes) -> Result<usize, SafeStopError> {
         budget_ns: RETRY_BUDGET.as_nanos() as u64,
         interval_ns: RETRY_INTERVAL.as_nanos() as u64,
     };
-    let mut tx = SocketTx::open(iface, retry).map_err(|source| SafeStopError::Open {
+    let mut tx = BusTx::open(iface, retry).map_err(|source| SafeStopError::Open {
         iface: iface.to_owned(),
         source,
     })?;

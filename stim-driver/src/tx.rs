@@ -6,11 +6,14 @@
 //! and then dropped and reported, so the forward path never blocks on the bus.
 //! [`CountingSink`] stands in for the bus in benchmarks and tests, and [`DatagramTx`] (a
 //! Unix socket pair) in the latency suite's forward-path measurement on hosts without CAN.
+//! [`HostBusTx`] writes to the host bus ([`fes_can::hostbus`], an interface named
+//! `hostbus:<dir>`), and [`BusTx`] is whichever of the two the configured interface names.
 
 use std::io;
 use std::os::fd::{AsRawFd, RawFd};
 
 use fes_can::Frame;
+use fes_can::hostbus::{self, HostBus, RawFrame, Station};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions, StandardId};
 
@@ -165,6 +168,70 @@ fn write_with_retry(
                     sleep_until(next);
                 }
             },
+        }
+    }
+}
+
+/// The host-bus transmit side: one datagram per station, never blocking (like vcan, a
+/// station that is absent or behind misses the frame; see [`fes_can::hostbus`]).
+#[derive(Debug)]
+pub struct HostBusTx {
+    bus: HostBus,
+    retry: RetryPolicy,
+}
+
+impl HostBusTx {
+    /// Sends through `bus` (a [`HostBus::sender`] for the driver station: the receive
+    /// thread holds the driver's bound socket, [`crate::bus`]).
+    pub fn new(bus: HostBus, retry: RetryPolicy) -> Self {
+        Self { bus, retry }
+    }
+}
+
+impl CanTx for HostBusTx {
+    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        let Some(raw) = RawFrame::data(frame.id, frame.payload()) else {
+            return Err(TxError::Failed {
+                errno: libc::EINVAL,
+            });
+        };
+        let bus = &self.bus;
+        write_with_retry(&self.retry, || {
+            bus.send(&raw)
+                .map_err(|e| e.raw_os_error().unwrap_or(libc::EIO))
+        })
+    }
+}
+
+/// The driver's transmit side on the interface it was configured with.
+#[derive(Debug)]
+pub enum BusTx {
+    /// A SocketCAN interface.
+    Can(SocketTx),
+    /// The host bus.
+    Host(HostBusTx),
+}
+
+impl BusTx {
+    /// Opens `iface`: `hostbus:<dir>` joins the host bus as a send-only driver station
+    /// (the receive thread holds the driver's bound socket), anything else is a CAN
+    /// interface.
+    pub fn open(iface: &str, retry: RetryPolicy) -> io::Result<Self> {
+        match hostbus::bus_dir(iface) {
+            Some(dir) => Ok(Self::Host(HostBusTx::new(
+                HostBus::sender(dir, Some(Station::Driver))?,
+                retry,
+            ))),
+            None => Ok(Self::Can(SocketTx::open(iface, retry)?)),
+        }
+    }
+}
+
+impl CanTx for BusTx {
+    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        match self {
+            Self::Can(t) => t.send(frame),
+            Self::Host(t) => t.send(frame),
         }
     }
 }

@@ -53,7 +53,8 @@ fn parse_node_id(s: &str) -> Result<u8, String> {
 /// CONFIG frame can loosen.
 #[derive(Debug, Clone, clap::Args)]
 pub struct StimulatorArgs {
-    /// CAN interface (SocketCAN).
+    /// CAN interface (SocketCAN), or `hostbus:<absolute dir>` for the host bus (Unix
+    /// datagrams carrying the same frames, for hosts without SocketCAN; docs/vcan.md).
     #[arg(long, default_value = "vcan0")]
     pub iface: String,
     /// The stimulator's CANopen node id (decimal or 0x..).

@@ -1,4 +1,5 @@
-//! The thin adapter between a SocketCAN interface and the state machine: a 1 ms
+//! The thin adapter between a SocketCAN interface (or the host bus, `hostbus:<dir>`,
+//! [`fes_can::hostbus`]) and the state machine: a 1 ms
 //! absolute-time loop that drains received frames into [`Stimulator::on_frame`], runs
 //! [`Stimulator::tick`] and sends what the machine produced.
 //!
@@ -12,6 +13,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context as _;
+use fes_can::hostbus::{self, HostBus, RawFrame, Station};
 use fes_can::{ErrorCode, Message, MessageKind, Nodes, decode};
 use nix::errno::Errno;
 use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions};
@@ -95,23 +97,54 @@ pub fn classify_error_frame(class: u32, data: &[u8]) -> ErrorCode {
     }
 }
 
+/// The message kinds the stimulator consumes.
+const ACCEPTED: [MessageKind; 4] = [
+    MessageKind::Nmt,
+    MessageKind::Pulse,
+    MessageKind::Config,
+    MessageKind::HostHeartbeat,
+];
+
+/// The stimulator's socket: a CAN interface, or the stimulator station of the host bus
+/// (`hostbus:<dir>`, [`fes_can::hostbus`]: frames in the same `struct can_frame` layout,
+/// the same identifier filter applied here, error frames only as a tap injects them).
+#[derive(Debug)]
+enum StimSocket {
+    Can(CanSocket),
+    Host(HostBus),
+}
+
+/// One read.
+enum Rx {
+    /// An error frame: its class bits and payload.
+    Error(u32, [u8; 8]),
+    /// A standard data frame that passed the filter, with its arrival (CLOCK_MONOTONIC).
+    Data(u16, [u8; 8], usize, u64),
+    /// A frame to ignore (extended, remote, filtered out).
+    Skip,
+}
+
 /// Opens `iface` with a filter for the frames the stimulator consumes (NMT, its PULSE and
 /// CONFIG, the host heartbeat; standard data frames only) plus error frames.
-fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<CanSocket> {
+fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<StimSocket> {
+    if let Some(dir) = hostbus::bus_dir(iface) {
+        let bus = HostBus::open(dir, Station::Stimulator, None)
+            .with_context(|| format!("joining the host bus {iface:?}"))?;
+        tracing::warn!(
+            iface,
+            "the host bus (Unix datagrams, no CAN): for tests and benches on hosts without SocketCAN"
+        );
+        return Ok(StimSocket::Host(bus));
+    }
     let socket = CanSocket::open(iface).with_context(|| {
         format!("opening CAN interface {iface:?} (does it exist and is it up? see docs/vcan.md)")
     })?;
     // Match the 11-bit identifier and require the EFF and RTR flags clear.
     let mask = 0x7FF | libc_flags::EFF | libc_flags::RTR;
-    let filters: Vec<CanFilter> = [
-        MessageKind::Nmt,
-        MessageKind::Pulse,
-        MessageKind::Config,
-        MessageKind::HostHeartbeat,
-    ]
-    .into_iter()
-    .map(|k| CanFilter::new(u32::from(nodes.id_of(k)), mask))
-    .collect();
+    let filters: Vec<CanFilter> = ACCEPTED
+        .into_iter()
+        .map(|k| CanFilter::new(u32::from(nodes.id_of(k)), mask))
+        .collect();
     socket
         .set_filters(&filters)
         .context("setting the CAN receive filters")?;
@@ -124,7 +157,76 @@ fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<CanSocket> {
     if let Err(e) = socket.set_recv_timestamp(true) {
         tracing::warn!("no kernel receive timestamps ({e}): frames are timed when read");
     }
-    Ok(socket)
+    Ok(StimSocket::Can(socket))
+}
+
+fn real_now_ns() -> u64 {
+    unix_ns(std::time::SystemTime::now()).unwrap_or(0)
+}
+
+impl StimSocket {
+    /// Reads one frame without blocking: `Ok(None)` when none is queued.
+    fn read(&self, nodes: &Nodes) -> std::io::Result<Option<Rx>> {
+        match self {
+            StimSocket::Can(socket) => match socket.read_frame_with_timestamps() {
+                Ok((CanFrame::Error(e), _)) => {
+                    let mut data = [0u8; 8];
+                    let n = e.data().len().min(8);
+                    data[..n].copy_from_slice(&e.data()[..n]);
+                    Ok(Some(Rx::Error(e.error_bits(), data)))
+                }
+                Ok((frame, stamps)) => {
+                    if frame.is_extended() || frame.is_remote_frame() {
+                        return Ok(Some(Rx::Skip));
+                    }
+                    let at = arrival_ns(
+                        stamps.socket.and_then(unix_ns),
+                        real_now_ns(),
+                        monotonic_ns(),
+                    );
+                    let mut data = [0u8; 8];
+                    let n = frame.data().len().min(8);
+                    data[..n].copy_from_slice(&frame.data()[..n]);
+                    Ok(Some(Rx::Data(frame.raw_id() as u16, data, n, at)))
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => Ok(None),
+                Err(e) => Err(e),
+            },
+            StimSocket::Host(bus) => match bus.recv() {
+                Ok(Some(r)) if r.frame.is_error() => Ok(Some(Rx::Error(
+                    r.frame.can_id & !hostbus::ERR_FLAG,
+                    r.frame.data,
+                ))),
+                Ok(Some(r)) => Ok(Some(match r.frame.standard_id() {
+                    Some(id) if ACCEPTED.iter().any(|k| nodes.id_of(*k) == id) => {
+                        let at = arrival_ns(r.rx_realtime_ns, real_now_ns(), monotonic_ns());
+                        Rx::Data(id, r.frame.data, r.frame.payload().len(), at)
+                    }
+                    _ => Rx::Skip,
+                })),
+                Ok(None) => Ok(None),
+                // A datagram that is not a CAN frame: dropped, as a controller drops a
+                // malformed frame.
+                Err(e) if e.kind() == std::io::ErrorKind::InvalidData => Ok(Some(Rx::Skip)),
+                Err(e) => Err(e),
+            },
+        }
+    }
+
+    /// Writes one frame.
+    fn write(&self, f: &fes_can::Frame) -> std::io::Result<()> {
+        let invalid = || std::io::Error::from(std::io::ErrorKind::InvalidInput);
+        match self {
+            StimSocket::Can(socket) => {
+                let id = socketcan::StandardId::new(f.id).ok_or_else(invalid)?;
+                let frame = CanFrame::new(id, f.payload()).ok_or_else(invalid)?;
+                socket.write_frame(&frame)
+            }
+            StimSocket::Host(bus) => {
+                bus.send(&RawFrame::data(f.id, f.payload()).ok_or_else(invalid)?)
+            }
+        }
+    }
 }
 
 mod libc_flags {
@@ -136,17 +238,9 @@ mod libc_flags {
 
 /// Sends everything in `out`; counts failures (the frame is lost, the machine is told at
 /// the next tick).
-fn flush(socket: &CanSocket, out: &mut Outbox, stim_nodes: &Nodes, summary: &mut RunSummary) {
+fn flush(socket: &StimSocket, out: &mut Outbox, stim_nodes: &Nodes, summary: &mut RunSummary) {
     for f in out.frames() {
-        let Some(id) = socketcan::StandardId::new(f.id) else {
-            summary.tx_errors += 1;
-            continue;
-        };
-        let Some(frame) = CanFrame::new(id, f.payload()) else {
-            summary.tx_errors += 1;
-            continue;
-        };
-        match socket.write_frame(&frame) {
+        match socket.write(f) {
             Ok(()) => summary.frames_tx += 1,
             Err(_) => summary.tx_errors += 1,
         }
@@ -209,21 +303,17 @@ pub fn run_loop(
         let nominal = t0 + k * TICK_NS;
 
         loop {
-            match socket.read_frame_with_timestamps() {
-                Ok((CanFrame::Error(e), _)) => {
-                    let code = classify_error_frame(e.error_bits(), e.data());
-                    stim.on_bus_error(code, (e.error_bits() & 0xFFFF) as u16, &mut out);
+            match socket.read(&settings.nodes) {
+                Ok(Some(Rx::Error(class, data))) => {
+                    let code = classify_error_frame(class, &data);
+                    stim.on_bus_error(code, (class & 0xFFFF) as u16, &mut out);
                 }
-                Ok((frame, stamps)) => {
+                Ok(Some(Rx::Data(id, data, len, at))) => {
                     summary.frames_rx += 1;
-                    if !frame.is_extended() && !frame.is_remote_frame() {
-                        let real_now = unix_ns(std::time::SystemTime::now()).unwrap_or(0);
-                        let at =
-                            arrival_ns(stamps.socket.and_then(unix_ns), real_now, monotonic_ns());
-                        stim.on_frame(at, frame.raw_id(), frame.data(), &mut out);
-                    }
+                    stim.on_frame(at, u32::from(id), &data[..len], &mut out);
                 }
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Ok(Some(Rx::Skip)) => {}
+                Ok(None) => break,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                 Err(e) => {
                     failure = Some(anyhow::Error::new(e).context(format!("reading from {iface}")));
@@ -348,5 +438,7 @@ mod tests {
     fn a_missing_interface_is_a_clear_error() {
         let e = open_socket("nosuchcan9", &Nodes::DEFAULT).unwrap_err();
         assert!(format!("{e:#}").contains("nosuchcan9"), "{e:#}");
+        let e = open_socket("hostbus:relative/dir", &Nodes::DEFAULT).unwrap_err();
+        assert!(format!("{e:#}").contains("not an absolute path"), "{e:#}");
     }
 }

@@ -73,6 +73,34 @@ pub struct Args {
     /// latencies) instead of running the processes on CAN.
     #[arg(long)]
     pub in_process: bool,
+    /// The bus between stim-driver and the virtual stimulator. `can`: SocketCAN (native
+    /// vcan0, or a User-Mode Linux guest when the kernel has no CAN: functional timings
+    /// only); `host`: the host bus (the same frames over Unix datagrams, on this host at
+    /// its real-time latencies); `auto`: `can` where the kernel has CAN, else `host`.
+    #[arg(long, value_enum, default_value_t = BusChoice::Auto)]
+    pub bus: BusChoice,
+}
+
+/// `--bus`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BusChoice {
+    /// SocketCAN where the kernel has it, else the host bus.
+    Auto,
+    /// SocketCAN: native vcan or a User-Mode Linux guest.
+    Can,
+    /// The host bus (Unix datagrams carrying the CAN frames).
+    Host,
+}
+
+/// Whether this kernel has SocketCAN (the CAN core loaded, or a vcan module to load).
+fn kernel_has_can() -> bool {
+    Path::new("/proc/net/can").exists()
+        || std::process::Command::new("modprobe")
+            .args(["-n", "-q", "vcan"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
 }
 
 fn check(a: &Args) -> anyhow::Result<()> {
@@ -128,7 +156,19 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if a.in_process {
         return in_process(&a, &out);
     }
-    if std::env::var_os("FES_VCAN_IFACE").is_none() {
+    let in_can_env = std::env::var_os("FES_VCAN_IFACE").is_some();
+    let host_bus = match a.bus {
+        BusChoice::Host => true,
+        BusChoice::Can => false,
+        BusChoice::Auto => !in_can_env && !kernel_has_can(),
+    };
+    if host_bus {
+        std::fs::create_dir_all(&out).with_context(|| format!("create {}", out.display()))?;
+        let out = std::fs::canonicalize(&out)?;
+        let iface = format!("{}{}", fes_can::hostbus::SCHEME, out.join("bus").display());
+        return inside(&a, &bin_dir, &out, iface, false);
+    }
+    if !in_can_env {
         // Not in a CAN environment yet: run this same command inside one.
         let vcan_run = bin_dir.join("vcan-run");
         if !vcan_run.is_file() {
@@ -156,12 +196,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .with_context(|| format!("start {}", vcan_run.display()))?;
         std::process::exit(status.code().unwrap_or(1));
     }
-    inside(&a, &bin_dir, &out)
-}
-
-fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
     let iface = std::env::var("FES_VCAN_IFACE").unwrap_or_else(|_| "vcan0".into());
     let uml = std::env::var("FES_VCAN_BACKEND").is_ok_and(|b| b == "uml");
+    inside(&a, &bin_dir, &out, iface, uml)
+}
+
+fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> anyhow::Result<()> {
     let prefix = format!("bench{}", std::process::id());
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let out = std::fs::canonicalize(out)?;
@@ -171,6 +211,8 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path) -> anyhow::Result<()> {
         a.controller.display(),
         if uml {
             "User-Mode Linux guest: timings are functional only"
+        } else if fes_can::hostbus::bus_dir(&iface).is_some() {
+            "the host bus: Unix datagrams carrying the CAN frames, real-time on this host"
         } else {
             "native"
         }
