@@ -218,6 +218,8 @@ struct Watch {
     condition: Condition,
     reason: String,
     finished: bool,
+    /// `last_ns` when the fault was raised: a fault clears only after a newer message.
+    last_at_fault: Option<u64>,
 }
 
 impl Watch {
@@ -229,6 +231,7 @@ impl Watch {
             condition: Condition::Waiting,
             reason: String::new(),
             finished: false,
+            last_at_fault: None,
         }
     }
 }
@@ -291,6 +294,7 @@ impl HealthMonitor {
             }
             w.condition = Condition::Faulted;
             w.reason = message.clone();
+            w.last_at_fault = w.last_ns;
         }
         self.events.push(HealthEvent {
             process: p,
@@ -681,14 +685,18 @@ impl HealthMonitor {
         }
     }
 
-    /// Clears the fault latches of processes that are live again (messages fresher than
-    /// their timeout at `now_ns`); called on an operator re-arm.
+    /// Clears the fault latches of processes that are live again: heard from after the
+    /// fault was raised, recently (within their timeout at `now_ns`), and not seen dead;
+    /// called on an operator re-arm. (A message from before the fault, however recent,
+    /// says nothing about a process that died after sending it.)
     pub fn clear_recovered(&mut self, now_ns: u64) {
         for p in Process::ALL {
             let limit = self.settings.timeout_ns(p);
             let w = &mut self.watch[p.index()];
+            let heard_since = w.last_ns > w.last_at_fault;
             let fresh = w.last_ns.is_some_and(|t| now_ns.saturating_sub(t) <= limit);
-            if w.condition == Condition::Faulted && fresh && !w.finished {
+            let dead = w.node.as_ref().is_some_and(|n| n.dead);
+            if w.condition == Condition::Faulted && heard_since && fresh && !dead && !w.finished {
                 w.condition = Condition::Ok;
                 w.reason.clear();
             }
@@ -974,5 +982,45 @@ mod tests {
         live(&mut h, 300 * MS);
         h.clear_recovered(300 * MS);
         assert!(h.ready().is_ok());
+    }
+
+    /// A process killed just after its last message: that message is still "fresh" when
+    /// the operator re-arms a moment later, but it predates the fault; the fault stays.
+    /// (Found by the kill test on the host bus: the supervisor re-armed with a dead driver.)
+    #[test]
+    fn a_fresh_message_from_before_the_fault_does_not_clear_it() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        h.on_nodes(&nodes());
+        live(&mut h, 10 * MS);
+        let driver_gone = |pid: u32| {
+            if pid == 200 {
+                ProcState::Gone
+            } else {
+                ProcState::Running
+            }
+        };
+        h.check(11 * MS, &driver_gone);
+        assert!(h.ready().unwrap_err().contains("stim-driver"));
+        h.clear_recovered(12 * MS);
+        assert!(
+            h.ready().is_err(),
+            "cleared by a message from before the death"
+        );
+        // rt-core and the stimulator keep talking; the driver stays faulted.
+        h.on_stim_tick(&tick(20, 20 * MS), 20 * MS);
+        h.clear_recovered(21 * MS);
+        assert!(h.ready().unwrap_err().contains("stim-driver"));
+        // A node seen dead is not cleared even by a late message.
+        let mut dead = nodes();
+        dead[1].dead = true;
+        h.on_nodes(&dead);
+        h.on_driver_status(&status(30), 30 * MS);
+        h.clear_recovered(31 * MS);
+        assert!(h.ready().is_err());
+        // A restarted driver (a new, live node) is heard again: re-arm clears it.
+        h.on_nodes(&nodes());
+        h.on_driver_status(&status(40), 40 * MS);
+        h.clear_recovered(41 * MS);
+        assert!(h.ready().is_ok(), "{:?}", h.ready());
     }
 }

@@ -306,22 +306,25 @@ fn stimulator_ticks(path: &Path) -> Vec<(u64, String, bool)> {
 /// off (the supervisor as victim: the driver's supervisor watch sees its node dead and
 /// sends NMT stop), and the recording up to that moment is a readable data set. Prints
 /// the kill → stimulator-stopped time per victim.
-fn kill_one(bins: &Path, can: &fes_tests::vcan::CanEnv, victim: &str) {
+/// `iface` is a CAN interface or `None` for the host bus (in the stack's directory).
+fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str) {
     use nix::sys::signal::Signal;
     use std::time::{Duration, Instant};
     use supervisor::bench::{Stack, StackOptions, log_tail};
     use supervisor::profile::{CardiacSpec, ProfileSpec};
     use supervisor::protocol::Command as Cmd;
 
-    let uml = can.backend == fes_tests::vcan::Backend::Uml;
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("kill-{victim}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("fes-kill-{victim}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
+    let iface = iface.map_or_else(
+        || format!("hostbus:{}", dir.join("bus").display()),
+        str::to_owned,
+    );
     let stack = Stack::start(StackOptions {
         dir: dir.clone(),
         bin_dir: bins.to_path_buf(),
         controller: workspace_root().join("models/fast.lcn.json"),
-        iface: can.iface.clone(),
+        iface,
         uml,
         fatigue: false,
         outer_loop: true,
@@ -445,8 +448,18 @@ fn kill_one(bins: &Path, can: &fes_tests::vcan::CanEnv, victim: &str) {
 }
 
 /// "Killing any one process mid-run leaves the stimulator stopped and the supervisor
-/// reporting which process died; the recording up to that moment is readable." One CAN
-/// environment (one UML boot), one stack per victim.
+/// reporting which process died; the recording up to that moment is readable." The four
+/// processes on the host bus (the CAN frames over Unix datagrams, fes_can::hostbus), one
+/// stack per victim, at the host's real-time latencies.
+#[test]
+fn killing_any_one_process_stops_stimulation_and_names_it() {
+    let bins = stack_binaries();
+    for victim in ["rt-core", "stim-driver", "sim-muscle", "supervisor"] {
+        kill_one(&bins, None, false, victim);
+    }
+}
+
+/// The same on SocketCAN (one CAN environment, one UML boot).
 ///
 /// Ignored on hosts without CAN: in the User-Mode Linux guest the four processes share one
 /// emulated CPU and stall for seconds (2026-11-22, three runs on an idle 2-core VM: the
@@ -457,11 +470,12 @@ fn kill_one(bins: &Path, can: &fes_tests::vcan::CanEnv, victim: &str) {
 /// `cargo test -p supervisor --test runtime_recording -- --ignored killing --nocapture`.
 #[test]
 #[ignore = "needs a native vcan: the UML guest stalls for seconds (see the doc comment)"]
-fn killing_any_one_process_stops_stimulation_and_names_it() {
+fn killing_any_one_process_on_vcan_stops_stimulation_and_names_it() {
     let bins = stack_binaries();
     fes_tests::vcan::with_vcan(|can| {
+        let uml = can.backend == fes_tests::vcan::Backend::Uml;
         for victim in ["rt-core", "stim-driver", "sim-muscle", "supervisor"] {
-            kill_one(&bins, can, victim);
+            kill_one(&bins, Some(&can.iface), uml, victim);
         }
     });
 }
