@@ -198,9 +198,12 @@ fn open_socket(settings: &BusSettings) -> Result<RxSocket, BusError> {
         }
     };
     if let Some(dir) = hostbus::bus_dir(&settings.iface) {
-        return HostBus::open(dir, Station::Driver, Some(READ_TIMEOUT))
-            .map(RxSocket::Host)
-            .map_err(err("host bus"));
+        let bus =
+            HostBus::open(dir, Station::Driver, Some(READ_TIMEOUT)).map_err(err("host bus"))?;
+        if let Some(w) = bus.queue_warning() {
+            tracing::warn!("{w}");
+        }
+        return Ok(RxSocket::Host(bus));
     }
     let socket = CanSocket::open(&settings.iface).map_err(err("open"))?;
     // Match the 11-bit identifier and require the EFF and RTR flags clear.

@@ -6,6 +6,7 @@
 //! protocol's own codes stop at 0xFF0B; these never appear on the bus).
 
 use fes_can::ErrorCode;
+use rt_core::msg::DriverStatus;
 
 /// A condition that stops stimulation: NMT stop on the bus, the driver's safe state, and
 /// nothing forwarded until an explicit re-arm.
@@ -75,21 +76,21 @@ impl Fault {
         match self {
             Fault::StimulatorEmcy { code, .. } => code.raw(),
             Fault::ConfigRefused { .. } => ErrorCode::ConfigInvalid.raw(),
-            Fault::TickTimeout { .. } => 0xFF21,
-            Fault::PublisherDead => 0xFF22,
-            Fault::PublisherGone => 0xFF23,
-            Fault::StaleTick { .. } => 0xFF24,
-            Fault::GeneratorStopped => 0xFF25,
-            Fault::LinkDown => 0xFF26,
-            Fault::BusOff => 0xFF27,
-            Fault::StimulatorSilent { .. } => 0xFF28,
-            Fault::StimulatorReset => 0xFF29,
-            Fault::StimulatorNotOperational => 0xFF2A,
-            Fault::SafeStopCommand => rt_core::msg::DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED,
-            Fault::BusEventsLost => 0xFF2C,
-            Fault::TxFailed { .. } => 0xFF2D,
-            Fault::SupervisorDead => 0xFF2E,
-            Fault::SupervisorGone => 0xFF2F,
+            Fault::TickTimeout { .. } => DriverStatus::FAULT_TICK_TIMEOUT,
+            Fault::PublisherDead => DriverStatus::FAULT_GENERATOR_DEAD,
+            Fault::PublisherGone => DriverStatus::FAULT_GENERATOR_GONE,
+            Fault::StaleTick { .. } => DriverStatus::FAULT_STALE_TICK,
+            Fault::GeneratorStopped => DriverStatus::FAULT_GENERATOR_STOPPED,
+            Fault::LinkDown => DriverStatus::FAULT_LINK_DOWN,
+            Fault::BusOff => DriverStatus::FAULT_BUS_OFF,
+            Fault::StimulatorSilent { .. } => DriverStatus::FAULT_STIMULATOR_SILENT,
+            Fault::StimulatorReset => DriverStatus::FAULT_STIMULATOR_RESET,
+            Fault::StimulatorNotOperational => DriverStatus::FAULT_STIMULATOR_NOT_OPERATIONAL,
+            Fault::SafeStopCommand => DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED,
+            Fault::BusEventsLost => DriverStatus::FAULT_BUS_EVENTS_LOST,
+            Fault::TxFailed { .. } => DriverStatus::FAULT_TX_FAILED,
+            Fault::SupervisorDead => DriverStatus::FAULT_SUPERVISOR_DEAD,
+            Fault::SupervisorGone => DriverStatus::FAULT_SUPERVISOR_GONE,
         }
     }
 
@@ -243,9 +244,12 @@ mod tests {
         codes.sort_unstable();
         codes.dedup();
         assert_eq!(codes.len(), faults.len());
-        // None collides with a bus protocol code.
+        // None collides with a bus protocol code, and each is in the contract's table
+        // the supervisor names them by.
+        assert_eq!(codes.len(), DriverStatus::DRIVER_FAULTS.len());
         for c in codes {
             assert_eq!(ErrorCode::from_raw(u64::from(c)), None);
+            assert!(DriverStatus::driver_fault_name(c).is_some(), "{c:#06x}");
         }
         assert_eq!(
             Fault::StimulatorEmcy {

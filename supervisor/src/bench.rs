@@ -279,6 +279,7 @@ delay_ms = {delay}.0
 stim_tick_timeout_ms = {tick_to}
 driver_status_timeout_ms = {status_to}
 force_timeout_ms = {force_to}
+self_stall_ms = {self_stall}
 stimulator_pid = {sim_pid}
 
 [recording]
@@ -287,6 +288,7 @@ scale_n = {scale_n}
 source = "supervisor bench"
 "#,
                 socket = socket.display(),
+                self_stall = if opts.uml { 3000 } else { 250 },
                 outer = opts.outer_loop,
                 gain = opts
                     .outer_gain

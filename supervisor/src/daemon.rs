@@ -1,7 +1,8 @@
 //! `supervisor run`: the daemon's loop. It wires the pure parts ([`crate::core`],
 //! [`crate::health`]) to iceoryx2, the control socket and the recorder.
 //!
-//! Every iteration (at most every [`POLL_MS`] ms, and at each profile edge): drain
+//! Every iteration (at most every [`POLL_MS`] ms, and at each profile edge): check its own
+//! stall (passes further apart than `[health] self_stall_ms` while armed are a fault); drain
 //! StimTick, ForceSample, DriverStatus and TimingReport; list the iceoryx2 nodes when due;
 //! check health (a fault stops stimulation at once); serve operator requests; send driver
 //! orders; publish the Reference when its period is up or it changed; record; flush.
@@ -155,9 +156,20 @@ pub fn run(
         protocol: serde_json::Value::Null,
     };
 
+    let mut last_pass = monotonic_ns();
     loop {
         let now = monotonic_ns();
         let stopping = stop.load(Ordering::Relaxed);
+
+        // 0. Our own stall (SIGSTOP, starvation): while armed, a fault before anything
+        //    else, so the references that follow are the stop reference.
+        let gap = now.saturating_sub(last_pass);
+        last_pass = now;
+        if *core.state() == ArmState::Armed
+            && let Some(reason) = cfg.health.self_stall(gap)
+        {
+            core.fault(reason);
+        }
 
         // 1. Inputs.
         while let Ok(Some(s)) = ticks.receive() {

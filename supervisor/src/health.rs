@@ -121,6 +121,10 @@ pub struct HealthSettings {
     pub stim_driver_node: String,
     /// Process id of the stimulator process, when known (the bench sets it).
     pub stimulator_pid: Option<u32>,
+    /// The supervisor itself is stalled when two passes of its loop are further apart
+    /// than this, ms (it was stopped by a signal, or starved): while armed, that is a
+    /// fault, so stimulation does not resume on its own when it runs again. Default 250.
+    pub self_stall_ms: u64,
 }
 
 impl Default for HealthSettings {
@@ -136,6 +140,7 @@ impl Default for HealthSettings {
             rt_core_node: "rt-core".into(),
             stim_driver_node: "stim-driver".into(),
             stimulator_pid: None,
+            self_stall_ms: 250,
         }
     }
 }
@@ -148,6 +153,7 @@ impl HealthSettings {
             ("driver_status_timeout_ms", self.driver_status_timeout_ms, 2),
             ("force_timeout_ms", self.force_timeout_ms, 2),
             ("node_scan_period_ms", self.node_scan_period_ms, 10),
+            ("self_stall_ms", self.self_stall_ms, 20),
         ] {
             if !(lo..=60_000).contains(&v) {
                 return Err(format!("{k} {v} must be in [{lo}, 60000]"));
@@ -162,6 +168,19 @@ impl HealthSettings {
             }
         }
         Ok(())
+    }
+
+    /// The supervisor's own stall, when the gap `gap_ns` between two passes of its loop
+    /// exceeds `self_stall_ms`: the fault message.
+    pub fn self_stall(&self, gap_ns: u64) -> Option<String> {
+        (gap_ns > self.self_stall_ms * 1_000_000).then(|| {
+            format!(
+                "supervisor stalled: {:.0} ms between two passes of its loop (limit {} ms); \
+                 its view of the chain is stale",
+                ms(gap_ns),
+                self.self_stall_ms
+            )
+        })
     }
 
     fn watched(&self, p: Process) -> bool {
@@ -261,9 +280,13 @@ fn state_name(s: Result<DeviceState, rt_core::msg::ValidationError>) -> String {
 
 /// Name of a CANopen EMCY code of the stimulator protocol.
 pub fn emcy_name(code: u16) -> String {
-    match fes_can::ErrorCode::from_raw(code.into()) {
-        Some(c) => format!("0x{code:04X} {}", c.name()),
-        None => format!("0x{code:04X}"),
+    match (
+        fes_can::ErrorCode::from_raw(code.into()),
+        DriverStatus::driver_fault_name(code),
+    ) {
+        (Some(c), _) => format!("0x{code:04X} {}", c.name()),
+        (None, Some(n)) => format!("0x{code:04X} {n}"),
+        (None, None) => format!("0x{code:04X}"),
     }
 }
 
@@ -417,6 +440,18 @@ impl HealthMonitor {
                     Severity::Fault,
                     format!(
                         "rt-core: no StimTick for {age:.0} ms (stim-driver's watchdog tripped)"
+                    ),
+                );
+            } else if DriverStatus::is_stimulator_loss(s.fault_code)
+                && self.settings.watch_stimulator
+            {
+                // The driver lost the stimulator: the stimulator is the cause.
+                self.raise(
+                    Process::SimMuscle,
+                    Severity::Fault,
+                    format!(
+                        "sim-muscle (stimulator): {} (stim-driver's watchdog tripped)",
+                        emcy_name(s.fault_code)
                     ),
                 );
             } else {
@@ -1022,5 +1057,40 @@ mod tests {
         h.on_driver_status(&status(40), 40 * MS);
         h.clear_recovered(41 * MS);
         assert!(h.ready().is_ok(), "{:?}", h.ready());
+    }
+
+    #[test]
+    fn a_stalled_supervisor_is_its_own_fault() {
+        let s = HealthSettings::default();
+        assert_eq!(s.self_stall(250 * MS), None);
+        let m = s.self_stall(1250 * MS).unwrap();
+        assert!(m.starts_with("supervisor stalled: 1250 ms"), "{m}");
+        let bad = HealthSettings {
+            self_stall_ms: 5,
+            ..HealthSettings::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("self_stall_ms"));
+    }
+
+    /// The driver's watchdog tripping because the stimulator went silent names the
+    /// stimulator, with the driver's code by name (found by the seeded SIGSTOP test).
+    #[test]
+    fn a_stimulator_loss_is_the_stimulators_fault() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        live(&mut h, 10 * MS);
+        let mut s = status(20);
+        s.watchdog_trips = 1;
+        s.fault_code = DriverStatus::FAULT_STIMULATOR_SILENT;
+        s.state = DeviceState::Fault as u8;
+        h.on_driver_status(&s, 11 * MS);
+        let ev = h.take_events();
+        assert_eq!(ev[0].process, Process::SimMuscle, "{ev:?}");
+        assert_eq!(
+            ev[0].message,
+            "sim-muscle (stimulator): 0xFF28 stimulator_silent (stim-driver's watchdog tripped)"
+        );
+        assert_eq!(emcy_name(0xFF27), "0xFF27 bus_off");
+        assert_eq!(emcy_name(0x8130), "0x8130 heartbeat_lost");
+        assert_eq!(emcy_name(0xFFFF), "0xFFFF");
     }
 }

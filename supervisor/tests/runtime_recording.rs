@@ -246,57 +246,13 @@ fn disk_full_is_an_error_not_a_panic() {
 
 // ---- The whole stack on CAN: killing any one process ----------------------------------
 
-/// The workspace root.
-fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("supervisor lives inside the workspace")
-        .to_path_buf()
-}
+use fes_tests::stack::{stack_binaries, stimulator_rows, workspace_root};
 
-/// Builds the four binaries of the stack (debug; a no-op when fresh) on the host side
-/// and returns their directory (inside a UML guest the host's build is reused).
-fn stack_binaries() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .map(|d| {
-            if d.is_absolute() {
-                d
-            } else {
-                workspace_root().join(d)
-            }
-        })
-        .unwrap_or_else(|| workspace_root().join("target"));
-    if std::env::var_os("FES_VCAN_IFACE").is_none() {
-        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-        let ok = Command::new(cargo)
-            .current_dir(workspace_root())
-            .args(["build", "--quiet", "--bins"])
-            .args(["-p", "rt-core", "-p", "stim-driver"])
-            .args(["-p", "supervisor", "-p", "sim-muscle"])
-            .status()
-            .is_ok_and(|s| s.success());
-        assert!(ok, "cargo build of the stack failed");
-    }
-    target.join("debug")
-}
-
-/// The stimulator's per-tick record (sim-muscle `--record`): (CLOCK_MONOTONIC ns, state,
-/// pulse applied).
+/// The stimulator's per-tick record: (CLOCK_MONOTONIC ns, state, pulse applied).
 fn stimulator_ticks(path: &Path) -> Vec<(u64, String, bool)> {
-    let text = std::fs::read_to_string(path).expect("stimulator record");
-    text.lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f.len() == 8).then(|| {
-                (
-                    f[1].parse().unwrap_or(0),
-                    f[3].to_string(),
-                    !f[5].is_empty(),
-                )
-            })
-        })
+    stimulator_rows(path)
+        .into_iter()
+        .map(|r| (r.t_ns, r.state, r.pulse.is_some()))
         .collect()
 }
 

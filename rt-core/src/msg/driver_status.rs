@@ -84,6 +84,78 @@ impl DriverStatus {
     /// found.
     pub const FAULT_CODE_SAFE_STOP_ORDERED: u16 = 0xFF2B;
 
+    /// Driver fault: no StimTick within the watchdog time.
+    pub const FAULT_TICK_TIMEOUT: u16 = 0xFF21;
+    /// Driver fault: the StimTick publisher's node is dead.
+    pub const FAULT_GENERATOR_DEAD: u16 = 0xFF22;
+    /// Driver fault: the StimTick service has no publisher.
+    pub const FAULT_GENERATOR_GONE: u16 = 0xFF23;
+    /// Driver fault: a StimTick older than allowed.
+    pub const FAULT_STALE_TICK: u16 = 0xFF24;
+    /// Driver fault: rt-core published its final tick.
+    pub const FAULT_GENERATOR_STOPPED: u16 = 0xFF25;
+    /// Driver fault: the CAN link went down.
+    pub const FAULT_LINK_DOWN: u16 = 0xFF26;
+    /// Driver fault: the CAN controller went bus-off.
+    pub const FAULT_BUS_OFF: u16 = 0xFF27;
+    /// Driver fault: no heartbeat or STATUS from the stimulator in time.
+    pub const FAULT_STIMULATOR_SILENT: u16 = 0xFF28;
+    /// Driver fault: the stimulator booted again.
+    pub const FAULT_STIMULATOR_RESET: u16 = 0xFF29;
+    /// Driver fault: the stimulator left or never reached operational.
+    pub const FAULT_STIMULATOR_NOT_OPERATIONAL: u16 = 0xFF2A;
+    /// Driver fault: bus events were lost between the driver's threads.
+    pub const FAULT_BUS_EVENTS_LOST: u16 = 0xFF2C;
+    /// Driver fault: a frame could not be written.
+    pub const FAULT_TX_FAILED: u16 = 0xFF2D;
+    /// Driver fault: the supervisor's node is dead.
+    pub const FAULT_SUPERVISOR_DEAD: u16 = 0xFF2E;
+    /// Driver fault: the DriverCommand service has no publisher.
+    pub const FAULT_SUPERVISOR_GONE: u16 = 0xFF2F;
+
+    /// The driver's own fault codes (manufacturer-specific EMCY range 0xFF21..=0xFF2F),
+    /// with their names: the contract between stim-driver, which reports them, and the
+    /// supervisor, which names them (docs/stim-driver.md).
+    pub const DRIVER_FAULTS: [(u16, &'static str); 15] = [
+        (Self::FAULT_TICK_TIMEOUT, "tick_timeout"),
+        (Self::FAULT_GENERATOR_DEAD, "generator_dead"),
+        (Self::FAULT_GENERATOR_GONE, "generator_gone"),
+        (Self::FAULT_STALE_TICK, "stale_tick"),
+        (Self::FAULT_GENERATOR_STOPPED, "generator_stopped"),
+        (Self::FAULT_LINK_DOWN, "link_down"),
+        (Self::FAULT_BUS_OFF, "bus_off"),
+        (Self::FAULT_STIMULATOR_SILENT, "stimulator_silent"),
+        (Self::FAULT_STIMULATOR_RESET, "stimulator_reset"),
+        (
+            Self::FAULT_STIMULATOR_NOT_OPERATIONAL,
+            "stimulator_not_operational",
+        ),
+        (Self::FAULT_CODE_SAFE_STOP_ORDERED, "safe_stop_ordered"),
+        (Self::FAULT_BUS_EVENTS_LOST, "bus_events_lost"),
+        (Self::FAULT_TX_FAILED, "tx_failed"),
+        (Self::FAULT_SUPERVISOR_DEAD, "supervisor_dead"),
+        (Self::FAULT_SUPERVISOR_GONE, "supervisor_gone"),
+    ];
+
+    /// The name of a driver fault code, if it is one.
+    pub fn driver_fault_name(code: u16) -> Option<&'static str> {
+        Self::DRIVER_FAULTS
+            .iter()
+            .find(|(c, _)| *c == code)
+            .map(|(_, n)| *n)
+    }
+
+    /// True for the driver faults that say the stimulator stopped answering or left
+    /// operation (silent, reset, not operational): the stimulator is the cause.
+    pub fn is_stimulator_loss(code: u16) -> bool {
+        matches!(
+            code,
+            Self::FAULT_STIMULATOR_SILENT
+                | Self::FAULT_STIMULATOR_RESET
+                | Self::FAULT_STIMULATOR_NOT_OPERATIONAL
+        )
+    }
+
     /// The driver's state, decoded.
     pub fn state(&self) -> Result<DeviceState, ValidationError> {
         DeviceState::try_from(self.state)

@@ -470,6 +470,15 @@ impl Stimulator {
     }
 
     fn on_pulse(&mut self, arrival_ns: u64, p: Pulse, out: &mut Outbox) {
+        // The watchdog as of the frame's arrival: frames are handled in arrival order, so
+        // after a stall of this loop a pulse that arrived once the host's heartbeat had
+        // already been missing for the watchdog time trips it, as it would have on time.
+        if self.operational()
+            && let Some(elapsed_ns) = self.watchdog.expired(arrival_ns)
+        {
+            let elapsed_ms = u16::try_from(elapsed_ns / 1_000_000).unwrap_or(u16::MAX);
+            self.enter_fault(ErrorCode::HeartbeatLost, elapsed_ms, out);
+        }
         if !self.operational() {
             let id = self.pulse_id();
             return self.reject(ErrorCode::WrongState, p.seq, id, out);

@@ -134,6 +134,9 @@ fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<StimSocket> {
             iface,
             "the host bus (Unix datagrams, no CAN): for tests and benches on hosts without SocketCAN"
         );
+        if let Some(w) = bus.queue_warning() {
+            tracing::warn!("{w}");
+        }
         return Ok(StimSocket::Host(bus));
     }
     let socket = CanSocket::open(iface).with_context(|| {
@@ -347,13 +350,15 @@ pub fn run_loop(
         }
         if let Some(r) = recorder.as_mut() {
             // Pulses applied at ticks the loop missed (a stall) get their own rows, so
-            // the record lists every delivered pulse at the tick it was applied.
+            // the record lists every delivered pulse at the tick it was applied, in the
+            // state it was applied in (operational: a pulse is only ever applied then;
+            // `report.state` is the state now, after the catch-up).
             for c in stim.caught_up() {
                 r.push(TickRecord {
                     tick: c.tick,
                     nominal_ns: t0 + c.tick * TICK_NS,
                     late_ns: now.saturating_sub(t0 + c.tick * TICK_NS),
-                    state: report.state,
+                    state: fes_can::StimState::Stimulating,
                     force_n: c.force_n,
                     pulse: Some((c.pulse.seq, c.pulse.amplitude_ma(), c.pulse.width_us)),
                 });

@@ -881,3 +881,54 @@ fn a_stalled_loop_applies_pulses_at_their_arrival_ticks() {
     b.run(30, true);
     assert_eq!(b.plant.pulses(), before);
 }
+
+/// After a stall of the loop, frames are judged as of their arrival: a pulse that arrived
+/// when the host's heartbeat had been missing for longer than the watchdog time trips the
+/// watchdog and is not applied (found by the seeded SIGSTOP test of the whole stack).
+#[test]
+fn a_pulse_that_arrived_after_the_heartbeat_expired_is_refused_in_the_catch_up() {
+    let mut b = Bench::new();
+    b.operational();
+    b.run(1, true);
+    let watchdog_ms = u64::from(StimLimits::DEFAULT.watchdog_ms);
+    let at = |tick: u64| T0 + TICK_NS + tick * TICK_NS + 300_000;
+    // One pulse while the heartbeat is fresh, one after the heartbeat's absence passed
+    // the watchdog time; all read at once later.
+    let hb = Message::HostHeartbeat(Heartbeat {
+        state: NmtState::Operational,
+    })
+    .encode()
+    .unwrap();
+    b.stim
+        .on_frame(at(5), u32::from(hb.id), hb.payload(), &mut b.out);
+    let early = b.next_pulse(100, 100);
+    let f = Message::Pulse(early).encode().unwrap();
+    b.stim
+        .on_frame(at(10), u32::from(f.id), f.payload(), &mut b.out);
+    let late = b.next_pulse(100, 100);
+    let f = Message::Pulse(late).encode().unwrap();
+    b.stim.on_frame(
+        at(5 + watchdog_ms + 10),
+        u32::from(f.id),
+        f.payload(),
+        &mut b.out,
+    );
+    b.collect();
+    assert_eq!(b.stim.state(), StimState::Fault);
+    let codes: Vec<ErrorCode> = b.emcys().iter().map(|e| e.code).collect();
+    assert!(codes.contains(&ErrorCode::HeartbeatLost), "{codes:?}");
+    // The fault turned the output off: the early pulse, still waiting, is cancelled too.
+    assert!(!b.stim.has_pending_pulse());
+    b.tick = 5 + watchdog_ms + 20;
+    let report = b.stim.tick(
+        Tick {
+            index: b.tick,
+            nominal_ns: b.now(),
+            now_ns: b.now(),
+        },
+        &mut b.plant,
+        &mut b.out,
+    );
+    assert_eq!(report.caught_up_pulses, 0);
+    assert_eq!(b.plant.pulses(), 0);
+}

@@ -1,0 +1,472 @@
+//! Fault injection on the whole stack (issue 10): the four processes on the host bus
+//! (fes_can::hostbus: the CAN frames over Unix datagrams, at the host's real-time
+//! latencies), a 120 beats/min cardiac profile, and then
+//!
+//! * SIGSTOP of each process at a seeded random moment for a seeded random time, SIGCONT;
+//! * injected on the bus through the tap station: a bus-off error frame, an EMCY storm in
+//!   the stimulator's name, forged PULSE frames, and random frames and datagrams.
+//!
+//! Each case asserts on what the stimulator did (its per-tick record) and what the
+//! supervisor reports: every applied pulse within the stimulator's limits and with the
+//! generator's parameters (never a forged one); once the stimulator has left operation it
+//! applies no pulse again (nobody re-arms); a fault beyond the chain's reaction threshold
+//! ends with the stimulator out of operation and the supervisor in `fault`; the recording
+//! reads back as a data set. Each process's exit is clean at the end, or it was a victim.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use fes_can::hostbus::{HostBus, RawFrame, Station};
+use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
+use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows, workspace_root};
+use nix::sys::signal::Signal;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rt_core::dataset::DataSet;
+use rt_core::rt::clock::monotonic_ns;
+use supervisor::bench::{PROCESSES, Stack, StackOptions, log_tail};
+use supervisor::profile::{CardiacSpec, ProfileSpec};
+use supervisor::protocol::{Command, Status};
+
+/// The stimulator's limits on the bench (its defaults).
+const LIMITS: fes_can::StimLimits = fes_can::StimLimits::DEFAULT;
+
+/// One stack at a time: the cases share two cores and run their loops at SCHED_FIFO.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+struct Bench {
+    stack: Stack,
+    dir: PathBuf,
+    _serial: std::sync::MutexGuard<'static, ()>,
+}
+
+impl Bench {
+    /// Starts the stack on the host bus, arms, starts the cardiac profile and waits until
+    /// pulses flow.
+    fn start(tag: &str) -> Self {
+        let serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let stack = Stack::start(StackOptions {
+            dir: dir.clone(),
+            bin_dir: stack_binaries(),
+            controller: workspace_root().join("models/fast.lcn.json"),
+            iface: format!("hostbus:{}", dir.join("bus").display()),
+            uml: false,
+            fatigue: false,
+            outer_loop: true,
+            outer_gain: None,
+            prefix: format!("fi{}{tag}", std::process::id()),
+        })
+        .unwrap_or_else(|e| panic!("{tag}: the stack did not start: {e}"));
+        let bench = Self {
+            stack,
+            dir,
+            _serial: serial,
+        };
+        if let Err(e) = bench.stack.wait_healthy(Duration::from_secs(20)) {
+            panic!("{tag}: {e}\n{}", bench.logs());
+        }
+        bench.stack.must(Command::Arm).expect("arm");
+        bench
+            .stack
+            .must(Command::Profile {
+                profile: ProfileSpec::Cardiac(CardiacSpec {
+                    bpm: 120.0,
+                    duty: 0.4,
+                    amplitude: 0.3,
+                    edge_rate_per_s: None,
+                    outer_loop: None,
+                }),
+            })
+            .expect("cardiac profile");
+        bench
+    }
+
+    fn bus(&self) -> PathBuf {
+        self.dir.join("bus")
+    }
+
+    fn logs(&self) -> String {
+        PROCESSES
+            .iter()
+            .map(|p| {
+                format!(
+                    "--- {p}\n{}",
+                    log_tail(&self.dir.join(format!("{p}.log")), 1500)
+                )
+            })
+            .collect()
+    }
+
+    fn status(&self) -> Status {
+        self.stack
+            .status()
+            .unwrap_or_else(|e| panic!("the supervisor does not answer: {e}\n{}", self.logs()))
+    }
+
+    /// Polls the supervisor until it reports a fault or `timeout` passes.
+    fn wait_fault(&self, timeout: Duration) -> Status {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let s = self.status();
+            if s.state == "fault" || Instant::now() > deadline {
+                return s;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Stops the stack and returns the stimulator's record, the recording's sample count
+    /// and the exit codes.
+    fn finish(self) -> Finished {
+        let recordings = self.stack.recordings();
+        let dir = self.dir.clone();
+        let exits = self.stack.stop(Duration::from_secs(5));
+        let rows = stimulator_rows(&dir.join("stimulator.csv"));
+        let run = recordings.last().expect("a recording run");
+        let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{}: {e}", run.display()));
+        let samples = ds.records.iter().map(|r| r.len()).sum();
+        let logs = PROCESSES
+            .iter()
+            .map(|p| format!("--- {p}\n{}", log_tail(&dir.join(format!("{p}.log")), 1500)))
+            .collect::<String>();
+        let _ = std::fs::remove_dir_all(&dir);
+        Finished {
+            rows,
+            samples,
+            exits,
+            logs,
+        }
+    }
+}
+
+struct Finished {
+    rows: Vec<StimRow>,
+    samples: usize,
+    exits: Vec<(&'static str, Option<i32>)>,
+    logs: String,
+}
+
+const OPERATING: [&str; 2] = ["stimulating", "armed"];
+
+impl Finished {
+    /// The invariants of every case: applied pulses within the limits and identical in
+    /// amplitude and width to the generator's first; no pulse once the stimulator left
+    /// operation after `from_ns`; a readable recording. Returns when the stimulator left
+    /// operation after `from_ns`, if it did.
+    fn check(&self, case: &str, from_ns: u64) -> Option<u64> {
+        let pulses: Vec<&StimRow> = self.rows.iter().filter(|r| r.pulse.is_some()).collect();
+        assert!(
+            pulses.iter().filter(|r| r.t_ns < from_ns).count() > 5,
+            "{case}: no stimulation before the fault\n{}",
+            self.logs
+        );
+        let (_, amp0, width0) = pulses[0].pulse.unwrap();
+        let mut prev: Option<u64> = None;
+        let mut ticks_sorted: Vec<u64> = pulses.iter().map(|r| r.tick).collect();
+        ticks_sorted.sort_unstable();
+        for (r, &tick) in pulses.iter().zip(&ticks_sorted) {
+            let (_, amp, width) = r.pulse.unwrap();
+            assert!(
+                amp == amp0 && width == width0,
+                "{case}: a pulse of {amp} mA / {width} us at tick {} (the generator's are {amp0} / {width0})",
+                r.tick
+            );
+            assert!(
+                amp * 10.0 <= f64::from(LIMITS.max_amplitude_100ua) + 1e-9
+                    && width <= f64::from(LIMITS.max_width_us),
+                "{case}: pulse beyond the limits at tick {}",
+                r.tick
+            );
+            if let Some(p) = prev {
+                assert!(
+                    tick - p >= u64::from(LIMITS.min_ipi_ms),
+                    "{case}: pulses at ticks {p} and {tick}, closer than the minimum IPI"
+                );
+            }
+            prev = Some(tick);
+        }
+        let left = self
+            .rows
+            .iter()
+            .find(|r| r.t_ns > from_ns && !OPERATING.contains(&r.state.as_str()))
+            .map(|r| r.t_ns);
+        if let Some(t) = left {
+            let after: Vec<u64> = pulses
+                .iter()
+                .filter(|r| r.t_ns > t)
+                .map(|r| (r.t_ns - t) / 1_000_000)
+                .collect();
+            let around: Vec<String> = self
+                .rows
+                .iter()
+                .filter(|r| r.t_ns + 5_000_000 >= t && (r.state != "fault" || r.pulse.is_some()))
+                .take(40)
+                .map(|r| format!("{} {} {} {:?}", r.tick, r.t_ns, r.state, r.pulse))
+                .collect();
+            assert!(
+                after.is_empty(),
+                "{case}: pulses {after:?} ms after the stimulator left operation (re-armed by itself?)\n{}",
+                around.join("\n")
+            );
+        }
+        assert!(
+            self.samples >= 500,
+            "{case}: only {} samples recorded",
+            self.samples
+        );
+        left
+    }
+
+    /// The stimulator's last recorded state.
+    fn last_state(&self) -> &str {
+        self.rows.last().map_or("", |r| r.state.as_str())
+    }
+
+    fn clean_exits_except(&self, case: &str, victim: Option<&str>) {
+        for (name, code) in &self.exits {
+            if Some(*name) != victim {
+                assert!(
+                    code.is_some(),
+                    "{case}: {name} had to be killed at the end\n{}",
+                    self.logs
+                );
+            }
+        }
+    }
+}
+
+/// The stall beyond which the chain must have stopped stimulation, per victim, ms: the
+/// driver's StimTick watchdog (20 ms) for rt-core, the stimulator's heartbeat watchdog
+/// (100 ms) for the driver, the driver's stimulator timeout (100 ms) for the stimulator,
+/// the supervisor's self-stall limit (250 ms) for the supervisor; with margin.
+fn must_stop_after_ms(victim: &str) -> u64 {
+    match victim {
+        "supervisor" => 400,
+        _ => 200,
+    }
+}
+
+/// SIGSTOP of each process at a seeded moment (0.3-1.5 s into the profile) for a seeded
+/// time (20-900 ms), then SIGCONT. Three seeds per process.
+#[test]
+fn seeded_sigstop_of_each_process_fails_safe_and_never_rearms() {
+    let mut summary = Vec::new();
+    for (index, victim) in PROCESSES.into_iter().enumerate() {
+        for seed in 1..=3u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed * 7919 + index as u64);
+            let at_ms: u64 = rng.random_range(300..1500);
+            let stall_ms: u64 = rng.random_range(20..900);
+            let case = format!("SIGSTOP {victim} seed {seed} ({stall_ms} ms at {at_ms} ms)");
+            let bench = Bench::start(&format!("stop{}{seed}", &victim[..3]));
+            std::thread::sleep(Duration::from_millis(700 + at_ms));
+            let stopped_ns = monotonic_ns();
+            bench
+                .stack
+                .signal(victim, Signal::SIGSTOP)
+                .expect("SIGSTOP");
+            std::thread::sleep(Duration::from_millis(stall_ms));
+            bench
+                .stack
+                .signal(victim, Signal::SIGCONT)
+                .expect("SIGCONT");
+            let must_stop = stall_ms >= must_stop_after_ms(victim);
+            let status = if must_stop {
+                bench.wait_fault(Duration::from_secs(3))
+            } else {
+                std::thread::sleep(Duration::from_millis(1000));
+                bench.status()
+            };
+            std::thread::sleep(Duration::from_millis(500));
+            let done = bench.finish();
+            let left = done.check(&case, stopped_ns);
+            done.clean_exits_except(&case, None);
+            if must_stop {
+                assert_eq!(status.state, "fault", "{case}: {status:?}\n{}", done.logs);
+                let fault = status.fault.clone().unwrap_or_default();
+                assert!(
+                    fault.starts_with(victim),
+                    "{case}: the supervisor blames another process: {fault}"
+                );
+                assert!(
+                    left.is_some() && !OPERATING.contains(&done.last_state()),
+                    "{case}: the stimulator is still {}\n{}",
+                    done.last_state(),
+                    done.logs
+                );
+            }
+            summary.push(format!(
+                "{case}: supervisor {} {:?}; stimulator {} (left operation {})",
+                status.state,
+                status.fault.unwrap_or_default(),
+                done.last_state(),
+                left.map_or("never".into(), |t| format!(
+                    "{:.1} ms after SIGSTOP",
+                    (t - stopped_ns) as f64 / 1e6
+                ))
+            ));
+        }
+    }
+    for s in &summary {
+        eprintln!("{s}");
+    }
+}
+
+fn tap(bench: &Bench) -> HostBus {
+    HostBus::open(&bench.bus(), Station::Tap, None).expect("the tap station")
+}
+
+/// Runs an injection case: `inject` sends through the tap; `must_stop`: the chain must
+/// end stopped with the supervisor in fault; otherwise it must keep stimulating.
+fn injection_case(case: &str, must_stop: bool, inject: impl FnOnce(&HostBus, &Path)) {
+    let bench = Bench::start(case);
+    let tap = tap(&bench);
+    std::thread::sleep(Duration::from_millis(1500));
+    let from_ns = monotonic_ns();
+    inject(&tap, &bench.bus());
+    let status = if must_stop {
+        bench.wait_fault(Duration::from_secs(3))
+    } else {
+        std::thread::sleep(Duration::from_millis(1500));
+        bench.status()
+    };
+    let checked_ns = monotonic_ns();
+    std::thread::sleep(Duration::from_millis(300));
+    drop(tap);
+    let done = bench.finish();
+    let left = done.check(case, from_ns);
+    done.clean_exits_except(case, None);
+    if must_stop {
+        assert_eq!(status.state, "fault", "{case}: {status:?}\n{}", done.logs);
+        assert!(
+            left.is_some() && !OPERATING.contains(&done.last_state()),
+            "{case}: the stimulator is still {}",
+            done.last_state()
+        );
+    } else {
+        assert_eq!(status.state, "armed", "{case}: {status:?}\n{}", done.logs);
+        let pulses_after = done
+            .rows
+            .iter()
+            .filter(|r| r.t_ns > from_ns && r.pulse.is_some())
+            .count();
+        assert!(
+            pulses_after > 10 && left.is_none_or(|t| t > checked_ns),
+            "{case}: stimulation stopped ({pulses_after} pulses after)\n{}",
+            done.logs
+        );
+    }
+    eprintln!(
+        "{case}: supervisor {} {:?}; stimulator {}",
+        status.state,
+        status.fault.unwrap_or_default(),
+        done.last_state()
+    );
+}
+
+/// A bus-off error frame reaches the driver and the stimulator: the driver trips, the
+/// stimulator reports a communication error, stimulation ends.
+#[test]
+fn an_injected_bus_off_stops_stimulation() {
+    injection_case("bus-off", true, |tap, _| {
+        // CAN_ERR_BUSOFF (linux/can/error.h).
+        tap.send(&RawFrame::error(0x40, &[])).expect("inject");
+    });
+}
+
+/// 2000 EMCY frames in the stimulator's name within about 200 ms: the driver trips on the
+/// first and survives the storm (its event queues are bounded), stimulation ends.
+#[test]
+fn an_emcy_storm_stops_stimulation_and_crashes_nothing() {
+    injection_case("emcy-storm", true, |tap, _| {
+        let nodes = Nodes::DEFAULT;
+        for i in 0..2000u32 {
+            let f = Message::Emcy(Emcy::new(
+                ErrorCode::Generic,
+                StimState::Fault,
+                i as u16,
+                0xBEEF,
+            ))
+            .encode_for(&nodes)
+            .expect("EMCY encodes");
+            tap.send(&RawFrame::data(f.id, f.payload()).unwrap())
+                .expect("inject");
+            if i % 10 == 0 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+    });
+}
+
+/// Forged PULSE frames (random payloads, so bad CRCs and counters, and an amplitude the
+/// generator never uses) at the stimulator's PULSE identifier: it applies none of them
+/// (the invariant check: every applied pulse has the generator's amplitude and width) and
+/// stops on the corruption.
+#[test]
+fn forged_pulse_frames_are_never_applied() {
+    injection_case("forged-pulse", true, |tap, _| {
+        let id = Nodes::DEFAULT.id_of(fes_can::MessageKind::Pulse);
+        let mut rng = ChaCha8Rng::seed_from_u64(42);
+        for _ in 0..200 {
+            let r: [u8; 8] = rng.random();
+            tap.send(&RawFrame::data(id, &r).unwrap()).expect("inject");
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    });
+}
+
+/// Noise on the bus that is nobody's: datagrams that are not CAN frames, extended and
+/// remote frames, and standard frames at identifiers outside the protocol (random
+/// payloads). Filtered or dropped as malformed; stimulation goes on.
+#[test]
+fn foreign_frames_and_garbage_datagrams_are_ignored() {
+    injection_case("noise", false, |tap, bus| {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let raw = std::os::unix::net::UnixDatagram::unbound().unwrap();
+        for i in 0..500u32 {
+            let r: [u8; 8] = rng.random();
+            match i % 4 {
+                0 => {
+                    for s in [Station::Driver, Station::Stimulator] {
+                        let len = rng.random_range(0..40usize);
+                        let _ = raw.send_to(&[0xA5; 40][..len], bus.join(s.file_name()));
+                    }
+                }
+                1 => {
+                    let f = RawFrame {
+                        can_id: fes_can::hostbus::EFF_FLAG | rng.random_range(0..0x2000_0000u32),
+                        len: 8,
+                        data: r,
+                    };
+                    tap.send(&f).unwrap();
+                }
+                2 => {
+                    let f = RawFrame {
+                        can_id: fes_can::hostbus::RTR_FLAG | 0x110,
+                        len: 0,
+                        data: [0; 8],
+                    };
+                    tap.send(&f).unwrap();
+                }
+                _ => {
+                    // Identifiers the protocol does not use (a frame of the wrong length
+                    // at one it uses, e.g. a host heartbeat at 0x701, is a protocol
+                    // error: the forged-frame case).
+                    let id = loop {
+                        let id = rng.random_range(0x200..0x800u16);
+                        if Nodes::DEFAULT.kind_of(u32::from(id)).is_none() {
+                            break id;
+                        }
+                    };
+                    tap.send(&RawFrame::data(id, &r).unwrap()).unwrap();
+                }
+            }
+            // About 4 frames per millisecond: what a 1 Mbit/s CAN bus carries besides
+            // the protocol's own traffic (at most about 8 frames per millisecond).
+            if i % 4 == 0 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+    });
+}

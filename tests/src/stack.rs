@@ -1,0 +1,82 @@
+//! Helpers for tests that run the four processes of the stack (`supervisor::bench::Stack`):
+//! building their binaries and reading the virtual stimulator's per-tick record.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The workspace root.
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("fes-tests lives inside the workspace")
+        .to_path_buf()
+}
+
+/// Builds the four binaries of the stack (debug; a no-op when fresh) on the host side
+/// and returns their directory (inside a UML guest, `FES_VCAN_IFACE` set, the host's
+/// build is reused).
+pub fn stack_binaries() -> PathBuf {
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .map(|d| {
+            if d.is_absolute() {
+                d
+            } else {
+                workspace_root().join(d)
+            }
+        })
+        .unwrap_or_else(|| workspace_root().join("target"));
+    if std::env::var_os("FES_VCAN_IFACE").is_none() {
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+        let ok = Command::new(cargo)
+            .current_dir(workspace_root())
+            .args(["build", "--quiet", "--bins"])
+            .args(["-p", "rt-core", "-p", "stim-driver"])
+            .args(["-p", "supervisor", "-p", "sim-muscle"])
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "cargo build of the stack failed");
+    }
+    target.join("debug")
+}
+
+/// One row of the virtual stimulator's record (`sim-muscle stimulator --record`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StimRow {
+    /// Tick index.
+    pub tick: u64,
+    /// The tick's time, CLOCK_MONOTONIC ns.
+    pub t_ns: u64,
+    /// Stimulator state (`stimulating`, `armed`, `stopped`, `fault`, ...).
+    pub state: String,
+    /// The pulse applied at the tick: (seq, amplitude mA, width us).
+    pub pulse: Option<(u64, f64, f64)>,
+}
+
+/// Reads the stimulator's record (rows in file order).
+pub fn stimulator_rows(path: &Path) -> Vec<StimRow> {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("stimulator record {}: {e}", path.display()));
+    text.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            if f.len() != 8 {
+                return None;
+            }
+            let pulse = (!f[5].is_empty()).then(|| {
+                (
+                    f[5].parse().unwrap_or(0),
+                    f[6].parse().unwrap_or(f64::NAN),
+                    f[7].parse().unwrap_or(f64::NAN),
+                )
+            });
+            Some(StimRow {
+                tick: f[0].parse().ok()?,
+                t_ns: f[1].parse().ok()?,
+                state: f[3].to_string(),
+                pulse,
+            })
+        })
+        .collect()
+}
