@@ -27,6 +27,7 @@ use crate::core::{ArmState, DriverOrder, SupervisorCore};
 use crate::health::{HealthMonitor, NodeObservation, Severity, proc_state};
 use crate::protocol::{Command, Response, Status};
 use crate::recording::{Recorder, RecorderSettings, utc_stamp};
+use crate::recording_thread::{Item, RecorderThread};
 
 /// Longest sleep of the loop, ms (StimTick buffers hold about 1 s).
 pub const POLL_MS: u64 = 5;
@@ -83,7 +84,9 @@ pub fn list_nodes() -> Vec<NodeObservation> {
 }
 
 struct Run {
-    recorder: Option<Recorder>,
+    recorder: Option<RecorderThread>,
+    /// Runs ended and being finished by their writer threads.
+    closing: Vec<RecorderThread>,
     dirs: Vec<PathBuf>,
     index: u32,
 }
@@ -144,6 +147,7 @@ pub fn run(
     let mut last_state = core.state().clone();
     let mut run = Run {
         recorder: None,
+        closing: Vec::new(),
         dirs: Vec::new(),
         index: 0,
     };
@@ -180,7 +184,7 @@ pub fn run(
                 if t.fires() {
                     core.on_pulse(t.t_ns);
                 }
-                record(&mut run, &mut core, |r| r.on_stim_tick(&t, now));
+                record(&mut run, &mut core, Item::Tick(t, now));
             }
         }
         while let Ok(Some(s)) = forces.receive() {
@@ -189,20 +193,20 @@ pub fn run(
             health.on_force_sample(&f, now);
             if f.validate().is_ok() {
                 core.on_force(f.t_ns, f.force);
-                record(&mut run, &mut core, |r| r.on_force(&f, now));
+                record(&mut run, &mut core, Item::Force(f, now));
             }
         }
         while let Ok(Some(s)) = statuses.receive() {
             let st = *s.payload();
             drop(s);
             health.on_driver_status(&st, now);
-            record(&mut run, &mut core, |r| r.on_status(&st));
+            record(&mut run, &mut core, Item::Status(st));
         }
         while let Ok(Some(s)) = timings.receive() {
             let tr = *s.payload();
             drop(s);
             health.on_timing(&tr);
-            record(&mut run, &mut core, |r| r.on_timing(&tr));
+            record(&mut run, &mut core, Item::Timing(tr));
         }
 
         // 2. Operator requests, served before the health check so that a fault found
@@ -257,7 +261,13 @@ pub fn run(
             if state == ArmState::Armed && cfg.recording.enabled && run.recorder.is_none() {
                 run.index += 1;
                 let name = format!("run-{}-{}-{}", utc_stamp(), std::process::id(), run.index);
-                match Recorder::create(&cfg.recording.dir, &name, settings.clone(), now) {
+                let started = Recorder::create(&cfg.recording.dir, &name, settings.clone(), now)
+                    .map_err(|e| e.to_string())
+                    .and_then(|r| {
+                        RecorderThread::spawn(r)
+                            .map_err(|e| format!("recording: cannot start the writer thread: {e}"))
+                    });
+                match started {
                     Ok(r) => {
                         core.note(format!("recording to {}", r.dir().display()));
                         run.dirs.push(r.dir().to_path_buf());
@@ -271,15 +281,11 @@ pub fn run(
             last_state = core.state().clone();
         }
         for b in core.take_beat_starts() {
-            if let Some(r) = &mut run.recorder {
-                r.boundary(
-                    b.start_ns,
-                    format!("beat {} ({} beats/min)", b.index, b.bpm),
-                );
-            }
+            let kind = format!("beat {} ({} beats/min)", b.index, b.bpm);
+            record(&mut run, &mut core, Item::Boundary(b.start_ns, kind));
         }
         for b in core.take_beats() {
-            record(&mut run, &mut core, |r| r.on_beat(&b));
+            record(&mut run, &mut core, Item::Beat(b));
         }
 
         // 6. Reference.
@@ -293,7 +299,7 @@ pub fn run(
                 Ok(_) => {}
                 Err(e) => tracing::warn!("Reference not published: {e:?}"),
             }
-            record(&mut run, &mut core, |rec| rec.on_reference(&r));
+            record(&mut run, &mut core, Item::Reference(r));
             next_publish = now + period_ns;
         }
 
@@ -302,36 +308,24 @@ pub fn run(
         for e in &events {
             tracing::info!("{e}");
         }
-        if let Some(rec) = &mut run.recorder {
-            let mut failed = None;
-            for e in &events {
-                if let Err(err) = rec.on_event(now, e) {
-                    failed = Some(err);
-                    break;
-                }
-            }
-            if failed.is_none()
-                && let Err(err) = rec.maybe_flush(now)
-            {
-                failed = Some(err);
-            }
-            if let Some(err) = failed {
-                run.recorder = None;
-                core.fault(format!("{err}; no recording means no evidence"));
-            }
+        for e in &events {
+            record(&mut run, &mut core, Item::Event(now, e.clone()));
+        }
+        record(&mut run, &mut core, Item::Flush(now));
+        if let Some(e) = run.recorder.as_ref().and_then(RecorderThread::failure) {
+            run.recorder = None;
+            core.fault(format!("{e}; no recording means no evidence"));
         }
         if *core.state() != ArmState::Armed
-            && let Some(rec) = run.recorder.take()
+            && let Some(mut rec) = run.recorder.take()
         {
-            match rec.finish(now) {
-                Ok(s) => core.note(format!(
-                    "recording closed: {} ({} records, {} ticks)",
-                    s.dir.display(),
-                    s.records,
-                    s.ticks
-                )),
-                Err(e) => core.note(format!("recording could not be closed cleanly: {e}")),
-            }
+            rec.close(now);
+            run.closing.push(rec);
+        }
+        // Runs whose writer has finished (flushed, fsynced): say so.
+        while let Some(i) = run.closing.iter().position(RecorderThread::is_closed) {
+            let rec = run.closing.swap_remove(i);
+            note_closed(&mut core, rec);
         }
 
         if let Some(wd) = watchdog
@@ -362,6 +356,14 @@ pub fn run(
         ArmState::Fault(f) => Some(f.clone()),
         _ => None,
     };
+    // Wait for the writers: every run on disk, fsynced, before the process exits.
+    if let Some(mut rec) = run.recorder.take() {
+        rec.close(monotonic_ns());
+        run.closing.push(rec);
+    }
+    for rec in run.closing.drain(..) {
+        note_closed(&mut core, rec);
+    }
     for e in core.take_new_events() {
         tracing::info!("{e}");
     }
@@ -372,15 +374,24 @@ pub fn run(
     })
 }
 
-/// Applies `f` to the recorder of the current run; a failure ends the recording and
-/// stops stimulation.
-fn record(
-    run: &mut Run,
-    core: &mut SupervisorCore,
-    f: impl FnOnce(&mut Recorder) -> Result<(), crate::recording::RecordingError>,
-) {
-    if let Some(r) = &mut run.recorder
-        && let Err(e) = f(r)
+/// Waits for a closing run's writer and notes the outcome.
+fn note_closed(core: &mut SupervisorCore, rec: RecorderThread) {
+    match rec.join() {
+        Ok(s) => core.note(format!(
+            "recording closed: {} ({} records, {} ticks)",
+            s.dir.display(),
+            s.records,
+            s.ticks
+        )),
+        Err(e) => core.note(format!("recording could not be closed cleanly: {e}")),
+    }
+}
+
+/// Queues `item` for the recording of the current run; a failure (the writer failed or
+/// fell behind) ends the recording and stops stimulation.
+fn record(run: &mut Run, core: &mut SupervisorCore, item: Item) {
+    if let Some(r) = &run.recorder
+        && let Err(e) = r.send(item)
     {
         run.recorder = None;
         core.fault(format!("{e}; no recording means no evidence"));

@@ -28,5 +28,6 @@ pub mod plots;
 pub mod profile;
 pub mod protocol;
 pub mod recording;
+pub mod recording_thread;
 pub mod simulation;
 pub mod summary;

@@ -263,7 +263,7 @@ impl Recorder {
                 d,
                 "timing.csv",
                 Some(
-                    "seq,t_ns,source,flags,ticks,misses,overruns,queue_overflows,hot_path_allocations,rejected_inputs,wake_p50_ns,wake_p99_ns,wake_p999_ns,wake_max_ns,compute_p99_ns,publish_p99_ns,ipc_p50_ns,ipc_p99_ns,ipc_p999_ns,ipc_max_ns",
+                    "seq,t_ns,source,flags,ticks,misses,overruns,queue_overflows,hot_path_allocations,rejected_inputs,wake_p50_ns,wake_p99_ns,wake_p999_ns,wake_max_ns,compute_p99_ns,publish_p99_ns,ipc_p50_ns,ipc_p99_ns,ipc_p999_ns,ipc_max_ns,publish_p50_ns,publish_p999_ns,publish_max_ns",
                 ),
             )?,
             beats: Stream::create(
@@ -397,7 +397,7 @@ impl Recorder {
     pub fn on_timing(&mut self, r: &TimingReport) -> Result<(), RecordingError> {
         self.ok()?;
         let res = self.timing.line(format_args!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.seq,
             r.t_ns,
             r.source,
@@ -417,7 +417,10 @@ impl Recorder {
             r.ipc.p50_ns,
             r.ipc.p99_ns,
             r.ipc.p999_ns,
-            r.ipc.max_ns
+            r.ipc.max_ns,
+            r.publish.p50_ns,
+            r.publish.p999_ns,
+            r.publish.max_ns
         ));
         self.guard(res)
     }

@@ -111,8 +111,12 @@ pub struct Latency {
     pub ipc_us: [f64; 3],
     /// Compute p99, µs.
     pub compute_p99_us: f64,
-    /// Publish p99, µs.
+    /// Publish p99, µs (rt-core: the StimTick publish; stim-driver: StimTick publish to
+    /// PULSE written on the bus).
     pub publish_p99_us: f64,
+    /// The same, p50 / p99 / max, µs (NaN in recordings made before it was recorded).
+    #[serde(default)]
+    pub publish_us: [f64; 3],
 }
 
 /// The run's figures (the `--json` file; keys documented in docs/bench.md).
@@ -153,7 +157,7 @@ pub struct Summary {
     pub deadline_misses: u64,
     /// rt-core wake-up lateness p99, µs.
     pub rt_wake_p99_us: f64,
-    /// stim-driver forward latency (StimTick publish to driver receive) p99, µs.
+    /// stim-driver forward latency (StimTick publish to PULSE written on the bus) p99, µs.
     pub driver_forward_p99_us: f64,
     /// rt-core figures.
     pub rt_core: Latency,
@@ -297,6 +301,11 @@ fn latency(row: &BTreeMap<&str, f64>) -> Latency {
         ipc_us: [us("ipc_p50_ns"), us("ipc_p99_ns"), us("ipc_max_ns")],
         compute_p99_us: us("compute_p99_ns"),
         publish_p99_us: us("publish_p99_ns"),
+        publish_us: [
+            us("publish_p50_ns"),
+            us("publish_p99_ns"),
+            us("publish_max_ns"),
+        ],
     }
 }
 
@@ -423,7 +432,7 @@ pub fn summarise(
         pulses_sent,
         deadline_misses: rt.misses,
         rt_wake_p99_us: rt.wake_us[1],
-        driver_forward_p99_us: drv.map_or(f64::NAN, |l| l.ipc_us[1]),
+        driver_forward_p99_us: drv.map_or(f64::NAN, |l| l.publish_us[1]),
         rt_core: rt,
         stim_driver: drv,
         timing_functional_only: input.uml,

@@ -44,9 +44,16 @@ impl Bench {
     /// Starts the stack on the host bus, arms, starts the cardiac profile and waits until
     /// pulses flow.
     fn start(tag: &str) -> Self {
+        Self::start_with(tag, |_| {})
+    }
+
+    /// As [`Self::start`], with `prepare` run on the (new, empty) stack directory first.
+    fn start_with(tag: &str, prepare: impl FnOnce(&Path)) -> Self {
         let serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
         let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("stack directory");
+        prepare(&dir);
         let stack = Stack::start(StackOptions {
             dir: dir.clone(),
             bin_dir: stack_binaries(),
@@ -469,4 +476,66 @@ fn foreign_frames_and_garbage_datagrams_are_ignored() {
             }
         }
     });
+}
+
+/// Unmounts a filesystem on drop.
+struct Mounted(PathBuf);
+
+impl Drop for Mounted {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// The recording's disk fills up mid-run (a 1 MiB tmpfs mounted at the recording
+/// directory): the supervisor stops stimulation and says why, the stimulator ends stopped,
+/// and what was written before reads back as a data set. Needs root (mount); without it
+/// the case says so and passes vacuously.
+#[test]
+fn a_full_recording_disk_stops_stimulation_and_keeps_what_was_written() {
+    let mut mounted = None;
+    let bench = Bench::start_with("diskfull", |dir| {
+        let rec = dir.join("recording");
+        std::fs::create_dir_all(&rec).unwrap();
+        let ok = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=1m,mode=0750", "tmpfs"])
+            .arg(&rec)
+            .status()
+            .is_ok_and(|s| s.success());
+        if ok {
+            mounted = Some(Mounted(rec));
+        }
+    });
+    let Some(_mounted) = mounted else {
+        eprintln!("SKIPPED: cannot mount a tmpfs here (not root?)");
+        return;
+    };
+    let status = bench.wait_fault(Duration::from_secs(30));
+    // The fault was raised at most one poll (50 ms) before it was seen.
+    let from_ns = monotonic_ns() - 100_000_000;
+    let fault = status.fault.clone().unwrap_or_default();
+    std::thread::sleep(Duration::from_millis(300));
+    let done = bench.finish();
+    assert_eq!(status.state, "fault", "{status:?}\n{}", done.logs);
+    assert!(
+        fault.contains("no recording means no evidence") && fault.contains("No space left"),
+        "{fault}"
+    );
+    done.check("disk full", from_ns);
+    assert!(
+        !OPERATING.contains(&done.last_state()),
+        "the stimulator is still {}",
+        done.last_state()
+    );
+    done.clean_exits_except("disk full", None);
+    eprintln!(
+        "disk full: supervisor {fault:?}; stimulator {}; {} samples readable",
+        done.last_state(),
+        done.samples
+    );
+    let dir = _mounted.0.parent().map(Path::to_path_buf);
+    drop(_mounted);
+    if let Some(d) = dir {
+        let _ = std::fs::remove_dir_all(d);
+    }
 }

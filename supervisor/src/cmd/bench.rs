@@ -409,6 +409,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         ipc_us: [f64::NAN; 3],
         compute_p99_us: f64::NAN,
         publish_p99_us: f64::NAN,
+        publish_us: [f64::NAN; 3],
         ..Default::default()
     };
     let summary = summarise(
@@ -622,8 +623,8 @@ fn print_latency(s: &Summary) {
     };
     row("rt-core wake-up lateness", s.rt_core.wake_us);
     if let Some(d) = &s.stim_driver {
-        row("stim-driver wake-up", d.wake_us);
         row("StimTick -> stim-driver", d.ipc_us);
+        row("StimTick -> PULSE written", d.publish_us);
     }
     println!(
         "    rt-core compute p99 {} us, publish p99 {} us",
