@@ -24,7 +24,7 @@ use rt_core::rt::clock::{monotonic_ns, sleep_until};
 use crate::config::SupervisorConfig;
 use crate::control::{ControlServer, Pending};
 use crate::core::{ArmState, DriverOrder, SupervisorCore};
-use crate::health::{HealthMonitor, NodeObservation, Severity, proc_state};
+use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
 use crate::protocol::{Command, Response, Status};
 use crate::recording::{Recorder, RecorderSettings, utc_stamp};
 use crate::recording_thread::{Item, RecorderThread};
@@ -83,6 +83,19 @@ pub fn list_nodes() -> Vec<NodeObservation> {
     out
 }
 
+/// The node ids of a service's publishers.
+fn publisher_nodes<T: Contract>(
+    service: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+) -> Vec<u128> {
+    use iceoryx2::service::port_factory::PortFactory as _;
+    let mut ids = Vec::new();
+    service.dynamic_config().list_publishers(|p| {
+        ids.push(node_id(&p.node_id));
+        CallbackProgression::Continue
+    });
+    ids
+}
+
 struct Run {
     recorder: Option<RecorderThread>,
     /// Runs ended and being finished by their writer threads.
@@ -127,6 +140,9 @@ pub fn run(
     let ticks = sub!(StimTick);
     let forces = sub!(ForceSample);
     let statuses = sub!(DriverStatus);
+    // The services whose publishers are this stack's rt-core and stim-driver.
+    let tick_service = open_pubsub::<StimTick>(&node, prefix).map_err(ipc("StimTick"))?;
+    let status_service = open_pubsub::<DriverStatus>(&node, prefix).map_err(ipc("DriverStatus"))?;
     let timings = sub!(TimingReport);
 
     let (tx, rx) = mpsc::channel::<Pending>();
@@ -223,7 +239,12 @@ pub fn run(
         // 3. Health.
         if now >= next_scan {
             next_scan = now + scan_ns;
-            health.on_nodes(&list_nodes());
+            let owners = ServiceOwners {
+                stim_tick: publisher_nodes(&tick_service),
+                driver_status: publisher_nodes(&status_service),
+            };
+            let listed = list_nodes();
+            health.on_nodes(&listed, &owners);
         }
         health.check(now, &proc_state);
         for e in health.take_events() {

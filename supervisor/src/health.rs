@@ -115,15 +115,12 @@ pub struct HealthSettings {
     /// Watch the stimulator (sim-muscle on a bench, the real stimulator on a rig) through
     /// the forwarded force and the driver's view of it. Default true.
     pub watch_stimulator: bool,
-    /// iceoryx2 node name of rt-core. Default "rt-core".
-    pub rt_core_node: String,
-    /// iceoryx2 node name of stim-driver. Default "stim-driver".
-    pub stim_driver_node: String,
     /// Process id of the stimulator process, when known (the bench sets it).
     pub stimulator_pid: Option<u32>,
     /// The supervisor itself is stalled when two passes of its loop are further apart
     /// than this, ms (it was stopped by a signal, or starved): while armed, that is a
-    /// fault, so stimulation does not resume on its own when it runs again. Default 250.
+    /// fault, so stimulation does not resume on its own when it runs again. Default 500
+    /// (rt-core ramps a reference older than its `stale_after_ms` to zero meanwhile).
     pub self_stall_ms: u64,
 }
 
@@ -137,10 +134,8 @@ impl Default for HealthSettings {
             watch_rt_core: true,
             watch_stim_driver: true,
             watch_stimulator: true,
-            rt_core_node: "rt-core".into(),
-            stim_driver_node: "stim-driver".into(),
             stimulator_pid: None,
-            self_stall_ms: 250,
+            self_stall_ms: 500,
         }
     }
 }
@@ -157,14 +152,6 @@ impl HealthSettings {
         ] {
             if !(lo..=60_000).contains(&v) {
                 return Err(format!("{k} {v} must be in [{lo}, 60000]"));
-            }
-        }
-        for (k, v) in [
-            ("rt_core_node", &self.rt_core_node),
-            ("stim_driver_node", &self.stim_driver_node),
-        ] {
-            if v.is_empty() || v.len() > 64 {
-                return Err(format!("{k} must be 1..=64 characters"));
             }
         }
         Ok(())
@@ -199,6 +186,17 @@ impl HealthSettings {
                 Process::SimMuscle => self.force_timeout_ms,
             }
     }
+}
+
+/// The iceoryx2 node ids of the publishers of this stack's services (its prefix): how
+/// the monitor tells its own rt-core and stim-driver from those of another stack on the
+/// same machine, whose nodes have the same names.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ServiceOwners {
+    /// Publishers of StimTick (rt-core).
+    pub stim_tick: Vec<u128>,
+    /// Publishers of DriverStatus (stim-driver).
+    pub driver_status: Vec<u128>,
 }
 
 /// How serious an event is.
@@ -571,19 +569,20 @@ impl HealthMonitor {
     }
 
     /// A node listing taken at `now_ns`.
-    pub fn on_nodes(&mut self, nodes: &[NodeObservation]) {
+    pub fn on_nodes(&mut self, nodes: &[NodeObservation], owners: &ServiceOwners) {
         for p in [Process::RtCore, Process::StimDriver] {
-            let name = match p {
-                Process::RtCore => self.settings.rt_core_node.clone(),
-                _ => self.settings.stim_driver_node.clone(),
+            let ids = match p {
+                Process::RtCore => &owners.stim_tick,
+                _ => &owners.driver_status,
             };
             let w = &mut self.watch[p.index()];
             match &w.node {
                 None => {
-                    // Adopt the first live node of that name (prefer the newest pid).
+                    // Adopt the live node that publishes our service (by its id: other
+                    // stacks on this machine have nodes of the same names).
                     if let Some(n) = nodes
                         .iter()
-                        .filter(|n| n.name == name && !n.dead)
+                        .filter(|n| !n.dead && ids.contains(&n.id))
                         .max_by_key(|n| n.pid)
                     {
                         w.node = Some(n.clone());
@@ -844,6 +843,13 @@ mod tests {
         h.on_force_sample(&force(t / MS + 1), t);
     }
 
+    fn owners() -> ServiceOwners {
+        ServiceOwners {
+            stim_tick: vec![1],
+            driver_status: vec![2],
+        }
+    }
+
     fn nodes() -> Vec<NodeObservation> {
         vec![
             NodeObservation {
@@ -876,7 +882,7 @@ mod tests {
     #[test]
     fn dead_process_is_named_with_its_pid() {
         let mut h = HealthMonitor::new(HealthSettings::default());
-        h.on_nodes(&nodes());
+        h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
         let probe = |pid: u32| {
             if pid == 100 {
@@ -906,7 +912,7 @@ mod tests {
     #[test]
     fn stopped_driver_is_stalled_and_blamed_first() {
         let mut h = HealthMonitor::new(HealthSettings::default());
-        h.on_nodes(&nodes());
+        h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
         let probe = |pid: u32| {
             if pid == 200 {
@@ -932,7 +938,7 @@ mod tests {
     #[test]
     fn silent_stimulator_is_named() {
         let mut h = HealthMonitor::new(HealthSettings::default());
-        h.on_nodes(&nodes());
+        h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
         for t in (11..200).map(|k| k * MS) {
             h.on_stim_tick(&tick(t / MS + 1, t), t);
@@ -1025,7 +1031,7 @@ mod tests {
     #[test]
     fn a_fresh_message_from_before_the_fault_does_not_clear_it() {
         let mut h = HealthMonitor::new(HealthSettings::default());
-        h.on_nodes(&nodes());
+        h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
         let driver_gone = |pid: u32| {
             if pid == 200 {
@@ -1048,12 +1054,12 @@ mod tests {
         // A node seen dead is not cleared even by a late message.
         let mut dead = nodes();
         dead[1].dead = true;
-        h.on_nodes(&dead);
+        h.on_nodes(&dead, &owners());
         h.on_driver_status(&status(30), 30 * MS);
         h.clear_recovered(31 * MS);
         assert!(h.ready().is_err());
         // A restarted driver (a new, live node) is heard again: re-arm clears it.
-        h.on_nodes(&nodes());
+        h.on_nodes(&nodes(), &owners());
         h.on_driver_status(&status(40), 40 * MS);
         h.clear_recovered(41 * MS);
         assert!(h.ready().is_ok(), "{:?}", h.ready());
@@ -1062,7 +1068,7 @@ mod tests {
     #[test]
     fn a_stalled_supervisor_is_its_own_fault() {
         let s = HealthSettings::default();
-        assert_eq!(s.self_stall(250 * MS), None);
+        assert_eq!(s.self_stall(500 * MS), None);
         let m = s.self_stall(1250 * MS).unwrap();
         assert!(m.starts_with("supervisor stalled: 1250 ms"), "{m}");
         let bad = HealthSettings {
@@ -1092,5 +1098,39 @@ mod tests {
         assert_eq!(emcy_name(0xFF27), "0xFF27 bus_off");
         assert_eq!(emcy_name(0x8130), "0x8130 heartbeat_lost");
         assert_eq!(emcy_name(0xFFFF), "0xFFFF");
+    }
+
+    /// Another stack's processes have nodes of the same names: only the publishers of
+    /// this stack's services are adopted, so a dead stranger is not taken for ours (found
+    /// by a bench run next to the test suite, which kills its own stim-drivers).
+    #[test]
+    fn nodes_of_another_stack_are_not_adopted() {
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        let mut all = nodes();
+        all.push(NodeObservation {
+            name: "stim-driver".into(),
+            pid: 900,
+            id: 9,
+            dead: false,
+        });
+        h.on_nodes(&all, &owners());
+        live(&mut h, 10 * MS);
+        // The stranger (higher pid) dies: not our driver.
+        all[2].dead = true;
+        h.on_nodes(&all, &owners());
+        h.check(11 * MS, &|pid| {
+            if pid == 900 {
+                ProcState::Zombie
+            } else {
+                ProcState::Running
+            }
+        });
+        assert!(h.ready().is_ok(), "{:?}", h.ready());
+        // Nothing is adopted before our service has a publisher.
+        let mut fresh = HealthMonitor::new(HealthSettings::default());
+        fresh.on_nodes(&all, &ServiceOwners::default());
+        live(&mut fresh, 20 * MS);
+        fresh.check(21 * MS, &running);
+        assert!(fresh.statuses(21 * MS).iter().all(|s| s.pid.is_none()));
     }
 }

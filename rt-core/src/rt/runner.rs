@@ -179,10 +179,32 @@ pub fn run_pattern_loop<S: TickSource>(
     let counters = &telemetry.counters;
     let max_references = Reference::QOS.subscriber_buffer;
     let max_forces = ForceSample::QOS.subscriber_buffer;
+    let mut connection_allocs = 0u64;
     while !stop.load(Ordering::Relaxed) {
         let wake = clock.wait();
         if stop.load(Ordering::Relaxed) {
             break;
+        }
+        // Peers that appeared since the last tick (a supervisor, a driver, a probe
+        // started later): iceoryx2 allocates a connection's state once, when it connects;
+        // that happens here, explicitly, and is counted apart from the hot path (it would
+        // otherwise happen inside the first receive or send after the peer appeared).
+        // Without new peers this only compares a change counter.
+        let before = alloc::current_thread_allocations().allocations;
+        let _ = publisher.update_connections();
+        let _ = references.update_connections();
+        if let Some(f) = &force_subscriber {
+            let _ = f.update_connections();
+        }
+        if let Some(n) = &notifier {
+            let _ = n.update_connections();
+        }
+        let connected = alloc::current_thread_allocations().allocations - before;
+        if connected > 0 {
+            connection_allocs += connected;
+            counters
+                .connection_allocations
+                .store(connection_allocs, Ordering::Relaxed);
         }
         for _ in 0..max_references {
             match references.receive() {
@@ -242,7 +264,7 @@ pub fn run_pattern_loop<S: TickSource>(
         }
         let allocs = alloc::current_thread_allocations();
         counters.hot_path_allocations.store(
-            allocs.allocations - alloc_baseline.allocations,
+            allocs.allocations - alloc_baseline.allocations - connection_allocs,
             Ordering::Relaxed,
         );
         counters.pool_allocations.store(

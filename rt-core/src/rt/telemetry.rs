@@ -43,6 +43,10 @@ pub struct LoopCounters {
     pub rejected_inputs: AtomicU64,
     /// System-heap allocations made by the real-time thread after start-up (must stay 0).
     pub hot_path_allocations: AtomicU64,
+    /// System-heap allocations iceoryx2 made on the real-time thread while connecting a
+    /// peer that appeared after start-up (a supervisor or driver started later): once per
+    /// new connection, counted apart from [`Self::hot_path_allocations`].
+    pub connection_allocations: AtomicU64,
     /// Allocations the real-time thread took from the real-time pool of
     /// [`super::alloc::CountingAllocator`] (iceoryx2's one `Rc` per publish).
     pub pool_allocations: AtomicU64,
@@ -67,6 +71,8 @@ pub struct CounterSnapshot {
     pub rejected_inputs: u64,
     /// Hot-path heap allocations.
     pub hot_path_allocations: u64,
+    /// Allocations while connecting late peers.
+    pub connection_allocations: u64,
     /// Hot-path pool allocations.
     pub pool_allocations: u64,
     /// Source faults.
@@ -94,6 +100,7 @@ impl LoopCounters {
             overruns: r(&self.overruns),
             rejected_inputs: r(&self.rejected_inputs),
             hot_path_allocations: r(&self.hot_path_allocations),
+            connection_allocations: r(&self.connection_allocations),
             pool_allocations: r(&self.pool_allocations),
             source_faults: r(&self.source_faults),
             publish_errors: r(&self.publish_errors),

@@ -201,12 +201,13 @@ fn run(cli: &Cli) -> Result<(), Failure> {
                 .map_err(|_| anyhow!("the telemetry thread panicked"))??;
             let us = |ns: u64| ns as f64 / 1000.0;
             info!(
-                "final timing: {} ticks, {} missed periods, {} hot-path heap allocations, \
-                 {} queue overflows; p50/p99/p99.9/max us: wake-up {:.1}/{:.1}/{:.1}/{:.1}, \
+                "final timing: {} ticks, {} missed periods, {} hot-path heap allocations \
+                 ({} while connecting late peers), {} queue overflows; p50/p99/p99.9/max us: wake-up {:.1}/{:.1}/{:.1}/{:.1}, \
                  input {:.1}/{:.1}/{:.1}/{:.1}, compute {:.1}/{:.1}/{:.1}/{:.1}, publish {:.1}/{:.1}/{:.1}/{:.1}",
                 report.ticks,
                 report.misses,
                 report.hot_path_allocations,
+                telemetry.counters.snapshot().connection_allocations,
                 report.queue_overflows,
                 us(report.wake.p50_ns),
                 us(report.wake.p99_ns),
