@@ -5,7 +5,7 @@
 //! schema = "fes-stim-driver/1"
 //!
 //! [can]
-//! iface = "can0"                 # required
+//! iface = "can0"                 # required; "hostbus:<dir>" for the host bus (docs/vcan.md)
 //! host_node = 1                  # our CANopen node id (1..=127)
 //! stim_node = 16                 # the stimulator's (0x10)
 //! heartbeat_ms = 10              # host heartbeat period
