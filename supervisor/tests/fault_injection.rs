@@ -557,3 +557,91 @@ fn a_full_recording_disk_stops_stimulation_and_keeps_what_was_written() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// Steps CLOCK_REALTIME by `delta_ns` (signed); restores it on drop if still stepped.
+struct ClockStep {
+    applied_ns: i64,
+}
+
+impl ClockStep {
+    fn step(delta_ns: i64) -> nix::Result<Self> {
+        use nix::time::{ClockId, clock_gettime, clock_settime};
+        let now = clock_gettime(ClockId::CLOCK_REALTIME)?;
+        let t = i128::from(now.tv_sec()) * 1_000_000_000
+            + i128::from(now.tv_nsec())
+            + i128::from(delta_ns);
+        let ts = nix::sys::time::TimeSpec::new(
+            (t.div_euclid(1_000_000_000)) as i64,
+            (t.rem_euclid(1_000_000_000)) as i64,
+        );
+        clock_settime(ClockId::CLOCK_REALTIME, ts)?;
+        Ok(Self {
+            applied_ns: delta_ns,
+        })
+    }
+
+    fn undo(mut self) {
+        let d = std::mem::replace(&mut self.applied_ns, 0);
+        let _ = Self::step(-d).map(|mut s| s.applied_ns = 0);
+    }
+}
+
+impl Drop for ClockStep {
+    fn drop(&mut self) {
+        if self.applied_ns != 0 {
+            let _ = Self::step(-self.applied_ns).map(|mut s| s.applied_ns = 0);
+        }
+    }
+}
+
+/// CLOCK_REALTIME steps forward by 10 s, back to the true time a second later, 10 s behind
+/// it and back again a second after that: the stack does not notice. Every loop, timeout and watchdog runs on CLOCK_MONOTONIC; the kernel receive
+/// timestamps (CLOCK_REALTIME) are mapped onto it and bounded (`socket_loop::arrival_ns`).
+/// Stimulation goes on, the stimulator never leaves operation, pulses keep their spacing.
+/// Needs CAP_SYS_TIME; without it the case says so and passes vacuously. The system clock
+/// is put back (to within the time the two steps take) even if the case fails.
+#[test]
+fn clock_realtime_steps_change_nothing() {
+    let bench = Bench::start("clock");
+    std::thread::sleep(Duration::from_millis(1500));
+    let from_ns = monotonic_ns();
+    let forward = match ClockStep::step(10_000_000_000) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("SKIPPED: cannot set CLOCK_REALTIME here ({e})");
+            return;
+        }
+    };
+    std::thread::sleep(Duration::from_millis(1000));
+    forward.undo();
+    let back = ClockStep::step(-10_000_000_000).expect("second step");
+    std::thread::sleep(Duration::from_millis(1000));
+    back.undo();
+    std::thread::sleep(Duration::from_millis(500));
+    let status = bench.status();
+    let checked_ns = monotonic_ns();
+    let done = bench.finish();
+    assert_eq!(status.state, "armed", "{status:?}\n{}", done.logs);
+    let left = done.check("clock steps", from_ns);
+    assert!(
+        left.is_none_or(|t| t > checked_ns),
+        "the stimulator left operation during the clock steps\n{}",
+        done.logs
+    );
+    let during = done
+        .rows
+        .iter()
+        .filter(|r| r.t_ns > from_ns && r.t_ns < checked_ns && r.pulse.is_some())
+        .count();
+    // 2.5 s at 120 beats/min: 5 beats of about 6 pulses.
+    assert!(
+        during >= 20,
+        "only {during} pulses during the steps\n{}",
+        done.logs
+    );
+    done.clean_exits_except("clock steps", None);
+    eprintln!(
+        "clock steps: supervisor {}; {during} pulses during the steps",
+        status.state
+    );
+}
