@@ -279,8 +279,8 @@ pub struct HostBus {
 
 impl HostBus {
     /// Joins the bus in `dir` as `station`: creates the directory (mode 0700) if needed,
-    /// binds `<dir>/<station>.sock` (replacing a stale file; refusing if a live station
-    /// holds it) and asks for receive timestamps. Reads block for at most `read_timeout`
+    /// binds `<dir>/<station>.sock` (mode 0600; replacing a stale file; refusing if a live
+    /// station holds it) and asks for receive timestamps. Reads block for at most `read_timeout`
     /// (`None`: never block).
     pub fn open(dir: &Path, station: Station, read_timeout: Option<Duration>) -> io::Result<Self> {
         validate_dir(dir).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
@@ -306,6 +306,11 @@ impl HostBus {
                 len,
             )
         })?;
+        // Only the owner may send to it (the directory is private too).
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600))?;
+        }
         let on: libc::c_int = 1;
         // SAFETY: SO_TIMESTAMPNS takes an int flag; `on` lives across the call.
         check(unsafe {
