@@ -887,6 +887,15 @@ fn driver_on_the_bus() {
     fes_tests::vcan::with_vcan(on_bus::driver_on_the_bus);
 }
 
+/// The same scenarios (1-4; the link-down scenario needs a CAN interface) with the driver and
+/// the virtual stimulator on the host bus (`fes_can::hostbus`: the same CAN frames over Unix
+/// datagrams, docs/vcan.md), observed by its tap station: runs by default on hosts without
+/// CAN, at the host's timing.
+#[test]
+fn driver_on_the_host_bus() {
+    on_bus::driver_on_the_bus(&fes_tests::vcan::CanEnv::host_bus("driver"));
+}
+
 /// Not a test: the scripted StimTick publisher process that [`driver_on_the_bus`] starts
 /// (this binary re-executed with `--exact --ignored` and the script in the environment).
 #[test]

@@ -52,8 +52,11 @@ pub struct Tap {
 }
 
 impl Tap {
-    /// Starts recording `iface`.
+    /// Starts recording `iface` (a CAN interface, or `hostbus:<dir>` as its tap station).
     pub fn open(iface: &str) -> io::Result<Self> {
+        if let Some(dir) = fes_can::hostbus::bus_dir(iface) {
+            return Self::open_host_bus(dir);
+        }
         let socket = CanSocket::open(iface)?;
         socket.set_read_timeout(Duration::from_millis(20))?;
         let frames = Arc::new(Mutex::new(Vec::new()));
@@ -89,6 +92,46 @@ impl Tap {
                                 e.kind(),
                                 io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
                             ) => {}
+                        Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                        Err(_) => break,
+                    }
+                }
+            })?;
+        Ok(Self {
+            frames,
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    /// The tap station of a host bus: every data frame the driver and the stimulator send.
+    fn open_host_bus(dir: &std::path::Path) -> io::Result<Self> {
+        use fes_can::hostbus::{HostBus, Station};
+        let bus = HostBus::open(dir, Station::Tap, Some(Duration::from_millis(20)))?;
+        let frames = Arc::new(Mutex::new(Vec::new()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (f, s) = (frames.clone(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name("hostbus-tap".into())
+            .spawn(move || {
+                while !s.load(Ordering::Relaxed) {
+                    match bus.recv() {
+                        Ok(Some(r)) if !r.frame.is_error() => {
+                            let at = Instant::now();
+                            let id = r.frame.can_id;
+                            let data = r.frame.payload().to_vec();
+                            let message = fes_can::decode(id, &data);
+                            f.lock()
+                                .unwrap_or_else(PoisonError::into_inner)
+                                .push(RxFrame {
+                                    at,
+                                    id,
+                                    data,
+                                    message,
+                                });
+                        }
+                        Ok(_) => {}
+                        Err(e) if e.kind() == io::ErrorKind::InvalidData => {}
                         Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                         Err(_) => break,
                     }

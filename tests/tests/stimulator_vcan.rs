@@ -39,7 +39,7 @@ fn session(can: &CanEnv) {
     // exact bound (W < t <= W + 1 ms) is unit-tested on simulated time in sim-muscle.
     let (watchdog_ms, margin_ms): (u16, u64) = match can.backend {
         Backend::Uml => (250, 100),
-        Backend::Native => (100, 10),
+        Backend::Native | Backend::HostBus => (100, 10),
     };
     let tap = Tap::open(&can.iface).expect("open the tap");
     let mut host = HostPort::open(&can.iface).expect("open the host port");
