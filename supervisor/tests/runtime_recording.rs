@@ -262,8 +262,9 @@ fn stimulator_ticks(path: &Path) -> Vec<(u64, String, bool)> {
 /// off (the supervisor as victim: the driver's supervisor watch sees its node dead and
 /// sends NMT stop), and the recording up to that moment is a readable data set. Prints
 /// the kill → stimulator-stopped time per victim.
-/// `iface` is a CAN interface or `None` for the host bus (in the stack's directory).
-fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str) {
+/// `iface` is a CAN interface or `None` for the host bus (in the stack's directory); the
+/// kill comes `after_ms` into the profile.
+fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str, after_ms: u64) {
     use nix::sys::signal::Signal;
     use std::time::{Duration, Instant};
     use supervisor::bench::{Stack, StackOptions, log_tail};
@@ -309,7 +310,7 @@ fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str) {
             }),
         })
         .expect("cardiac profile");
-    std::thread::sleep(Duration::from_millis(2000));
+    std::thread::sleep(Duration::from_millis(after_ms));
     let before = stack.status().expect("status");
     assert_eq!(before.state, "armed", "{victim}: {before:?}");
     let killed_ns = rt_core::rt::clock::monotonic_ns();
@@ -406,12 +407,22 @@ fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str) {
 /// "Killing any one process mid-run leaves the stimulator stopped and the supervisor
 /// reporting which process died; the recording up to that moment is readable." The four
 /// processes on the host bus (the CAN frames over Unix datagrams, fes_can::hostbus), one
-/// stack per victim, at the host's real-time latencies.
+/// stack per victim and seed, at the host's real-time latencies; the moment of the kill is
+/// drawn from a seeded generator (1.0-2.5 s into the profile), two seeds per victim.
 #[test]
 fn killing_any_one_process_stops_stimulation_and_names_it() {
+    use rand::{RngExt, SeedableRng};
     let bins = stack_binaries();
-    for victim in ["rt-core", "stim-driver", "sim-muscle", "supervisor"] {
-        kill_one(&bins, None, false, victim);
+    for (index, victim) in ["rt-core", "stim-driver", "sim-muscle", "supervisor"]
+        .into_iter()
+        .enumerate()
+    {
+        for seed in 1..=2u64 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed * 104_729 + index as u64);
+            let after_ms = rng.random_range(1000..2500);
+            eprintln!("kill {victim}, seed {seed}: {after_ms} ms into the profile");
+            kill_one(&bins, None, false, victim, after_ms);
+        }
     }
 }
 
@@ -431,7 +442,7 @@ fn killing_any_one_process_on_vcan_stops_stimulation_and_names_it() {
     fes_tests::vcan::with_vcan(|can| {
         let uml = can.backend == fes_tests::vcan::Backend::Uml;
         for victim in ["rt-core", "stim-driver", "sim-muscle", "supervisor"] {
-            kill_one(&bins, Some(&can.iface), uml, victim);
+            kill_one(&bins, Some(&can.iface), uml, victim, 2000);
         }
     });
 }
