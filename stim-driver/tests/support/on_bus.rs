@@ -836,7 +836,16 @@ pub fn driver_on_the_bus(can: &CanEnv) {
         );
         let s = op.status().unwrap();
         assert_eq!(s.state(), Ok(DeviceState::Fault));
-        assert_eq!(fault_code(&s), 0xFF21, "tick timeout");
+        if uml || host_bus {
+            // On a loaded host the driver can wake to the first tick after the stall before
+            // its timer fires: that tick is stale (0xFF24); either trip is the watchdog's.
+            assert!(
+                matches!(fault_code(&s), 0xFF21 | 0xFF24),
+                "tick timeout or stale tick: {s:?}"
+            );
+        } else {
+            assert_eq!(fault_code(&s), 0xFF21, "tick timeout");
+        }
         let rearm_at = tap.len();
         op.arm(slow(2000), &log);
         tap.wait_for(rearm_at, Duration::from_secs(5), |f| is_pulse(f).is_some())
