@@ -19,6 +19,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
+use iceoryx2::prelude::FileDescriptorBased;
 use rt_core::msg::service::{open_pubsub, open_stim_tick_event};
 use rt_core::msg::{Contract, DriverCommand, StimTick};
 use rt_core::rt::alloc;
@@ -93,6 +94,32 @@ pub struct ForwardOutcome {
     pub hot_path_allocations: Option<u64>,
 }
 
+/// Waits until the StimTick listener's socket is readable or `timeout` passes: `Ok(true)`
+/// when a notification is waiting. `ppoll` times out on a high-resolution timer (an RT
+/// thread has no timer slack), where iceoryx2's own `Listener::timed_wait` uses the
+/// socket's `SO_RCVTIMEO`, which the kernel counts in jiffies: a 1 ms wait lasted 4-8 ms at
+/// HZ=250 (found by the forward-path histograms: timed wake-ups 5-8 ms late, and the
+/// 3-tick StimTick watchdog tripping 5-12 ms after the last tick).
+fn wait_for_tick(fd: i32, timeout: Duration) -> Result<bool, ()> {
+    let mut pfd = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs() as libc::time_t,
+        tv_nsec: libc::c_long::from(timeout.subsec_nanos() as i32),
+    };
+    // SAFETY: `pfd` and `ts` are valid for the call; one descriptor, no signal mask.
+    let rc = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+    match rc {
+        0 => Ok(false),
+        n if n > 0 => Ok(pfd.revents & libc::POLLIN != 0),
+        _ if std::io::Error::last_os_error().kind() == std::io::ErrorKind::Interrupted => Ok(false),
+        _ => Err(()),
+    }
+}
+
 fn port_err(port: &'static str) -> impl Fn(&dyn core::fmt::Debug) -> RunError {
     move |e| RunError::Port {
         port,
@@ -131,6 +158,9 @@ pub fn run_forward<T: CanTx>(
         .create()
         .map_err(|e| port_err("stim-tick listener")(&e))?;
 
+    // SAFETY: the descriptor stays owned by `listener`, which outlives every use below; it
+    // is only polled, never stored elsewhere or closed here.
+    let listener_fd = unsafe { listener.file_descriptor().native_handle() };
     let mut path = ForwardPath::new(settings, tx);
     let mut sink = QueueSink::new(&shared.events, &shared.event_overflows);
     let _ = shared.rt_status.set(rt.clone());
@@ -149,10 +179,20 @@ pub fn run_forward<T: CanTx>(
         let now = monotonic_ns();
         let deadline = path.next_deadline(now);
         let mut notified = false;
-        let waited = listener.timed_wait(
-            |_| notified = true,
+        let waited = wait_for_tick(
+            listener_fd,
             Duration::from_nanos(deadline.saturating_sub(now).max(1_000)),
-        );
+        )
+        .and_then(|ready| {
+            if ready {
+                listener
+                    .try_wait(|_| notified = true)
+                    .map_err(|_| ())
+                    .map(|_| ())
+            } else {
+                Ok(())
+            }
+        });
         let wake_ns = monotonic_ns();
         if waited.is_err() {
             // A failed wait must not spin: fall back to sleeping to the deadline.
