@@ -59,11 +59,11 @@ pub const SCHEME: &str = "hostbus:";
 /// Bytes of a frame on the host bus (`sizeof(struct can_frame)`).
 pub const FRAME_LEN: usize = 16;
 /// `CAN_EFF_FLAG`: extended frame format.
-pub const EFF_FLAG: u32 = 0x8000_0000;
+pub const EFF_FLAG: u32 = libc::CAN_EFF_FLAG;
 /// `CAN_RTR_FLAG`: remote transmission request.
-pub const RTR_FLAG: u32 = 0x4000_0000;
+pub const RTR_FLAG: u32 = libc::CAN_RTR_FLAG;
 /// `CAN_ERR_FLAG`: error frame.
-pub const ERR_FLAG: u32 = 0x2000_0000;
+pub const ERR_FLAG: u32 = libc::CAN_ERR_FLAG;
 /// The longest directory accepted: `sun_path` (108 bytes) less the longest station file
 /// name and the terminating NUL.
 pub const MAX_DIR_LEN: usize = 108 - "/stimulator.sock".len() - 1;
@@ -150,7 +150,7 @@ impl RawFrame {
         let n = payload.len().min(8);
         data[..n].copy_from_slice(&payload[..n]);
         Self {
-            can_id: ERR_FLAG | (class & 0x1FFF_FFFF),
+            can_id: ERR_FLAG | (class & libc::CAN_ERR_MASK),
             len: 8,
             data,
         }

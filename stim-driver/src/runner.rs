@@ -108,7 +108,7 @@ fn wait_for_tick(fd: i32, timeout: Duration) -> Result<bool, ()> {
     };
     let ts = libc::timespec {
         tv_sec: timeout.as_secs() as libc::time_t,
-        tv_nsec: libc::c_long::from(timeout.subsec_nanos() as i32),
+        tv_nsec: timeout.subsec_nanos() as libc::c_long,
     };
     // SAFETY: `pfd` and `ts` are valid for the call; one descriptor, no signal mask.
     let rc = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };

@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use rt_core::control::file::Controller;
 
 use crate::control;
+use crate::profile::ProfileSpec;
 use crate::protocol::{Command, Response, Status};
 
 /// A bench failure.
@@ -109,6 +110,20 @@ fn timeouts(uml: bool) -> (u64, u32, u32, u64, u64, u64) {
     } else {
         (100, 20, 100, 50, 500, 100)
     }
+}
+
+/// The last 1500 bytes of each process's log in the stack directory `dir`, each under a
+/// `--- <name>.log` line, for error messages.
+pub fn process_logs(dir: &Path) -> String {
+    PROCESSES
+        .iter()
+        .map(|p| {
+            format!(
+                "--- {p}.log\n{}",
+                log_tail(&dir.join(format!("{p}.log")), 1500)
+            )
+        })
+        .collect()
 }
 
 /// The last `n` bytes of a log, for error messages.
@@ -405,6 +420,13 @@ source = "supervisor bench"
             });
         }
         Ok(r)
+    }
+
+    /// Arms stimulation and starts `profile` (both must be accepted).
+    pub fn arm_with(&self, profile: ProfileSpec) -> Result<(), BenchError> {
+        self.must(Command::Arm)?;
+        self.must(Command::Profile { profile })?;
+        Ok(())
     }
 
     /// The supervisor's status.

@@ -837,6 +837,11 @@ mod tests {
         ProcState::Running
     }
 
+    /// A probe that finds process `pid` in `state` and every other one running.
+    fn only(pid: u32, state: ProcState) -> impl Fn(u32) -> ProcState {
+        move |p| if p == pid { state } else { ProcState::Running }
+    }
+
     fn live(h: &mut HealthMonitor, t: u64) {
         h.on_stim_tick(&tick(t / MS + 1, t), t);
         h.on_driver_status(&status(t / MS + 1), t);
@@ -884,13 +889,7 @@ mod tests {
         let mut h = HealthMonitor::new(HealthSettings::default());
         h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
-        let probe = |pid: u32| {
-            if pid == 100 {
-                ProcState::Gone
-            } else {
-                ProcState::Running
-            }
-        };
+        let probe = only(100, ProcState::Gone);
         h.on_driver_status(&status(50), 30 * MS);
         h.on_force_sample(&force(50), 30 * MS);
         h.check(30 * MS, &probe);
@@ -914,13 +913,7 @@ mod tests {
         let mut h = HealthMonitor::new(HealthSettings::default());
         h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
-        let probe = |pid: u32| {
-            if pid == 200 {
-                ProcState::Stopped
-            } else {
-                ProcState::Running
-            }
-        };
+        let probe = only(200, ProcState::Stopped);
         for t in (11..700).map(|k| k * MS) {
             h.on_stim_tick(&tick(t / MS + 1, t), t);
             h.check(t, &probe);
@@ -1033,13 +1026,7 @@ mod tests {
         let mut h = HealthMonitor::new(HealthSettings::default());
         h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
-        let driver_gone = |pid: u32| {
-            if pid == 200 {
-                ProcState::Gone
-            } else {
-                ProcState::Running
-            }
-        };
+        let driver_gone = only(200, ProcState::Gone);
         h.check(11 * MS, &driver_gone);
         assert!(h.ready().unwrap_err().contains("stim-driver"));
         h.clear_recovered(12 * MS);
@@ -1118,13 +1105,7 @@ mod tests {
         // The stranger (higher pid) dies: not our driver.
         all[2].dead = true;
         h.on_nodes(&all, &owners());
-        h.check(11 * MS, &|pid| {
-            if pid == 900 {
-                ProcState::Zombie
-            } else {
-                ProcState::Running
-            }
-        });
+        h.check(11 * MS, &only(900, ProcState::Zombie));
         assert!(h.ready().is_ok(), "{:?}", h.ready());
         // Nothing is adopted before our service has a publisher.
         let mut fresh = HealthMonitor::new(HealthSettings::default());

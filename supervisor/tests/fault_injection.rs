@@ -18,15 +18,16 @@ use std::time::{Duration, Instant};
 
 use fes_can::hostbus::{HostBus, RawFrame, Station};
 use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
-use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows, workspace_root};
+use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows};
 use nix::sys::signal::Signal;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rt_core::dataset::DataSet;
 use rt_core::rt::clock::monotonic_ns;
-use supervisor::bench::{PROCESSES, Stack, StackOptions, log_tail};
-use supervisor::profile::{CardiacSpec, ProfileSpec};
-use supervisor::protocol::{Command, Status};
+use supervisor::bench::{PROCESSES, Stack, process_logs};
+use supervisor::protocol::Status;
+
+mod stack_support;
 
 /// The stimulator's limits on the bench (its defaults).
 const LIMITS: fes_can::StimLimits = fes_can::StimLimits::DEFAULT;
@@ -41,8 +42,7 @@ struct Bench {
 }
 
 impl Bench {
-    /// Starts the stack on the host bus, arms, starts the cardiac profile and waits until
-    /// pulses flow.
+    /// Starts the stack on the host bus, arms and starts the cardiac profile.
     fn start(tag: &str) -> Self {
         Self::start_with(tag, |_| {})
     }
@@ -54,40 +54,19 @@ impl Bench {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("stack directory");
         prepare(&dir);
-        let stack = Stack::start(StackOptions {
-            dir: dir.clone(),
-            bin_dir: stack_binaries(),
-            controller: workspace_root().join("models/fast.lcn.json"),
-            iface: format!("hostbus:{}", dir.join("bus").display()),
-            uml: false,
-            fatigue: false,
-            outer_loop: true,
-            outer_gain: None,
-            prefix: format!("fi{}{tag}", std::process::id()),
-        })
-        .unwrap_or_else(|e| panic!("{tag}: the stack did not start: {e}"));
-        let bench = Self {
+        let stack = stack_support::start_armed(
+            tag,
+            &dir,
+            &stack_binaries(),
+            format!("hostbus:{}", dir.join("bus").display()),
+            false,
+            format!("fi{}{tag}", std::process::id()),
+        );
+        Self {
             stack,
             dir,
             _serial: serial,
-        };
-        if let Err(e) = bench.stack.wait_healthy(Duration::from_secs(20)) {
-            panic!("{tag}: {e}\n{}", bench.logs());
         }
-        bench.stack.must(Command::Arm).expect("arm");
-        bench
-            .stack
-            .must(Command::Profile {
-                profile: ProfileSpec::Cardiac(CardiacSpec {
-                    bpm: 120.0,
-                    duty: 0.4,
-                    amplitude: 0.3,
-                    edge_rate_per_s: None,
-                    outer_loop: None,
-                }),
-            })
-            .expect("cardiac profile");
-        bench
     }
 
     fn bus(&self) -> PathBuf {
@@ -95,15 +74,7 @@ impl Bench {
     }
 
     fn logs(&self) -> String {
-        PROCESSES
-            .iter()
-            .map(|p| {
-                format!(
-                    "--- {p}\n{}",
-                    log_tail(&self.dir.join(format!("{p}.log")), 1500)
-                )
-            })
-            .collect()
+        process_logs(&self.dir)
     }
 
     fn status(&self) -> Status {
@@ -134,10 +105,7 @@ impl Bench {
         let run = recordings.last().expect("a recording run");
         let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{}: {e}", run.display()));
         let samples = ds.records.iter().map(|r| r.len()).sum();
-        let logs = PROCESSES
-            .iter()
-            .map(|p| format!("--- {p}\n{}", log_tail(&dir.join(format!("{p}.log")), 1500)))
-            .collect::<String>();
+        let logs = process_logs(&dir);
         let _ = std::fs::remove_dir_all(&dir);
         Finished {
             rows,
@@ -574,45 +542,44 @@ fn a_full_recording_disk_stops_stimulation_and_keeps_what_was_written() {
     }
 }
 
-/// Steps CLOCK_REALTIME by `delta_ns` (signed); restores it on drop if still stepped.
+/// A step of CLOCK_REALTIME by `applied_ns` (signed), stepped back when dropped (also when
+/// the case fails).
 struct ClockStep {
     applied_ns: i64,
 }
 
+/// Moves CLOCK_REALTIME by `delta_ns`.
+fn shift_realtime(delta_ns: i64) -> nix::Result<()> {
+    use nix::time::{ClockId, clock_gettime, clock_settime};
+    let now = clock_gettime(ClockId::CLOCK_REALTIME)?;
+    let t =
+        i128::from(now.tv_sec()) * 1_000_000_000 + i128::from(now.tv_nsec()) + i128::from(delta_ns);
+    let ts = nix::sys::time::TimeSpec::new(
+        (t.div_euclid(1_000_000_000)) as i64,
+        (t.rem_euclid(1_000_000_000)) as i64,
+    );
+    clock_settime(ClockId::CLOCK_REALTIME, ts)
+}
+
 impl ClockStep {
     fn step(delta_ns: i64) -> nix::Result<Self> {
-        use nix::time::{ClockId, clock_gettime, clock_settime};
-        let now = clock_gettime(ClockId::CLOCK_REALTIME)?;
-        let t = i128::from(now.tv_sec()) * 1_000_000_000
-            + i128::from(now.tv_nsec())
-            + i128::from(delta_ns);
-        let ts = nix::sys::time::TimeSpec::new(
-            (t.div_euclid(1_000_000_000)) as i64,
-            (t.rem_euclid(1_000_000_000)) as i64,
-        );
-        clock_settime(ClockId::CLOCK_REALTIME, ts)?;
+        shift_realtime(delta_ns)?;
         Ok(Self {
             applied_ns: delta_ns,
         })
-    }
-
-    fn undo(mut self) {
-        let d = std::mem::replace(&mut self.applied_ns, 0);
-        let _ = Self::step(-d).map(|mut s| s.applied_ns = 0);
     }
 }
 
 impl Drop for ClockStep {
     fn drop(&mut self) {
-        if self.applied_ns != 0 {
-            let _ = Self::step(-self.applied_ns).map(|mut s| s.applied_ns = 0);
-        }
+        let _ = shift_realtime(-self.applied_ns);
     }
 }
 
 /// CLOCK_REALTIME steps forward by 10 s, back to the true time a second later, 10 s behind
-/// it and back again a second after that: the stack does not notice. Every loop, timeout and watchdog runs on CLOCK_MONOTONIC; the kernel receive
-/// timestamps (CLOCK_REALTIME) are mapped onto it and bounded (`socket_loop::arrival_ns`).
+/// it and back again a second after that: the stack does not notice. Every loop, timeout
+/// and watchdog runs on CLOCK_MONOTONIC; the kernel receive timestamps (CLOCK_REALTIME)
+/// are mapped onto it and bounded (`socket_loop::arrival_ns`).
 /// Stimulation goes on, the stimulator never leaves operation, pulses keep their spacing.
 /// Needs CAP_SYS_TIME; without it the case says so and passes vacuously. The system clock
 /// is put back (to within the time the two steps take) even if the case fails.
@@ -629,10 +596,10 @@ fn clock_realtime_steps_change_nothing() {
         }
     };
     std::thread::sleep(Duration::from_millis(1000));
-    forward.undo();
+    drop(forward); // steps it back
     let back = ClockStep::step(-10_000_000_000).expect("second step");
     std::thread::sleep(Duration::from_millis(1000));
-    back.undo();
+    drop(back);
     std::thread::sleep(Duration::from_millis(500));
     let status = bench.status();
     let checked_ns = monotonic_ns();

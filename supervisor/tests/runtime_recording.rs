@@ -246,7 +246,9 @@ fn disk_full_is_an_error_not_a_panic() {
 
 // ---- The whole stack on CAN: killing any one process ----------------------------------
 
-use fes_tests::stack::{stack_binaries, stimulator_rows, workspace_root};
+mod stack_support;
+
+use fes_tests::stack::{stack_binaries, stimulator_rows};
 
 /// The stimulator's per-tick record: (CLOCK_MONOTONIC ns, state, pulse applied).
 fn stimulator_ticks(path: &Path) -> Vec<(u64, String, bool)> {
@@ -267,8 +269,7 @@ fn stimulator_ticks(path: &Path) -> Vec<(u64, String, bool)> {
 fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str, after_ms: u64) {
     use nix::sys::signal::Signal;
     use std::time::{Duration, Instant};
-    use supervisor::bench::{Stack, StackOptions, log_tail};
-    use supervisor::profile::{CardiacSpec, ProfileSpec};
+    use supervisor::bench::process_logs;
     use supervisor::protocol::Command as Cmd;
 
     let dir = std::env::temp_dir().join(format!("fes-kill-{victim}-{}", std::process::id()));
@@ -277,39 +278,14 @@ fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str, after_ms:
         || format!("hostbus:{}", dir.join("bus").display()),
         str::to_owned,
     );
-    let stack = Stack::start(StackOptions {
-        dir: dir.clone(),
-        bin_dir: bins.to_path_buf(),
-        controller: workspace_root().join("models/fast.lcn.json"),
+    let stack = stack_support::start_armed(
+        victim,
+        &dir,
+        bins,
         iface,
         uml,
-        fatigue: false,
-        outer_loop: true,
-        outer_gain: None,
-        prefix: format!("kill{}{}", std::process::id(), &victim[..3]),
-    })
-    .unwrap_or_else(|e| panic!("{victim}: the stack did not start: {e}"));
-    let logs = |dir: &Path| -> String {
-        supervisor::bench::PROCESSES
-            .iter()
-            .map(|p| format!("--- {p}\n{}", log_tail(&dir.join(format!("{p}.log")), 1500)))
-            .collect()
-    };
-    if let Err(e) = stack.wait_healthy(Duration::from_secs(if uml { 90 } else { 20 })) {
-        panic!("{victim}: {e}\n{}", logs(&dir));
-    }
-    stack.must(Cmd::Arm).expect("arm");
-    stack
-        .must(Cmd::Profile {
-            profile: ProfileSpec::Cardiac(CardiacSpec {
-                bpm: 120.0,
-                duty: 0.4,
-                amplitude: 0.3,
-                edge_rate_per_s: None,
-                outer_loop: None,
-            }),
-        })
-        .expect("cardiac profile");
+        format!("kill{}{}", std::process::id(), &victim[..3]),
+    );
     std::thread::sleep(Duration::from_millis(after_ms));
     let before = stack.status().expect("status");
     assert_eq!(before.state, "armed", "{victim}: {before:?}");
@@ -332,7 +308,7 @@ fn kill_one(bins: &Path, iface: Option<&str>, uml: bool, victim: &str, after_ms:
             status.state,
             "fault",
             "{victim}: {status:?}\n{}",
-            logs(&dir)
+            process_logs(&dir)
         );
         assert!(
             fault.starts_with(victim) && fault.contains("died"),

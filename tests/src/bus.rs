@@ -44,6 +44,9 @@ impl RxFrame {
     }
 }
 
+/// How long the tap's reads wait before checking whether to stop.
+const READ_TIMEOUT: Duration = Duration::from_millis(20);
+
 /// Records every frame on an interface, in order, with timestamps.
 pub struct Tap {
     frames: Arc<Mutex<Vec<RxFrame>>>,
@@ -55,71 +58,60 @@ impl Tap {
     /// Starts recording `iface` (a CAN interface, or `hostbus:<dir>` as its tap station).
     pub fn open(iface: &str) -> io::Result<Self> {
         if let Some(dir) = fes_can::hostbus::bus_dir(iface) {
-            return Self::open_host_bus(dir);
+            // The tap station of a host bus: every data frame the driver and the
+            // stimulator send.
+            use fes_can::hostbus::{HostBus, Station};
+            let bus = HostBus::open(dir, Station::Tap, Some(READ_TIMEOUT))?;
+            return Self::record("hostbus-tap", move || match bus.recv() {
+                Ok(Some(r)) if !r.frame.is_error() => {
+                    Ok(Some((r.frame.can_id, r.frame.payload().to_vec())))
+                }
+                Ok(_) => Ok(None),
+                Err(e) if e.kind() == io::ErrorKind::InvalidData => Ok(None),
+                Err(e) => Err(e),
+            });
         }
         let socket = CanSocket::open(iface)?;
-        socket.set_read_timeout(Duration::from_millis(20))?;
-        let frames = Arc::new(Mutex::new(Vec::new()));
-        let stop = Arc::new(AtomicBool::new(false));
-        let (f, s) = (frames.clone(), stop.clone());
-        let thread = std::thread::Builder::new()
-            .name("can-tap".into())
-            .spawn(move || {
-                while !s.load(Ordering::Relaxed) {
-                    match socket.read_frame() {
-                        Ok(frame) => {
-                            let at = Instant::now();
-                            let id = frame.raw_id()
-                                | if frame.is_extended() { 0x8000_0000 } else { 0 }
-                                | if matches!(frame, CanFrame::Remote(_)) {
-                                    0x4000_0000
-                                } else {
-                                    0
-                                };
-                            let data = frame.data().to_vec();
-                            let message = fes_can::decode(id, &data);
-                            f.lock()
-                                .unwrap_or_else(PoisonError::into_inner)
-                                .push(RxFrame {
-                                    at,
-                                    id,
-                                    data,
-                                    message,
-                                });
-                        }
-                        Err(e)
-                            if matches!(
-                                e.kind(),
-                                io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                            ) => {}
-                        Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                        Err(_) => break,
-                    }
-                }
-            })?;
-        Ok(Self {
-            frames,
-            stop,
-            thread: Some(thread),
+        socket.set_read_timeout(READ_TIMEOUT)?;
+        Self::record("can-tap", move || match socket.read_frame() {
+            Ok(frame) => {
+                let id = frame.raw_id()
+                    | if frame.is_extended() { 0x8000_0000 } else { 0 }
+                    | if matches!(frame, CanFrame::Remote(_)) {
+                        0x4000_0000
+                    } else {
+                        0
+                    };
+                Ok(Some((id, frame.data().to_vec())))
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                Ok(None)
+            }
+            Err(e) => Err(e),
         })
     }
 
-    /// The tap station of a host bus: every data frame the driver and the stimulator send.
-    fn open_host_bus(dir: &std::path::Path) -> io::Result<Self> {
-        use fes_can::hostbus::{HostBus, Station};
-        let bus = HostBus::open(dir, Station::Tap, Some(Duration::from_millis(20)))?;
+    /// Records what `read` returns (identifier with flag bits, payload; `None`: nothing
+    /// this time) on a thread named `name`, until dropped or a read fails.
+    fn record(
+        name: &str,
+        mut read: impl FnMut() -> io::Result<Option<(u32, Vec<u8>)>> + Send + 'static,
+    ) -> io::Result<Self> {
         let frames = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
         let (f, s) = (frames.clone(), stop.clone());
         let thread = std::thread::Builder::new()
-            .name("hostbus-tap".into())
+            .name(name.into())
             .spawn(move || {
                 while !s.load(Ordering::Relaxed) {
-                    match bus.recv() {
-                        Ok(Some(r)) if !r.frame.is_error() => {
+                    match read() {
+                        Ok(Some((id, data))) => {
                             let at = Instant::now();
-                            let id = r.frame.can_id;
-                            let data = r.frame.payload().to_vec();
                             let message = fes_can::decode(id, &data);
                             f.lock()
                                 .unwrap_or_else(PoisonError::into_inner)
@@ -130,8 +122,7 @@ impl Tap {
                                     message,
                                 });
                         }
-                        Ok(_) => {}
-                        Err(e) if e.kind() == io::ErrorKind::InvalidData => {}
+                        Ok(None) => {}
                         Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                         Err(_) => break,
                     }
@@ -396,5 +387,51 @@ impl Drop for HeartbeatSender {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+    }
+}
+
+/// A host bus with only a tap station on it, for proving that a process refused bad input
+/// before it put anything on the bus (issue 10, item 3): start the process on
+/// [`SilentBus::iface`], then [`SilentBus::assert_silent`].
+pub struct SilentBus {
+    dir: std::path::PathBuf,
+    tap: fes_can::hostbus::HostBus,
+}
+
+impl SilentBus {
+    /// A fresh bus in a temporary directory named after `tag` and this process.
+    pub fn new(tag: &str) -> Self {
+        use fes_can::hostbus::{HostBus, Station};
+        let dir = std::env::temp_dir().join(format!("fes-silent-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let tap = HostBus::open(&dir, Station::Tap, None).expect("the tap station");
+        Self { dir, tap }
+    }
+
+    /// The interface name to give the process under test.
+    pub fn iface(&self) -> String {
+        format!("{}{}", fes_can::hostbus::SCHEME, self.dir.display())
+    }
+
+    /// Panics naming `case` if a frame reached the tap or a driver or stimulator station
+    /// was opened.
+    pub fn assert_silent(&self, case: &str) {
+        use fes_can::hostbus::Station;
+        std::thread::sleep(Duration::from_millis(20));
+        if let Some(r) = self.tap.recv().expect("tap read") {
+            panic!("{case}: a frame reached the bus: {:?}", r.frame);
+        }
+        for s in [Station::Driver, Station::Stimulator] {
+            assert!(
+                !self.dir.join(s.file_name()).exists(),
+                "{case}: the {s:?} station was opened"
+            );
+        }
+    }
+}
+
+impl Drop for SilentBus {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }

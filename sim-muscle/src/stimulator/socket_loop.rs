@@ -143,7 +143,7 @@ fn open_socket(iface: &str, nodes: &Nodes) -> anyhow::Result<StimSocket> {
         format!("opening CAN interface {iface:?} (does it exist and is it up? see docs/vcan.md)")
     })?;
     // Match the 11-bit identifier and require the EFF and RTR flags clear.
-    let mask = 0x7FF | libc_flags::EFF | libc_flags::RTR;
+    let mask = 0x7FF | hostbus::EFF_FLAG | hostbus::RTR_FLAG;
     let filters: Vec<CanFilter> = ACCEPTED
         .into_iter()
         .map(|k| CanFilter::new(u32::from(nodes.id_of(k)), mask))
@@ -230,13 +230,6 @@ impl StimSocket {
             }
         }
     }
-}
-
-mod libc_flags {
-    /// CAN_EFF_FLAG: extended frame format.
-    pub const EFF: u32 = 0x8000_0000;
-    /// CAN_RTR_FLAG: remote transmission request.
-    pub const RTR: u32 = 0x4000_0000;
 }
 
 /// Sends everything in `out`; counts failures (the frame is lost, the machine is told at

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use supervisor::baseline::{BeatShape, baseline_40hz};
-use supervisor::bench::{Stack, StackOptions, log_tail};
+use supervisor::bench::{Stack, StackOptions, process_logs};
 use supervisor::plots::{LatencyCurve, RunSeries, percentile_grid, plot_latency, plot_run};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
@@ -230,22 +230,11 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
     if let Err(e) = healthy {
-        let logs: String = supervisor::bench::PROCESSES
-            .iter()
-            .map(|p| {
-                format!(
-                    "--- {p}.log\n{}",
-                    log_tail(&out.join(format!("{p}.log")), 1500)
-                )
-            })
-            .collect();
+        let logs = process_logs(&out);
         let _ = stack.stop(Duration::from_secs(3));
         bail!("{e}\n{logs}");
     }
-    stack.must(Command::Arm)?;
-    stack.must(Command::Profile {
-        profile: ProfileSpec::Cardiac(cardiac(a)),
-    })?;
+    stack.arm_with(ProfileSpec::Cardiac(cardiac(a)))?;
     println!(
         "bench: armed; cardiac profile {} beats/min, duty {}, amplitude {}, outer loop {} for {} s",
         a.hr,

@@ -1,0 +1,48 @@
+//! The whole stack for the tests that run it (the kill test in `runtime_recording.rs`, the
+//! fault-injection suite): started, armed and stimulating.
+
+use std::path::Path;
+use std::time::Duration;
+
+use fes_tests::stack::workspace_root;
+use supervisor::bench::{Stack, StackOptions, process_logs};
+use supervisor::profile::{CardiacSpec, ProfileSpec};
+
+/// Starts the four processes in `dir` from `bins` on `iface` with the default controller
+/// (`uml`: the guest's generous timeouts), waits until the supervisor has heard from every
+/// process, arms, and starts a 120 beats/min cardiac profile (duty 0.4, amplitude 0.3).
+/// Panics naming `what`, with the processes' logs.
+pub fn start_armed(
+    what: &str,
+    dir: &Path,
+    bins: &Path,
+    iface: String,
+    uml: bool,
+    prefix: String,
+) -> Stack {
+    let stack = Stack::start(StackOptions {
+        dir: dir.to_path_buf(),
+        bin_dir: bins.to_path_buf(),
+        controller: workspace_root().join("models/fast.lcn.json"),
+        iface,
+        uml,
+        fatigue: false,
+        outer_loop: true,
+        outer_gain: None,
+        prefix,
+    })
+    .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
+    if let Err(e) = stack.wait_healthy(Duration::from_secs(if uml { 90 } else { 20 })) {
+        panic!("{what}: {e}\n{}", process_logs(dir));
+    }
+    stack
+        .arm_with(ProfileSpec::Cardiac(CardiacSpec {
+            bpm: 120.0,
+            duty: 0.4,
+            amplitude: 0.3,
+            edge_rate_per_s: None,
+            outer_loop: None,
+        }))
+        .unwrap_or_else(|e| panic!("{what}: arm and cardiac profile: {e}"));
+    stack
+}
