@@ -215,6 +215,43 @@ fn no_windup_during_a_pause_with_a_positive_rest_force() {
     );
 }
 
+/// The rest gate: at a zero reference no pulse fires although the LCN still asks for
+/// stimulation (its integral term outlives the contraction), the shaper's energy is
+/// cleared; a positive reference fires again. Checked on cardiac-like beats (320 ms at 0.3
+/// to 0.4, 480 ms at zero); the test also checks that the LCN did ask for stimulation at
+/// rest, so that the gate had something to hold back.
+#[test]
+fn no_pulse_while_the_reference_is_zero() {
+    let c = controller(fast_muscle(6), &table_6_1_specs(6));
+    let mut pg = c.pattern_generator().unwrap();
+    let mut asked_at_rest = 0;
+    let mut pulses_on = 0;
+    for beat in 0..6 {
+        let amplitude = 0.3 + 0.02 * beat as f64;
+        for k in 0..800 {
+            let r = if k < 320 { amplitude } else { 0.0 };
+            let out = pg.tick(&TickInput {
+                reference: r,
+                measured_force: None,
+            });
+            if r == 0.0 {
+                assert!(!out.pulse, "beat {beat}: pulse at rest, {k} ms");
+                assert_eq!(out.energy, 0.0, "beat {beat}: energy banked at rest");
+                if out.u_cont > 0.0 {
+                    asked_at_rest += 1;
+                }
+            } else if out.pulse {
+                pulses_on += 1;
+            }
+        }
+    }
+    assert!(pulses_on >= 6, "{pulses_on} pulses in the contractions");
+    assert!(
+        asked_at_rest > 0,
+        "the LCN never asked for stimulation at rest: the gate is untested"
+    );
+}
+
 #[test]
 fn output_clamp_rule_biases_the_pulsed_loop() {
     // The textbook rule (freeze whenever clamped and the error pushes down) sees only the
@@ -241,16 +278,17 @@ fn output_clamp_rule_biases_the_pulsed_loop() {
 fn settling_table_of_the_docs() {
     const DOCUMENTED: [(f64, f64, f64); 7] = [
         // (r, integral_sign, output_clamp)
-        (0.05, 0.0979, 0.1528),
-        (0.1, 0.1291, 0.2198),
-        (0.15, 0.1618, 0.2792),
-        (0.2, 0.2038, 0.3367),
-        (0.3, 0.2967, 0.4355),
-        (0.5, 0.5009, 0.6133),
-        (0.7, 0.7007, 0.8020),
+        (0.05, 0.0977, 0.1549),
+        (0.1, 0.1287, 0.2188),
+        (0.15, 0.1584, 0.2793),
+        (0.2, 0.2039, 0.3306),
+        (0.3, 0.2962, 0.4316),
+        (0.5, 0.501, 0.6075),
+        (0.7, 0.7003, 0.8002),
     ];
     println!("| r | mean force, integral_sign | pulses/s | mean force, output_clamp |");
     println!("|---|---|---|---|");
+    let mut stale = Vec::new();
     for (r, want_sign, want_clamp) in DOCUMENTED {
         let mut means = [0.0; 2];
         let mut rate = 0.0;
@@ -271,7 +309,9 @@ fn settling_table_of_the_docs() {
             }
         }
         println!("| {r} | {:.4} | {rate} | {:.4} |", means[0], means[1]);
-        assert!((means[0] - want_sign).abs() < 2e-3, "r {r}: {}", means[0]);
-        assert!((means[1] - want_clamp).abs() < 2e-3, "r {r}: {}", means[1]);
+        if (means[0] - want_sign).abs() >= 2e-3 || (means[1] - want_clamp).abs() >= 2e-3 {
+            stale.push(r);
+        }
     }
+    assert!(stale.is_empty(), "documented rows stale for r = {stale:?}");
 }

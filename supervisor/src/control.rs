@@ -312,12 +312,15 @@ fn handle(
         writer.flush()
     };
     let peer = peer_of(&stream)?;
+    // The request is read (bounded) before a refusal too: refusing and closing first raced
+    // the client's write, which then failed with EPIPE and never showed why it was refused.
+    let mut reader = BufReader::new(stream.take(MAX_LINE as u64 + 2));
+    let mut line = Vec::new();
+    let read = reader.read_until(b'\n', &mut line);
     if let Err(e) = policy.check(&peer) {
         return send(Response::error(0, e));
     }
-    let mut reader = BufReader::new(stream.take(MAX_LINE as u64 + 2));
-    let mut line = Vec::new();
-    reader.read_until(b'\n', &mut line)?;
+    read?;
     if line.last() == Some(&b'\n') {
         line.pop();
     } else if line.len() > MAX_LINE {

@@ -45,6 +45,43 @@ pub struct SimSettings {
     pub seconds: f64,
 }
 
+impl SimSettings {
+    /// The bench's chain (`supervisor bench --in-process`): sim-muscle's fast preset
+    /// (optionally fatiguing, Ding 2003) measured by the bench's sensor
+    /// (`sim-muscle stimulator --measured --offset-n 0`: default noise, seed 1), normalised
+    /// by the controller's model, beats measured with the model's delay, default limits.
+    pub fn bench(
+        controller: &Controller,
+        fatigue: bool,
+        profile: ProfileSpec,
+        outer_loop: OuterLoopSettings,
+        seconds: f64,
+    ) -> Result<Self, SimError> {
+        let mut muscle = MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
+        if fatigue {
+            muscle.fatigue = Some(sim_muscle::ding::FatigueParams::for_muscle(&muscle.ding));
+        }
+        let fmax = sim_muscle::muscle::max_force_n(&muscle.ding)?;
+        Ok(Self {
+            muscle,
+            sensor: Some(SensorConfig {
+                offset_n: 0.0,
+                ..SensorConfig::defaults_for(fmax, 1)
+            }),
+            scale_n: controller.lmn.force_scale_n,
+            offset_n: 0.0,
+            profile,
+            outer_loop,
+            contraction: ContractionSettings {
+                delay_ms: controller.lmn.delay as f64,
+                ..Default::default()
+            },
+            limits: ReferenceLimits::default(),
+            seconds,
+        })
+    }
+}
+
 /// A simulation failure.
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {

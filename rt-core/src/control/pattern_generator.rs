@@ -12,7 +12,8 @@
 //! 1. `r` = reference clamped to `[0, 1]` (non-finite -> 0);
 //! 2. activation `rho(phi_k)` of the core's scheduling value (model library);
 //! 3. `u_cont = max(0, -K_I(phi) x_I - K_x(phi)' z[k])` (LCN, eq. C.26);
-//! 4. pulse = shaper(`u_cont`) (eq. 6.8);
+//! 4. pulse = shaper(`u_cont`) (eq. 6.8); at `r = 0` the shaper rests instead (no pulse,
+//!    its energy cleared: no stimulation while the muscle is to be at rest);
 //! 5. core step with `u = pulse` (model library): predicted force `y[k+d]`, model force
 //!    `y[k]`;
 //! 6. `x_I += Ts (y[k+d] - r)` with conditional integration (eq. C.24, LCN).
@@ -289,7 +290,7 @@ impl PatternGenerator {
                 let phi = self.core.phi();
                 let z = self.core.state().ss_state();
                 let action = self.lcn.control(&act, z);
-                let (pulse, u) = apply(&mut self.shaper, action.u_cont, shaped);
+                let (pulse, u) = apply(&mut self.shaper, action.u_cont, r, shaped);
                 let step = self.core.step_with_activation(&act, u);
                 let integrated = self.lcn.integrate(&action, step.y_ahead - r);
                 TickOutput {
@@ -314,7 +315,7 @@ impl PatternGenerator {
                 let phi = core.phi;
                 let z = core.ss_state();
                 let action = self.lcn.control(&act, z);
-                let (pulse, u) = apply(&mut self.shaper, action.u_cont, shaped);
+                let (pulse, u) = apply(&mut self.shaper, action.u_cont, r, shaped);
                 let y_ahead = net.step_with_activation(&mut core, &act, u);
                 let y_pred_now = m.predictions.push(y_ahead);
                 m.estimator.push_pulse(u);
@@ -346,13 +347,18 @@ impl PatternGenerator {
     }
 }
 
-/// Shaper decision, or the bypass: returns (pulse, input applied to the model).
+/// Shaper decision, or the bypass: returns (pulse, input applied to the model). At a
+/// zero reference `r` the shaper rests: no pulse, its energy cleared
+/// ([`PulseShaper::rest`]); the bypass (analysis of the continuous loop) is not gated.
 #[inline(always)]
-fn apply(shaper: &mut PulseShaper, u_cont: f64, shaped: bool) -> (bool, f64) {
-    if shaped {
-        let p = shaper.step(u_cont);
-        (p, if p { 1.0 } else { 0.0 })
-    } else {
-        (false, u_cont)
+fn apply(shaper: &mut PulseShaper, u_cont: f64, r: f64, shaped: bool) -> (bool, f64) {
+    if !shaped {
+        return (false, u_cont);
     }
+    if r == 0.0 {
+        shaper.rest();
+        return (false, 0.0);
+    }
+    let p = shaper.step(u_cont);
+    (p, if p { 1.0 } else { 0.0 })
 }

@@ -5,23 +5,35 @@
 //!
 //! 1. `u = u_cont[k]` if it is finite and non-negative, else `u = 0` (counted in
 //!    [`ShaperStats::rejected_inputs`]).
-//! 2. `E += u` — the energy since the last pulse, eq. (6.8), with the remainder of earlier
-//!    pulses carried over (see below).
+//! 2. `E += u` — the energy since the last pulse, eq. (6.8).
 //! 3. A pulse fires when `E >= eta` and at least `min_gap` empty samples have passed since
 //!    the last pulse (thesis: `k > lp + 1`, i.e. `min_gap = 1`, a pulse is always followed
-//!    by a zero). Firing subtracts `eta` from `E`.
-//! 4. `E` is capped at `e_max`; the excess is counted in [`ShaperStats::discarded`].
+//!    by a zero). Firing **restarts the sum at zero** (thesis 6.5.2: "the sum ... since the
+//!    last pulse"); the remainder `E - eta` is counted in [`ShaperStats::dropped`].
+//! 4. `E` is capped at `e_max` while the gap holds a pulse back; the excess is counted in
+//!    [`ShaperStats::discarded`].
 //!
-//! Carrying the remainder (instead of restarting the sum at zero) makes eq. (6.7) hold with
-//! equality up to the present energy: at every sample
-//! `sum u = pulses * eta + E + discarded` exactly (up to rounding), and with
-//! `eta = 1` the pulse count never differs from the integral of `u_cont` by more than the
-//! current `E`.
+//! With the counters the energy balance of eq. (6.7) is exact at every sample:
+//! `sum u = pulses * eta + E + dropped + discarded` (up to rounding).
 //!
-//! **Safety property: no catch-up burst.** While the gap holds back a pulse, undelivered
-//! energy is banked only up to `e_max` (default `2 eta`). After any period of saturation
-//! (or a stall upstream that made `u_cont` huge) at most `floor(e_max / eta)` pulses
-//! follow once the input falls to zero, each still separated by the gap.
+//! Why restart and not carry the remainder over (this module carried it until 2026-11-22):
+//! carrying keeps `sum u = pulses * eta + E` but, when `u_cont` rises steeply before a
+//! pulse (it does, once per inter-pulse interval, at the LCN's plateau), `E` overshoots
+//! `eta` by most of one sample's input and the carried remainder fires a second pulse
+//! `min_gap + 1` samples later: a spurious doublet in the middle of a plateau, which the
+//! fatigued muscle answers with 20 % more force than the model predicts (docs/bench.md,
+//! "Fatigue and the outer loop"). Restarting gives doublets only where `u_cont >= eta`
+//! per sample, i.e. at a large error (thesis Phase a, 6.5.4).
+//!
+//! **Rest:** [`PulseShaper::rest`] holds the shaper at a zero reference: no pulse, `E`
+//! cleared (counted in `dropped`). The pattern generator calls it whenever the reference
+//! is zero, so no pulse is ever delivered while the muscle is to be at rest (the LCN's
+//! integrator can still drive `u_cont > 0` for tens of ms after the reference fell) and
+//! every contraction starts from the same shaper state.
+//!
+//! **Safety property: no catch-up burst.** After any period of saturation (or a stall
+//! upstream that made `u_cont` huge) at most one pulse follows once the input falls to
+//! zero: the banked energy is capped at `e_max` and a pulse restarts it at zero.
 
 use serde::{Deserialize, Serialize};
 
@@ -34,7 +46,8 @@ pub struct ShaperConfig {
     /// Least number of empty samples between two pulses (thesis: 1, so the minimum IPI is
     /// 2 samples). Must be at least 1. Default 1.
     pub min_gap: u32,
-    /// Cap on the banked energy `E`; must be at least `eta`. Default `2 eta`.
+    /// Cap on the energy `E` banked while the gap holds a pulse back; must be at least
+    /// `eta`. Default `2 eta`.
     pub e_max: f64,
 }
 
@@ -93,6 +106,9 @@ pub struct ShaperStats {
     pub pulses: u64,
     /// Energy dropped by the `e_max` cap (would otherwise have become a catch-up burst).
     pub discarded: f64,
+    /// Energy dropped when a pulse restarted the sum (`E - eta` at each pulse) and when
+    /// [`PulseShaper::rest`] cleared it.
+    pub dropped: f64,
     /// Inputs that were negative or not finite and were treated as 0.
     pub rejected_inputs: u64,
 }
@@ -101,7 +117,7 @@ pub struct ShaperStats {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PulseShaper {
     config: ShaperConfig,
-    /// Energy since the last pulse, `E` (eq. 6.8), including the carried remainder.
+    /// Energy since the last pulse, `E` (eq. 6.8).
     energy: f64,
     /// Empty samples since the last pulse (saturating; `u32::MAX` before the first pulse).
     empty_since_pulse: u32,
@@ -142,6 +158,14 @@ impl PulseShaper {
         self.stats = ShaperStats::default();
     }
 
+    /// One sample at a zero reference (rest): no pulse, `E` cleared into
+    /// [`ShaperStats::dropped`]; the gap keeps counting.
+    pub fn rest(&mut self) {
+        self.stats.dropped += self.energy;
+        self.energy = 0.0;
+        self.empty_since_pulse = self.empty_since_pulse.saturating_add(1);
+    }
+
     /// One sample: accumulate `u_cont` and decide whether to fire a pulse now.
     pub fn step(&mut self, u_cont: f64) -> bool {
         let u = if u_cont.is_finite() && u_cont >= 0.0 {
@@ -153,7 +177,8 @@ impl PulseShaper {
         self.energy += u;
         let pulse = self.energy >= self.config.eta && self.empty_since_pulse >= self.config.min_gap;
         if pulse {
-            self.energy -= self.config.eta;
+            self.stats.dropped += self.energy - self.config.eta;
+            self.energy = 0.0;
             self.empty_since_pulse = 0;
             self.stats.pulses += 1;
         } else {
@@ -180,17 +205,36 @@ mod tests {
     }
 
     #[test]
-    fn gap_blocks_and_cap_discards() {
+    fn firing_restarts_the_sum_the_gap_blocks_and_the_cap_discards() {
         let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
-        assert!(s.step(10.0)); // E = 10 -> fire -> 9 -> cap 2, discard 7
-        assert_eq!(s.energy(), 2.0);
-        assert_eq!(s.stats().discarded, 7.0);
-        assert!(!s.step(0.0)); // gap
-        assert!(s.step(0.0)); // E = 2 -> 1
-        assert!(!s.step(0.0));
-        assert!(s.step(0.0)); // E = 1 -> 0
-        assert!(!s.step(0.0));
-        assert!(!s.step(0.0)); // nothing left: no burst beyond e_max / eta = 2 pulses
+        assert!(s.step(10.0)); // E = 10 -> fire -> restart at 0, 9 dropped
+        assert_eq!(s.energy(), 0.0);
+        assert_eq!(s.stats().dropped, 9.0);
+        assert!(!s.step(10.0)); // gap: E = 10 -> cap 2, 8 discarded
+        assert_eq!((s.energy(), s.stats().discarded), (2.0, 8.0));
+        assert!(s.step(0.0)); // E = 2 -> fire -> 0, 1 more dropped
+        assert_eq!(s.stats().dropped, 10.0);
+        assert!((0..10).all(|_| !s.step(0.0))); // nothing left: no burst
+    }
+
+    #[test]
+    fn constant_input_fires_every_ceil_eta_over_u_samples() {
+        // u = 0.3: E = 0.3, 0.6, 0.9, 1.2 -> fire, dropping 0.2 each time.
+        let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
+        let fired: Vec<usize> = (0..20).filter(|_| s.step(0.3)).collect();
+        assert_eq!(fired, [3, 7, 11, 15, 19]);
+        assert!((s.stats().dropped - 5.0 * 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn rest_clears_the_energy_and_never_fires() {
+        let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
+        assert!(!s.step(0.9));
+        s.rest();
+        assert_eq!(s.energy(), 0.0);
+        assert!((s.stats().dropped - 0.9).abs() < 1e-15);
+        assert!(!s.step(0.9)); // starts again from zero
+        assert!(s.step(0.2));
     }
 
     #[test]

@@ -334,45 +334,24 @@ fn baseline(amplitude: f64, scale_n: f64, delay: usize) -> BaselineFn {
 
 /// `--in-process`: the chain in simulated time, with the bench's muscle and sensor.
 fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
-    use sim_muscle::muscle::{MuscleConfig, max_force_n};
-    use sim_muscle::sensor::SensorConfig;
     use supervisor::simulation::{SimSettings, simulate};
 
     let controller = rt_core::control::file::Controller::load(&a.controller)
         .with_context(|| format!("controller {}", a.controller.display()))?;
     let (scale_n, delay) = (controller.lmn.force_scale_n, controller.lmn.delay);
-    let mut muscle = MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
-    if a.fatigue {
-        muscle.fatigue = Some(sim_muscle::ding::FatigueParams::for_muscle(&muscle.ding));
-    }
-    // The bench's sensor: `sim-muscle stimulator --measured --offset-n 0` (default noise).
-    let fmax = max_force_n(&muscle.ding)?;
-    let sensor = SensorConfig {
-        offset_n: 0.0,
-        ..SensorConfig::defaults_for(fmax, 1)
-    };
     println!(
         "bench: in-process simulation (simulated time; no CAN, no processes, no latencies): fast muscle{}, {}",
         if a.fatigue { " with fatigue" } else { "" },
         a.controller.display()
     );
-    let run = simulate(
+    let settings = SimSettings::bench(
         &controller,
-        &SimSettings {
-            muscle,
-            sensor: Some(sensor),
-            scale_n,
-            offset_n: 0.0,
-            profile: ProfileSpec::Cardiac(cardiac(a)),
-            outer_loop: outer_settings(a),
-            contraction: supervisor::contraction::ContractionSettings {
-                delay_ms: delay as f64,
-                ..Default::default()
-            },
-            limits: supervisor::limits::ReferenceLimits::default(),
-            seconds: a.seconds,
-        },
+        a.fatigue,
+        ProfileSpec::Cardiac(cardiac(a)),
+        outer_settings(a),
+        a.seconds,
     )?;
+    let run = simulate(&controller, &settings)?;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let beats_csv = out.join("beats.csv");
     let mut text =
