@@ -444,7 +444,8 @@ fn foreign_frames_and_garbage_datagrams_are_ignored() {
                 }
                 1 => {
                     let f = RawFrame {
-                        can_id: fes_can::hostbus::EFF_FLAG | rng.random_range(0..0x2000_0000u32),
+                        can_id: fes_can::hostbus::EFF_FLAG
+                            | rng.random_range(0..=libc::CAN_EFF_MASK),
                         len: 8,
                         data: r,
                     };

@@ -75,10 +75,11 @@ impl Tap {
         socket.set_read_timeout(READ_TIMEOUT)?;
         Self::record("can-tap", move || match socket.read_frame() {
             Ok(frame) => {
+                use fes_can::hostbus::{EFF_FLAG, RTR_FLAG};
                 let id = frame.raw_id()
-                    | if frame.is_extended() { 0x8000_0000 } else { 0 }
+                    | if frame.is_extended() { EFF_FLAG } else { 0 }
                     | if matches!(frame, CanFrame::Remote(_)) {
-                        0x4000_0000
+                        RTR_FLAG
                     } else {
                         0
                     };
