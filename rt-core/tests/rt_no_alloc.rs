@@ -107,3 +107,75 @@ fn so_does_the_loop_running_a_ten_unit_pattern_generator() {
     assert_eq!(source.units(), 10);
     run_counting(source, "controller");
 }
+
+/// Peers that come and go while the loop runs (a driver's listener, a probe's subscriber, a
+/// supervisor's reference publisher; 400 cycles at random moments of the tick) are connected
+/// by the loop's explicit connection updates, counted apart: the hot path's heap count stays
+/// 0. (A listener appearing between the tick's first update and its notify used to be
+/// connected inside `notify`, an allocation on the hot path once in about 30 stack runs.)
+#[test]
+fn peers_connecting_while_the_loop_runs_are_counted_apart_from_the_hot_path() {
+    let prefix = format!("noalloclate{}", std::process::id());
+    let mut config = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 3 });
+    config.ipc.prefix = prefix.clone();
+    config.rt = RtConfig {
+        priority: 10,
+        core: None,
+        on_missing_rights: MissingRightsPolicy::BestEffort,
+        lock_memory: false,
+        prefault_stack_bytes: 64 * 1024,
+        cpu_dma_latency_us: None,
+    };
+    let telemetry = TelemetryChannel::new(1 << 16);
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        let rt = s.spawn(|| {
+            let node = create_node("noalloc-late-loop").unwrap();
+            run_pattern_loop(
+                &node,
+                &config,
+                TestPattern::new(3).unwrap(),
+                &telemetry,
+                &stop,
+                |_| {},
+            )
+        });
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while telemetry.counters.snapshot().ticks < 50 {
+            assert!(Instant::now() < deadline, "the loop did not run");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let node = create_node("noalloc-late-peers").unwrap();
+        let events = open_stim_tick_event(&node, &prefix).unwrap();
+        let ticks = open_pubsub::<StimTick>(&node, &prefix).unwrap();
+        let references = open_pubsub::<Reference>(&node, &prefix).unwrap();
+        for cycle in 0..400u64 {
+            let listener = events.listener_builder().create().unwrap();
+            let subscriber = ticks.subscriber_builder().create().unwrap();
+            let publisher = references.publisher_builder().create().unwrap();
+            publisher
+                .send_copy(Reference::new(cycle + 1, monotonic_ns(), 0.5))
+                .unwrap();
+            // A moment that is not a multiple of the tick.
+            std::thread::sleep(Duration::from_micros(3_000 + 137 * (cycle % 7)));
+            let _ = listener.try_wait(|_| {});
+            while let Ok(Some(_)) = subscriber.receive() {}
+            while telemetry.pop().is_some() {}
+            drop((listener, subscriber, publisher));
+            std::thread::sleep(Duration::from_micros(1_000 + 211 * (cycle % 5)));
+        }
+        stop.store(true, Ordering::Relaxed);
+        assert!(rt.join().unwrap().unwrap().allocations_counted);
+    });
+    let counters = telemetry.counters.snapshot();
+    assert_eq!(
+        counters.hot_path_allocations,
+        0,
+        "heap allocation on the hot path: {:?}",
+        rt_core::rt::alloc::take_first_heap_allocation().map(|t| t.to_string())
+    );
+    assert!(
+        counters.connection_allocations > 0,
+        "no connection was made while the loop ran"
+    );
+}

@@ -55,6 +55,7 @@
 //! report_period_ms = 1000
 //! status_period_ms = 100
 //! queue_capacity = 8192
+//! trace_allocations = true       # log where the forward loop's first heap allocation came from
 //!
 //! [ipc]
 //! prefix = "fes"
@@ -299,6 +300,10 @@ pub struct TelemetryConfig {
     pub status_period_ms: u64,
     /// Events the queue from the forward thread holds (256..=1048576).
     pub queue_capacity: usize,
+    /// Keep the backtrace of the forward loop's first heap allocation, if one happens, and
+    /// log it at exit (`rt_core::rt::alloc::trace_first_heap_allocation`; costs nothing
+    /// until then). Default true.
+    pub trace_allocations: bool,
 }
 
 impl Default for TelemetryConfig {
@@ -308,6 +313,7 @@ impl Default for TelemetryConfig {
             report_period_ms: 1000,
             status_period_ms: 100,
             queue_capacity: 8192,
+            trace_allocations: true,
         }
     }
 }

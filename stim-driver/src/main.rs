@@ -437,6 +437,9 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
                     .map_or("not counted".to_owned(), |n| n.to_string()),
             );
         }
+        if let Some(trace) = rt_core::rt::alloc::take_first_heap_allocation() {
+            warn!("{trace}");
+        }
         if !outcome.stop_sent {
             warn!("the final NMT stop could not be written (the stimulator's watchdog stops it)");
         }

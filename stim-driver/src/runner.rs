@@ -168,6 +168,7 @@ pub fn run_forward<T: CanTx>(
     let allocations_counted = alloc::counting_allocator_installed();
 
     // ---- hot path from here on: no heap allocation, log or blocking call ----
+    alloc::trace_first_heap_allocation(config.telemetry.trace_allocations);
     alloc::track_current_thread(true);
     let baseline = alloc::current_thread_allocations();
     path.start(monotonic_ns(), &mut sink);

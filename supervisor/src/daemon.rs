@@ -429,7 +429,7 @@ fn serve(
 ) -> Response {
     let id = p.request.id;
     if matches!(p.request.command, Command::Arm) {
-        health.clear_recovered(now);
+        health.clear_recovered(now, &proc_state);
     }
     let result = core.command(&p.request.command, now, health.ready());
     let status = status(core, health, run, now, start_ns);

@@ -237,6 +237,9 @@ struct Watch {
     finished: bool,
     /// `last_ns` when the fault was raised: a fault clears only after a newer message.
     last_at_fault: Option<u64>,
+    /// The pid of the process this watch saw die: that process never clears its fault
+    /// (a frame it sent before its death may still arrive after it), only a new one.
+    died_pid: Option<u32>,
 }
 
 impl Watch {
@@ -249,6 +252,7 @@ impl Watch {
             reason: String::new(),
             finished: false,
             last_at_fault: None,
+            died_pid: None,
         }
     }
 }
@@ -457,7 +461,8 @@ impl HealthMonitor {
                     Process::StimDriver,
                     Severity::Fault,
                     format!(
-                        "stim-driver: watchdog tripped ({} in all)",
+                        "stim-driver: watchdog tripped: {} ({} in all)",
+                        emcy_name(s.fault_code),
                         s.watchdog_trips
                     ),
                 );
@@ -590,8 +595,24 @@ impl HealthMonitor {
                     }
                 }
                 Some(known) => match nodes.iter().find(|n| n.id == known.id) {
-                    Some(n) => w.node = Some(n.clone()),
-                    None => w.node_gone = true,
+                    Some(n) if !n.dead => w.node = Some(n.clone()),
+                    found => {
+                        // Our process is dead or gone: a live node that now publishes
+                        // our service is its restart (systemd's); adopt it, so that a
+                        // re-arm can clear the fault once it is heard from.
+                        let successor = nodes
+                            .iter()
+                            .filter(|n| !n.dead && n.id != known.id && ids.contains(&n.id))
+                            .max_by_key(|n| n.pid);
+                        match (successor, found) {
+                            (Some(n), _) => {
+                                w.node = Some(n.clone());
+                                w.node_gone = false;
+                            }
+                            (None, Some(n)) => w.node = Some(n.clone()),
+                            (None, None) => w.node_gone = true,
+                        }
+                    }
                 },
             }
         }
@@ -640,6 +661,9 @@ impl HealthMonitor {
                     _ => None,
                 };
                 if let Some(reason) = reason {
+                    if reason.starts_with("died") {
+                        self.watch[Process::StimDriver.index()].died_pid = drv_pid;
+                    }
                     let message = format!(
                         "stim-driver{pid_txt} {reason}; no force sample forwarded for {:.0} ms",
                         ms(age)
@@ -693,6 +717,9 @@ impl HealthMonitor {
                     ms(limit)
                 ),
             };
+            if dead_now {
+                self.watch[p.index()].died_pid = pid;
+            }
             self.raise(p, Severity::Fault, message);
         }
     }
@@ -720,16 +747,24 @@ impl HealthMonitor {
     }
 
     /// Clears the fault latches of processes that are live again: heard from after the
-    /// fault was raised, recently (within their timeout at `now_ns`), and not seen dead;
-    /// called on an operator re-arm. (A message from before the fault, however recent,
-    /// says nothing about a process that died after sending it.)
-    pub fn clear_recovered(&mut self, now_ns: u64) {
+    /// fault was raised, recently (within their timeout at `now_ns`), not seen dead, not
+    /// found gone by `probe` now, and not the very process that was seen to die; called on
+    /// an operator re-arm. (A message from before the fault, however recent, says nothing
+    /// about a process that died after sending it; nor does a frame it sent before its
+    /// death that the driver forwarded after it.)
+    pub fn clear_recovered(&mut self, now_ns: u64, probe: &dyn Fn(u32) -> ProcState) {
         for p in Process::ALL {
             let limit = self.settings.timeout_ns(p);
+            let pid = match p {
+                Process::SimMuscle => self.settings.stimulator_pid,
+                _ => self.watch[p.index()].node.as_ref().map(|n| n.pid),
+            };
             let w = &mut self.watch[p.index()];
             let heard_since = w.last_ns > w.last_at_fault;
             let fresh = w.last_ns.is_some_and(|t| now_ns.saturating_sub(t) <= limit);
-            let dead = w.node.as_ref().is_some_and(|n| n.dead);
+            let dead = w.node.as_ref().is_some_and(|n| n.dead)
+                || (pid.is_some() && pid == w.died_pid)
+                || pid.is_some_and(|pid| matches!(probe(pid), ProcState::Gone | ProcState::Zombie));
             if w.condition == Condition::Faulted && heard_since && fresh && !dead && !w.finished {
                 w.condition = Condition::Ok;
                 w.reason.clear();
@@ -1011,10 +1046,10 @@ mod tests {
         live(&mut h, 10 * MS);
         h.check(200 * MS, &running);
         assert!(h.ready().is_err());
-        h.clear_recovered(200 * MS);
+        h.clear_recovered(200 * MS, &running);
         assert!(h.ready().is_err(), "still silent");
         live(&mut h, 300 * MS);
-        h.clear_recovered(300 * MS);
+        h.clear_recovered(300 * MS, &running);
         assert!(h.ready().is_ok());
     }
 
@@ -1029,27 +1064,70 @@ mod tests {
         let driver_gone = only(200, ProcState::Gone);
         h.check(11 * MS, &driver_gone);
         assert!(h.ready().unwrap_err().contains("stim-driver"));
-        h.clear_recovered(12 * MS);
+        h.clear_recovered(12 * MS, &running);
         assert!(
             h.ready().is_err(),
             "cleared by a message from before the death"
         );
         // rt-core and the stimulator keep talking; the driver stays faulted.
         h.on_stim_tick(&tick(20, 20 * MS), 20 * MS);
-        h.clear_recovered(21 * MS);
+        h.clear_recovered(21 * MS, &running);
         assert!(h.ready().unwrap_err().contains("stim-driver"));
         // A node seen dead is not cleared even by a late message.
         let mut dead = nodes();
         dead[1].dead = true;
         h.on_nodes(&dead, &owners());
         h.on_driver_status(&status(30), 30 * MS);
-        h.clear_recovered(31 * MS);
+        h.clear_recovered(31 * MS, &running);
         assert!(h.ready().is_err());
-        // A restarted driver (a new, live node) is heard again: re-arm clears it.
+        // The same process (pid 200) is never cleared, even if it seemed to come back.
         h.on_nodes(&nodes(), &owners());
+        h.on_driver_status(&status(35), 35 * MS);
+        h.clear_recovered(36 * MS, &running);
+        assert!(h.ready().is_err(), "the dead pid 200 cleared");
+        // A restarted driver (a new, live node publishing our service) is adopted and,
+        // once heard from, cleared by a re-arm.
+        let mut restarted = dead.clone();
+        restarted.push(NodeObservation {
+            name: "stim-driver".into(),
+            pid: 201,
+            id: 3,
+            dead: false,
+        });
+        let mut owners = owners();
+        owners.driver_status.push(3);
+        h.on_nodes(&restarted, &owners);
         h.on_driver_status(&status(40), 40 * MS);
-        h.clear_recovered(41 * MS);
+        h.clear_recovered(41 * MS, &running);
         assert!(h.ready().is_ok(), "{:?}", h.ready());
+        assert_eq!(h.statuses(41 * MS)[1].pid, Some(201));
+    }
+
+    /// The stimulator process killed just after a FORCE frame: the driver forwards that
+    /// frame after the supervisor saw the process gone. It is no sign of life: a re-arm
+    /// stays refused. (Found by the kill test on a loaded CI machine: "sim-muscle:
+    /// re-armed with a dead process".)
+    #[test]
+    fn a_frame_forwarded_after_the_stimulators_death_does_not_clear_it() {
+        let settings = HealthSettings {
+            stimulator_pid: Some(300),
+            ..HealthSettings::default()
+        };
+        let mut h = HealthMonitor::new(settings);
+        h.on_nodes(&nodes(), &owners());
+        live(&mut h, 10 * MS);
+        h.check(11 * MS, &only(300, ProcState::Zombie));
+        assert!(h.ready().unwrap_err().contains("sim-muscle"));
+        // The frame sent before the death, forwarded a millisecond later.
+        h.on_force_sample(&force(12), 12 * MS);
+        h.clear_recovered(13 * MS, &only(300, ProcState::Zombie));
+        assert!(h.ready().unwrap_err().contains("died"));
+        // Reaped (gone), and even a probe that misses it (pid reused): still refused.
+        h.on_force_sample(&force(14), 14 * MS);
+        h.clear_recovered(15 * MS, &only(300, ProcState::Gone));
+        assert!(h.ready().is_err());
+        h.clear_recovered(16 * MS, &running);
+        assert!(h.ready().is_err(), "the pid that died was cleared");
     }
 
     #[test]

@@ -14,10 +14,19 @@
 //! (`ChunkMutSharedState`), so a publish cannot be heap-free with the system allocator. With
 //! this allocator the real-time loop's only allocation per tick is that one pool block, and
 //! the heap count stays 0, which the tests assert.
+//!
+//! When a heap allocation does happen on a tracked thread, a count alone does not say where.
+//! With [`trace_first_heap_allocation`] on, the first one (process-wide) also captures a
+//! backtrace, taken once and kept until [`take_first_heap_allocation`]: a process logs it at
+//! exit. Capturing costs nothing until that allocation happens (the hot path has already
+//! broken its rule then); the capture itself is done with tracking paused, so its own
+//! allocations go untracked to the system heap.
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::backtrace::Backtrace;
 use std::cell::{Cell, UnsafeCell};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Size of one pool block, bytes.
 pub const POOL_BLOCK_BYTES: usize = 256;
@@ -99,6 +108,86 @@ thread_local! {
     static HEAP_ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
     static HEAP_BYTES: Cell<u64> = const { Cell::new(0) };
     static POOL_ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    // Set in a section whose allocations are expected and counted apart ([`untraced`]), and
+    // while `counting_allocator_installed` makes its deliberate probe allocation.
+    static UNTRACED: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Whether the first heap allocation of a tracked thread is traced.
+static TRACE_FIRST: AtomicBool = AtomicBool::new(false);
+/// Set once the first heap allocation has been traced (or is being traced).
+static TRACE_TAKEN: AtomicBool = AtomicBool::new(false);
+/// The trace, until taken.
+static FIRST_TRACE: Mutex<Option<HeapTrace>> = Mutex::new(None);
+
+/// Where the first heap allocation of a tracked thread happened.
+#[derive(Debug)]
+pub struct HeapTrace {
+    /// Bytes requested.
+    pub bytes: usize,
+    /// The allocating thread's name, if it has one.
+    pub thread: Option<String>,
+    /// The call stack at the allocation (resolved to symbols when displayed).
+    pub backtrace: Backtrace,
+}
+
+impl core::fmt::Display for HeapTrace {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "first heap allocation on a tracked thread: {} bytes on thread {}, at\n{}",
+            self.bytes,
+            self.thread.as_deref().unwrap_or("(unnamed)"),
+            self.backtrace
+        )
+    }
+}
+
+/// Turns the trace of the first heap allocation of a tracked thread on or off (process-wide).
+pub fn trace_first_heap_allocation(on: bool) {
+    TRACE_FIRST.store(on, Ordering::Relaxed);
+}
+
+/// The trace of the first heap allocation of a tracked thread, once (later calls: `None`).
+pub fn take_first_heap_allocation() -> Option<HeapTrace> {
+    FIRST_TRACE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .take()
+}
+
+/// Runs `f` with the current thread's allocations counted but never traced: for a section
+/// whose allocations are expected and counted apart (iceoryx2 connecting a late peer).
+pub fn untraced<R>(f: impl FnOnce() -> R) -> R {
+    let was = UNTRACED.with(|u| u.replace(true));
+    let r = f();
+    UNTRACED.with(|u| u.set(was));
+    r
+}
+
+/// Records where the current (tracked) thread allocates `bytes` from the heap, if tracing is
+/// on and nothing was traced before.
+#[cold]
+#[inline(never)]
+fn trace_heap_allocation(bytes: usize) {
+    if !TRACE_FIRST.load(Ordering::Relaxed)
+        || UNTRACED.try_with(Cell::get).unwrap_or(true)
+        || TRACE_TAKEN.swap(true, Ordering::AcqRel)
+    {
+        return;
+    }
+    // Untracked while capturing: the capture's own allocations go to the system heap and
+    // are not counted (nor traced again).
+    let _ = TRACKED.try_with(|t| t.set(false));
+    let trace = HeapTrace {
+        bytes,
+        thread: std::thread::current().name().map(str::to_owned),
+        backtrace: Backtrace::force_capture(),
+    };
+    *FIRST_TRACE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(trace);
+    let _ = TRACKED.try_with(|t| t.set(true));
 }
 
 /// True when the current thread is tracked (false while it is being torn down).
@@ -129,6 +218,7 @@ unsafe fn tracked_alloc(layout: Layout, zeroed: bool) -> *mut u8 {
     }
     bump(&HEAP_ALLOCATIONS, 1);
     bump(&HEAP_BYTES, layout.size() as u64);
+    trace_heap_allocation(layout.size());
     // SAFETY: forwarded to `System` under the caller's `GlobalAlloc` contract.
     unsafe {
         if zeroed {
@@ -186,6 +276,7 @@ unsafe impl GlobalAlloc for CountingAllocator {
         if tracked() {
             bump(&HEAP_ALLOCATIONS, 1);
             bump(&HEAP_BYTES, new_size as u64);
+            trace_heap_allocation(new_size);
         }
         // SAFETY: `ptr` came from `System` (it is not a pool block) with `layout`.
         unsafe { System.realloc(ptr, layout, new_size) }
@@ -237,10 +328,13 @@ pub fn pool_blocks_in_use() -> u32 {
 pub fn counting_allocator_installed() -> bool {
     let was_tracked = TRACKED.with(Cell::get);
     let before = current_thread_allocations();
-    track_current_thread(true);
-    let probe = std::hint::black_box(Box::new([0u8; POOL_BLOCK_BYTES + 1]));
+    let probe = untraced(|| {
+        track_current_thread(true);
+        let probe = std::hint::black_box(Box::new([0u8; POOL_BLOCK_BYTES + 1]));
+        track_current_thread(was_tracked);
+        probe
+    });
     drop(probe);
-    track_current_thread(was_tracked);
     let installed = current_thread_allocations().allocations > before.allocations;
     // The probe is not the caller's allocation: restore the counters.
     HEAP_ALLOCATIONS.with(|n| n.set(before.allocations));

@@ -34,6 +34,7 @@
 //! hlog = "rt-core.hlog"            # optional interval log
 //! report_period_ms = 1000          # TimingReport and hlog interval period
 //! queue_capacity = 8192            # tick records buffered for the telemetry thread
+//! trace_allocations = true         # log where the loop's first heap allocation came from
 //!
 //! [ipc]
 //! prefix = "fes"                   # iceoryx2 service-name prefix
@@ -168,7 +169,8 @@ impl Default for PulseConfig {
     }
 }
 
-/// Telemetry. Defaults: no hlog, a report every 1000 ms, 8192 queued records.
+/// Telemetry. Defaults: no hlog, a report every 1000 ms, 8192 queued records, allocations
+/// traced.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TelemetryConfig {
@@ -179,6 +181,10 @@ pub struct TelemetryConfig {
     pub report_period_ms: u64,
     /// Tick records the queue to the telemetry thread holds (16..=1048576).
     pub queue_capacity: usize,
+    /// Keep the backtrace of the loop's first heap allocation, if one happens, and log it
+    /// at exit (`rt_core::rt::alloc::trace_first_heap_allocation`; costs nothing until
+    /// then). Default true.
+    pub trace_allocations: bool,
 }
 
 impl Default for TelemetryConfig {
@@ -187,6 +193,7 @@ impl Default for TelemetryConfig {
             hlog: None,
             report_period_ms: 1000,
             queue_capacity: 8192,
+            trace_allocations: true,
         }
     }
 }

@@ -226,6 +226,9 @@ fn run(cli: &Cli) -> Result<(), Failure> {
                 us(report.publish.p999_ns),
                 us(report.publish.max_ns),
             );
+            if let Some(trace) = rt_core::rt::alloc::take_first_heap_allocation() {
+                warn!("{trace}");
+            }
             Ok(())
         };
         if telemetry_ready_rx.recv().is_err() {
