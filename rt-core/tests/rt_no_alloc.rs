@@ -22,11 +22,11 @@ static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 const TICKS: u64 = 400;
 
-/// Runs the real loop with `source` for [`TICKS`] ticks and checks the allocation counts.
-fn run_counting<S: TickSource + Send>(source: S, name: &str) {
-    let prefix = format!("noalloc{name}{}", std::process::id());
+/// The loop's configuration: a test pattern firing every 3 ticks, real time best effort
+/// at a low priority, memory not locked (the tests run in parallel).
+fn loop_config(prefix: &str) -> RtCoreConfig {
     let mut config = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 3 });
-    config.ipc.prefix = prefix.clone();
+    config.ipc.prefix = prefix.to_owned();
     config.rt = RtConfig {
         priority: 10,
         core: None,
@@ -35,6 +35,13 @@ fn run_counting<S: TickSource + Send>(source: S, name: &str) {
         prefault_stack_bytes: 64 * 1024,
         cpu_dma_latency_us: None,
     };
+    config
+}
+
+/// Runs the real loop with `source` for [`TICKS`] ticks and checks the allocation counts.
+fn run_counting<S: TickSource + Send>(source: S, name: &str) {
+    let prefix = format!("noalloc{name}{}", std::process::id());
+    let config = loop_config(&prefix);
 
     // Receiver side first, so that every connection exists before the loop starts.
     let node = create_node("noalloc-test").unwrap();
@@ -116,16 +123,7 @@ fn so_does_the_loop_running_a_ten_unit_pattern_generator() {
 #[test]
 fn peers_connecting_while_the_loop_runs_are_counted_apart_from_the_hot_path() {
     let prefix = format!("noalloclate{}", std::process::id());
-    let mut config = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 3 });
-    config.ipc.prefix = prefix.clone();
-    config.rt = RtConfig {
-        priority: 10,
-        core: None,
-        on_missing_rights: MissingRightsPolicy::BestEffort,
-        lock_memory: false,
-        prefault_stack_bytes: 64 * 1024,
-        cpu_dma_latency_us: None,
-    };
+    let config = loop_config(&prefix);
     let telemetry = TelemetryChannel::new(1 << 16);
     let stop = AtomicBool::new(false);
     std::thread::scope(|s| {
