@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use rt_core::rt::config_file::FileError;
 use rt_core::rt::process_config::{ConfigError, RtCoreConfig, SCHEMA, SourceConfig};
 use rt_core::rt::{MissingRightsPolicy, RtConfig};
 
@@ -84,38 +85,38 @@ fn errors_name_the_problem() {
     let err = |extra: &str| RtCoreConfig::parse(&format!("{base}{extra}")).unwrap_err();
     assert!(matches!(
         err("[reference]\nstale_ramp_per_s = nan\n"),
-        ConfigError::Range {
+        ConfigError::File(FileError::Range {
             field: "reference.stale_ramp_per_s",
             ..
-        }
+        })
     ));
     assert!(matches!(
         err("[telemetry]\nqueue_capacity = 4\n"),
-        ConfigError::Range {
+        ConfigError::File(FileError::Range {
             field: "telemetry.queue_capacity",
             ..
-        }
+        })
     ));
     assert!(matches!(
         err("[pulse]\nchannel = 16\n"),
-        ConfigError::Range {
+        ConfigError::File(FileError::Range {
             field: "pulse.channel",
             ..
-        }
+        })
     ));
     assert!(matches!(
         err("[pulse]\nwidth_us = 0\n"),
-        ConfigError::Range {
+        ConfigError::File(FileError::Range {
             field: "pulse.width_us",
             ..
-        }
+        })
     ));
     assert!(matches!(
         err("[feedback]\nmax_age_ms = 0\n"),
-        ConfigError::Range {
+        ConfigError::File(FileError::Range {
             field: "feedback.max_age_ms",
             ..
-        }
+        })
     ));
     assert!(matches!(
         err("[rt]\nprefault_stack_bytes = 99999999\n"),
@@ -123,7 +124,7 @@ fn errors_name_the_problem() {
     ));
     assert!(matches!(
         err("[rt]\npriority = 80\nnice = 3\n"),
-        ConfigError::Parse { .. }
+        ConfigError::File(FileError::Parse { .. })
     ));
     let wrong_kind =
         RtCoreConfig::parse("schema = \"fes-rt-core/1\"\n[source]\nkind = \"magic\"\n")

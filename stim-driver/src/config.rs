@@ -67,6 +67,7 @@ use fes_can::{Nodes, StimLimits};
 use rt_core::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
 use rt_core::rt::RtConfig;
 use rt_core::rt::config::RtConfigError;
+use rt_core::rt::config_file::{self, FileError};
 use serde::{Deserialize, Serialize};
 
 use crate::forward::ForwardSettings;
@@ -337,38 +338,9 @@ impl Default for IpcConfig {
 /// Invalid configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// Not valid TOML for this schema (unknown key, wrong type, missing table...).
-    #[error("{path}: {source}")]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// The cause (with line and column).
-        source: Box<toml::de::Error>,
-    },
-    /// Wrong `schema`.
-    #[error("schema is {found:?}, expected {SCHEMA:?}")]
-    Schema {
-        /// What the file says.
-        found: String,
-    },
-    /// A value is out of range.
-    #[error("{field} = {value} is out of range ({allowed})")]
-    Range {
-        /// Dotted key.
-        field: &'static str,
-        /// The value.
-        value: String,
-        /// What is allowed.
-        allowed: &'static str,
-    },
+    /// Unreadable, not TOML of this schema, wrong `schema`, or a value out of range.
+    #[error(transparent)]
+    File(#[from] FileError),
     /// Node ids.
     #[error("can.host_node / can.stim_node: {0}")]
     Nodes(#[from] fes_can::NodeError),
@@ -384,23 +356,6 @@ pub enum ConfigError {
     /// The prefix.
     #[error("ipc.prefix: {0}")]
     Prefix(#[from] ServiceError),
-}
-
-fn range<T: ToString>(
-    ok: bool,
-    field: &'static str,
-    value: T,
-    allowed: &'static str,
-) -> Result<(), ConfigError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigError::Range {
-            field,
-            value: value.to_string(),
-            allowed,
-        })
-    }
 }
 
 impl DriverConfig {
@@ -430,25 +385,16 @@ impl DriverConfig {
 
     /// Reads, parses and validates a file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = config_file::read(path)?;
         Self::parse(&text).map_err(|e| match e {
-            ConfigError::Parse { source, .. } => ConfigError::Parse {
-                path: path.to_path_buf(),
-                source,
-            },
+            ConfigError::File(f) => ConfigError::File(f.in_file(path)),
             other => other,
         })
     }
 
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> Result<Self, ConfigError> {
-        let config: Self = toml::from_str(text).map_err(|source| ConfigError::Parse {
-            path: PathBuf::new(),
-            source: Box::new(source),
-        })?;
+        let config: Self = config_file::parse(text)?;
         config.validate()?;
         Ok(config)
     }
@@ -461,7 +407,7 @@ impl DriverConfig {
     /// The CONFIG limits.
     pub fn stim_limits(&self) -> Result<StimLimits, ConfigError> {
         let s = &self.stimulator;
-        range(
+        config_file::range(
             s.max_amplitude_ua.is_multiple_of(AMPLITUDE_STEP_UA),
             "stimulator.max_amplitude_ua",
             s.max_amplitude_ua,
@@ -469,7 +415,7 @@ impl DriverConfig {
         )?;
         let max_amplitude_100ua =
             u16::try_from(s.max_amplitude_ua / AMPLITUDE_STEP_UA).map_err(|_| {
-                ConfigError::Range {
+                FileError::Range {
                     field: "stimulator.max_amplitude_ua",
                     value: s.max_amplitude_ua.to_string(),
                     allowed: "0..=150000",
@@ -492,10 +438,10 @@ impl DriverConfig {
         let i = &self.interlocks;
         let mut allowed_channels = 0u16;
         for &c in &i.channels {
-            range(c <= 15, "interlocks.channels", c, "0..=15")?;
+            config_file::range(c <= 15, "interlocks.channels", c, "0..=15")?;
             allowed_channels |= 1 << c;
         }
-        range(
+        config_file::range(
             (1..=1000).contains(&i.max_width_us),
             "interlocks.max_width_us",
             i.max_width_us,
@@ -503,7 +449,7 @@ impl DriverConfig {
         )?;
         // Above the stimulator's own limit the interlock guards nothing (a typo such as
         // 4000000000 uA was accepted before; found by the bad-input sweep).
-        range(
+        config_file::range(
             i.max_amplitude_ua <= self.stimulator.max_amplitude_ua,
             "interlocks.max_amplitude_ua",
             i.max_amplitude_ua,
@@ -519,7 +465,7 @@ impl DriverConfig {
             allowed_channels,
             max_pulse_delay_ns: u64::from(i.max_pulse_delay_us) * US,
         };
-        range(
+        config_file::range(
             i.max_pulse_delay_us >= 1,
             "interlocks.max_pulse_delay_us",
             i.max_pulse_delay_us,
@@ -531,20 +477,16 @@ impl DriverConfig {
 
     /// Checks every value.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.schema != SCHEMA {
-            return Err(ConfigError::Schema {
-                found: self.schema.clone(),
-            });
-        }
+        config_file::check_schema(&self.schema, SCHEMA)?;
         let c = &self.can;
         match fes_can::hostbus::bus_dir(&c.iface) {
-            Some(dir) => range(
+            Some(dir) => config_file::range(
                 fes_can::hostbus::validate_dir(dir).is_ok(),
                 "can.iface",
                 &c.iface,
                 "hostbus:<absolute directory of at most 91 bytes> (the host bus)",
             )?,
-            None => range(
+            None => config_file::range(
                 !c.iface.is_empty() && c.iface.len() < 16 && !c.iface.contains(['/', ' ']),
                 "can.iface",
                 &c.iface,
@@ -552,33 +494,33 @@ impl DriverConfig {
             )?,
         }
         self.nodes()?;
-        range(
+        config_file::range(
             (1..=1000).contains(&c.heartbeat_ms),
             "can.heartbeat_ms",
             c.heartbeat_ms,
             "1..=1000",
         )?;
-        range(
+        config_file::range(
             c.tx_retry_budget_us <= 1000,
             "can.tx_retry_budget_us",
             c.tx_retry_budget_us,
             "0..=1000",
         )?;
-        range(
+        config_file::range(
             c.tx_retry_budget_us == 0
                 || (10..=c.tx_retry_budget_us).contains(&c.tx_retry_interval_us),
             "can.tx_retry_interval_us",
             c.tx_retry_interval_us,
             "10..=tx_retry_budget_us",
         )?;
-        range(
+        config_file::range(
             (50..=60_000).contains(&c.bringup_retry_ms),
             "can.bringup_retry_ms",
             c.bringup_retry_ms,
             "50..=60000",
         )?;
         let limits = self.stim_limits()?;
-        range(
+        config_file::range(
             u32::from(limits.watchdog_ms) >= 2 * u32::from(c.heartbeat_ms),
             "stimulator.watchdog_ms",
             limits.watchdog_ms,
@@ -586,49 +528,49 @@ impl DriverConfig {
         )?;
         self.interlock_limits()?;
         let w = &self.watchdog;
-        range(
+        config_file::range(
             (100..=1_000_000).contains(&w.tick_period_us),
             "watchdog.tick_period_us",
             w.tick_period_us,
             "100..=1000000",
         )?;
-        range(
+        config_file::range(
             (1..=10_000).contains(&w.timeout_ticks),
             "watchdog.timeout_ticks",
             w.timeout_ticks,
             "1..=10000",
         )?;
-        range(
+        config_file::range(
             (1..=10_000).contains(&w.stale_after_ticks),
             "watchdog.stale_after_ticks",
             w.stale_after_ticks,
             "1..=10000",
         )?;
-        range(
+        config_file::range(
             (20..=10_000).contains(&w.stimulator_timeout_ms),
             "watchdog.stimulator_timeout_ms",
             w.stimulator_timeout_ms,
             "20..=10000",
         )?;
-        range(
+        config_file::range(
             (20..=10_000).contains(&w.arm_confirm_ms),
             "watchdog.arm_confirm_ms",
             w.arm_confirm_ms,
             "20..=10000",
         )?;
-        range(
+        config_file::range(
             (1..=10_000).contains(&w.command_max_age_ms),
             "watchdog.command_max_age_ms",
             w.command_max_age_ms,
             "1..=10000",
         )?;
-        range(
+        config_file::range(
             (1..=1000).contains(&w.liveness_check_ms),
             "watchdog.liveness_check_ms",
             w.liveness_check_ms,
             "1..=1000",
         )?;
-        range(
+        config_file::range(
             self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
             "force.max_n",
             self.force.max_n,
@@ -639,19 +581,19 @@ impl DriverConfig {
             b.validate()?;
         }
         let t = &self.telemetry;
-        range(
+        config_file::range(
             (10..=60_000).contains(&t.report_period_ms),
             "telemetry.report_period_ms",
             t.report_period_ms,
             "10..=60000",
         )?;
-        range(
+        config_file::range(
             (10..=10_000).contains(&t.status_period_ms),
             "telemetry.status_period_ms",
             t.status_period_ms,
             "10..=10000",
         )?;
-        range(
+        config_file::range(
             (256..=1 << 20).contains(&t.queue_capacity),
             "telemetry.queue_capacity",
             t.queue_capacity,

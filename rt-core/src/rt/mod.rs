@@ -12,7 +12,8 @@
 //! - [`source`], [`reference`](mod@reference), [`feedback`], [`generator`]: the pattern generator's tick
 //!   without I/O ([`PatternLoop`] around a [`TickSource`]).
 //! - [`process_config`], [`runner`], [`signals`]: the rt-core process (configuration file,
-//!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM).
+//!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM); [`config_file`]: the
+//!   reading, schema and range checks of the real-time processes' configuration files.
 //! - [`probe`]: file formats of the `rt-probe` measurement process.
 //! - [`notify`], [`logging`]: running under systemd: READY/WATCHDOG notification fed only
 //!   while the real-time loop makes progress, and logs to the journal.
@@ -20,6 +21,7 @@
 pub mod alloc;
 pub mod clock;
 pub mod config;
+pub mod config_file;
 pub mod error_text;
 pub mod feedback;
 pub mod generator;

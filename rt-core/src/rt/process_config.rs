@@ -48,6 +48,7 @@ use serde::{Deserialize, Serialize};
 
 use super::clock::{MAX_PERIOD, MIN_PERIOD};
 use super::config::{RtConfig, RtConfigError};
+use super::config_file::{self, FileError};
 use super::generator::PulseSettings;
 use super::reference::ReferencePolicy;
 use crate::msg::StimTick;
@@ -221,61 +222,15 @@ impl Default for IpcConfig {
 /// Invalid configuration file.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("cannot read {path}: {source}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// Not valid TOML for this schema (unknown key, wrong type, missing `source`...).
-    #[error("{path}: {source}")]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// The cause (with line and column).
-        source: Box<toml::de::Error>,
-    },
-    /// Wrong `schema`.
-    #[error("schema is {found:?}, expected {SCHEMA:?}")]
-    Schema {
-        /// What the file says.
-        found: String,
-    },
-    /// A value is out of range.
-    #[error("{field} = {value} is out of range ({allowed})")]
-    Range {
-        /// Dotted key.
-        field: &'static str,
-        /// The value.
-        value: String,
-        /// What is allowed.
-        allowed: &'static str,
-    },
+    /// Unreadable, not TOML of this schema, wrong `schema`, or a value out of range.
+    #[error(transparent)]
+    File(#[from] FileError),
     /// The `[rt]` table is invalid.
     #[error(transparent)]
     Rt(#[from] RtConfigError),
     /// The service-name prefix is invalid.
     #[error("ipc.prefix: {0}")]
     Prefix(#[from] ServiceError),
-}
-
-fn range<T: ToString>(
-    ok: bool,
-    field: &'static str,
-    value: T,
-    allowed: &'static str,
-) -> Result<(), ConfigError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigError::Range {
-            field,
-            value: value.to_string(),
-            allowed,
-        })
-    }
 }
 
 impl RtCoreConfig {
@@ -297,15 +252,9 @@ impl RtCoreConfig {
     /// Reads, parses and validates a file; a relative controller path is resolved against
     /// the file's directory.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = config_file::read(path)?;
         let mut config = Self::parse(&text).map_err(|e| match e {
-            ConfigError::Parse { source, .. } => ConfigError::Parse {
-                path: path.to_path_buf(),
-                source,
-            },
+            ConfigError::File(f) => ConfigError::File(f.in_file(path)),
             other => other,
         })?;
         if let SourceConfig::Controller { path: controller } = &mut config.source
@@ -322,73 +271,66 @@ impl RtCoreConfig {
 
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> Result<Self, ConfigError> {
-        let config: Self = toml::from_str(text).map_err(|source| ConfigError::Parse {
-            path: PathBuf::new(),
-            source: Box::new(source),
-        })?;
+        let config: Self = config_file::parse(text)?;
         config.validate()?;
         Ok(config)
     }
 
     /// Checks every value.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.schema != SCHEMA {
-            return Err(ConfigError::Schema {
-                found: self.schema.clone(),
-            });
-        }
+        config_file::check_schema(&self.schema, SCHEMA)?;
         let period = Duration::from_micros(self.period_us);
-        range(
+        config_file::range(
             (MIN_PERIOD..=MAX_PERIOD).contains(&period),
             "period_us",
             self.period_us,
             "100..=1000000",
         )?;
         if let SourceConfig::TestPattern { ipi_ticks } = self.source {
-            range(ipi_ticks >= 2, "source.ipi_ticks", ipi_ticks, ">= 2")?;
+            config_file::range(ipi_ticks >= 2, "source.ipi_ticks", ipi_ticks, ">= 2")?;
         }
         self.rt.validate()?;
         let r = &self.reference;
-        range(
+        config_file::range(
             (1..=10_000).contains(&r.stale_after_ms),
             "reference.stale_after_ms",
             r.stale_after_ms,
             "1..=10000",
         )?;
-        range(
+        config_file::range(
             (0.0..=1000.0).contains(&r.stale_ramp_per_s),
             "reference.stale_ramp_per_s",
             r.stale_ramp_per_s,
             "0..=1000, finite",
         )?;
-        range(
+        config_file::range(
             (1..=1000).contains(&self.feedback.max_age_ms),
             "feedback.max_age_ms",
             self.feedback.max_age_ms,
             "1..=1000",
         )?;
         let p = &self.pulse;
-        range(
+        config_file::range(
             p.channel <= StimTick::MAX_CHANNEL,
             "pulse.channel",
             p.channel,
             "0..=15",
         )?;
-        range(
+        config_file::range(
             (1..=StimTick::MAX_AMPLITUDE_UA).contains(&p.amplitude_ua),
             "pulse.amplitude_ua",
             p.amplitude_ua,
             "1..=250000",
         )?;
-        range(p.width_us >= 1, "pulse.width_us", p.width_us, ">= 1")?;
+        config_file::range(p.width_us >= 1, "pulse.width_us", p.width_us, ">= 1")?;
         let t = &self.telemetry;
-        range(
+        config_file::range(
             (10..=60_000).contains(&t.report_period_ms),
             "telemetry.report_period_ms",
             t.report_period_ms,
             "10..=60000",
         )?;
-        range(
+        config_file::range(
             (16..=1 << 20).contains(&t.queue_capacity),
             "telemetry.queue_capacity",
             t.queue_capacity,
