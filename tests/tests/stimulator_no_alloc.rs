@@ -2,44 +2,12 @@
 //! global allocator sees zero allocations over 20 000 ticks with pulses, heartbeats,
 //! rejected frames (CRC, counter, length, state, rate), a watchdog fault and re-arming.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use rt_core::rt::alloc::{self, CountingAllocator};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-std::thread_local! {
-    /// Only the measuring thread counts (libtest's own threads allocate meanwhile).
-    static MEASURING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-fn count() {
-    if MEASURING.with(std::cell::Cell::get) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-    }
-}
-
-// SAFETY: forwards every call unchanged to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
+/// The project's counting allocator; only the measuring thread is tracked (libtest's own
+/// threads allocate meanwhile). Its small-block pool counts too: zero means zero.
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 use fes_can::{
     AliveCounter, Heartbeat, Message, Nmt, NmtCommand, NmtState, Nodes, Pulse, StimLimits,
@@ -80,8 +48,9 @@ fn state_machine_allocates_nothing_per_tick() {
     let mut sent = 0u64;
     let mut frames_out = 0usize;
 
-    MEASURING.with(|m| m.set(true));
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    assert!(alloc::counting_allocator_installed());
+    alloc::track_current_thread(true);
+    let before = alloc::current_thread_allocations();
     for k in 0..20_000u64 {
         let now = (k + 1) * TICK_NS;
         let silent = (5_000..5_300).contains(&k); // the host goes quiet: watchdog fault
@@ -122,12 +91,13 @@ fn state_machine_allocates_nothing_per_tick() {
         frames_out += out.frames().len();
         out.clear();
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
-    MEASURING.with(|m| m.set(false));
+    let after = alloc::current_thread_allocations();
+    alloc::track_current_thread(false);
     assert_eq!(
-        after - before,
+        (after.allocations - before.allocations)
+            + (after.pool_allocations - before.pool_allocations),
         0,
-        "heap allocations in the stimulator's tick path"
+        "allocations in the stimulator's tick path"
     );
     // The run did what it should, so the path measured was the real one: pulses every
     // 7 ms are capped by the default 100-per-second rate limit, minus the fault period.
