@@ -529,3 +529,23 @@ fn service_names_compose_prefix_and_topic() {
         assert!(validate_prefix(bad).is_err(), "{bad:?}");
     }
 }
+
+/// The hand-made tick constructors give valid ticks: quiet (no pulse, no state) and firing.
+#[test]
+fn quiet_and_firing_ticks_are_valid_and_say_what_they_are() {
+    let q = StimTick::quiet(5, 7_000_000);
+    assert!(q.validate().is_ok(), "{:?}", q.validate());
+    assert!(!q.fires() && q.amplitude_ua == 0 && q.width_us == 0 && q.flags == 0);
+    assert_eq!(
+        (q.t_ns, q.t_wake_ns, q.t_publish_ns),
+        (7_000_000, 7_000_000, 7_000_000)
+    );
+    let f = q.firing(3, 20_000, 200);
+    assert!(f.validate().is_ok(), "{:?}", f.validate());
+    assert!(f.fires());
+    assert_eq!((f.channel, f.amplitude_ua, f.width_us), (3, 20_000, 200));
+    assert!(
+        StimTick { pulse: 0, ..f }.validate().is_err(),
+        "amplitude without a pulse"
+    );
+}

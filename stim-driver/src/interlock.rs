@@ -573,25 +573,11 @@ mod tests {
     }
 
     fn tick(seq: u64, t_ms: u64, pulse: bool) -> StimTick {
-        StimTick {
-            seq,
-            t_ns: t_ms * MS,
-            t_wake_ns: t_ms * MS,
-            t_publish_ns: t_ms * MS,
-            ref_seq: 0,
-            reference: 0.0,
-            u_cont: 0.0,
-            energy: 0.0,
-            model_force: 0.0,
-            predicted_force: 0.0,
-            phi: 0.0,
-            amplitude_ua: if pulse { 20_000 } else { 0 },
-            missed_periods: 0,
-            width_us: if pulse { 200 } else { 0 },
-            flags: 0,
-            pulse: u8::from(pulse),
-            channel: 0,
-            reserved: [0; 2],
+        let quiet = StimTick::quiet(seq, t_ms * MS);
+        if pulse {
+            quiet.firing(0, 20_000, 200)
+        } else {
+            quiet
         }
     }
 

@@ -208,25 +208,10 @@ proptest! {
         for k in 0..n as u64 {
             let t = 1_000 * MS + k * ipi_ms * MS;
             let tick = StimTick {
-                seq: 1 + k * ipi_ms,
-                t_ns: t,
-                t_wake_ns: t,
-                t_publish_ns: t,
-                ref_seq: 0,
                 reference: 0.5,
-                u_cont: 0.0,
-                energy: 0.0,
-                model_force: 0.0,
-                predicted_force: 0.0,
-                phi: 0.0,
-                amplitude_ua: 20_000,
-                missed_periods: 0,
-                width_us: 200,
-                flags: 0,
-                pulse: 1,
-                channel: 0,
-                reserved: [0; 2],
-            };
+                ..StimTick::quiet(1 + k * ipi_ms, t)
+            }
+            .firing(0, 20_000, 200);
             // Only every ipi-th tick is shown: the ones between are pulse-free ticks,
             // given here so the stream has no gap.
             for j in (1..ipi_ms).filter(|_| k > 0) {

@@ -820,26 +820,7 @@ mod tests {
     const MS: u64 = 1_000_000;
 
     fn tick(seq: u64, t: u64) -> StimTick {
-        StimTick {
-            seq,
-            t_ns: t,
-            t_wake_ns: t,
-            t_publish_ns: t,
-            ref_seq: 0,
-            reference: 0.0,
-            u_cont: 0.0,
-            energy: 0.0,
-            model_force: 0.0,
-            predicted_force: 0.0,
-            phi: 0.0,
-            amplitude_ua: 0,
-            missed_periods: 0,
-            width_us: 0,
-            flags: 0,
-            pulse: 0,
-            channel: 0,
-            reserved: [0; 2],
-        }
+        StimTick::quiet(seq, t)
     }
 
     fn status(seq: u64) -> DriverStatus {

@@ -84,6 +84,41 @@ impl StimTick {
     /// enforce their own, lower, clinical limits).
     pub const MAX_AMPLITUDE_UA: u32 = 250_000;
 
+    /// A tick of deadline `t_ns` (woken and stamped at `t_ns` too) that fires nothing and
+    /// carries no generator state: every other field zero. The base of rt-core's final
+    /// tick and of hand-made ticks in tests and benches.
+    pub const fn quiet(seq: u64, t_ns: u64) -> Self {
+        Self {
+            seq,
+            t_ns,
+            t_wake_ns: t_ns,
+            t_publish_ns: t_ns,
+            ref_seq: 0,
+            reference: 0.0,
+            u_cont: 0.0,
+            energy: 0.0,
+            model_force: 0.0,
+            predicted_force: 0.0,
+            phi: 0.0,
+            amplitude_ua: 0,
+            missed_periods: 0,
+            width_us: 0,
+            flags: 0,
+            pulse: 0,
+            channel: 0,
+            reserved: [0; 2],
+        }
+    }
+
+    /// This tick, firing one pulse of `amplitude_ua` and `width_us` on `channel`.
+    pub const fn firing(mut self, channel: u8, amplitude_ua: u32, width_us: u16) -> Self {
+        self.pulse = 1;
+        self.channel = channel;
+        self.amplitude_ua = amplitude_ua;
+        self.width_us = width_us;
+        self
+    }
+
     /// True when this tick fires a pulse.
     pub fn fires(&self) -> bool {
         self.pulse != 0

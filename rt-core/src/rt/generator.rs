@@ -158,29 +158,14 @@ impl<S: TickSource> PatternLoop<S> {
     pub fn final_tick(&mut self, now_ns: u64) -> StimTick {
         self.seq += 1;
         StimTick {
-            seq: self.seq,
-            t_ns: now_ns,
-            t_wake_ns: now_ns,
-            t_publish_ns: now_ns,
-            ref_seq: 0,
-            reference: 0.0,
-            u_cont: 0.0,
-            energy: 0.0,
-            model_force: 0.0,
-            predicted_force: 0.0,
-            phi: 0.0,
-            amplitude_ua: 0,
-            missed_periods: 0,
-            width_us: 0,
             flags: StimTick::FLAG_FINAL
                 | if self.degraded {
                     StimTick::FLAG_DEGRADED
                 } else {
                     0
                 },
-            pulse: 0,
             channel: self.pulse.channel,
-            reserved: [0; 2],
+            ..StimTick::quiet(self.seq, now_ns)
         }
     }
 }

@@ -112,25 +112,16 @@ pub fn run_publisher(spec: &str) {
         if w.missed_periods > 0 {
             flags |= StimTick::FLAG_OVERRUN;
         }
-        let tick = StimTick {
-            seq,
-            t_ns: w.grid_ns,
+        let quiet = StimTick {
             t_wake_ns: w.wake_ns,
             t_publish_ns: 0,
-            ref_seq: 0,
-            reference: 0.0,
-            u_cont: 0.0,
-            energy: 0.0,
-            model_force: 0.0,
-            predicted_force: 0.0,
-            phi: 0.0,
-            amplitude_ua: pulse.unwrap_or(0),
             missed_periods: w.missed_periods,
-            width_us: if pulse.is_some() { 200 } else { 0 },
             flags,
-            pulse: u8::from(pulse.is_some()),
-            channel: 0,
-            reserved: [0; 2],
+            ..StimTick::quiet(seq, w.grid_ns)
+        };
+        let tick = match pulse {
+            Some(amplitude_ua) => quiet.firing(0, amplitude_ua, 200),
+            None => quiet,
         };
         let sample = publisher.loan_uninit().expect("loan");
         let mut sample = sample.write_payload(tick);
