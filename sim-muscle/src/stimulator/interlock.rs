@@ -74,11 +74,6 @@ impl Interlock {
         }
     }
 
-    /// Forgets the pulse history (reset node).
-    pub fn clear(&mut self) {
-        self.applied = PulseTimes::new();
-    }
-
     /// Tick of the last applied pulse.
     pub fn last_pulse_tick(&self) -> Option<u64> {
         self.applied.newest()

@@ -451,7 +451,10 @@ impl Stimulator {
                 self.rejected = 0;
                 self.status_counter = 0;
                 self.force_seq = 0;
-                self.interlock.clear();
+                // The applied-pulse history survives the reset: the minimum IPI and the
+                // rate window protect the tissue, and a protocol reset does not undo the
+                // pulses it has had (a host resetting and restarting between pulses got
+                // around both; found by the stimulator property test).
                 self.reset_communication();
                 self.boot_up(now_ns, out);
             }

@@ -607,6 +607,69 @@ fn stop_cancels_output_and_nmt_to_other_nodes_is_ignored() {
     assert_eq!(b.last_status().state, StimState::Stopped);
 }
 
+/// A reset node restores the protocol state, not the tissue: a host that resets and
+/// restarts the stimulator between two pulses gets neither a shorter IPI nor a fresh rate
+/// window. (Found by `tests/stimulator_props.rs`: the reset cleared the pulse history.)
+#[test]
+fn reset_node_keeps_the_minimum_ipi_and_the_rate_window() {
+    let mut b = Bench::new();
+    b.configure(
+        StimLimits {
+            min_ipi_ms: 50,
+            max_pulses: 2,
+            rate_window_ms: 1000,
+            ..settings().ceiling
+        },
+        3,
+    );
+    b.operational();
+    b.pulse(100, 100);
+    b.run(2, true);
+    assert_eq!(b.plant.pulses(), 1);
+    // Reset, configure the same limits again, restart, pulse 2 ms later: inside the IPI.
+    b.nmt(NmtCommand::ResetNode);
+    b.configure(
+        StimLimits {
+            min_ipi_ms: 50,
+            max_pulses: 2,
+            rate_window_ms: 1000,
+            ..settings().ceiling
+        },
+        3,
+    );
+    b.operational();
+    let p = b.pulse(100, 100);
+    assert_eq!(
+        (b.last_emcy().code, b.last_emcy().seq),
+        (ErrorCode::MinIpiViolation, p.seq)
+    );
+    b.run(60, true);
+    assert_eq!(b.plant.pulses(), 1, "the IPI was reset");
+    // The second pulse of the window, after the IPI: applied.
+    b.pulse(100, 100);
+    b.run(60, true);
+    assert_eq!(b.plant.pulses(), 2);
+    // A reset and restart do not open a new rate window: the third is refused.
+    b.nmt(NmtCommand::ResetNode);
+    b.configure(
+        StimLimits {
+            min_ipi_ms: 50,
+            max_pulses: 2,
+            rate_window_ms: 1000,
+            ..settings().ceiling
+        },
+        3,
+    );
+    b.operational();
+    let p = b.pulse(100, 100);
+    assert_eq!(
+        (b.last_emcy().code, b.last_emcy().seq),
+        (ErrorCode::RateViolation, p.seq)
+    );
+    b.run(5, true);
+    assert_eq!(b.plant.pulses(), 2, "the rate window was reset");
+}
+
 #[test]
 fn reset_node_restores_defaults_and_reboots() {
     let mut b = Bench::new();
