@@ -36,7 +36,7 @@
 //! timeout_ticks = 3              # no StimTick for this many periods -> NMT stop
 //! stale_after_ticks = 3          # a StimTick this old on arrival -> NMT stop
 //! stimulator_timeout_ms = 100    # no STATUS for this long -> NMT stop (and no arming)
-//! arm_confirm_ms = 100           # NMT start must show in STATUS within this
+//! arm_confirm_ms = 100           # NMT start must show in STATUS (and the supervisor be seen) within this
 //! command_max_age_ms = 100       # an older Arm is refused
 //! liveness_check_ms = 20         # how often the publishers' nodes are checked
 //! supervisor_watch = true        # the supervisor's node dead or gone while armed -> NMT stop
@@ -253,7 +253,8 @@ pub struct WatchdogConfig {
     pub stale_after_ticks: u32,
     /// No STATUS from the stimulator for this long trips it, ms (20..=10000).
     pub stimulator_timeout_ms: u32,
-    /// NMT start must show in STATUS within this, ms (20..=10000).
+    /// NMT start must show in STATUS, and the supervisor (with `supervisor_watch`) be seen
+    /// alive, within this after an Arm, ms (20..=10000).
     pub arm_confirm_ms: u32,
     /// An Arm command older than this is refused, ms (1..=10000).
     pub command_max_age_ms: u32,

@@ -115,6 +115,8 @@ pub struct ForwardPath<T: CanTx> {
     supervisor: Liveness,
     last_status: Option<(Status, u64)>,
     last_command_t_ns: u64,
+    /// The supervisor has been seen alive since the last Arm (see [`Self::poll`]).
+    supervisor_seen_armed: bool,
 }
 
 impl<T: CanTx> ForwardPath<T> {
@@ -142,6 +144,7 @@ impl<T: CanTx> ForwardPath<T> {
             supervisor: Liveness::Unknown,
             last_status: None,
             last_command_t_ns: 0,
+            supervisor_seen_armed: false,
         }
     }
 
@@ -512,6 +515,7 @@ impl<T: CanTx> ForwardPath<T> {
                         confirmed: false,
                     };
                     self.interlocks.resync_sequence();
+                    self.supervisor_seen_armed = self.supervisor == Liveness::Alive;
                     ev.emit(DriverEvent::Armed { command_seq });
                 }
                 Err((disarmed, error)) => {
@@ -709,7 +713,9 @@ impl<T: CanTx> ForwardPath<T> {
 
     /// Takes the supervisor's liveness (its DriverCommand publisher's node) the report
     /// thread found. With `supervisor_watch`, while armed: dead → [`Fault::SupervisorDead`],
-    /// no publisher → [`Fault::SupervisorGone`]. Nothing re-arms when it comes back.
+    /// no publisher → [`Fault::SupervisorGone`]; and not seen alive within the arm
+    /// confirmation time of an Arm → the same, from [`Self::poll`]. Nothing re-arms when it
+    /// comes back.
     pub fn on_supervisor_liveness(
         &mut self,
         liveness: Liveness,
@@ -721,6 +727,9 @@ impl<T: CanTx> ForwardPath<T> {
         }
         let before = self.state();
         self.supervisor = liveness;
+        if liveness == Liveness::Alive {
+            self.supervisor_seen_armed = true;
+        }
         ev.emit(DriverEvent::SupervisorLiveness(liveness));
         if self.settings.supervisor_watch && self.is_armed() {
             match liveness {
@@ -760,6 +769,21 @@ impl<T: CanTx> ForwardPath<T> {
                 );
             } else if !confirmed && now_ns.saturating_sub(since_ns) > s.arm_confirm_ns {
                 self.trip(Fault::StimulatorNotOperational, now_ns, ev);
+            } else if s.supervisor_watch
+                && !self.supervisor_seen_armed
+                && now_ns.saturating_sub(since_ns) > s.arm_confirm_ns
+            {
+                // An Arm is accepted before the liveness check has seen its sender (the
+                // check lags the command); the sender must then be seen alive within the
+                // arm confirmation time. Without this, a supervisor gone right after its
+                // Arm left the value at "no publisher", unchanged, and never tripped
+                // (found by the forward-path property test).
+                let fault = if self.supervisor == Liveness::Dead {
+                    Fault::SupervisorDead
+                } else {
+                    Fault::SupervisorGone
+                };
+                self.trip(fault, now_ns, ev);
             }
         } else {
             match self.config {

@@ -5,82 +5,22 @@
 //! Then the same on a real bus: [`driver_on_the_bus`] runs the `stim-driver` binary in the
 //! vcan harness against the virtual stimulator (module `on_bus`).
 
-use std::cell::{Cell, RefCell};
-use std::rc::Rc;
-
 use fes_can::{
-    Emcy, ErrorCode, Frame, Message, NmtCommand, NmtState, Nodes, Status, StimLimits, StimState,
+    Emcy, ErrorCode, Message, NmtCommand, NmtState, Nodes, Status, StimLimits, StimState,
 };
 use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
 use stim_driver::fault::{ArmRefusal, Fault};
 use stim_driver::forward::{ForwardPath, ForwardSettings};
-use stim_driver::tx::{CanTx, TxDone, TxError};
+use stim_driver::tx::TxError;
 
 const MS: u64 = 1_000_000;
 const T0: u64 = 1_000 * MS;
 
-/// A bus that records every frame with the simulated time it was sent at.
-#[derive(Clone, Default)]
-struct Bus {
-    now: Rc<Cell<u64>>,
-    frames: Rc<RefCell<Vec<(u64, Frame)>>>,
-    fail: Rc<Cell<Option<TxError>>>,
-}
-
-impl CanTx for Bus {
-    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
-        if let Some(e) = self.fail.get() {
-            return Err(e);
-        }
-        self.frames.borrow_mut().push((self.now.get(), *frame));
-        Ok(TxDone {
-            retries: 0,
-            written_ns: self.now.get(),
-            write_ns: 0,
-        })
-    }
-}
-
-impl Bus {
-    fn messages(&self) -> Vec<(u64, Message)> {
-        self.frames
-            .borrow()
-            .iter()
-            .map(|(t, f)| {
-                (
-                    *t,
-                    fes_can::decode(u32::from(f.id), f.payload()).expect("driver frames decode"),
-                )
-            })
-            .collect()
-    }
-
-    fn nmt(&self) -> Vec<(u64, NmtCommand)> {
-        self.messages()
-            .into_iter()
-            .filter_map(|(t, m)| match m {
-                Message::Nmt(n) => Some((t, n.command)),
-                _ => None,
-            })
-            .collect()
-    }
-
-    fn pulses(&self) -> Vec<(u64, fes_can::Pulse)> {
-        self.messages()
-            .into_iter()
-            .filter_map(|(t, m)| match m {
-                Message::Pulse(p) => Some((t, p)),
-                _ => None,
-            })
-            .collect()
-    }
-
-    fn clear(&self) {
-        self.frames.borrow_mut().clear();
-    }
-}
+#[path = "support/recording_bus.rs"]
+mod recording_bus;
+use recording_bus::Bus;
 
 fn settings() -> ForwardSettings {
     DriverConfig::with_defaults("vcan0", 40.0)
@@ -179,10 +119,11 @@ impl Rig {
         r
     }
 
-    /// Configured, ticks flowing, publisher alive, armed and confirmed.
+    /// Configured, ticks flowing, publisher and supervisor alive, armed and confirmed.
     fn armed(s: ForwardSettings) -> Self {
         let mut r = Self::configured(s);
         r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+        r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
         for _ in 0..3 {
             r.advance(MS);
             r.tick(false);
@@ -540,9 +481,17 @@ fn supervisor_watch_refuses_an_arm_while_dead_and_can_be_turned_off() {
             ..
         }
     )));
-    // Not yet checked, or no publisher listed yet (the check lags the command): accepted.
-    for l in [Liveness::Unknown, Liveness::NoPublisher] {
-        let mut r = Rig::configured(settings());
+    // Not yet checked, or no publisher listed yet (the check lags the command): accepted;
+    // the supervisor must then be seen alive within the arm confirmation time, or the
+    // driver trips (it used to stay armed: the unchanged "no publisher" never tripped).
+    for (l, comes_alive) in [
+        (Liveness::Unknown, true),
+        (Liveness::NoPublisher, true),
+        (Liveness::Unknown, false),
+        (Liveness::NoPublisher, false),
+    ] {
+        let s = settings();
+        let mut r = Rig::configured(s);
         r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
         r.fp.on_supervisor_liveness(l, r.now, &mut r.ev);
         for _ in 0..3 {
@@ -551,6 +500,42 @@ fn supervisor_watch_refuses_an_arm_while_dead_and_can_be_turned_off() {
         }
         r.command(DriverCommandKind::Arm);
         assert_eq!(r.fp.state(), DriverState::Armed, "{l:?}: {:?}", r.ev);
+        let id = r.config_id;
+        r.bus_event(status(StimState::Armed, id));
+        if comes_alive {
+            r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+        }
+        let steps = s.arm_confirm_ns / MS + 5;
+        for _ in 0..steps {
+            r.advance(MS);
+            r.tick(false);
+            r.fp.on_supervisor_liveness(
+                if comes_alive { Liveness::Alive } else { l },
+                r.now,
+                &mut r.ev,
+            );
+            if r.fp.state() != DriverState::Armed {
+                break;
+            }
+            if r.now.is_multiple_of(10 * MS) {
+                r.bus_event(status(StimState::Armed, id));
+            }
+        }
+        if comes_alive {
+            assert_eq!(
+                r.fp.state(),
+                DriverState::Armed,
+                "{l:?} then alive: {:?}",
+                r.ev
+            );
+        } else {
+            assert_eq!(
+                r.fault(),
+                Some(Fault::SupervisorGone),
+                "{l:?} for {steps} ms after the Arm: {:?}",
+                r.fp.state()
+            );
+        }
     }
     // Watch off: the supervisor's death changes nothing.
     let mut s = settings();
