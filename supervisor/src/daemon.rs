@@ -25,6 +25,7 @@ use crate::config::SupervisorConfig;
 use crate::control::{ControlServer, Pending};
 use crate::core::{ArmState, DriverOrder, SupervisorCore};
 use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
+use crate::pass;
 use crate::protocol::{Command, Response, Status};
 use crate::recording::{Recorder, RecorderSettings, utc_stamp};
 use crate::recording_thread::{Item, RecorderThread};
@@ -246,19 +247,10 @@ pub fn run(
             let listed = list_nodes();
             health.on_nodes(&listed, &owners);
         }
-        health.check(now, &proc_state);
-        for e in health.take_events() {
+        for e in pass::check_health(&mut core, &mut health, now, &proc_state) {
             match e.severity {
-                Severity::Fault => {
-                    if !core.fault(e.message.clone()) {
-                        core.note(format!("also: {}", e.message));
-                    }
-                    tracing::error!("{}", e.message);
-                }
-                Severity::Warning => {
-                    tracing::warn!("{}", e.message);
-                    core.note(format!("warning: {}", e.message));
-                }
+                Severity::Fault => tracing::error!("{}", e.message),
+                Severity::Warning => tracing::warn!("{}", e.message),
             }
         }
 
@@ -428,10 +420,7 @@ fn serve(
     start_ns: u64,
 ) -> Response {
     let id = p.request.id;
-    if matches!(p.request.command, Command::Arm) {
-        health.clear_recovered(now, &proc_state);
-    }
-    let result = core.command(&p.request.command, now, health.ready());
+    let result = pass::serve_command(core, health, &p.request.command, now, &proc_state);
     let status = status(core, health, run, now, start_ns);
     match result {
         Ok(m) => Response::ok(id, m, Some(status)),

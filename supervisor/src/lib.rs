@@ -24,6 +24,7 @@ pub mod daemon;
 pub mod health;
 pub mod limits;
 pub mod outer_loop;
+pub mod pass;
 pub mod plots;
 pub mod profile;
 pub mod protocol;
