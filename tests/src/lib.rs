@@ -4,12 +4,14 @@
 //!   guest) for a `#[test]` ([`vcan::with_vcan`]) or for any command (`vcan-run`).
 //! * [`bus`]: host-side helpers for protocol tests: a frame tap with timestamps, a host
 //!   port that sends PULSE/NMT/CONFIG with correct counters, a heartbeat thread.
+//! * [`child`]: test children die with the test thread that started them.
 //! * [`cli`]: the common assertion of the binaries' bad-input sweeps.
 //! * [`stack`]: building the four binaries and reading the virtual stimulator's record,
 //!   for tests that run the whole stack (`supervisor::bench::Stack`).
 #![deny(missing_docs)]
 
 pub mod bus;
+pub mod child;
 pub mod cli;
 pub mod stack;
 pub mod vcan;

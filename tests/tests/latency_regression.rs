@@ -9,7 +9,8 @@
 //!   passes against the stored baseline `tests/latency-baseline.json` and writes the
 //!   report, plot, summary and interval logs;
 //! - the same suite with the test-only slowdown (`FES_TEST_TICK_BUSY_US=1100`: each tick
-//!   busy-waits longer than the 1 ms period) exits 1 and names the regressed ratio.
+//!   busy-waits longer than the 1 ms period) exits 1 and names the exceeded compute budget
+//!   and the lateness (the p99 ratio or the late-wake-up rate).
 //!
 //! Needs root (SCHED_FIFO), cyclictest and stress-ng, as the rt-core tests do.
 
@@ -22,7 +23,12 @@ use systemd_support::{Scratch, build_stack, workspace_root};
 
 const BIN: &str = env!("CARGO_BIN_EXE_latency-regression");
 
+/// Runs the suite: its exit code and its report (stdout, then the lines of stderr that
+/// are not log records). The processes' log records (thousands of lines on a long run)
+/// go to a file named in the text, so that a failed assertion shows its reason and the
+/// report, not a screenful of logs.
 fn run(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
+    static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let mut cmd = Command::new(BIN);
     cmd.args(args).env_remove("FES_TEST_TICK_BUSY_US");
     for (k, v) in env {
@@ -34,7 +40,28 @@ fn run(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
         stderr,
     } = cmd.output().expect("run latency-regression");
     let mut text = String::from_utf8_lossy(&stdout).into_owned();
-    text.push_str(&String::from_utf8_lossy(&stderr));
+    let stderr = String::from_utf8_lossy(&stderr);
+    // A tracing record starts with its RFC 3339 time (after an ANSI colour code, if any).
+    let is_log = |l: &str| {
+        let l = l.strip_prefix("\x1b[2m").unwrap_or(l).as_bytes();
+        l.len() > 20 && l[..4].iter().all(u8::is_ascii_digit) && l[4] == b'-' && l[10] == b'T'
+    };
+    let logs: Vec<&str> = stderr.lines().filter(|l| is_log(l)).collect();
+    for line in stderr.lines().filter(|l| !is_log(l)) {
+        text.push_str(line);
+        text.push('\n');
+    }
+    let n = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let log_path = std::env::temp_dir().join(format!(
+        "latency-regression-test-{}-{n}.log",
+        std::process::id()
+    ));
+    std::fs::write(&log_path, logs.join("\n")).expect("write the run's log");
+    text.push_str(&format!(
+        "({} log records in {})\n",
+        logs.len(),
+        log_path.display()
+    ));
     println!("{text}");
     (status.code(), text)
 }
@@ -398,9 +425,18 @@ fn short_run_passes_and_a_slowed_tick_is_caught() {
         .lines()
         .find_map(|l| l.strip_prefix("FAIL: regressed: "))
         .expect("the failed checks are listed");
-    for key in ["no_load.ratio_p99", "no_load.compute_us.p99"] {
-        assert!(failed.contains(key), "{key} in {failed:?}");
-    }
+    // The compute budget is absolute and always exceeded; of the two gates relative to
+    // cyclictest at least one must see the lateness: the ratio of p99s (a 2 s run's
+    // cyclictest p99 can reach 0.5 ms on a noisy CI host, which brings the loop's 1.1 ms
+    // p99 under the 2.6x limit) or the late-wake-up rate (15 % of ticks here).
+    assert!(
+        failed.contains("no_load.compute_us.p99"),
+        "compute_us.p99 in {failed:?}"
+    );
+    assert!(
+        failed.contains("no_load.ratio_p99") || failed.contains("no_load.overrun_rate"),
+        "the lateness is named (ratio_p99 or overrun_rate) in {failed:?}"
+    );
     let md = std::fs::read_to_string(slow_dir.join("report.md")).expect("report.md");
     assert!(md.contains("TEST SLOWDOWN ON"), "the report says so");
 }

@@ -179,15 +179,17 @@ struct Publisher {
 
 impl Publisher {
     fn start(prefix: &str, script: &str) -> Self {
-        let mut child = Command::new(std::env::current_exe().expect("test binary"))
-            .args([PUBLISHER_TEST, "--exact", "--ignored", "--nocapture"])
-            .args(["--test-threads", "1"])
-            .env(ENV_PUBLISHER, format!("{prefix};{script}"))
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("start the publisher");
+        let mut child = fes_tests::child::dies_with_parent(&mut Command::new(
+            std::env::current_exe().expect("test binary"),
+        ))
+        .args([PUBLISHER_TEST, "--exact", "--ignored", "--nocapture"])
+        .args(["--test-threads", "1"])
+        .env(ENV_PUBLISHER, format!("{prefix};{script}"))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start the publisher");
         let stdout = child.stdout.take().expect("stdout");
         let (tx, lines) = mpsc::channel();
         std::thread::spawn(move || {
@@ -661,7 +663,7 @@ pub fn driver_on_the_bus(can: &CanEnv) {
     let candump_out = dir.join("candump.log");
     // candump needs a CAN interface; on the host bus the tap is the only observer.
     let mut candump = (!host_bus).then(|| {
-        Command::new("candump")
+        fes_tests::child::dies_with_parent(&mut Command::new("candump"))
             .args(["-L", &can.iface])
             .stdout(std::fs::File::create(&candump_out).unwrap())
             .stderr(Stdio::null())
@@ -669,7 +671,8 @@ pub fn driver_on_the_bus(can: &CanEnv) {
             .expect("candump (can-utils) is needed: scripts/setup installs it")
     });
     let log_file = std::fs::File::create(&log).unwrap();
-    let mut driver = Command::new(EXE)
+    // A panicking scenario takes the driver with it (the next test would share its load).
+    let mut driver = fes_tests::child::dies_with_parent(&mut Command::new(EXE))
         .args(["run", "--config"])
         .arg(&config)
         .env_remove("FES_CAN_IFACE")
@@ -731,15 +734,17 @@ pub fn driver_on_the_bus(can: &CanEnv) {
             }
             let refused = s.pulses_rejected - rejected_before;
             if host_bus {
-                // On a shared host (the test binary's other tests, a build) a tick can reach the
-                // driver later than max_pulse_delay: it is refused and reported, never lost or
-                // sent late; a handful at most.
+                // On a shared host a tick can reach the driver later than max_pulse_delay
+                // (500 us): it is refused and reported, never lost or sent late. The pulse
+                // path has two wake-ups (publisher, driver) on a host whose cyclictest p99.9
+                // is 0.8-1 ms (docs/realtime.md): CI has seen 6-10 of the 500 refused on a
+                // quiet machine. A driver that delays or refuses pulses itself refuses most.
                 assert_eq!(
                     js.len() as u64 + refused,
                     500,
                     "on the bus or reported: {s:?}"
                 );
-                assert!(refused <= 5, "{refused} pulses refused as late: {s:?}");
+                assert!(refused <= 25, "{refused} pulses refused as late: {s:?}");
                 assert!(js.windows(2).all(|w| w[0] < w[1]), "in order: {js:?}");
             } else if uml {
                 // The guest stalls for tens of ms under load: a pulse that would leave more than

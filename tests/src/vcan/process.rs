@@ -54,16 +54,7 @@ impl Streamed {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .process_group(0);
-        // SAFETY: the closure runs between fork and exec and only calls prctl(2), which
-        // is async-signal-safe; it touches no memory of the parent.
-        unsafe {
-            cmd.pre_exec(|| {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
+        crate::child::dies_with_parent(cmd);
         let mut child = cmd.spawn()?;
         let (tx, rx) = channel();
         let mut readers = Vec::new();
