@@ -1,0 +1,16 @@
+//! The data-set record reader on any bytes: an error, or columns that are consistent
+//! (equal lengths, at least two samples, time increasing from >= 0, finite force).
+#![no_main]
+
+use std::path::Path;
+
+use libfuzzer_sys::fuzz_target;
+use rt_core::dataset::parse_record_csv;
+
+fuzz_target!(|data: &[u8]| {
+    if let Ok((t, p, f)) = parse_record_csv(Path::new("r.csv"), data, 1e-3) {
+        assert!(t.len() >= 2 && t.len() == p.len() && t.len() == f.len());
+        assert!(t[0] >= 0.0 && t.windows(2).all(|w| w[1] > w[0]));
+        assert!(f.iter().all(|x| x.is_finite()));
+    }
+});
