@@ -174,6 +174,9 @@ pub enum Violation {
         delay_ns: u64,
         /// Limit, ns.
         max_ns: u64,
+        /// The generator's share: its publish time (`t_publish_ns`) after the grid time,
+        /// ns, so a refusal says whether rt-core or the transport and driver were late.
+        published_after_ns: u64,
     },
     /// Closer to the previous pulse than the minimum inter-pulse interval.
     MinIpi {
@@ -269,11 +272,16 @@ impl core::fmt::Display for Violation {
                 f,
                 "charge per phase {charge_nc} nC above the ceiling {max_nc} nC"
             ),
-            Violation::Late { delay_ns, max_ns } => write!(
+            Violation::Late {
+                delay_ns,
+                max_ns,
+                published_after_ns,
+            } => write!(
                 f,
-                "pulse {:.1} us after its grid time (limit {:.1} us)",
+                "pulse {:.1} us after its grid time (limit {:.1} us; published {:.1} us after it)",
                 us(delay_ns),
-                us(max_ns)
+                us(max_ns),
+                us(published_after_ns)
             ),
             Violation::MinIpi { ipi_ns, min_ns } => write!(
                 f,
@@ -516,6 +524,7 @@ impl Interlocks {
             return Err(Violation::Late {
                 delay_ns,
                 max_ns: l.max_pulse_delay_ns,
+                published_after_ns: tick.t_publish_ns.saturating_sub(tick.t_ns),
             });
         }
         if let Some(last) = self.last_pulse_t_ns {
@@ -742,13 +751,20 @@ mod tests {
     #[test]
     fn late_future_and_invalid() {
         let mut i = Interlocks::new(limits());
-        let t = tick(1, 10, true);
+        let mut t = tick(1, 10, true);
+        t.t_publish_ns = t.t_ns + 300_000;
+        let late = rejected(i.assess(&t, 10 * MS + MS / 2 + 1).verdict);
         assert_eq!(
-            rejected(i.assess(&t, 10 * MS + MS / 2 + 1).verdict),
+            late,
             Violation::Late {
                 delay_ns: MS / 2 + 1,
-                max_ns: MS / 2
+                max_ns: MS / 2,
+                published_after_ns: 300_000,
             }
+        );
+        assert_eq!(
+            late.to_string(),
+            "pulse 500.0 us after its grid time (limit 500.0 us; published 300.0 us after it)"
         );
         let t = tick(2, 20, true);
         assert!(matches!(

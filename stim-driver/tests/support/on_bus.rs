@@ -744,6 +744,17 @@ pub fn driver_on_the_bus(can: &CanEnv) {
                     500,
                     "on the bus or reported: {s:?}"
                 );
+                // The driver's own account of each: how late, and the generator's share.
+                let text = std::fs::read_to_string(&log).unwrap_or_default();
+                for line in text
+                    .lines()
+                    .filter(|l| l.contains("refused (its pulse NOT sent)"))
+                {
+                    println!(
+                        "  {}",
+                        line.split_once("StimTick ").map_or(line, |(_, r)| r)
+                    );
+                }
                 assert!(refused <= 25, "{refused} pulses refused as late: {s:?}");
                 assert!(js.windows(2).all(|w| w[0] < w[1]), "in order: {js:?}");
             } else if uml {
