@@ -81,6 +81,11 @@ pub struct BeatMeasurement {
     pub plateau_coverage: f64,
     /// Pulses delivered during the beat (StimTicks that fired in `[start, end)`).
     pub pulses: u64,
+    /// Pulses of the beat the stimulator driver refused (its interlocks: late, IPI, rate,
+    /// ...), from its DriverStatus counts. Such a beat's force is not the response to the
+    /// train the inner loop planned, so the outer loop does not learn from it.
+    #[serde(default)]
+    pub pulses_refused: u64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -96,6 +101,7 @@ struct Window {
     plateau_n: u64,
     peak: f64,
     pulses: u64,
+    pulses_refused: u64,
 }
 
 /// Collects force samples and pulses into beat windows.
@@ -133,6 +139,7 @@ impl ContractionEstimator {
             plateau_n: 0,
             peak: f64::NAN,
             pulses: 0,
+            pulses_refused: 0,
         });
     }
 
@@ -172,6 +179,17 @@ impl ContractionEstimator {
         }
     }
 
+    /// Counts `n` pulses the driver refused somewhere in `(from_ns, to_ns]` (between two
+    /// of its status reports, 100 ms apart): every open beat overlapping that interval
+    /// is marked, so a refusal near a beat boundary marks both beats (conservative).
+    pub fn add_refused(&mut self, from_ns: u64, to_ns: u64, n: u64) {
+        for w in &mut self.open {
+            if w.beat.start_ns <= to_ns && from_ns < w.beat.end_ns() {
+                w.pulses_refused += n;
+            }
+        }
+    }
+
     /// Closes the windows that are complete: those ending at or before `latest_sample_ns`
     /// (a later sample has arrived), or more than [`CLOSE_GRACE_NS`] before `now_ns`.
     pub fn poll(&mut self, latest_sample_ns: u64, now_ns: u64) -> Vec<BeatMeasurement> {
@@ -207,6 +225,7 @@ impl ContractionEstimator {
             samples: w.n,
             plateau_coverage: coverage,
             pulses: w.pulses,
+            pulses_refused: w.pulses_refused,
         }
     }
 }
@@ -268,5 +287,27 @@ mod tests {
         assert_eq!(m.len(), 1);
         assert_eq!(m[0].plateau_mean, None);
         assert!((m[0].plateau_coverage - 0.5).abs() < 0.01);
+    }
+
+    /// A refusal reported between two driver statuses marks the beats whose window
+    /// overlaps that interval, and only those: the one it fell in, and at a boundary both.
+    #[test]
+    fn refusals_mark_the_overlapping_beats() {
+        let mut est = ContractionEstimator::new(ContractionSettings::default());
+        for k in 0..3 {
+            est.begin(beat(800 * k));
+        }
+        // Beat 0 is [0, 800) ms, beat 1 [800, 1600), beat 2 [1600, 2400).
+        est.add_refused(100 * MS, 200 * MS, 1);
+        est.add_refused(1550 * MS, 1650 * MS, 2);
+        let m = est.poll(0, 2407 * MS + CLOSE_GRACE_NS);
+        let refused: Vec<u64> = m.iter().map(|m| m.pulses_refused).collect();
+        assert_eq!(refused, [1, 2, 2]);
+        let mut est = ContractionEstimator::new(ContractionSettings::default());
+        est.begin(beat(800));
+        est.add_refused(700 * MS, 800 * MS, 1); // ends at the beat's start: overlaps
+        est.add_refused(1600 * MS, 1700 * MS, 4); // starts at its end: does not
+        let m = est.poll(0, 1607 * MS + CLOSE_GRACE_NS);
+        assert_eq!(m[0].pulses_refused, 1);
     }
 }

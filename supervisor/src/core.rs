@@ -17,7 +17,7 @@
 
 use std::collections::VecDeque;
 
-use rt_core::msg::Reference;
+use rt_core::msg::{DriverStatus, Reference};
 
 use crate::contraction::{BeatMeasurement, ContractionEstimator, ContractionSettings};
 use crate::limits::ReferenceLimits;
@@ -78,6 +78,8 @@ pub struct SupervisorCore {
     contraction_settings: ContractionSettings,
     last_contraction: Option<f64>,
     latest_force_ns: u64,
+    /// The last driver status's time and refused-pulse count.
+    driver_refusals: Option<(u64, u64)>,
     seq: u64,
     last: Option<Reference>,
     orders: Vec<DriverOrder>,
@@ -106,6 +108,7 @@ impl SupervisorCore {
             contraction_settings: contraction,
             last_contraction: None,
             latest_force_ns: 0,
+            driver_refusals: None,
             seq: 0,
             last: None,
             orders: Vec::new(),
@@ -321,6 +324,20 @@ impl SupervisorCore {
         self.contraction.add_pulse(t_ns);
     }
 
+    /// A (validated) DriverStatus: pulses refused since the previous one are charged to
+    /// the beats between the two reports' times (both on CLOCK_MONOTONIC).
+    pub fn on_driver_status(&mut self, s: &DriverStatus) {
+        if let Some((t_ns, refused)) = self.driver_refusals
+            && s.pulses_rejected > refused
+            && s.t_ns >= t_ns
+        {
+            self.contraction
+                .add_refused(t_ns, s.t_ns, s.pulses_rejected - refused);
+        }
+        // A restarted driver counts from 0 again: its first report is the new origin.
+        self.driver_refusals = Some((s.t_ns, s.pulses_rejected));
+    }
+
     /// Advances the profile and the outer loop to `now_ns`.
     pub fn advance(&mut self, now_ns: u64) -> Option<Setpoint> {
         let run = self.profile.as_mut()?;
@@ -333,9 +350,12 @@ impl SupervisorCore {
             }
         }
         for m in self.contraction.poll(self.latest_force_ns, now_ns) {
+            // A beat with a refused pulse did not get the train the inner loop planned:
+            // its error is not the model's, and the outer loop skips it.
+            let measured = m.plateau_mean.filter(|_| m.pulses_refused == 0);
             let update = self
                 .outer
-                .update(m.beat.target, m.plateau_mean, self.limits.max_force);
+                .update(m.beat.target, measured, self.limits.max_force);
             if let Some(c) = m.plateau_mean {
                 self.last_contraction = Some(c);
             }
@@ -527,6 +547,93 @@ mod tests {
             (last.update.amplitude - 0.5).abs() < 0.01,
             "{:?}",
             last.update
+        );
+    }
+
+    /// A beat in which the driver refused a pulse is not learned from: the correction
+    /// stays what it was, however weak that beat's contraction; the beats before and
+    /// after it are corrected as usual. The refusal reaches the core as the DriverStatus
+    /// count rising between two 100 ms reports.
+    #[test]
+    fn a_beat_with_a_refused_pulse_leaves_the_outer_loop_correction_unchanged() {
+        use rt_core::msg::DeviceState;
+        let status = |seq: u64, t_ns: u64, rejected: u64| DriverStatus {
+            seq,
+            t_ns,
+            ticks_received: seq,
+            ticks_lost: 0,
+            pulses_sent: 0,
+            pulses_rejected: rejected,
+            can_tx_errors: 0,
+            watchdog_trips: 0,
+            fault_code: 0,
+            state: DeviceState::Armed as u8,
+            stimulator_state: DeviceState::Armed as u8,
+        };
+        // Beat 6 of the profile ([4.8 s, 5.6 s)) has its pulse refused at about 4.95 s,
+        // and its contraction falls to half; every other beat gets 80 % of the reference.
+        let run = |report: bool| {
+            let mut c = core();
+            c.command(&Command::Arm, 0, Ok(())).unwrap();
+            c.command(&cardiac(0.4), 0, Ok(())).unwrap();
+            let mut rejected = 0;
+            for k in 0..(10 * 800u64) {
+                let t = k * MS;
+                let r = c.reference(t);
+                let hit = (4800..5600).contains(&k);
+                c.on_force(t + 7 * MS, if hit { 0.4 } else { 0.8 } * r.force);
+                if k % 100 == 0 && k > 0 {
+                    if k == 5000 {
+                        rejected = 1;
+                    }
+                    if report {
+                        c.on_driver_status(&status(k / 100, t, rejected));
+                    }
+                }
+            }
+            c.take_beats()
+        };
+        let (reported, unreported) = (run(true), run(false));
+        let six = |beats: &[BeatRecord]| {
+            *beats
+                .iter()
+                .find(|b| b.measurement.beat.index == 6)
+                .unwrap()
+        };
+        let (with, without) = (six(&reported), six(&unreported));
+        assert_eq!(with.measurement.pulses_refused, 1);
+        assert_eq!(without.measurement.pulses_refused, 0);
+        // The weak beat is measured alike in both runs; only the reported one is skipped.
+        assert_eq!(
+            with.measurement.plateau_mean,
+            without.measurement.plateau_mean
+        );
+        assert!(with.measurement.plateau_mean.unwrap() < 0.25);
+        let before = reported
+            .iter()
+            .find(|b| b.measurement.beat.index == 5)
+            .unwrap();
+        assert_eq!(with.update.measured, None);
+        assert_eq!(with.update.correction, before.update.correction, "skipped");
+        assert!(
+            without.update.correction > before.update.correction + 0.02,
+            "integrated"
+        );
+        for b in reported.iter().filter(|b| b.measurement.beat.index != 6) {
+            assert_eq!(
+                b.measurement.pulses_refused, 0,
+                "beat {}",
+                b.measurement.beat.index
+            );
+            assert!(b.update.measured.is_some());
+        }
+        let next = reported
+            .iter()
+            .find(|b| b.measurement.beat.index == 7)
+            .unwrap();
+        assert!(
+            next.update.correction > with.update.correction,
+            "learning resumes"
         );
     }
 }

@@ -217,6 +217,9 @@ pub fn run(
             let st = *s.payload();
             drop(s);
             health.on_driver_status(&st, now);
+            if st.validate().is_ok() {
+                core.on_driver_status(&st);
+            }
             record(&mut run, &mut core, Item::Status(st));
         }
         while let Ok(Some(s)) = timings.receive() {

@@ -16,7 +16,10 @@
 //! beats, several seconds, against the inner loop's tens of milliseconds), its step
 //! limited to `s` per beat (rate limit) and its correction bounded by `m` and by the
 //! reference range `[0, A_max]` (bounded output, no windup). A beat without a valid
-//! measurement leaves the correction unchanged. Switched off, the correction is zero and
+//! measurement leaves the correction unchanged; so does a beat in which the stimulator
+//! driver refused a pulse ([`crate::core::SupervisorCore`] passes no measurement): the
+//! muscle did not get the train the inner loop planned, so its error is not a model
+//! mismatch, and integrating it would overshoot the beats after. Switched off, the correction is zero and
 //! the reference amplitude is the target.
 
 use serde::{Deserialize, Serialize};

@@ -13,7 +13,7 @@
 //! | `references.csv` | every published Reference |
 //! | `status.csv` | every DriverStatus |
 //! | `timing.csv` | every TimingReport |
-//! | `beats.csv` | per beat: target, reference amplitude, measured plateau/peak/FTI, pulses, outer-loop correction |
+//! | `beats.csv` | per beat: target, reference amplitude, measured plateau/peak/FTI, pulses, outer-loop correction, pulses the driver refused |
 //! | `events.jsonl` | commands, faults, warnings, with CLOCK_MONOTONIC and wall-clock times |
 //!
 //! Durability: the stream files are flushed at least every `flush_period_ms` (default
@@ -270,7 +270,7 @@ impl Recorder {
                 d,
                 "beats.csv",
                 Some(
-                    "index,start_ns,period_ns,on_ns,bpm,target,amplitude,plateau_mean,peak,fti,pulses,samples,coverage,outer_loop_error,correction,next_amplitude",
+                    "index,start_ns,period_ns,on_ns,bpm,target,amplitude,plateau_mean,peak,fti,pulses,samples,coverage,outer_loop_error,correction,next_amplitude,pulses_refused",
                 ),
             )?,
             events: Stream::create(d, "events.jsonl", None)?,
@@ -442,7 +442,7 @@ impl Recorder {
         let m = &b.measurement;
         let opt = |v: Option<f64>| v.map_or(String::new(), |x| x.to_string());
         let r = self.beats.line(format_args!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             m.beat.index,
             m.beat.start_ns,
             m.beat.period_ns,
@@ -458,7 +458,8 @@ impl Recorder {
             m.plateau_coverage,
             b.update.error,
             b.update.correction,
-            b.update.amplitude
+            b.update.amplitude,
+            m.pulses_refused
         ));
         self.guard(r)
     }
