@@ -140,6 +140,7 @@ impl SimResult {
                         plateau: m.plateau_mean.unwrap_or(f64::NAN),
                         pulses: m.pulses,
                         fti: m.fti,
+                        pulses_refused: m.pulses_refused,
                     }
                 })
                 .collect(),

@@ -151,6 +151,13 @@ pub struct Summary {
     /// Largest deviation of a beat's plateau from the target after the first 10 beats,
     /// as a fraction of the target.
     pub worst_deviation_after_10: f64,
+    /// The same over the beats that got every planned pulse (none refused by the driver):
+    /// the controller's own figure, apart from the pulses the host's timing cost.
+    #[serde(default)]
+    pub worst_deviation_after_10_delivered: f64,
+    /// Beats with a pulse refused by the driver (the outer loop skips them).
+    #[serde(default)]
+    pub beats_with_refused_pulses: u64,
     /// Pulses the stimulator applied (DriverStatus `pulses_sent`, last), if known.
     pub pulses_sent: Option<u64>,
     /// Skipped periods of rt-core (its final TimingReport).
@@ -232,6 +239,8 @@ pub struct BeatRow {
     pub pulses: u64,
     /// FTI of the beat window.
     pub fti: f64,
+    /// Pulses of the beat the driver refused (0 in recordings made before the column).
+    pub pulses_refused: u64,
 }
 
 /// Reads the time series of the recording in `dir`.
@@ -271,6 +280,7 @@ pub fn read_series(dir: &Path) -> Result<Series, SummaryError> {
             beats.col("pulses"),
             beats.col("fti"),
         );
+        let refused = beats.col("pulses_refused");
         (0..s.len())
             .map(|i| BeatRow {
                 start_ns: s[i] as u64,
@@ -279,6 +289,7 @@ pub fn read_series(dir: &Path) -> Result<Series, SummaryError> {
                 plateau: m[i],
                 pulses: n[i] as u64,
                 fti: f[i],
+                pulses_refused: refused.get(i).map_or(0, |&x| x as u64),
             })
             .collect()
     };
@@ -401,10 +412,12 @@ pub fn summarise(
         (Some(f), true) => Some(f(fti, period_ms, on_ms)),
         _ => None,
     };
-    let worst = plateaus
-        .iter()
-        .skip(10)
-        .map(|p| ((p - input.target) / input.target).abs())
+    let deviation = |b: &&BeatRow| ((b.plateau - input.target) / input.target).abs();
+    let measured_beats = || s.beats.iter().filter(|b| b.plateau.is_finite()).skip(10);
+    let worst = measured_beats().map(|b| deviation(&b)).fold(0.0, f64::max);
+    let worst_delivered = measured_beats()
+        .filter(|b| b.pulses_refused == 0)
+        .map(|b| deviation(&b))
         .fold(0.0, f64::max);
     let k5 = plateaus.len().min(5);
     Summary {
@@ -429,6 +442,8 @@ pub fn summarise(
             mean(&plateaus[plateaus.len() - k5..]),
         ],
         worst_deviation_after_10: worst,
+        worst_deviation_after_10_delivered: worst_delivered,
+        beats_with_refused_pulses: s.beats.iter().filter(|b| b.pulses_refused > 0).count() as u64,
         pulses_sent,
         deadline_misses: rt.misses,
         rt_wake_p99_us: rt.wake_us[1],
@@ -437,5 +452,50 @@ pub fn summarise(
         stim_driver: drv,
         timing_functional_only: input.uml,
         recording,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    /// 14 beats at the target but beat 12 (a refused pulse: 50 %) and beat 13 (110 %): the
+    /// overall worst is 50 %, the worst over beats that got every pulse 10 %, one beat
+    /// with a refusal; the first 10 beats are not judged (beat 3 at 0 would be 100 %).
+    #[test]
+    fn worst_beat_is_reported_with_and_without_the_beats_with_a_refused_pulse() {
+        let beat = |k: u64, plateau: f64, refused: u64| BeatRow {
+            start_ns: k * 800 * MS,
+            period_ns: 800 * MS,
+            on_ns: 320 * MS,
+            plateau,
+            pulses: 8,
+            fti: 0.1,
+            pulses_refused: refused,
+        };
+        let beats: Vec<BeatRow> = (0..14)
+            .map(|k| match k {
+                3 => beat(k, 0.0, 0),
+                12 => beat(k, 0.15, 1),
+                13 => beat(k, 0.33, 0),
+                _ => beat(k, 0.3, 0),
+            })
+            .collect();
+        let series = Series {
+            beats,
+            ..Series::default()
+        };
+        let input = AnalysisInput {
+            delay: 0,
+            target: 0.3,
+            baseline: None,
+            uml: false,
+        };
+        let s = summarise(&series, &input, RunTiming::default(), String::new());
+        assert!((s.worst_deviation_after_10 - 0.5).abs() < 1e-12);
+        assert!((s.worst_deviation_after_10_delivered - 0.1).abs() < 1e-12);
+        assert_eq!(s.beats_with_refused_pulses, 1);
     }
 }

@@ -533,6 +533,13 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
         fmt(s.first_last_contraction[1], 4),
         fmt(s.worst_deviation_after_10 * 100.0, 1)
     );
+    if s.beats_with_refused_pulses > 0 {
+        println!(
+            "    {} beat(s) with a pulse refused by the driver (not learned from by the outer loop); worst after beat 10 without them {} %",
+            s.beats_with_refused_pulses,
+            fmt(s.worst_deviation_after_10_delivered * 100.0, 1)
+        );
+    }
     println!(
         "  pulses delivered           {} ({} per contraction){}",
         s.pulses,
