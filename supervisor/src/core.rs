@@ -426,6 +426,14 @@ mod tests {
         }
     }
 
+    /// Armed, running the cardiac profile at `amplitude` from t = 0.
+    fn armed_with_cardiac(amplitude: f64) -> SupervisorCore {
+        let mut c = core();
+        c.command(&Command::Arm, 0, Ok(())).unwrap();
+        c.command(&cardiac(amplitude), 0, Ok(())).unwrap();
+        c
+    }
+
     #[test]
     fn disarmed_publishes_stop_and_refuses_set() {
         let mut c = core();
@@ -527,9 +535,7 @@ mod tests {
     /// the amplitude climb towards target / 0.8.
     #[test]
     fn outer_loop_raises_the_amplitude_on_a_weak_muscle() {
-        let mut c = core();
-        c.command(&Command::Arm, 0, Ok(())).unwrap();
-        c.command(&cardiac(0.4), 0, Ok(())).unwrap();
+        let mut c = armed_with_cardiac(0.4);
         let mut amp = 0.0f64;
         for k in 0..(40 * 800u64) {
             let t = k * MS;
@@ -573,9 +579,7 @@ mod tests {
         // Beat 6 of the profile ([4.8 s, 5.6 s)) has its pulse refused at about 4.95 s,
         // and its contraction falls to half; every other beat gets 80 % of the reference.
         let run = |report: bool| {
-            let mut c = core();
-            c.command(&Command::Arm, 0, Ok(())).unwrap();
-            c.command(&cardiac(0.4), 0, Ok(())).unwrap();
+            let mut c = armed_with_cardiac(0.4);
             let mut rejected = 0;
             for k in 0..(10 * 800u64) {
                 let t = k * MS;
