@@ -5,9 +5,7 @@
 //! Then the same on a real bus: [`driver_on_the_bus`] runs the `stim-driver` binary in the
 //! vcan harness against the virtual stimulator (module `on_bus`).
 
-use fes_can::{
-    Emcy, ErrorCode, Message, NmtCommand, NmtState, Nodes, Status, StimLimits, StimState,
-};
+use fes_can::{Emcy, ErrorCode, Message, NmtCommand, NmtState, Nodes, StimLimits, StimState};
 use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
@@ -20,7 +18,7 @@ const T0: u64 = 1_000 * MS;
 
 #[path = "support/recording_bus.rs"]
 mod recording_bus;
-use recording_bus::Bus;
+use recording_bus::{Bus, status};
 
 fn settings() -> ForwardSettings {
     DriverConfig::with_defaults("vcan0", 40.0)
@@ -36,17 +34,6 @@ struct Rig {
     tick_seq: u64,
     cmd_seq: u64,
     config_id: u8,
-}
-
-fn status(state: StimState, config_id: u8) -> BusEvent {
-    BusEvent::Status(Status {
-        state,
-        counter: 0,
-        last_error: ErrorCode::NoError,
-        pulses_delivered: 0,
-        rejected: 0,
-        config_id,
-    })
 }
 
 fn tick(seq: u64, t_ns: u64, pulse: bool) -> StimTick {

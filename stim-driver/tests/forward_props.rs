@@ -19,7 +19,7 @@
 //!
 //! The interlocks' own limits over whole trains are `interlock_props.rs`.
 
-use fes_can::{Emcy, ErrorCode, Message, NmtState, Status, StimState};
+use fes_can::{Emcy, ErrorCode, Message, NmtState, StimState};
 use proptest::prelude::*;
 use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
@@ -28,7 +28,7 @@ use stim_driver::forward::{ForwardPath, ForwardSettings};
 
 #[path = "support/recording_bus.rs"]
 mod recording_bus;
-use recording_bus::Bus;
+use recording_bus::{Bus, status};
 
 const MS: u64 = 1_000_000;
 const T0: u64 = 1_000 * MS;
@@ -154,17 +154,6 @@ fn configured(bus: &Bus) -> (ForwardPath<Bus>, u64) {
     fp.on_liveness(Liveness::Alive, now, &mut ev);
     fp.on_supervisor_liveness(Liveness::Alive, now, &mut ev);
     (fp, now)
-}
-
-fn status(state: StimState, config_id: u8) -> BusEvent {
-    BusEvent::Status(Status {
-        state,
-        counter: 0,
-        last_error: ErrorCode::NoError,
-        pulses_delivered: 0,
-        rejected: 0,
-        config_id,
-    })
 }
 
 /// The liveness values the path was last given (a report thread hands over the current

@@ -1,11 +1,13 @@
 #![allow(dead_code)] // each test binary uses part of it
 //! A CAN transmitter for the forward path's tests on simulated time: it records every
-//! frame with the time it was written and can be told to fail.
+//! frame with the time it was written and can be told to fail; and the stimulator's
+//! STATUS as the receive side hands it to the forward path.
 
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
 
-use fes_can::{Frame, Message, NmtCommand};
+use fes_can::{ErrorCode, Frame, Message, NmtCommand, Status, StimState};
+use stim_driver::event::BusEvent;
 use stim_driver::tx::{CanTx, TxDone, TxError};
 
 /// A bus that records every frame with the simulated time it was sent at.
@@ -67,4 +69,16 @@ impl Bus {
     pub fn clear(&self) {
         self.frames.borrow_mut().clear();
     }
+}
+
+/// A STATUS event from the stimulator: `state`, confirming configuration `config_id`.
+pub fn status(state: StimState, config_id: u8) -> BusEvent {
+    BusEvent::Status(Status {
+        state,
+        counter: 0,
+        last_error: ErrorCode::NoError,
+        pulses_delivered: 0,
+        rejected: 0,
+        config_id,
+    })
 }

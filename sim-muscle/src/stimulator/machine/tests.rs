@@ -612,32 +612,26 @@ fn stop_cancels_output_and_nmt_to_other_nodes_is_ignored() {
 /// window. (Found by `tests/stimulator_props.rs`: the reset cleared the pulse history.)
 #[test]
 fn reset_node_keeps_the_minimum_ipi_and_the_rate_window() {
+    let limits = StimLimits {
+        min_ipi_ms: 50,
+        max_pulses: 2,
+        rate_window_ms: 1000,
+        ..settings().ceiling
+    };
+    // Reset, configure the same limits again, restart.
+    let restart = |b: &mut Bench| {
+        b.nmt(NmtCommand::ResetNode);
+        b.configure(limits, 3);
+        b.operational();
+    };
     let mut b = Bench::new();
-    b.configure(
-        StimLimits {
-            min_ipi_ms: 50,
-            max_pulses: 2,
-            rate_window_ms: 1000,
-            ..settings().ceiling
-        },
-        3,
-    );
+    b.configure(limits, 3);
     b.operational();
     b.pulse(100, 100);
     b.run(2, true);
     assert_eq!(b.plant.pulses(), 1);
-    // Reset, configure the same limits again, restart, pulse 2 ms later: inside the IPI.
-    b.nmt(NmtCommand::ResetNode);
-    b.configure(
-        StimLimits {
-            min_ipi_ms: 50,
-            max_pulses: 2,
-            rate_window_ms: 1000,
-            ..settings().ceiling
-        },
-        3,
-    );
-    b.operational();
+    // Restart, pulse 2 ms later: inside the IPI.
+    restart(&mut b);
     let p = b.pulse(100, 100);
     assert_eq!(
         (b.last_emcy().code, b.last_emcy().seq),
@@ -650,17 +644,7 @@ fn reset_node_keeps_the_minimum_ipi_and_the_rate_window() {
     b.run(60, true);
     assert_eq!(b.plant.pulses(), 2);
     // A reset and restart do not open a new rate window: the third is refused.
-    b.nmt(NmtCommand::ResetNode);
-    b.configure(
-        StimLimits {
-            min_ipi_ms: 50,
-            max_pulses: 2,
-            rate_window_ms: 1000,
-            ..settings().ceiling
-        },
-        3,
-    );
-    b.operational();
+    restart(&mut b);
     let p = b.pulse(100, 100);
     assert_eq!(
         (b.last_emcy().code, b.last_emcy().seq),
