@@ -614,6 +614,15 @@ impl Operator {
     }
 }
 
+/// The driver log's pulse refusals, each from its StimTick seq on: "<seq> refused (its
+/// pulse NOT sent): <the interlock's reason>".
+fn pulse_refusals(log_text: &str) -> impl Iterator<Item = &str> {
+    log_text
+        .lines()
+        .filter(|l| l.contains("refused (its pulse NOT sent)"))
+        .filter_map(|l| Some(l.split_once("StimTick ")?.1))
+}
+
 fn tail(log: &Path) -> String {
     let text = std::fs::read_to_string(log).unwrap_or_default();
     let lines: Vec<&str> = text.lines().collect();
@@ -781,14 +790,8 @@ pub fn driver_on_the_bus(can: &CanEnv) {
                 assert!(js.len() >= 250, "{} of 500 delivered: {s:?}", js.len());
                 // The driver's own account of each: how late, and the generator's share.
                 let text = std::fs::read_to_string(&log).unwrap_or_default();
-                for line in text
-                    .lines()
-                    .filter(|l| l.contains("refused (its pulse NOT sent)"))
-                {
-                    println!(
-                        "  {}",
-                        line.split_once("StimTick ").map_or(line, |(_, r)| r)
-                    );
+                for refusal in pulse_refusals(&text) {
+                    println!("  {refusal}");
                 }
                 assert!(
                     noisy || refused <= 25,
@@ -854,19 +857,9 @@ pub fn driver_on_the_bus(can: &CanEnv) {
             // expected subset is the greedy rule over the decisions the driver did not
             // refuse as late (its log names each by StimTick seq).
             let text = std::fs::read_to_string(&log).unwrap_or_default();
-            let late: Vec<u64> = text[log_start.min(text.len())..]
-                .lines()
-                .filter(|l| {
-                    l.contains("refused (its pulse NOT sent)") && l.contains("after its grid time")
-                })
-                .filter_map(|l| {
-                    l.split_once("StimTick ")?
-                        .1
-                        .split_whitespace()
-                        .next()?
-                        .parse()
-                        .ok()
-                })
+            let late: Vec<u64> = pulse_refusals(&text[log_start.min(text.len())..])
+                .filter(|r| r.contains("after its grid time"))
+                .filter_map(|r| r.split_whitespace().next()?.parse().ok())
                 .collect();
             let on_time: Vec<Decision> = decisions
                 .iter()
