@@ -10,25 +10,18 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use fes_can::{ErrorCode, MessageKind, Status, StimState};
+use fes_can::{MessageKind, StimState};
 use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
-use stim_driver::event::{BusEvent, DriverState, Liveness, NullSink};
+use stim_driver::event::{DriverState, Liveness, NullSink};
 use stim_driver::forward::ForwardPath;
 use stim_driver::tx::CountingSink;
 
 const MS: u64 = 1_000_000;
 
-fn status(state: StimState, config_id: u8) -> BusEvent {
-    BusEvent::Status(Status {
-        state,
-        counter: 0,
-        last_error: ErrorCode::NoError,
-        pulses_delivered: 0,
-        rejected: 0,
-        config_id,
-    })
-}
+#[path = "../tests/support/recording_bus.rs"]
+mod recording_bus;
+use recording_bus::status;
 
 fn tick(seq: u64, t_ns: u64, pulse: bool) -> StimTick {
     let quiet = StimTick {
@@ -66,6 +59,8 @@ impl Armed {
         let config_id = 1;
         fp.on_bus(status(StimState::PreOperational, config_id), now, ev);
         fp.on_liveness(Liveness::Alive, now, ev);
+        // An armed driver must see its supervisor alive (arm_confirm_ms).
+        fp.on_supervisor_liveness(Liveness::Alive, now, ev);
         let mut seq = 0;
         for _ in 0..3 {
             now += MS;
