@@ -5,7 +5,7 @@ mod analysis_support;
 
 use analysis_support::*;
 use rt_core::analysis::stabilise::{
-    StabiliseError, reestimate_offsets, replace_unstable_eigenvalues, stabilise,
+    StabiliseError, fastest_eigenvalue, reestimate_offsets, replace_unstable_eigenvalues, stabilise,
 };
 use rt_core::analysis::trace::simulate_trace;
 use rt_core::analysis::validation::msse;
@@ -243,4 +243,35 @@ fn refusals_and_trivial_cases() {
     assert_eq!(r.changes.len(), 1);
     assert!(r.offsets.is_empty());
     r.model.validate(Stability::Require).unwrap();
+}
+
+/// A stable eigenvalue faster than one sample (-2/Ts < e <= -1/Ts: shift-domain pole in
+/// (-1, 0]) lies outside the region the eigensystem parameterisation can hold, so it is
+/// replaced too, but by the region's fastest eigenvalue (a fast mode stays fast), never by
+/// the slow -1 /s meant for unstable ones; the unstable eigenvalue beside it still gets -1.
+#[test]
+fn a_fast_stable_eigenvalue_stays_fast() {
+    let mut m = unstable();
+    if let LocalModelSet::SsEigLocal(units) = &mut m.local {
+        units[0].eigenvalues[1] = -1500.0; // z = -0.5: stable
+        units[1].eigenvalues[0] = -1000.0; // z = 0: stable, on the region's edge
+    }
+    let (fixed, changes) = replace_unstable_eigenvalues(&m, -1.0).unwrap();
+    let got: Vec<(usize, usize, f64, f64)> = changes
+        .iter()
+        .map(|c| (c.unit, c.index, c.old, c.new))
+        .collect();
+    let fast = fastest_eigenvalue(TS);
+    assert!((fast * TS + 1.0).abs() < 1e-5, "{fast}");
+    assert_eq!(
+        got,
+        [
+            (0, 1, -1500.0, fast),
+            (1, 0, -1000.0, fast),
+            (2, 1, 9.96, -1.0)
+        ]
+    );
+    fixed
+        .validate(Stability::Require)
+        .expect("every eigenvalue in the region");
 }

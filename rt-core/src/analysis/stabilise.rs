@@ -14,7 +14,12 @@
 //! step that does not lower the error) until it no longer changes the offsets.
 //!
 //! **Which eigenvalues.** `ss-eig-local` / `ss-eig-common`: every eigenvalue outside
-//! (-1/Ts, 0), the region the strict model loader requires. `ss-direct`: every real
+//! (-1/Ts, 0), the region the strict model loader requires. An *unstable* one (`e >= 0` or
+//! `e <= -2/Ts`, |1 + Ts e| >= 1) becomes the given slow eigenvalue (thesis: -1 /s); a
+//! *stable* one in (-2/Ts, -1/Ts] (a mode faster than one sample, whose shift-domain pole
+//! 1 + Ts e lies in (-1, 0]) becomes [`fastest_eigenvalue`], the fastest of the region (shift
+//! pole 1e-6, dead-beat): a fast mode stays fast. (Until 2026-12 both became -1 /s, which
+//! turned a fast stable mode into the slowest one.) `ss-direct`: every real
 //! eigenvalue with |1 + Ts e| >= 1, replaced through the spectral projector
 //! A' = A + (e' - e) (A - e_2 I)/(e - e_2) (same eigenvectors, Sylvester's formula); an
 //! unstable complex pair or a repeated unstable eigenvalue cannot be replaced this way and is
@@ -31,6 +36,12 @@ use crate::num::Dual;
 
 /// Default replacement eigenvalue, 1/s (thesis 5.4.3).
 pub const DEFAULT_EIGENVALUE: f64 = -1.0;
+
+/// The replacement of a stable eigenvalue in (-2/Ts, -1/Ts]: the fastest eigenvalue of the
+/// region (-1/Ts, 0), `-(1 - 1e-6)/Ts` (shift-domain pole 1e-6).
+pub fn fastest_eigenvalue(ts: f64) -> f64 {
+    -(1.0 - 1e-6) / ts
+}
 
 /// Why a model could not be stabilised.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -149,13 +160,19 @@ pub fn replace_unstable_eigenvalues(
     let mut replace_eig = |unit: usize, e: &mut [f64; 2]| {
         for (index, v) in e.iter_mut().enumerate() {
             if !eigenvalue_in_region(*v, ts) {
+                let stable = (1.0 + ts * *v).abs() < 1.0;
+                let new = if stable {
+                    fastest_eigenvalue(ts)
+                } else {
+                    eigenvalue
+                };
                 changes.push(EigenvalueChange {
                     unit,
                     index,
                     old: *v,
-                    new: eigenvalue,
+                    new,
                 });
-                *v = eigenvalue;
+                *v = new;
             }
         }
     };
