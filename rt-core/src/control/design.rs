@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::model::SsLocalModel;
 use crate::model::local_model::eig2;
 
-use super::poles::Pole;
+use super::poles::{Pole, RiseTimeRule};
 
 /// The three closed-loop poles of one local loop with integral action (eq. C.27): the
 /// dominant pair `p1, p2` and the integrator pole `p3` (6.5.3), delta domain, 1/s.
@@ -63,7 +63,13 @@ pub struct LocalGains {
 
 /// Options of the local design.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DesignOptions {
+    /// How a unit's rise time becomes its dominant poles (default: the thesis's rule,
+    /// `w_n t_r = 3.2`). A controller file that does not name a rule was designed with
+    /// [`RiseTimeRule::legacy`] and is read so.
+    #[serde(default = "RiseTimeRule::legacy")]
+    pub rise_time_rule: RiseTimeRule,
     /// Accept a local model with a negative steady-state gain (default `false`; see
     /// [`DesignError::NegativeGain`] for why it is refused).
     pub allow_negative_gain: bool,
@@ -76,6 +82,7 @@ pub struct DesignOptions {
 impl Default for DesignOptions {
     fn default() -> Self {
         Self {
+            rise_time_rule: RiseTimeRule::Thesis,
             allow_negative_gain: false,
             min_rcond: 1e-9,
         }

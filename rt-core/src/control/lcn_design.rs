@@ -10,7 +10,7 @@ use super::design::{
     ClosedLoopPoles, DesignError, DesignOptions, EstimatorPoles, LocalGains, design_controller,
     design_estimator,
 };
-use super::poles::{Pole, SpecError, default_third_pole, dominant_pair};
+use super::poles::{Pole, RiseTimeRule, SpecError, default_third_pole, dominant_pair_by};
 
 /// The thesis's damping factor: `xi = 1.2`, no overshoot (6.5.3).
 pub const THESIS_DAMPING: f64 = 1.2;
@@ -36,9 +36,9 @@ impl UnitSpec {
         }
     }
 
-    /// The three closed-loop poles: the dominant pair from `t_r, xi` and `p3`.
-    pub fn poles(&self, ts: f64) -> Result<ClosedLoopPoles, SpecError> {
-        let [p1, p2] = dominant_pair(self.rise_time_s, self.damping, ts)?;
+    /// The three closed-loop poles: the dominant pair from `t_r, xi` by `rule` and `p3`.
+    pub fn poles(&self, rule: RiseTimeRule, ts: f64) -> Result<ClosedLoopPoles, SpecError> {
+        let [p1, p2] = dominant_pair_by(rule, self.rise_time_s, self.damping, ts)?;
         Ok(ClosedLoopPoles {
             p1,
             p2,
@@ -111,7 +111,7 @@ pub fn design_lcn(
     for (i, spec) in specs.iter().enumerate() {
         let m = net.ss_unit(i).ok_or(LcnDesignError::NotStateSpace)?;
         let poles = spec
-            .poles(ts)
+            .poles(opts.rise_time_rule, ts)
             .map_err(|source| LcnDesignError::Spec { unit: i, source })?;
         let gains = design_controller(i, m, &poles, ts, opts)?;
         let estimator_gain = estimator
