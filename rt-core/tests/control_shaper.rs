@@ -4,7 +4,7 @@
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rt_core::control::shaper::{PulseShaper, ShaperConfig};
+use rt_core::control::shaper::{PulseShaper, ShaperConfig, ShaperSum};
 
 #[test]
 fn pulse_count_tracks_integral_of_u_cont_over_a_million_samples() {
@@ -50,6 +50,7 @@ fn no_catch_up_burst_after_saturation() {
             eta,
             min_gap,
             e_max,
+            ..ShaperConfig::default()
         };
         let mut s = PulseShaper::new(cfg).unwrap();
         for _ in 0..1000 {
@@ -62,14 +63,23 @@ fn no_catch_up_burst_after_saturation() {
 }
 
 fn arb_config() -> impl Strategy<Value = ShaperConfig> {
-    (0.1..5.0f64, 1u32..6, 1.0..4.0f64).prop_map(|(eta, min_gap, f)| ShaperConfig {
-        eta,
-        min_gap,
-        e_max: eta * f,
-    })
+    (
+        0.1..5.0f64,
+        1u32..6,
+        1.0..4.0f64,
+        prop_oneof![Just(ShaperSum::Clamped), Just(ShaperSum::Signed)],
+    )
+        .prop_map(|(eta, min_gap, f, sum)| ShaperConfig {
+            eta,
+            min_gap,
+            e_max: eta * f,
+            sum,
+            e_min: None,
+        })
 }
 
-/// Non-negative inputs spanning many orders of magnitude, including huge ones.
+/// Inputs spanning many orders of magnitude, including huge ones; negative ones too (the
+/// signed sum takes them, the clamped one counts them as zero).
 fn arb_input() -> impl Strategy<Value = f64> {
     prop_oneof![
         4 => 0.0..1.0f64,
@@ -77,6 +87,7 @@ fn arb_input() -> impl Strategy<Value = f64> {
         1 => 0.0..1e9f64,
         1 => Just(0.0),
         1 => (0.0..1.0f64).prop_map(|x| x * 1e15),
+        2 => -2.0..0.0f64,
     ]
 }
 
@@ -88,9 +99,12 @@ proptest! {
     ) {
         let mut s = PulseShaper::new(cfg).unwrap();
         let mut sum = 0.0f64;
+        let mut low = 0.0f64;
         let mut last_pulse: Option<usize> = None;
         for (k, &u) in inputs.iter().enumerate() {
+            let u = if cfg.sum == ShaperSum::Signed { u } else { u.max(0.0) };
             sum += u;
+            low += u.min(0.0);
             if s.step(u) {
                 if let Some(lp) = last_pulse {
                     prop_assert!(k - lp > cfg.min_gap as usize,
@@ -99,10 +113,16 @@ proptest! {
                 last_pulse = Some(k);
             }
             let e = s.energy();
-            prop_assert!((0.0..=cfg.e_max).contains(&e), "E = {} outside [0, {}]", e, cfg.e_max);
+            // Below zero E goes only by the run of negative inputs since it last was >= 0.
+            let floor = if cfg.sum == ShaperSum::Signed { low.min(0.0) - 1e-9 } else { 0.0 };
+            prop_assert!(e <= cfg.e_max && e >= floor, "E = {} outside [{}, {}]", e, floor, cfg.e_max);
+            if e >= 0.0 {
+                low = 0.0;
+            }
             let st = s.stats();
+            let scale = sum.abs().max(1.0).max(-floor);
             let accounted = st.pulses as f64 * cfg.eta + e + st.dropped + st.discarded;
-            prop_assert!((sum - accounted).abs() <= 1e-9 * sum.max(1.0),
+            prop_assert!((sum - accounted).abs() <= 1e-9 * scale,
                 "sum u = {} but pulses*eta + E + dropped + discarded = {}", sum, accounted);
         }
     }
@@ -120,8 +140,9 @@ proptest! {
             1..500,
         )
     ) {
-        let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
-        let mut reference = PulseShaper::new(ShaperConfig::default()).unwrap();
+        let clamped = ShaperConfig { sum: ShaperSum::Clamped, ..ShaperConfig::default() };
+        let mut s = PulseShaper::new(clamped).unwrap();
+        let mut reference = PulseShaper::new(clamped).unwrap();
         let mut bad = 0u64;
         for &u in &inputs {
             let clean = if u.is_finite() && u >= 0.0 { u } else { bad += 1; 0.0 };

@@ -21,7 +21,9 @@ use crate::model::lmn::{Lmn, LmnError, Stability};
 use super::design::{DesignOptions, EstimatorPoles, LocalGains};
 use super::lcn::AntiWindup;
 use super::lcn_design::{LcnDesignError, UnitDesign, UnitSpec, design_lcn};
-use super::pattern_generator::{FeedbackMode, PatternGenerator, PatternGeneratorError};
+use super::pattern_generator::{
+    FeedbackMode, FeedbackState, PatternGenerator, PatternGeneratorError,
+};
 use super::poles::Pole;
 use super::shaper::{ShaperConfig, ShaperConfigError};
 
@@ -70,11 +72,16 @@ pub struct ControllerFile {
     /// Pulse-shaper settings.
     #[serde(default)]
     pub shaper: ShaperConfig,
-    /// Anti-windup rule of the integrator.
-    #[serde(default)]
+    /// Anti-windup rule of the integrator (a file without it was written with
+    /// [`AntiWindup::legacy`]).
+    #[serde(default = "AntiWindup::legacy")]
     pub anti_windup: AntiWindup,
     /// Feedback mode.
     pub mode: FeedbackMode,
+    /// Which model state the LCN feeds back in the model mode (a file without it was
+    /// written with [`FeedbackState::legacy`]).
+    #[serde(default = "FeedbackState::legacy")]
+    pub feedback_state: FeedbackState,
     /// Estimator poles (needed for `measured_force`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimator_poles: Option<EstimatorPoles>,
@@ -91,6 +98,8 @@ pub struct ControllerSettings {
     pub anti_windup: AntiWindup,
     /// Feedback mode.
     pub mode: FeedbackMode,
+    /// Which model state the LCN feeds back (model mode).
+    pub feedback_state: FeedbackState,
     /// Estimator poles (needed for [`FeedbackMode::MeasuredForce`]; optional otherwise).
     pub estimator_poles: Option<EstimatorPoles>,
 }
@@ -227,6 +236,7 @@ impl Controller {
             s.shaper,
             s.anti_windup,
             s.mode,
+            s.feedback_state,
             l.as_deref(),
         )
     }
@@ -256,6 +266,7 @@ impl Controller {
             shaper: self.settings.shaper,
             anti_windup: self.settings.anti_windup,
             mode: self.settings.mode,
+            feedback_state: self.settings.feedback_state,
             estimator_poles: self.settings.estimator_poles,
         })
     }
@@ -334,6 +345,7 @@ impl Controller {
             shaper: file.shaper,
             anti_windup: file.anti_windup,
             mode: file.mode,
+            feedback_state: file.feedback_state,
             estimator_poles: file.estimator_poles,
         };
         let c = Self::design(lmn, &specs, settings)?;

@@ -11,22 +11,31 @@
 //! summed over the (at most 3) active units only, using the model's own sparse
 //! [`Activation`]. Control law (eq. C.26): `u_raw = -K_I(phi) x_I - K_x(phi)' z`.
 //!
-//! **Anti-windup** ([`AntiWindup`]). A stimulation signal cannot be negative, so
-//! `u_cont = max(u_raw, 0)`. Left alone, the integrator keeps integrating while the output
-//! is held at zero; with a positive rest force and `r = 0` it grows without bound, and the
-//! force then lags or overshoots when the reference rises again (thesis E.4.7). The
-//! integrator `δx_I = e = y - r` (eq. C.24) therefore uses conditional integration: it is
-//! frozen for a sample when the output is clamped (`u_raw < 0`) and integrating `e` would
-//! push `u_raw` further down (`K_I(phi) e > 0`, since `∂u_raw/∂x_I = -K_I`) —
+//! **Output.** With the shaper's [`ShaperSum::Clamped`](super::shaper::ShaperSum) rule a
+//! stimulation signal cannot be negative, so `u_cont = max(u_raw, 0)`; with the thesis's
+//! [`ShaperSum::Signed`](super::shaper::ShaperSum) rule the shaper sums `u_cont = u_raw`
+//! as it is (eq. 6.8) and the output is never clamped.
 //!
-//! - [`AntiWindup::IntegralSign`] (default) — *and* the integral action itself already asks
-//!   for negative stimulation (`-K_I(phi) x_I < 0`). In the pulsed loop `u_raw` is negative
-//!   for part of every inter-pulse interval (each pulse overshoots the demand), so freezing
-//!   on the clamp alone biases the integrator: it only ever sees the negative errors.
-//!   With this extra condition the integrator runs freely in pulsed steady state and stops
-//!   at the point where the integral term stops asking for positive stimulation.
-//! - [`AntiWindup::OutputClamp`] — the clamp condition alone (textbook conditional
-//!   integration). Kept for comparison; docs/control.md gives the measured bias.
+//! **Anti-windup** ([`AntiWindup`]), for the clamped output. Left alone, the integrator
+//! keeps integrating while the output is held at zero; with a positive rest force and
+//! `r = 0` it grows without bound, and the force then lags or overshoots when the reference
+//! rises again (thesis E.4.7). The rules:
+//!
+//! - [`AntiWindup::None`] (default) — plain integral action, never frozen (the thesis's
+//!   loop, 6.5.3: "integral action ... to ensure zero steady state error"). In a periodic
+//!   pulsed steady state an integrator that always integrates returns to its value after
+//!   every period, so the mean error over a period is exactly zero, at every level. The
+//!   windup at rest is handled by the pattern generator, which resets the integrator with
+//!   the shaper at a zero reference.
+//! - [`AntiWindup::IntegralSign`] — conditional integration (`δx_I = e = y - r`, eq. C.24,
+//!   frozen for a sample) when the output is clamped (`u_raw < 0`), integrating `e` would
+//!   push `u_raw` further down (`K_I(phi) e > 0`, since `∂u_raw/∂x_I = -K_I`), *and* the
+//!   integral action itself already asks for negative stimulation (`-K_I(phi) x_I < 0`).
+//!   Freezing on the clamp alone biases the pulsed loop (`u_raw` is negative for part of
+//!   every inter-pulse interval, so the integrator only sees the negative errors); this
+//!   rule still settles above `r` where one twitch overshoots the reference (docs/control.md).
+//! - [`AntiWindup::OutputClamp`] — the clamp and error conditions alone (textbook
+//!   conditional integration). Kept for comparison; docs/control.md gives the measured bias.
 
 use core::ops::{Add, Mul};
 
@@ -41,11 +50,22 @@ use super::design::LocalGains;
 #[serde(rename_all = "snake_case")]
 pub enum AntiWindup {
     /// Freeze when clamped, the error drives `u_raw` down, and the integral term itself
-    /// asks for negative stimulation (default).
-    #[default]
+    /// asks for negative stimulation (the default until 2026-12, and the rule of
+    /// controller files that do not name one).
     IntegralSign,
     /// Freeze when clamped and the error drives `u_raw` down (biased in pulsed operation).
     OutputClamp,
+    /// Never freeze: plain integral action (thesis 6.5.3); the default (docs/control.md,
+    /// "Variants", gives the measurements that chose it).
+    #[default]
+    None,
+}
+
+impl AntiWindup {
+    /// The rule of a controller file that does not name one: [`AntiWindup::IntegralSign`].
+    pub const fn legacy() -> Self {
+        Self::IntegralSign
+    }
 }
 
 /// Gains `[K_I, K_x,1, K_x,2]` of one controller, interpolated as a unit.
@@ -114,15 +134,18 @@ pub struct ControlAction {
     pub gains: GainVector,
     /// Unclamped control law `-K_I x_I - K_x' z` (eq. C.26).
     pub u_raw: f64,
-    /// The control signal handed to the pulse shaper, `max(u_raw, 0)`.
+    /// The control signal handed to the pulse shaper: `max(u_raw, 0)` when the output is
+    /// clamped, else `u_raw`.
     pub u_cont: f64,
+    /// Whether the clamp held the output at zero (`u_raw < 0` with a clamped output).
+    pub clamped: bool,
 }
 
 impl ControlAction {
     /// `true` when the output is held at zero by the clamp.
     #[inline]
     pub fn clamped(&self) -> bool {
-        self.u_raw < 0.0
+        self.clamped
     }
 }
 
@@ -199,20 +222,22 @@ impl LocalControllerNetwork {
     }
 
     /// Control law (eq. C.26) at the core state `z` with the activation of the present
-    /// scheduling value; the output is clamped at zero (see the module docs).
+    /// scheduling value; with `clamp` the output is clamped at zero (module docs).
     #[inline(always)]
-    pub fn control(&self, act: &Activation<f64>, z: [f64; 2]) -> ControlAction {
+    pub fn control(&self, act: &Activation<f64>, z: [f64; 2], clamp: bool) -> ControlAction {
         let gains = self.gains(act);
         let u_raw = -gains.k_i * self.x_i - gains.k_x[0] * z[0] - gains.k_x[1] * z[1];
         // Written out rather than `u_raw.max(0.0)`: `max` may return either zero for
         // u_raw = -0.0, and which one depends on the optimisation level, so a live loop and
         // its offline replay built differently disagreed bit for bit. This is always +0.0
         // at and below zero, and NaN (impossible for finite state) maps to 0 as well.
-        let u_cont = if u_raw > 0.0 { u_raw } else { 0.0 };
+        let u_cont = if !clamp || u_raw > 0.0 { u_raw } else { 0.0 };
+        let clamped = clamp && u_raw < 0.0;
         ControlAction {
             gains,
             u_raw,
             u_cont,
+            clamped,
         }
     }
 
@@ -231,6 +256,7 @@ impl LocalControllerNetwork {
         let winds_up = match self.anti_windup {
             AntiWindup::IntegralSign => drives_down && k_i * self.x_i > 0.0,
             AntiWindup::OutputClamp => drives_down,
+            AntiWindup::None => false,
         };
         if winds_up || !error.is_finite() {
             return false;

@@ -11,9 +11,13 @@
 //!
 //! 1. `r` = reference clamped to `[0, 1]` (non-finite -> 0);
 //! 2. activation `rho(phi_k)` of the core's scheduling value (model library);
-//! 3. `u_cont = max(0, -K_I(phi) x_I - K_x(phi)' z[k])` (LCN, eq. C.26);
+//! 3. `u_cont = -K_I(phi) x_I - K_x(phi)' z[k]` (LCN, eq. C.26), clamped at zero unless
+//!    the shaper sums the signed signal ([`ShaperSum`]);
 //! 4. pulse = shaper(`u_cont`) (eq. 6.8); at `r = 0` the shaper rests instead (no pulse,
-//!    its energy cleared: no stimulation while the muscle is to be at rest);
+//!    its energy cleared: no stimulation while the muscle is to be at rest), and with
+//!    [`AntiWindup::None`] the integrator is reset (every contraction starts from rest, as
+//!    the thesis's step responses do; plain integral action would otherwise integrate the
+//!    whole relaxation, and a rest force above zero without bound);
 //! 5. core step with `u = pulse` (model library): predicted force `y[k+d]`, model force
 //!    `y[k]`;
 //! 6. `x_I += Ts (y[k+d] - r)` with conditional integration (eq. C.24, LCN).
@@ -30,12 +34,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::{AdvancedForm, DelayLine, Network, NetworkError};
+use crate::model::{AdvancedForm, CoreState, DelayLine, Network, NetworkError};
 
 use super::design::LocalGains;
 use super::estimator::{EstimatorError, ForceEstimator};
 use super::lcn::{AntiWindup, LcnError, LocalControllerNetwork};
-use super::shaper::{PulseShaper, ShaperConfig, ShaperConfigError, ShaperStats};
+use super::shaper::{PulseShaper, ShaperConfig, ShaperConfigError, ShaperStats, ShaperSum};
 
 /// Which signal closes the controller's loop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -47,6 +51,28 @@ pub enum FeedbackMode {
     /// The measured force corrects the model state through the estimator and drives the
     /// integral action (thesis Fig. 6.6(a)).
     MeasuredForce,
+}
+
+/// Which model state the LCN feeds back in [`FeedbackMode::Model`] (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeedbackState {
+    /// The advanced core state `z[k] = x[k+d]`, integrating `y[k+d] - r`: the loop has no
+    /// delay and each frozen local loop has exactly the designed poles (ours; the rule of
+    /// controller files written before the choice was stored).
+    #[default]
+    Advanced,
+    /// The model state now, `x[k] = z[k-d]`, integrating `y[k] - r`: the thesis's loop
+    /// (Fig. 6.8, designed "assuming T_d = 0", C.2), whose `d`-sample delay the design
+    /// ignores. The controller sees a pulse's effect only `d` samples after it fired.
+    Delayed,
+}
+
+impl FeedbackState {
+    /// The choice of a controller file that does not name one: [`FeedbackState::Advanced`].
+    pub const fn legacy() -> Self {
+        Self::Advanced
+    }
 }
 
 /// Inputs of one tick.
@@ -63,7 +89,8 @@ pub struct TickInput {
 pub struct TickOutput {
     /// Fire a pulse now.
     pub pulse: bool,
-    /// Control signal handed to the shaper (clamped at 0).
+    /// Control signal handed to the shaper (clamped at 0 unless the shaper sums the signed
+    /// signal).
     pub u_cont: f64,
     /// Unclamped control law `-K_I x_I - K_x' z`.
     pub u_raw: f64,
@@ -102,6 +129,11 @@ pub enum PatternGeneratorError {
     /// Measured-force mode without estimator gains.
     #[error("feedback mode measured_force needs one estimator gain per unit")]
     MissingEstimator,
+    /// The delayed feedback state exists in the model mode only.
+    #[error(
+        "feedback_state delayed needs mode model (the measured-force mode re-predicts the advanced state)"
+    )]
+    DelayedMeasured,
     /// Invalid LCN gains.
     #[error(transparent)]
     Lcn(#[from] LcnError),
@@ -149,6 +181,10 @@ pub struct PatternGenerator {
     lcn: LocalControllerNetwork,
     shaper: PulseShaper,
     measured: Option<MeasuredLoop>,
+    /// [`FeedbackState::Delayed`]: the last `d` core states; pushing `z[k]` returns
+    /// `z[k-d] = x[k]`.
+    delayed: Option<DelayLine<CoreState<f64>>>,
+    initial_delayed: Option<DelayLine<CoreState<f64>>>,
     ticks: u64,
     references_clamped: u64,
     integrator_held: u64,
@@ -156,7 +192,7 @@ pub struct PatternGenerator {
 
 impl PatternGenerator {
     /// Build from a state-space network, one gain set per unit, shaper settings, the
-    /// anti-windup rule and, for
+    /// anti-windup rule, the feedback mode and state and, for
     /// [`FeedbackMode::MeasuredForce`], one estimator gain per unit. May allocate; `tick`
     /// does not.
     pub fn new(
@@ -165,6 +201,7 @@ impl PatternGenerator {
         shaper: ShaperConfig,
         anti_windup: AntiWindup,
         mode: FeedbackMode,
+        feedback_state: FeedbackState,
         estimator_gains: Option<&[[f64; 2]]>,
     ) -> Result<Self, PatternGeneratorError> {
         if net.ss_unit(0).is_none() {
@@ -196,12 +233,24 @@ impl PatternGenerator {
                 })
             }
         };
+        let delayed = match (feedback_state, mode) {
+            (FeedbackState::Advanced, _) => None,
+            (FeedbackState::Delayed, FeedbackMode::MeasuredForce) => {
+                return Err(PatternGeneratorError::DelayedMeasured);
+            }
+            (FeedbackState::Delayed, FeedbackMode::Model) => {
+                let d = net.delay();
+                Some(DelayLine::new(d, *core.state()).ok_or(NetworkError::Delay(d))?)
+            }
+        };
         Ok(Self {
             initial_core: core.clone(),
             core,
             lcn,
             shaper,
             measured,
+            initial_delayed: delayed,
+            delayed,
             ticks: 0,
             references_clamped: 0,
             integrator_held: 0,
@@ -243,6 +292,7 @@ impl PatternGenerator {
         self.core.clone_from(&self.initial_core);
         self.lcn.reset();
         self.shaper.reset();
+        self.delayed = self.initial_delayed;
         if let Some(m) = self.measured.as_mut() {
             m.estimator.reset(self.core.network());
             m.predictions = m.initial_predictions;
@@ -283,16 +333,29 @@ impl PatternGenerator {
     fn advance(&mut self, input: &TickInput, shaped: bool) -> TickOutput {
         self.ticks += 1;
         let r = self.reference(input.reference);
+        let clamp = self.shaper.config().sum == ShaperSum::Clamped;
         let x_i = self.lcn.x_i();
         let out = match self.measured.as_mut() {
             None => {
-                let act = self.core.activation();
-                let phi = self.core.phi();
-                let z = self.core.state().ss_state();
-                let action = self.lcn.control(&act, z);
+                let act_core = self.core.activation();
+                // The state fed back: the advanced core state, or the model state now.
+                let (act, state) = match self.delayed.as_mut() {
+                    None => (act_core, *self.core.state()),
+                    Some(ring) => {
+                        let x = ring.push(*self.core.state());
+                        (self.core.network().activation(&x), x)
+                    }
+                };
+                let (phi, z) = (state.phi, state.ss_state());
+                let action = self.lcn.control(&act, z, clamp);
                 let (pulse, u) = apply(&mut self.shaper, action.u_cont, r, shaped);
-                let step = self.core.step_with_activation(&act, u);
-                let integrated = self.lcn.integrate(&action, step.y_ahead - r);
+                let step = self.core.step_with_activation(&act_core, u);
+                let y_fed_back = if self.delayed.is_some() {
+                    step.y
+                } else {
+                    step.y_ahead
+                };
+                let integrated = self.lcn.integrate(&action, y_fed_back - r);
                 TickOutput {
                     pulse,
                     u_cont: action.u_cont,
@@ -314,7 +377,7 @@ impl PatternGenerator {
                 let act = net.activation(&core);
                 let phi = core.phi;
                 let z = core.ss_state();
-                let action = self.lcn.control(&act, z);
+                let action = self.lcn.control(&act, z, clamp);
                 let (pulse, u) = apply(&mut self.shaper, action.u_cont, r, shaped);
                 let y_ahead = net.step_with_activation(&mut core, &act, u);
                 let y_pred_now = m.predictions.push(y_ahead);
@@ -342,6 +405,9 @@ impl PatternGenerator {
         };
         if !out.integrated {
             self.integrator_held += 1;
+        }
+        if r == 0.0 && shaped && self.lcn.anti_windup() == AntiWindup::None {
+            self.lcn.reset();
         }
         out
     }

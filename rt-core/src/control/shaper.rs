@@ -3,8 +3,8 @@
 //!
 //! Semantics, per sample `k`:
 //!
-//! 1. `u = u_cont[k]` if it is finite and non-negative, else `u = 0` (counted in
-//!    [`ShaperStats::rejected_inputs`]).
+//! 1. `u = u_cont[k]` if it is finite (and, with [`ShaperSum::Clamped`], non-negative),
+//!    else `u = 0` (counted in [`ShaperStats::rejected_inputs`]).
 //! 2. `E += u` — the energy since the last pulse, eq. (6.8).
 //! 3. A pulse fires when `E >= eta` and at least `min_gap` empty samples have passed since
 //!    the last pulse (thesis: `k > lp + 1`, i.e. `min_gap = 1`, a pulse is always followed
@@ -31,14 +31,42 @@
 //! integrator can still drive `u_cont > 0` for tens of ms after the reference fell) and
 //! every contraction starts from the same shaper state.
 //!
+//! **Sum rule** ([`ShaperSum`]). The thesis sums `u_cont` as it is (eq. 6.8,
+//! [`ShaperSum::Signed`]): while the force is above the reference the control signal is
+//! negative, `E` falls below zero and the next pulse comes later, so the controller can
+//! delay a pulse (which a muscle whose single twitch overshoots the reference needs to hold
+//! a low force). With [`ShaperSum::Clamped`] the LCN's output is clamped at zero before
+//! the shaper (`u_cont = max(u_raw, 0)`), `E` never falls and a pulse can only be hastened.
+//! A negative `E` is never a hazard: it only postpones the next pulse.
+//!
 //! **Safety property: no catch-up burst.** After any period of saturation (or a stall
 //! upstream that made `u_cont` huge) at most one pulse follows once the input falls to
 //! zero: the banked energy is capped at `e_max` and a pulse restarts it at zero.
 
 use serde::{Deserialize, Serialize};
 
+/// What the shaper sums (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShaperSum {
+    /// The control signal as it is, negative values included (thesis eq. 6.8).
+    Signed,
+    /// The control signal clamped at zero (`u_cont = max(u_raw, 0)`); the rule of
+    /// controller files written before the rule was stored.
+    #[default]
+    Clamped,
+}
+
+impl ShaperSum {
+    /// The rule of a controller file that does not name one: [`ShaperSum::Clamped`].
+    pub const fn legacy() -> Self {
+        Self::Clamped
+    }
+}
+
 /// Settings of the pulse shaper.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ShaperConfig {
     /// Energy threshold `eta` for one pulse (eq. 6.8; the thesis uses 1 so that the pulse
     /// train keeps the energy of `u_cont`, eq. 6.7). Default 1.
@@ -49,6 +77,15 @@ pub struct ShaperConfig {
     /// Cap on the energy `E` banked while the gap holds a pulse back; must be at least
     /// `eta`. Default `2 eta`.
     pub e_max: f64,
+    /// What is summed (default [`ShaperSum::default`]; a file without it was written with
+    /// [`ShaperSum::legacy`]).
+    #[serde(default = "ShaperSum::legacy")]
+    pub sum: ShaperSum,
+    /// Floor of `E` under the signed sum, `<= 0` (`None`: unbounded, as eq. 6.8). It
+    /// bounds how long a run of negative control signal can postpone the next pulse; the
+    /// energy below it is counted in [`ShaperStats::discarded`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub e_min: Option<f64>,
 }
 
 impl Default for ShaperConfig {
@@ -57,6 +94,8 @@ impl Default for ShaperConfig {
             eta: 1.0,
             min_gap: 1,
             e_max: 2.0,
+            sum: ShaperSum::default(),
+            e_min: None,
         }
     }
 }
@@ -70,6 +109,9 @@ pub enum ShaperConfigError {
     /// `min_gap` must be at least 1 (a pulse is always followed by a zero, thesis 6.5.2).
     #[error("shaper min_gap = {0} must be at least 1 (a pulse is always followed by a zero)")]
     MinGap(u32),
+    /// `e_min` must be finite and at most 0.
+    #[error("shaper e_min = {0} must be finite and at most 0")]
+    EMin(f64),
     /// `e_max` must be finite and at least `eta`, or no pulse could ever fire.
     #[error("shaper e_max = {e_max} must be finite and at least eta = {eta}")]
     EMax {
@@ -89,6 +131,11 @@ impl ShaperConfig {
         if self.min_gap < 1 {
             return Err(ShaperConfigError::MinGap(self.min_gap));
         }
+        if let Some(m) = self.e_min
+            && !(m.is_finite() && m <= 0.0)
+        {
+            return Err(ShaperConfigError::EMin(m));
+        }
         if !(self.e_max.is_finite() && self.e_max >= self.eta) {
             return Err(ShaperConfigError::EMax {
                 e_max: self.e_max,
@@ -104,12 +151,14 @@ impl ShaperConfig {
 pub struct ShaperStats {
     /// Pulses fired.
     pub pulses: u64,
-    /// Energy dropped by the `e_max` cap (would otherwise have become a catch-up burst).
+    /// Energy dropped by the `e_max` cap (would otherwise have become a catch-up burst),
+    /// plus the (negative) energy cut off by the `e_min` floor.
     pub discarded: f64,
     /// Energy dropped when a pulse restarted the sum (`E - eta` at each pulse) and when
     /// [`PulseShaper::rest`] cleared it.
     pub dropped: f64,
-    /// Inputs that were negative or not finite and were treated as 0.
+    /// Inputs that were not finite (or, with [`ShaperSum::Clamped`], negative) and were
+    /// treated as 0.
     pub rejected_inputs: u64,
 }
 
@@ -141,7 +190,8 @@ impl PulseShaper {
         &self.config
     }
 
-    /// Present energy since the last pulse, `E`, in `[0, e_max]`.
+    /// Present energy since the last pulse, `E`, at most `e_max` (and at least 0 with
+    /// [`ShaperSum::Clamped`]).
     pub fn energy(&self) -> f64 {
         self.energy
     }
@@ -168,7 +218,11 @@ impl PulseShaper {
 
     /// One sample: accumulate `u_cont` and decide whether to fire a pulse now.
     pub fn step(&mut self, u_cont: f64) -> bool {
-        let u = if u_cont.is_finite() && u_cont >= 0.0 {
+        let accepted = match self.config.sum {
+            ShaperSum::Signed => u_cont.is_finite(),
+            ShaperSum::Clamped => u_cont.is_finite() && u_cont >= 0.0,
+        };
+        let u = if accepted {
             u_cont
         } else {
             self.stats.rejected_inputs += 1;
@@ -187,6 +241,12 @@ impl PulseShaper {
         if self.energy > self.config.e_max {
             self.stats.discarded += self.energy - self.config.e_max;
             self.energy = self.config.e_max;
+        }
+        if let Some(m) = self.config.e_min
+            && self.energy < m
+        {
+            self.stats.discarded += self.energy - m;
+            self.energy = m;
         }
         pulse
     }
@@ -260,8 +320,60 @@ mod tests {
     }
 
     #[test]
+    fn signed_sum_delays_the_next_pulse() {
+        let signed = ShaperConfig {
+            sum: ShaperSum::Signed,
+            ..ShaperConfig::default()
+        };
+        let mut s = PulseShaper::new(signed).unwrap();
+        assert!(s.step(1.0));
+        // Force above the reference: the control signal is negative and E falls below 0.
+        for _ in 0..4 {
+            assert!(!s.step(-0.5));
+        }
+        assert_eq!(s.energy(), -2.0);
+        // E must climb back through 0 to eta: 3 / 0.5 = 6 samples, not 2.
+        let fired: Vec<bool> = (0..6).map(|_| s.step(0.5)).collect();
+        assert_eq!(fired, [false, false, false, false, false, true]);
+        assert_eq!(s.stats().rejected_inputs, 0);
+        // The same inputs clamped: negative samples count as zero (and as rejected).
+        let mut c = PulseShaper::new(ShaperConfig {
+            sum: ShaperSum::Clamped,
+            ..signed
+        })
+        .unwrap();
+        assert!(c.step(1.0));
+        (0..4).for_each(|_| assert!(!c.step(-0.5)));
+        assert_eq!(c.energy(), 0.0);
+        assert!(!c.step(0.5));
+        assert!(c.step(0.5));
+        assert_eq!(c.stats().rejected_inputs, 4);
+    }
+
+    #[test]
+    fn a_file_without_a_sum_rule_reads_the_legacy_clamp() {
+        let c: ShaperConfig =
+            serde_json::from_str(r#"{"eta": 1.0, "min_gap": 1, "e_max": 2.0}"#).unwrap();
+        assert_eq!(c.sum, ShaperSum::Clamped);
+        let c: ShaperConfig =
+            serde_json::from_str(r#"{"eta": 1.0, "min_gap": 1, "e_max": 2.0, "sum": "signed"}"#)
+                .unwrap();
+        assert_eq!(c.sum, ShaperSum::Signed);
+        assert!(
+            serde_json::from_str::<ShaperConfig>(
+                r#"{"eta": 1.0, "min_gap": 1, "e_max": 2.0, "extra": 1}"#
+            )
+            .is_err()
+        );
+    }
+
+    #[test]
     fn bad_inputs_count_as_zero() {
-        let mut s = PulseShaper::new(ShaperConfig::default()).unwrap();
+        let clamped = ShaperConfig {
+            sum: ShaperSum::Clamped,
+            ..ShaperConfig::default()
+        };
+        let mut s = PulseShaper::new(clamped).unwrap();
         for u in [f64::NAN, -1.0, f64::INFINITY, f64::NEG_INFINITY] {
             assert!(!s.step(u));
         }

@@ -27,6 +27,28 @@ impl LcnRun {
     }
 }
 
+/// Mean of `force` over the whole inter-pulse intervals from `from` on: from the first
+/// pulse at or after `from` to the last pulse (convention 11 of docs/analysis.md). A
+/// periodic pattern then gives its period mean whatever the window's phase; with fewer
+/// than two pulses from `from` on it is the plain mean over `[from, n)`. `None` when
+/// `from >= force.len()`.
+pub fn steady_mean(force: &[f64], pulses: &[usize], from: usize) -> Option<f64> {
+    let n = force.len();
+    if from >= n {
+        return None;
+    }
+    let inside: Vec<usize> = pulses
+        .iter()
+        .copied()
+        .filter(|&k| k >= from && k < n)
+        .collect();
+    let (a, b) = match (inside.first(), inside.last()) {
+        (Some(&a), Some(&b)) if b > a => (a, b),
+        _ => (from, n),
+    };
+    Some(force[a..b].iter().sum::<f64>() / (b - a) as f64)
+}
+
 /// A reference at 0 that steps to `level` at sample `onset` and stays there, `n` samples.
 pub fn step_reference(level: f64, onset: usize, n: usize) -> Vec<f64> {
     (0..n)
@@ -158,6 +180,25 @@ pub fn pattern_shape(pulses: &[usize], criteria: &ShapeCriteria) -> Option<Patte
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn steady_mean_spans_whole_inter_pulse_intervals() {
+        // Period 4 (pulse at 0 mod 4), force 1, 0, 0, 0: period mean 0.25 from any start.
+        let force: Vec<f64> = (0..22)
+            .map(|k| if k % 4 == 0 { 1.0 } else { 0.0 })
+            .collect();
+        let pulses: Vec<usize> = (0..22).step_by(4).collect();
+        for from in 0..5 {
+            assert_eq!(
+                steady_mean(&force, &pulses, from),
+                Some(0.25),
+                "from {from}"
+            );
+        }
+        // The plain mean over [10, 22) would be 3/12.
+        assert_eq!(steady_mean(&force, &[12], 10), Some(3.0 / 12.0));
+        assert_eq!(steady_mean(&force, &pulses, 22), None);
+    }
 
     /// Hand-made patterns: doublet + pause + even; even only; burst without pause.
     #[test]
