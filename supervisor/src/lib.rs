@@ -16,6 +16,7 @@
 
 pub mod baseline;
 pub mod bench;
+pub mod cft;
 pub mod config;
 pub mod contraction;
 pub mod control;

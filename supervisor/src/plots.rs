@@ -287,3 +287,111 @@ pub fn plot_latency(out: &Path, title: &str, curves: &[LatencyCurve]) -> Result<
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
+
+/// The CFT front (issue 17, [`crate::cft`]): RMS tracking error against pulses per
+/// contraction of every constant-frequency train (labelled every 10 Hz), the trains of
+/// equal FTI (within 5 %) filled green, and the LCN's point.
+pub fn plot_front(
+    out: &Path,
+    title: &str,
+    verdict: &crate::cft::FrontVerdict,
+) -> Result<(), PlotError> {
+    let e = fail(out);
+    let root = BitMapBackend::new(out, (1000, 650)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let pts: Vec<&crate::cft::FrontPoint> = verdict
+        .cft_front
+        .iter()
+        .chain(std::iter::once(&verdict.lcn))
+        .filter(|p| p.rms_error.is_finite() && p.pulses_per_contraction.is_finite())
+        .collect();
+    let x_max = pts
+        .iter()
+        .map(|p| p.pulses_per_contraction)
+        .fold(1.0, f64::max)
+        * 1.05;
+    let y_max = pts.iter().map(|p| p.rms_error).fold(0.01, f64::max) * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc("pulses per contraction")
+        .y_desc("RMS tracking error (normalised force)")
+        .draw()
+        .map_err(|x| e(&x))?;
+    let reference = verdict.reference_fti_per_contraction;
+    let equal = |p: &crate::cft::FrontPoint| {
+        (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
+    };
+    let line: Vec<(f64, f64)> = verdict
+        .cft_front
+        .iter()
+        .map(|p| (p.pulses_per_contraction, p.rms_error))
+        .collect();
+    chart
+        .draw_series(LineSeries::new(line, BLUE.stroke_width(1)))
+        .map_err(|x| e(&x))?
+        .label("constant-frequency trains, 5-100 Hz")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1)));
+    chart
+        .draw_series(verdict.cft_front.iter().map(|p| {
+            if equal(p) {
+                Circle::new((p.pulses_per_contraction, p.rms_error), 5, GREEN.filled())
+            } else {
+                Circle::new(
+                    (p.pulses_per_contraction, p.rms_error),
+                    3,
+                    BLUE.stroke_width(1),
+                )
+            }
+        }))
+        .map_err(|x| e(&x))?;
+    chart
+        .draw_series(
+            verdict
+                .cft_front
+                .iter()
+                .filter(|p| p.hz.is_some_and(|h| h % 10 == 0))
+                .map(|p| {
+                    Text::new(
+                        format!("{} Hz", p.hz.unwrap_or(0)),
+                        (p.pulses_per_contraction, p.rms_error),
+                        ("sans-serif", 13),
+                    )
+                }),
+        )
+        .map_err(|x| e(&x))?;
+    let l = &verdict.lcn;
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (l.pulses_per_contraction, l.rms_error),
+            7,
+            RED.filled(),
+        )))
+        .map_err(|x| e(&x))?
+        .label(format!(
+            "LCN: {:.2} pulses, RMS {:.4}{}",
+            l.pulses_per_contraction,
+            l.rms_error,
+            if verdict.lcn_dominated {
+                " (dominated)"
+            } else {
+                ""
+            }
+        ))
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}

@@ -82,6 +82,24 @@ impl SimSettings {
     }
 }
 
+impl SimSettings {
+    /// The constant-frequency-train front on this run's muscle and sensor, judged against a
+    /// profile of `amplitude` (5-100 Hz, [`crate::cft`]).
+    pub fn front(&self, amplitude: f64) -> crate::cft::FrontSettings {
+        crate::cft::FrontSettings {
+            muscle: self.muscle,
+            sensor: self.sensor,
+            scale_n: self.scale_n,
+            offset_n: self.offset_n,
+            delay: self.contraction.delay_ms.round() as usize,
+            amplitude,
+            edge_rate_per_s: self.limits.max_rate_per_s,
+            min_hz: 5,
+            max_hz: 100,
+        }
+    }
+}
+
 /// A simulation failure.
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {

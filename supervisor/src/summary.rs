@@ -174,6 +174,11 @@ pub struct Summary {
     pub timing_functional_only: bool,
     /// The recording directory.
     pub recording: String,
+    /// The verdict against the constant-frequency trains (keys `cft_front`, `lcn`,
+    /// `reference_fti_per_contraction`, `lcn_dominated`, `pulses_vs_equal_rms_cft`,
+    /// `ftipp_vs_best_cft`; docs/bench.md).
+    #[serde(flatten, default)]
+    pub front: Option<crate::cft::FrontVerdict>,
 }
 
 fn rms(pairs: impl Iterator<Item = (f64, f64)>) -> f64 {
@@ -197,6 +202,8 @@ pub type BaselineFn = Box<dyn Fn(f64, usize, usize) -> Baseline>;
 
 /// What the analysis needs besides the recording.
 pub struct AnalysisInput {
+    /// The constant-frequency-train front to judge the run against (`None`: not judged).
+    pub front: Option<crate::cft::FrontSettings>,
     /// The model's delay, samples.
     pub delay: usize,
     /// The target amplitude.
@@ -452,6 +459,7 @@ pub fn summarise(
         stim_driver: drv,
         timing_functional_only: input.uml,
         recording,
+        front: input.front.as_ref().and_then(|f| f.verdict(s).ok()),
     }
 }
 
@@ -492,6 +500,7 @@ mod tests {
             target: 0.3,
             baseline: None,
             uml: false,
+            front: None,
         };
         let s = summarise(&series, &input, RunTiming::default(), String::new());
         assert!((s.worst_deviation_after_10 - 0.5).abs() < 1e-12);

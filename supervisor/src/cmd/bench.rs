@@ -17,7 +17,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use supervisor::baseline::{BeatShape, baseline_40hz};
 use supervisor::bench::{Stack, StackOptions, process_logs};
-use supervisor::plots::{LatencyCurve, RunSeries, percentile_grid, plot_latency, plot_run};
+use supervisor::plots::{
+    LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
+};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
 use supervisor::summary::{
@@ -301,6 +303,20 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
             out.join("recording").display()
         );
     };
+    // The same muscle and sensor as the stimulator's, simulated for the CFT front.
+    let front = rt_core::control::file::Controller::load(&a.controller)
+        .ok()
+        .and_then(|c| {
+            supervisor::simulation::SimSettings::bench(
+                &c,
+                a.fatigue,
+                ProfileSpec::Cardiac(cardiac(a)),
+                outer_settings(a),
+                a.seconds,
+            )
+            .ok()
+        })
+        .map(|s| s.front(a.amplitude));
     let summary = analyse(
         rec,
         &AnalysisInput {
@@ -308,6 +324,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
             target: a.amplitude,
             baseline: Some(baseline(a.amplitude, scale_n, delay)),
             uml,
+            front,
         },
     )?;
     let series = read_series(rec)?;
@@ -351,6 +368,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         outer_settings(a),
         a.seconds,
     )?;
+    let front = settings.front(a.amplitude);
     let run = simulate(&controller, &settings)?;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let beats_csv = out.join("beats.csv");
@@ -387,6 +405,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
             target: a.amplitude,
             baseline: Some(baseline(a.amplitude, scale_n, delay)),
             uml: false,
+            front: Some(front),
         },
         RunTiming {
             rt_core: none,
@@ -454,6 +473,18 @@ fn draw(
             .map(|(&t, _)| (t as f64 - t0 as f64) * 1e-9)
             .collect(),
     };
+    if let Some(v) = &s.front {
+        let p = out.join("front.png");
+        plot_front(
+            &p,
+            &format!(
+                "CFT front: target {}, FTI per contraction {:.4} s (green: equal FTI +-5 %)",
+                a.amplitude, v.reference_fti_per_contraction
+            ),
+            v,
+        )?;
+        paths.push(p);
+    }
     let from = 2.0f64.min(s.duration_s / 2.0);
     let p = out.join("force.png");
     plot_run(
@@ -547,6 +578,37 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
         s.pulses_sent
             .map_or(String::new(), |p| format!("; stimulator driver sent {p}"))
     );
+    if let Some(v) = &s.front {
+        let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));
+        let cheapest = v
+            .cft_front
+            .iter()
+            .filter(|p| p.rms_error <= v.lcn.rms_error)
+            .min_by(|a, b| {
+                a.pulses_per_contraction
+                    .total_cmp(&b.pulses_per_contraction)
+            });
+        println!(
+            "  CFT front (5-100 Hz over each contraction, same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
+            fmt(v.lcn.pulses_per_contraction, 2),
+            fmt(v.lcn.rms_error, 4),
+            fmt(v.lcn.ftipp, 3),
+            fmt(v.lcn.fti_per_contraction, 4),
+            fmt(v.reference_fti_per_contraction, 4)
+        );
+        println!(
+            "    dominated by a CFT of equal FTI: {}; pulses vs the cheapest CFT as good {}{}; FTIpP vs the best CFT of equal FTI {}",
+            if v.lcn_dominated { "YES" } else { "no" },
+            opt(v.pulses_vs_equal_rms_cft, 3),
+            cheapest.map_or(String::new(), |p| format!(
+                " ({} Hz: {} pulses, RMS {})",
+                p.hz.unwrap_or(0),
+                fmt(p.pulses_per_contraction, 1),
+                fmt(p.rms_error, 4)
+            )),
+            opt(v.ftipp_vs_best_cft, 3)
+        );
+    }
     println!(
         "  40 Hz baseline, same FTI   {} pulses per contraction, RMS error {} (FTI per contraction {} s)",
         fmt(s.baseline_pulses_per_contraction, 2),

@@ -1,0 +1,360 @@
+//! The bench's verdict: the LCN's patterns against the front of constant-frequency trains
+//! (CFTs) on the same muscle (issue 17, docs/bench.md "The CFT front").
+//!
+//! For the bench's reference profile, every CFT from `min_hz` to `max_hz` in 1 Hz steps
+//! starts at each beat's onset and spans its contraction window (pulses at
+//! `onset + j 1000/f ms` while inside the window); it drives the same simulated muscle
+//! (same preset, same fatigue setting, same force sensor and seed) over the same beats.
+//! Each train, and the LCN's run, is scored by the same three numbers:
+//!
+//! - pulses per contraction;
+//! - RMS tracking error: the measured (normalised) force against the *profile's*
+//!   reference (its amplitude, with the ramped edges; not the outer loop's corrected
+//!   one) delayed by the model's `d`, over the complete beats;
+//! - FTIpP (eq. 6.3) of a contraction: its FTI (eq. 6.2, measured force over
+//!   `[onset + d, onset + period + d)`) over `FTI_1 x pulses`, `FTI_1` the rested muscle's
+//!   twitch over the same window.
+//!
+//! The verdict: `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
+//! the reference's has no more pulses and no larger RMS error than the LCN, one of them
+//! strictly less; `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest
+//! CFT that tracks at least as well (none: `None`); `ftipp_vs_best_cft`, the LCN's FTIpP
+//! over the best of the CFTs of equal FTI (within 5 %).
+
+use serde::{Deserialize, Serialize};
+use sim_muscle::muscle::{Muscle, MuscleConfig};
+use sim_muscle::pattern::constant_train;
+use sim_muscle::plant::{MusclePlant, Pulse};
+use sim_muscle::sensor::{ForceSensor, SensorConfig};
+
+use crate::baseline::BeatShape;
+use crate::summary::Series;
+
+/// How close a CFT's FTI per contraction must be to the reference's to count as the same
+/// contraction (fraction).
+pub const EQUAL_FTI: f64 = 0.05;
+
+/// One beat of a run, in samples from the run's first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BeatWindow {
+    /// First sample of the beat.
+    pub start: usize,
+    /// Beat period, samples.
+    pub period: usize,
+    /// Contraction, samples.
+    pub on: usize,
+}
+
+/// The beats of a run's series (complete beats only), 1 ms samples.
+pub fn beat_windows(series: &Series) -> Vec<BeatWindow> {
+    let Some(&t0) = series.t_ns.first() else {
+        return Vec::new();
+    };
+    let n = series.t_ns.len();
+    series
+        .beats
+        .iter()
+        .filter_map(|b| {
+            let start = series.t_ns.partition_point(|&t| t < b.start_ns);
+            let period = (b.period_ns / 1_000_000) as usize;
+            let on = (b.on_ns / 1_000_000) as usize;
+            (start < n && b.start_ns >= t0).then_some(BeatWindow { start, period, on })
+        })
+        .collect()
+}
+
+/// The muscle and sensor the trains drive, and the profile they are judged against.
+#[derive(Debug, Clone)]
+pub struct FrontSettings {
+    /// The muscle (preset, fatigue, delay), as in the run.
+    pub muscle: MuscleConfig,
+    /// The force sensor of the run, or the exact force.
+    pub sensor: Option<SensorConfig>,
+    /// Newtons per normalised force.
+    pub scale_n: f64,
+    /// Offset removed before normalising, N.
+    pub offset_n: f64,
+    /// The model's delay, samples.
+    pub delay: usize,
+    /// The profile's amplitude, normalised.
+    pub amplitude: f64,
+    /// The profile's edge rate, normalised force per second.
+    pub edge_rate_per_s: f64,
+    /// Lowest train frequency, Hz.
+    pub min_hz: u32,
+    /// Highest train frequency, Hz.
+    pub max_hz: u32,
+}
+
+/// One point of the front (or the LCN's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FrontPoint {
+    /// Train frequency, Hz (`None` for the LCN).
+    pub hz: Option<u32>,
+    /// Pulses per contraction.
+    pub pulses_per_contraction: f64,
+    /// RMS of the measured force against the profile's reference (delayed by d).
+    pub rms_error: f64,
+    /// FTI per pulse normalised by the twitch's (eq. 6.3), per contraction.
+    pub ftipp: f64,
+    /// FTI per contraction (eq. 6.2), normalised force x s.
+    pub fti_per_contraction: f64,
+}
+
+/// The verdict of a run against the CFT front (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrontVerdict {
+    /// Every train of the front, by frequency.
+    pub cft_front: Vec<FrontPoint>,
+    /// The LCN's point.
+    pub lcn: FrontPoint,
+    /// FTI of one beat of the profile's reference, normalised force x s.
+    pub reference_fti_per_contraction: f64,
+    /// Some CFT of equal FTI has pulses <= and RMS <= the LCN's, one strictly.
+    pub lcn_dominated: bool,
+    /// LCN pulses / pulses of the cheapest CFT whose RMS is at most the LCN's.
+    pub pulses_vs_equal_rms_cft: Option<f64>,
+    /// LCN FTIpP / the best FTIpP of the CFTs of equal FTI.
+    pub ftipp_vs_best_cft: Option<f64>,
+}
+
+impl FrontSettings {
+    fn shape(&self, b: &BeatWindow) -> BeatShape {
+        BeatShape {
+            period_ms: b.period,
+            on_ms: b.on,
+            amplitude: self.amplitude,
+            edge_rate_per_s: self.edge_rate_per_s,
+            delay: self.delay,
+        }
+    }
+
+    /// The measured, normalised force of `pulse` on this muscle and sensor, sample k being
+    /// the force after the pulses of samples < k (the in-process chain's alignment).
+    pub fn measured(&self, pulse: &[bool]) -> Result<Vec<f64>, sim_muscle::ding::ParamError> {
+        let mut muscle = Muscle::new(self.muscle)?;
+        let mut sensor = match &self.sensor {
+            Some(c) => Some(ForceSensor::new(*c, self.muscle.ts_s)?),
+            None => None,
+        };
+        let mut read = |f: f64| match &mut sensor {
+            Some(s) => (s.measure(f) - self.offset_n) / self.scale_n,
+            None => (f - self.offset_n) / self.scale_n,
+        };
+        let mut out = Vec::with_capacity(pulse.len());
+        let mut now = read(0.0);
+        for &p in pulse {
+            out.push(now);
+            let f = muscle.step(p.then_some(Pulse::SUPRAMAXIMAL));
+            now = read(f);
+        }
+        Ok(out)
+    }
+
+    /// The twitch FTI of the rested muscle (no fatigue, exact force) over a beat window.
+    fn twitch_fti(&self, b: &BeatWindow) -> Result<f64, sim_muscle::ding::ParamError> {
+        let mut cfg = self.muscle;
+        cfg.fatigue = None;
+        let exact = FrontSettings {
+            muscle: cfg,
+            sensor: None,
+            offset_n: 0.0,
+            ..self.clone()
+        };
+        let len = b.period + self.delay + 1;
+        let mut train = vec![false; len];
+        train[0] = true;
+        let f = exact.measured(&train)?;
+        Ok(f[self.delay..self.delay + b.period].iter().sum::<f64>() * 1e-3)
+    }
+
+    /// Scores one run (pulses and measured force over the same samples) on the beats.
+    fn score(
+        &self,
+        hz: Option<u32>,
+        beats: &[BeatWindow],
+        pulse: &[bool],
+        measured: &[f64],
+        fti_1: f64,
+    ) -> FrontPoint {
+        let n = measured.len();
+        let (mut pulses, mut sq, mut count, mut fti) = (0usize, 0.0, 0usize, 0.0);
+        for b in beats {
+            let reference = self.shape(b).reference();
+            pulses += (b.start..(b.start + b.period).min(n))
+                .filter(|&k| pulse[k])
+                .count();
+            for (j, r) in reference.iter().enumerate() {
+                let k = b.start + j + self.delay;
+                if k < n && measured[k].is_finite() {
+                    sq += (measured[k] - r).powi(2);
+                    count += 1;
+                    fti += measured[k] * 1e-3;
+                }
+            }
+        }
+        let beats_n = beats.len().max(1) as f64;
+        let ppc = pulses as f64 / beats_n;
+        let fti_pc = fti / beats_n;
+        FrontPoint {
+            hz,
+            pulses_per_contraction: ppc,
+            rms_error: if count > 0 {
+                (sq / count as f64).sqrt()
+            } else {
+                f64::NAN
+            },
+            ftipp: fti_pc / (fti_1 * ppc),
+            fti_per_contraction: fti_pc,
+        }
+    }
+
+    /// The CFT front and the verdict for a run: its beats, pulses and measured force.
+    pub fn verdict(&self, run: &Series) -> Result<FrontVerdict, sim_muscle::ding::ParamError> {
+        let beats = beat_windows(run);
+        let n = run.pulse.len();
+        let Some(first) = beats.first() else {
+            return Ok(FrontVerdict {
+                cft_front: Vec::new(),
+                lcn: FrontPoint {
+                    hz: None,
+                    pulses_per_contraction: f64::NAN,
+                    rms_error: f64::NAN,
+                    ftipp: f64::NAN,
+                    fti_per_contraction: f64::NAN,
+                },
+                reference_fti_per_contraction: f64::NAN,
+                lcn_dominated: false,
+                pulses_vs_equal_rms_cft: None,
+                ftipp_vs_best_cft: None,
+            });
+        };
+        let fti_1 = self.twitch_fti(first)?;
+        let reference_fti = self.shape(first).reference().iter().sum::<f64>() * 1e-3;
+        let lcn = self.score(None, &beats, &run.pulse, &run.measured, fti_1);
+        let mut front = Vec::new();
+        for hz in self.min_hz..=self.max_hz {
+            let mut pulse = vec![false; n];
+            for b in &beats {
+                let times = constant_train(hz as f64, 0, b.on, 1e-3).unwrap_or_default();
+                for t in times {
+                    if b.start + t < n {
+                        pulse[b.start + t] = true;
+                    }
+                }
+            }
+            let measured = self.measured(&pulse)?;
+            front.push(self.score(Some(hz), &beats, &pulse, &measured, fti_1));
+        }
+        let equal_fti = |p: &&FrontPoint| {
+            (p.fti_per_contraction - reference_fti).abs() <= EQUAL_FTI * reference_fti
+        };
+        let lcn_dominated = front.iter().filter(equal_fti).any(|p| {
+            p.pulses_per_contraction <= lcn.pulses_per_contraction
+                && p.rms_error <= lcn.rms_error
+                && (p.pulses_per_contraction < lcn.pulses_per_contraction
+                    || p.rms_error < lcn.rms_error)
+        });
+        let cheapest = front
+            .iter()
+            .filter(|p| p.rms_error <= lcn.rms_error)
+            .map(|p| p.pulses_per_contraction)
+            .fold(f64::INFINITY, f64::min);
+        let best_ftipp = front
+            .iter()
+            .filter(equal_fti)
+            .map(|p| p.ftipp)
+            .fold(f64::NEG_INFINITY, f64::max);
+        Ok(FrontVerdict {
+            pulses_vs_equal_rms_cft: cheapest
+                .is_finite()
+                .then(|| lcn.pulses_per_contraction / cheapest),
+            ftipp_vs_best_cft: best_ftipp.is_finite().then(|| lcn.ftipp / best_ftipp),
+            cft_front: front,
+            lcn,
+            reference_fti_per_contraction: reference_fti,
+            lcn_dominated,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::summary::BeatRow;
+    use sim_muscle::preset::Preset;
+
+    fn settings() -> FrontSettings {
+        let muscle = MuscleConfig::preset(Preset::Fast);
+        FrontSettings {
+            muscle,
+            sensor: None,
+            scale_n: sim_muscle::muscle::max_force_n(&muscle.ding).unwrap(),
+            offset_n: 0.0,
+            delay: 7,
+            amplitude: 0.3,
+            edge_rate_per_s: 10.0,
+            min_hz: 5,
+            max_hz: 100,
+        }
+    }
+
+    /// A run that *is* one of the CFTs (20 Hz over each contraction): its own point lies
+    /// on the front, so it is not dominated by itself, and its pulse ratio against the
+    /// cheapest train that tracks as well is at most 1.
+    #[test]
+    fn a_cft_run_scores_as_its_own_front_point() {
+        let s = settings();
+        let (period, on, beats) = (800usize, 320usize, 4usize);
+        let n = period * beats + 100;
+        let mut pulse = vec![false; n];
+        for b in 0..beats {
+            for t in constant_train(20.0, 0, on, 1e-3).unwrap() {
+                pulse[b * period + t] = true;
+            }
+        }
+        let measured = s.measured(&pulse).unwrap();
+        let series = Series {
+            t_ns: (0..n as u64)
+                .map(|k| 1_000_000_000 + k * 1_000_000)
+                .collect(),
+            reference: vec![0.0; n],
+            model: vec![0.0; n],
+            measured,
+            pulse,
+            beats: (0..beats as u64)
+                .map(|b| BeatRow {
+                    start_ns: 1_000_000_000 + b * period as u64 * 1_000_000,
+                    period_ns: period as u64 * 1_000_000,
+                    on_ns: on as u64 * 1_000_000,
+                    plateau: f64::NAN,
+                    pulses: 0,
+                    fti: 0.0,
+                    pulses_refused: 0,
+                })
+                .collect(),
+        };
+        let v = s.verdict(&series).unwrap();
+        assert_eq!(v.cft_front.len(), 96);
+        let own = v.cft_front.iter().find(|p| p.hz == Some(20)).unwrap();
+        assert_eq!(own.pulses_per_contraction, v.lcn.pulses_per_contraction);
+        assert_eq!(own.pulses_per_contraction, 7.0);
+        assert!((own.rms_error - v.lcn.rms_error).abs() < 1e-12);
+        assert!((own.ftipp - v.lcn.ftipp).abs() < 1e-12);
+        let ratio = v.pulses_vs_equal_rms_cft.unwrap();
+        assert!(ratio <= 1.0 + 1e-12, "{ratio}");
+        // Pulses grow with the frequency; the twitch normalisation makes FTIpP finite.
+        assert!(
+            v.cft_front
+                .windows(2)
+                .all(|w| { w[1].pulses_per_contraction >= w[0].pulses_per_contraction })
+        );
+        assert!(
+            v.cft_front
+                .iter()
+                .all(|p| p.ftipp.is_finite() && p.ftipp > 0.0)
+        );
+        // The reference's FTI: 0.3 over (about) 320 ms, less the ramps.
+        assert!((v.reference_fti_per_contraction - 0.3 * 0.32).abs() < 0.3 * 0.32 * 0.1);
+    }
+}
