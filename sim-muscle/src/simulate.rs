@@ -19,3 +19,35 @@ pub fn simulate(plant: &mut dyn MusclePlant, train: &[bool], pulse: Pulse) -> Ve
     }
     force
 }
+
+/// The Ding muscle as a pattern-to-force map for the optimal-stimulation-pattern methods
+/// of rt-core (`rt_core::analysis::osp`): each pattern runs from rest, the rest force
+/// removed, in newtons.
+#[derive(Debug, Clone)]
+pub struct MuscleResponse {
+    muscle: crate::muscle::Muscle,
+}
+
+impl MuscleResponse {
+    /// The response of `muscle` (reset before every pattern).
+    pub fn new(muscle: crate::muscle::Muscle) -> Self {
+        Self { muscle }
+    }
+}
+
+impl rt_core::analysis::osp::ForceResponse for MuscleResponse {
+    fn ts(&self) -> f64 {
+        self.muscle.ts()
+    }
+
+    fn force(&self, train: &[bool]) -> Result<Vec<f64>, rt_core::analysis::osp::OspError> {
+        let mut m = self.muscle.clone();
+        m.reset();
+        let rest = m.initial_force();
+        let mut f = simulate(&mut m, train, Pulse::SUPRAMAXIMAL);
+        for v in &mut f {
+            *v -= rest;
+        }
+        Ok(f)
+    }
+}

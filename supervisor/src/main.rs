@@ -31,6 +31,9 @@ enum Command {
     Modify(cmd::modify::Args),
     /// Design the Local Controller Network by pole placement (thesis 6.5.3, Tables 6.1/6.2).
     Design(cmd::design::Args),
+    /// The pattern generator's loop variants side by side on step references (issue 17,
+    /// docs/control.md "Variants").
+    LcnVariants(cmd::lcn_variants::Args),
     /// Optimal stimulation patterns: FTI/FTIpP, random, trains, iterative and LCN methods
     /// (thesis ch. 6).
     Osp(cmd::osp::Args),
@@ -60,6 +63,7 @@ fn main() -> anyhow::Result<()> {
         Command::Modify(args) => cmd::modify::run(args),
         Command::Design(args) => cmd::design::run(args),
         Command::Osp(args) => cmd::osp::run(args),
+        Command::LcnVariants(args) => cmd::lcn_variants::run(args),
         Command::Run(args) => cmd::run::run(args),
         Command::Set(args) => cmd::client::set(args),
         Command::Profile(args) => cmd::client::profile(args),

@@ -3,7 +3,7 @@
 //! the analysis commands share).
 //!
 //! Offline model work: [`identify`], [`sweep`], [`compare`], [`analyse`], [`modify`],
-//! [`design`], [`osp`]. The live runtime: the daemon ([`run`]), the operator client
+//! [`design`], [`lcn_variants`], [`osp`]. The live runtime: the daemon ([`run`]), the operator client
 //! ([`client`]: `set`, `profile`, `stop`, `arm`, `status`) and the end-to-end [`bench`].
 
 pub mod analyse;
@@ -13,6 +13,7 @@ pub mod compare;
 pub mod design;
 pub mod identify;
 pub mod inputs;
+pub mod lcn_variants;
 pub mod modify;
 pub mod osp;
 pub mod plots;

@@ -24,13 +24,12 @@ use rt_core::analysis::osp::lcn::{
 };
 use rt_core::analysis::osp::random::{RandomPattern, best_and_worst, random_method};
 use rt_core::analysis::osp::trains::{TrainSurface, train_surface};
-use rt_core::analysis::osp::{Evaluator, ForceResponse, ModelResponse, OspError};
+use rt_core::analysis::osp::{Evaluator, ForceResponse, ModelResponse};
 use rt_core::control::file::Controller;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
-use sim_muscle::plant::{MusclePlant, Pulse};
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::ProtocolConfig;
-use sim_muscle::simulate::simulate;
+use sim_muscle::simulate::MuscleResponse;
 
 use super::inputs::{md_table, open_model, out_dir, parse_list, progress, write_csv};
 use super::plots::{self, Figure, HeatMap, Line, Markers, Panel, color};
@@ -113,28 +112,6 @@ pub struct Args {
     pub lcn_ms: u32,
 }
 
-/// The Ding muscle as a pattern-to-force map (newtons).
-struct DingResponse {
-    muscle: Muscle,
-}
-
-impl ForceResponse for DingResponse {
-    fn ts(&self) -> f64 {
-        self.muscle.ts()
-    }
-
-    fn force(&self, train: &[bool]) -> Result<Vec<f64>, OspError> {
-        let mut m = self.muscle.clone();
-        m.reset();
-        let rest = m.initial_force();
-        let mut f = simulate(&mut m, train, Pulse::SUPRAMAXIMAL);
-        for v in &mut f {
-            *v -= rest;
-        }
-        Ok(f)
-    }
-}
-
 /// One muscle or model the methods run on.
 struct Subject {
     name: String,
@@ -198,7 +175,7 @@ pub fn run(args: Args) -> Result<()> {
         subjects.push(Subject {
             name: format!("Ding {} muscle", preset.name()),
             unit: "N",
-            response: Box::new(DingResponse { muscle }),
+            response: Box::new(MuscleResponse::new(muscle)),
             to_normalised: controller
                 .as_ref()
                 .map_or(1.0, |c| 1.0 / c.lmn.force_scale_n),

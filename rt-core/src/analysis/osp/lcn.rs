@@ -3,6 +3,7 @@
 //! the shape of the pattern it produces (6.5.4: on the fast muscle a doublet or triplet,
 //! then a pause, then nearly even pulses).
 
+use super::{ForceResponse, OspError};
 use crate::control::pattern_generator::{PatternGenerator, TickInput};
 
 /// The closed loop's signals over one run, one value per 1-sample tick.
@@ -175,6 +176,126 @@ pub fn pattern_shape(pulses: &[usize], criteria: &ShapeCriteria) -> Option<Patte
         has_pause,
         is_even,
     })
+}
+
+/// How a step run is set up and scored ([`evaluate_step`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepSettings {
+    /// Sample at which the reference steps from 0 to the level.
+    pub onset: usize,
+    /// Samples of the run.
+    pub samples: usize,
+    /// Shape criteria (convention 9 of docs/analysis.md).
+    pub criteria: ShapeCriteria,
+}
+
+impl StepSettings {
+    /// The variant table's runs (docs/control.md): the step at 50 ms, 3 s in all, at
+    /// `ts`; the hold is scored over its second half (1.5-3 s), long enough for a few
+    /// periods of the slowest pattern (the slow muscle at r = 0.1, IPI ~650 ms).
+    pub fn variant_table(ts: f64) -> Self {
+        Self {
+            onset: (0.05 / ts).round() as usize,
+            samples: (3.0 / ts).round() as usize,
+            criteria: ShapeCriteria::default(),
+        }
+    }
+
+    /// First sample of the scored half: `samples / 2`.
+    pub fn second_half(&self) -> usize {
+        self.samples / 2
+    }
+}
+
+/// One subject (muscle or model) driven by the pattern outside the loop (Fig. 6.6(b)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SubjectScore {
+    /// [`steady_mean`] of its force over the second half, normalised.
+    pub mean: f64,
+    /// RMS of (force - r) from the onset to the end, normalised.
+    pub rms: f64,
+}
+
+/// The score of one step run: pattern, shape and means.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepScore {
+    /// The reference level.
+    pub level: f64,
+    /// Pulse times, samples.
+    pub pulses: Vec<usize>,
+    /// The pattern's shape (`None` for fewer than two pulses).
+    pub shape: Option<PatternShape>,
+    /// [`steady_mean`] of the loop's model force over the second half.
+    pub loop_mean: f64,
+    /// RMS of (loop model force - r) from the onset to the end.
+    pub loop_rms: f64,
+    /// One score per subject, in the order given.
+    pub subjects: Vec<SubjectScore>,
+}
+
+impl StepScore {
+    /// Pulses at or after sample `from`.
+    pub fn pulses_from(&self, from: usize) -> usize {
+        self.pulses.iter().filter(|&&k| k >= from).count()
+    }
+
+    /// The first IPI, samples.
+    pub fn first_ipi(&self) -> Option<usize> {
+        (self.pulses.len() >= 2).then(|| self.pulses[1] - self.pulses[0])
+    }
+
+    /// IPIs shorter than `ipi` samples after the opening burst and its pause (a burst
+    /// limit cycle when any).
+    pub fn short_ipis_after_opening(&self, ipi: usize) -> usize {
+        self.shape
+            .as_ref()
+            .map_or(0, |s| s.steady_ipis.iter().filter(|&&i| i < ipi).count())
+    }
+}
+
+/// Runs the pattern generator on a step to `level` ([`run_pattern_generator`]), drives each
+/// subject with the pattern (its force times the given factor into the loop's normalised
+/// units) and scores the run.
+pub fn evaluate_step(
+    pg: &mut PatternGenerator,
+    level: f64,
+    settings: &StepSettings,
+    subjects: &[(&dyn ForceResponse, f64)],
+) -> Result<(LcnRun, StepScore), OspError> {
+    if settings.samples < 4 || settings.onset >= settings.samples / 2 {
+        return Err(OspError::Settings(format!(
+            "step run of {} samples with the onset at {}: need the onset in the first half",
+            settings.samples, settings.onset
+        )));
+    }
+    let run = run_pattern_generator(pg, &step_reference(level, settings.onset, settings.samples));
+    let pulses = run.pulse_times();
+    let half = settings.second_half();
+    let rms = |y: &[f64]| {
+        let tail = &y[settings.onset..];
+        (tail.iter().map(|v| (v - level).powi(2)).sum::<f64>() / tail.len() as f64).sqrt()
+    };
+    let mut scores = Vec::with_capacity(subjects.len());
+    for (response, scale) in subjects {
+        let f: Vec<f64> = response
+            .force(&run.pulse)?
+            .iter()
+            .map(|v| v * scale)
+            .collect();
+        scores.push(SubjectScore {
+            mean: steady_mean(&f, &pulses, half).unwrap_or(f64::NAN),
+            rms: rms(&f),
+        });
+    }
+    let score = StepScore {
+        level,
+        shape: pattern_shape(&pulses, &settings.criteria),
+        loop_mean: steady_mean(&run.model_force, &pulses, half).unwrap_or(f64::NAN),
+        loop_rms: rms(&run.model_force),
+        pulses,
+        subjects: scores,
+    };
+    Ok((run, score))
 }
 
 #[cfg(test)]
