@@ -21,6 +21,7 @@ fuzz_target!(|data: &[u8]| {
         let d = g.tick(&TickInput {
             reference: r,
             measured_force: None,
+            resting: false,
         });
         assert!(
             d.u_cont.is_finite() && d.energy.is_finite() && d.model_force.is_finite(),

@@ -42,6 +42,7 @@ fn bench_tick(c: &mut Criterion) {
         let input = TickInput {
             reference: 0.5,
             measured_force: Some(0.5),
+            resting: false,
         };
         for _ in 0..2000 {
             pg.tick(&input);

@@ -53,6 +53,7 @@ fn round_trip_through_a_file_keeps_everything() {
         let input = TickInput {
             reference: 0.4,
             measured_force: Some(0.1 * (k % 5) as f64),
+            resting: false,
         };
         assert_eq!(a.tick(&input), b.tick(&input), "k {k}");
     }

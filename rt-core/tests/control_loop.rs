@@ -54,6 +54,7 @@ fn one_unit_unshaped_loop_follows_the_linear_closed_loop() {
         let out = pg.tick_unshaped(&TickInput {
             reference: r,
             measured_force: None,
+            resting: false,
         });
         assert!(
             out.u_raw >= 0.0 && out.integrated,
@@ -93,6 +94,7 @@ fn run(
         let out = pg.tick(&TickInput {
             reference: r,
             measured_force: None,
+            resting: false,
         });
         force.push(out.model_force);
         if out.pulse {
@@ -150,10 +152,12 @@ fn reset_reproduces_the_run_and_bad_references_are_clamped() {
             let a = pg.tick(&TickInput {
                 reference: bad,
                 measured_force: None,
+                resting: false,
             });
             let b = reference.tick(&TickInput {
                 reference: good,
                 measured_force: None,
+                resting: false,
             });
             assert_eq!(a, b);
         }
@@ -179,6 +183,7 @@ fn anti_windup_holds_the_integrator_when_reference_drops() {
         let out = pg.tick(&TickInput {
             reference: 0.0,
             measured_force: None,
+            resting: false,
         });
         if !out.integrated {
             held += 1;
@@ -299,6 +304,7 @@ fn no_pulse_while_the_reference_is_zero() {
             let out = pg.tick(&TickInput {
                 reference: r,
                 measured_force: None,
+                resting: false,
             });
             if r == 0.0 {
                 assert!(!out.pulse, "beat {beat}: pulse at rest, {k} ms");
@@ -315,6 +321,39 @@ fn no_pulse_while_the_reference_is_zero() {
     assert!(
         asked_at_rest > 0,
         "the LCN never asked for stimulation at rest: the gate is untested"
+    );
+}
+
+/// A reference ramping down to rest (`resting`): the shaper rests from the first tick of
+/// the ramp, although the reference is still high and the LCN asks for stimulation.
+#[test]
+fn no_pulse_while_the_reference_ramps_down_to_rest() {
+    let c = controller(fast_muscle(6), &table_6_1_specs(6));
+    let mut gated = c.pattern_generator().unwrap();
+    let mut free = c.pattern_generator().unwrap();
+    run(&mut gated, 0.5, 300);
+    run(&mut free, 0.5, 300);
+    let (mut asked, mut free_pulses) = (0, 0);
+    for k in 0..40 {
+        let r = 0.5 - 0.01 * k as f64;
+        let g = gated.tick(&TickInput {
+            reference: r,
+            measured_force: None,
+            resting: true,
+        });
+        let f = free.tick(&TickInput {
+            reference: r,
+            measured_force: None,
+            resting: false,
+        });
+        assert!(!g.pulse, "pulse at {k} ms of the ramp to rest");
+        assert_eq!(g.energy, 0.0);
+        asked += usize::from(g.u_cont > 0.0);
+        free_pulses += usize::from(f.pulse);
+    }
+    assert!(
+        asked > 0 && free_pulses > 0,
+        "{asked} {free_pulses}: the gate held nothing back"
     );
 }
 

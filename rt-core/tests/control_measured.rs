@@ -75,6 +75,7 @@ fn run_with_plant(
         let out = pg.tick(&TickInput {
             reference: r,
             measured_force: Some(y),
+            resting: false,
         });
         if out.pulse {
             pulses.push(k);
@@ -97,10 +98,12 @@ fn with_a_perfect_model_the_measured_mode_makes_the_model_modes_decisions() {
         let oa = a.tick(&TickInput {
             reference: r,
             measured_force: None,
+            resting: false,
         });
         let ob = b.tick(&TickInput {
             reference: r,
             measured_force: Some(y),
+            resting: false,
         });
         assert!(
             ob.innovation.abs() < 1e-12,
@@ -167,6 +170,7 @@ fn missing_measurements_are_counted_and_survived() {
         let out = pg.tick(&TickInput {
             reference: 0.3,
             measured_force: measured,
+            resting: false,
         });
         assert!(out.u_cont.is_finite() && out.x_i.is_finite());
         muscle.apply(out.pulse);

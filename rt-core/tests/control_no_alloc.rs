@@ -103,6 +103,7 @@ fn tick_and_reset_never_allocate_with_ten_units() {
                 let out = pg.tick(&TickInput {
                     reference,
                     measured_force,
+                    resting: false,
                 });
                 pulses += out.pulse as u64;
                 if k == 50_000 {

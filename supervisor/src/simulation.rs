@@ -211,6 +211,7 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
         let o = pg.tick(&TickInput {
             reference: target.value,
             measured_force: Some(measured_now),
+            resting: target.resting,
         });
         out.reference.push(target.value);
         out.model_force.push(o.model_force);

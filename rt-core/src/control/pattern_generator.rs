@@ -82,6 +82,10 @@ pub struct TickInput {
     pub reference: f64,
     /// Measured force `y[k]`, normalised (used only in [`FeedbackMode::MeasuredForce`]).
     pub measured_force: Option<f64>,
+    /// The reference is heading to rest (ramping down to zero): the shaper rests as at a
+    /// zero reference (rt-core's reference tracker sets it; `false` when only a value is
+    /// known).
+    pub resting: bool,
 }
 
 /// Outputs of one tick.
@@ -333,6 +337,8 @@ impl PatternGenerator {
     fn advance(&mut self, input: &TickInput, shaped: bool) -> TickOutput {
         self.ticks += 1;
         let r = self.reference(input.reference);
+        // At rest (a zero reference, or one ramping down to zero) the shaper rests.
+        let rest = r == 0.0 || input.resting;
         let clamp = self.shaper.config().sum == ShaperSum::Clamped;
         let x_i = self.lcn.x_i();
         let out = match self.measured.as_mut() {
@@ -348,7 +354,7 @@ impl PatternGenerator {
                 };
                 let (phi, z) = (state.phi, state.ss_state());
                 let action = self.lcn.control(&act, z, clamp);
-                let (pulse, u) = apply(&mut self.shaper, action.u_cont, r, shaped);
+                let (pulse, u) = apply(&mut self.shaper, action.u_cont, rest, shaped);
                 let step = self.core.step_with_activation(&act_core, u);
                 let y_fed_back = if self.delayed.is_some() {
                     step.y
@@ -378,7 +384,7 @@ impl PatternGenerator {
                 let phi = core.phi;
                 let z = core.ss_state();
                 let action = self.lcn.control(&act, z, clamp);
-                let (pulse, u) = apply(&mut self.shaper, action.u_cont, r, shaped);
+                let (pulse, u) = apply(&mut self.shaper, action.u_cont, rest, shaped);
                 let y_ahead = net.step_with_activation(&mut core, &act, u);
                 let y_pred_now = m.predictions.push(y_ahead);
                 m.estimator.push_pulse(u);
@@ -406,7 +412,7 @@ impl PatternGenerator {
         if !out.integrated {
             self.integrator_held += 1;
         }
-        if r == 0.0 && shaped && self.lcn.anti_windup() == AntiWindup::None {
+        if rest && shaped && self.lcn.anti_windup() == AntiWindup::None {
             self.lcn.reset();
         }
         out
@@ -417,11 +423,11 @@ impl PatternGenerator {
 /// zero reference `r` the shaper rests: no pulse, its energy cleared
 /// ([`PulseShaper::rest`]); the bypass (analysis of the continuous loop) is not gated.
 #[inline(always)]
-fn apply(shaper: &mut PulseShaper, u_cont: f64, r: f64, shaped: bool) -> (bool, f64) {
+fn apply(shaper: &mut PulseShaper, u_cont: f64, rest: bool, shaped: bool) -> (bool, f64) {
     if !shaped {
         return (false, u_cont);
     }
-    if r == 0.0 {
+    if rest {
         shaper.rest();
         return (false, 0.0);
     }

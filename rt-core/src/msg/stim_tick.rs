@@ -76,8 +76,11 @@ impl StimTick {
     pub const FLAG_DEGRADED: u16 = 1 << 7;
     /// The operator stop of the reference is in effect.
     pub const FLAG_STOP: u16 = 1 << 8;
-    /// All flags defined in v1.
-    pub const KNOWN_FLAGS: u16 = (1 << 9) - 1;
+    /// The target is heading to rest (a zero reference still ramping down): the pattern
+    /// generator rested (added 2026-12, issue 17).
+    pub const FLAG_RESTING: u16 = 1 << 9;
+    /// All flags defined.
+    pub const KNOWN_FLAGS: u16 = (1 << 10) - 1;
     /// Highest stimulator channel index.
     pub const MAX_CHANNEL: u8 = 15;
     /// Contract ceiling of the amplitude, µA (a sanity bound; the driver and the stimulator

@@ -102,7 +102,7 @@ impl<S: TickSource> PatternLoop<S> {
             .feedback
             .as_ref()
             .and_then(|f| f.measured(wake.wake_ns));
-        let mut decision = self.source.tick(target.value, measured);
+        let mut decision = self.source.tick(&target, measured);
         let mut events = StepEvents::default();
         if !decision.is_finite() {
             self.source.reset();
@@ -120,6 +120,7 @@ impl<S: TickSource> PatternLoop<S> {
         set(target.stale, StimTick::FLAG_STALE_REFERENCE);
         set(target.none, StimTick::FLAG_NO_REFERENCE);
         set(target.stop, StimTick::FLAG_STOP);
+        set(target.resting, StimTick::FLAG_RESTING);
         set(wake.missed_periods > 0, StimTick::FLAG_OVERRUN);
         set(
             self.rejected_since_last_tick,
@@ -175,6 +176,7 @@ mod tests {
     use super::*;
     use crate::msg::Contract;
     use crate::rt::clock::PeriodicSchedule;
+    use crate::rt::reference::Target;
     use crate::rt::source::TestPattern;
     use core::time::Duration;
 
@@ -200,7 +202,7 @@ mod tests {
     /// A source that returns NaN on its third call.
     struct Faulty(u32);
     impl TickSource for Faulty {
-        fn tick(&mut self, _r: f64, _m: Option<f64>) -> TickDecision {
+        fn tick(&mut self, _r: &Target, _m: Option<f64>) -> TickDecision {
             self.0 += 1;
             TickDecision {
                 pulse: true,

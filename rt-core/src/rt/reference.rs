@@ -52,6 +52,25 @@ pub struct Target {
     pub stale: bool,
     /// The reference's operator stop is in effect (target 0).
     pub stop: bool,
+    /// The target is at or on its way to zero (no reference, a stale one, an operator stop,
+    /// or a reference of zero force still ramping down): the pattern generator rests (no
+    /// pulse) from the first tick of the ramp, not only once the ramp has reached zero.
+    pub resting: bool,
+}
+
+impl Target {
+    /// A target of `value` from a reference in use (tests, tools): resting exactly when the
+    /// value is zero.
+    pub fn at(value: f64) -> Self {
+        Self {
+            value,
+            ref_seq: 0,
+            none: false,
+            stale: false,
+            stop: false,
+            resting: value == 0.0,
+        }
+    }
 }
 
 /// Holds the reference in use and the ramped target.
@@ -118,6 +137,7 @@ impl ReferenceTracker {
                 none: true,
                 stale: false,
                 stop: false,
+                resting: true,
             };
         };
         let stale = now_ns.saturating_sub(reference.t_ns) > self.policy.stale_after_ns;
@@ -136,6 +156,7 @@ impl ReferenceTracker {
             none: false,
             stale,
             stop,
+            resting: desired == 0.0,
         }
     }
 }
@@ -187,6 +208,30 @@ mod tests {
             let expect = (0.5 + 0.01 * k as f64).min(1.0);
             assert!((v - expect).abs() < 1e-12, "k={k}: {v} vs {expect}");
         }
+    }
+
+    /// A reference of zero force reached by a ramp: the target is resting from the first
+    /// tick of the ramp down (the pattern generator then fires no pulse while the force is
+    /// to fall), and not while it ramps up.
+    #[test]
+    fn a_ramp_down_to_zero_is_resting_from_its_first_tick() {
+        let mut t = tracker();
+        let mut up = Reference::new(1, MS, 0.4);
+        up.max_rate_per_s = 50.0;
+        t.offer(&up, MS).unwrap();
+        let first = t.advance(MS);
+        assert!(!first.resting && first.value == 0.0, "{first:?}");
+        let rising = t.advance(2 * MS);
+        assert!(!rising.resting && rising.value > 0.0, "{rising:?}");
+        for k in 3..20 {
+            t.advance(k * MS);
+        }
+        let mut down = Reference::new(2, 20 * MS, 0.0);
+        down.max_rate_per_s = 50.0;
+        t.offer(&down, 20 * MS).unwrap();
+        let ramp = t.advance(21 * MS);
+        assert!(ramp.resting && ramp.value > 0.3, "{ramp:?}");
+        assert!(Target::at(0.0).resting && !Target::at(0.2).resting);
     }
 
     #[test]

@@ -8,6 +8,7 @@
 use std::path::Path;
 use std::time::Duration;
 
+use super::reference::Target;
 use crate::control::file::{Controller, ControllerFileError};
 use crate::control::pattern_generator::{
     FeedbackMode, PatternGenerator, PatternGeneratorError, TickInput,
@@ -48,9 +49,9 @@ impl TickDecision {
 /// One step of a pattern generator, called once per tick from the real-time thread: it must
 /// not allocate, lock, log or block.
 pub trait TickSource {
-    /// Decides this tick from the target `reference` (normalised force, [0, 1]) and, in
-    /// feedback mode, the latest measured force.
-    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision;
+    /// Decides this tick from the target (its value, normalised force in [0, 1], and
+    /// whether it is heading to rest) and, in feedback mode, the latest measured force.
+    fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision;
 
     /// Returns to rest (all states zero), e.g. after a fault.
     fn reset(&mut self);
@@ -139,10 +140,11 @@ impl ControllerSource {
 
 impl TickSource for ControllerSource {
     #[inline]
-    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision {
+    fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision {
         let out = self.generator.tick(&TickInput {
-            reference,
+            reference: target.value,
             measured_force,
+            resting: target.resting,
         });
         TickDecision {
             pulse: out.pulse,
@@ -193,7 +195,8 @@ impl TestPattern {
 }
 
 impl TickSource for TestPattern {
-    fn tick(&mut self, reference: f64, _measured_force: Option<f64>) -> TickDecision {
+    fn tick(&mut self, target: &Target, _measured_force: Option<f64>) -> TickDecision {
+        let reference = target.value;
         // `reference > 0.0` is false for NaN as well: no pulse on a bad input.
         let pulse = if reference > 0.0 {
             let fire = self.since_last.is_none_or(|n| n + 1 >= self.ipi_ticks);
@@ -234,10 +237,14 @@ mod tests {
     #[test]
     fn fires_every_ipi_ticks_while_the_reference_is_positive() {
         let mut p = TestPattern::new(5).unwrap();
-        let fired = (0..23).filter(|_| p.tick(0.4, None).pulse).count();
+        let fired = (0..23)
+            .filter(|_| p.tick(&Target::at(0.4), None).pulse)
+            .count();
         assert_eq!(fired, 5); // ticks 0, 5, 10, 15, 20
         let mut p = TestPattern::new(5).unwrap();
-        let pattern: Vec<bool> = (0..11).map(|_| p.tick(0.4, None).pulse).collect();
+        let pattern: Vec<bool> = (0..11)
+            .map(|_| p.tick(&Target::at(0.4), None).pulse)
+            .collect();
         let expect: Vec<bool> = (0..11).map(|k| k % 5 == 0).collect();
         assert_eq!(pattern, expect);
     }
@@ -245,11 +252,11 @@ mod tests {
     #[test]
     fn zero_reference_stops_and_restarts_the_count() {
         let mut p = TestPattern::new(3).unwrap();
-        assert!(p.tick(1.0, None).pulse);
-        assert!(!p.tick(1.0, None).pulse);
-        assert!(!p.tick(0.0, None).pulse);
-        assert!(p.tick(1.0, None).pulse);
-        assert!(!p.tick(f64::NAN, None).pulse);
+        assert!(p.tick(&Target::at(1.0), None).pulse);
+        assert!(!p.tick(&Target::at(1.0), None).pulse);
+        assert!(!p.tick(&Target::at(0.0), None).pulse);
+        assert!(p.tick(&Target::at(1.0), None).pulse);
+        assert!(!p.tick(&Target::at(f64::NAN), None).pulse);
     }
 
     #[test]

@@ -73,6 +73,7 @@ pub fn run_pattern_generator(pg: &mut PatternGenerator, reference: &[f64]) -> Lc
         let out = pg.tick(&TickInput {
             reference: r,
             measured_force: None,
+            resting: false,
         });
         run.model_force.push(out.model_force);
         run.pulse.push(out.pulse);

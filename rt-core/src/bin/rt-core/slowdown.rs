@@ -10,6 +10,7 @@
 
 use anyhow::bail;
 use rt_core::rt::clock::monotonic_ns;
+use rt_core::rt::reference::Target;
 use rt_core::rt::source::{TickDecision, TickSource};
 
 /// The environment variable.
@@ -49,8 +50,8 @@ impl<S> Slowed<S> {
 }
 
 impl<S: TickSource> TickSource for Slowed<S> {
-    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision {
-        let decision = self.inner.tick(reference, measured_force);
+    fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision {
+        let decision = self.inner.tick(target, measured_force);
         let until = monotonic_ns().saturating_add(self.busy_ns);
         while monotonic_ns() < until {
             std::hint::spin_loop();

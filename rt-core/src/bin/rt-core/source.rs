@@ -5,6 +5,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use rt_core::control::pattern_generator::FeedbackMode;
 use rt_core::rt::process_config::SourceConfig;
+use rt_core::rt::reference::Target;
 use rt_core::rt::source::{ControllerSource, TestPattern, TickDecision, TickSource};
 
 /// The configured source (static dispatch: one `match` per tick, no allocation).
@@ -61,10 +62,10 @@ impl Source {
 
 impl TickSource for Source {
     #[inline]
-    fn tick(&mut self, reference: f64, measured_force: Option<f64>) -> TickDecision {
+    fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision {
         match self {
-            Source::TestPattern(p) => p.tick(reference, measured_force),
-            Source::Controller(c) => c.tick(reference, measured_force),
+            Source::TestPattern(p) => p.tick(target, measured_force),
+            Source::Controller(c) => c.tick(target, measured_force),
         }
     }
 
