@@ -389,6 +389,20 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         );
     }
     std::fs::write(&beats_csv, text).with_context(|| format!("write {}", beats_csv.display()))?;
+    // The time series, one row per 1 ms tick (pandas / Octave: a plain CSV with a header).
+    let series_csv = out.join("series.csv");
+    let mut text = String::from("t_s,reference,model_force,measured_force,pulse\n");
+    for k in 0..run.pulse.len() {
+        text += &format!(
+            "{:.3},{:.6},{:.6},{:.6},{}\n",
+            k as f64 * 1e-3,
+            run.reference[k],
+            run.model_force[k],
+            run.measured[k],
+            u8::from(run.pulse[k])
+        );
+    }
+    std::fs::write(&series_csv, text).with_context(|| format!("write {}", series_csv.display()))?;
     let series = run.series();
     let none = Latency {
         wake_us: [f64::NAN; 3],
@@ -417,6 +431,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     let plots = draw(&series, out, &summary, a, delay, false)?;
     print_summary(&summary, &plots, &[]);
     println!("  per beat: {}", beats_csv.display());
+    println!("  per tick: {}", series_csv.display());
     write_json(&summary, &plots, a)
 }
 

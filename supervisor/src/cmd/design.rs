@@ -157,7 +157,8 @@ pub struct Args {
     pub model: PathBuf,
     /// Closed-loop rise time per unit, ms, comma-separated in unit order (Table 6.1:
     /// 100,30,30,10,20,30), or `auto`: evenly spaced from 30 to 200 ms over the units, as
-    /// Table 6.2.
+    /// Table 6.2, or `auto:LO-HI`: evenly spaced from LO to HI ms (the shipped controllers:
+    /// auto:15-200 fast, auto:80-200 slow; models/README.md).
     #[arg(long)]
     pub rise_ms: String,
     /// Damping factor xi of the dominant pair (1.2: no overshoot, thesis 6.5.3).
@@ -180,8 +181,29 @@ pub struct Args {
 
 /// Rise times in seconds, one per unit, from `--rise-ms` (a list or `auto`).
 pub fn rise_times(text: &str, units: usize) -> Result<Vec<f64>> {
-    if text.trim() == "auto" {
-        let (lo, hi) = AUTO_RISE_MS;
+    let text = text.trim();
+    if let Some(range) = text.strip_prefix("auto") {
+        let (lo, hi) = if range.is_empty() {
+            AUTO_RISE_MS
+        } else {
+            let bad = || {
+                anyhow::anyhow!(
+                    "--rise-ms {text}: write auto, or auto:LO-HI with 0 < LO <= HI in ms (e.g. auto:15-200)"
+                )
+            };
+            let (a, b) = range
+                .strip_prefix(':')
+                .and_then(|r| r.split_once('-'))
+                .ok_or_else(bad)?;
+            let (lo, hi): (f64, f64) = (
+                a.trim().parse().map_err(|_| bad())?,
+                b.trim().parse().map_err(|_| bad())?,
+            );
+            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                return Err(bad());
+            }
+            (lo, hi)
+        };
         return Ok((0..units)
             .map(|i| {
                 let f = if units > 1 {
