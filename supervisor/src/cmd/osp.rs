@@ -20,7 +20,8 @@ use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 use rt_core::analysis::osp::iterative::{Iterative, iterative_method};
 use rt_core::analysis::osp::lcn::{
-    LcnRun, PatternShape, ShapeCriteria, pattern_shape, run_pattern_generator, step_reference,
+    LcnRun, PatternShape, ShapeCriteria, pattern_shape, run_pattern_generator, steady_mean,
+    step_reference,
 };
 use rt_core::analysis::osp::random::{RandomPattern, best_and_worst, random_method};
 use rt_core::analysis::osp::trains::{TrainSurface, train_surface};
@@ -834,8 +835,7 @@ fn lcn(
                 .enumerate()
                 .map(|(k, &v)| (k as f64 * ms, v * s.to_normalised))
                 .collect();
-            let tail = (n / 2).max(1);
-            let mean = f[n - tail..].iter().sum::<f64>() / tail as f64 * s.to_normalised;
+            let mean = steady_mean(&f, &times, n / 2).unwrap_or(f64::NAN) * s.to_normalised;
             extra.push(format!("{}: {:.3}", s.name, mean));
             lines.push(Line::new(
                 Some(format!("{} (driven by the pattern)", s.name)),
@@ -844,8 +844,7 @@ fn lcn(
             ));
         }
         lines.push(loop_line);
-        let tail = (n / 2).max(1);
-        let loop_mean = run.model_force[n - tail..].iter().sum::<f64>() / tail as f64;
+        let loop_mean = steady_mean(&run.model_force, &times, n / 2).unwrap_or(f64::NAN);
         column.push((
             1,
             Panel {
@@ -945,7 +944,7 @@ fn lcn(
             "later IPI median (ms)",
             "later IPI CV",
             "shape",
-            "mean force over the 2nd half",
+            "mean force over the 2nd half (whole IPIs)",
         ],
         &table,
     ));
