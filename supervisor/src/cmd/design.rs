@@ -158,7 +158,7 @@ pub struct Args {
     /// Closed-loop rise time per unit, ms, comma-separated in unit order (Table 6.1:
     /// 100,30,30,10,20,30), or `auto`: evenly spaced from 30 to 200 ms over the units, as
     /// Table 6.2, or `auto:LO-HI`: evenly spaced from LO to HI ms (the shipped controllers:
-    /// auto:15-200 fast, auto:80-200 slow; models/README.md).
+    /// auto:12-160 fast, auto:80-200 slow; models/README.md).
     #[arg(long)]
     pub rise_ms: String,
     /// Damping factor xi of the dominant pair (1.2: no overshoot, thesis 6.5.3).
@@ -188,7 +188,7 @@ pub fn rise_times(text: &str, units: usize) -> Result<Vec<f64>> {
         } else {
             let bad = || {
                 anyhow::anyhow!(
-                    "--rise-ms {text}: write auto, or auto:LO-HI with 0 < LO <= HI in ms (e.g. auto:15-200)"
+                    "--rise-ms {text}: write auto, or auto:LO-HI with 0 < LO <= HI in ms (e.g. auto:12-160)"
                 )
             };
             let (a, b) = range
