@@ -36,6 +36,18 @@ impl UnitSpec {
         }
     }
 
+    /// One specification per rise time (seconds), all with the same damping and `p3`.
+    pub fn for_rise_times(rise_times_s: &[f64], damping: f64, p3: Pole) -> Vec<Self> {
+        rise_times_s
+            .iter()
+            .map(|&rise_time_s| Self {
+                rise_time_s,
+                damping,
+                p3,
+            })
+            .collect()
+    }
+
     /// The three closed-loop poles: the dominant pair from `t_r, xi` by `rule` and `p3`.
     pub fn poles(&self, rule: RiseTimeRule, ts: f64) -> Result<ClosedLoopPoles, SpecError> {
         let [p1, p2] = dominant_pair_by(rule, self.rise_time_s, self.damping, ts)?;

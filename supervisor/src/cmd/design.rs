@@ -114,7 +114,7 @@ impl From<FeedbackStateArg> for FeedbackState {
 
 /// The loop variant options shared by `design` and `lcn-variants`: every candidate of
 /// docs/control.md's variant table, defaults as measured there.
-#[derive(Debug, Clone, clap::Args)]
+#[derive(Debug, Clone, PartialEq, clap::Args)]
 pub struct VariantArgs {
     /// Rise-time rule of the dominant poles.
     #[arg(long, value_enum, default_value_t = RiseRuleArg::Thesis)]
@@ -134,6 +134,20 @@ pub struct VariantArgs {
     /// Which model state the LCN feeds back.
     #[arg(long, value_enum, default_value_t = FeedbackStateArg::Advanced)]
     pub feedback_state: FeedbackStateArg,
+}
+
+impl Default for VariantArgs {
+    /// The flags' defaults: the default loop (test `variant_defaults_are_the_flags`).
+    fn default() -> Self {
+        Self {
+            rise_rule: RiseRuleArg::Thesis,
+            third_pole_rule: ThirdPoleArg::Delta,
+            anti_windup: AntiWindupArg::None,
+            shaper_sum: ShaperSumArg::Clamped,
+            e_min: None,
+            feedback_state: FeedbackStateArg::Advanced,
+        }
+    }
 }
 
 impl VariantArgs {
@@ -283,14 +297,7 @@ pub fn run(args: Args) -> Result<()> {
             negative.join(", ")
         );
     }
-    let specs: Vec<UnitSpec> = tr
-        .iter()
-        .map(|&t| UnitSpec {
-            rise_time_s: t,
-            damping: args.damping,
-            p3,
-        })
-        .collect();
+    let specs = UnitSpec::for_rise_times(&tr, args.damping, p3);
     let mut settings = args.variant.settings();
     settings.design.allow_negative_gain = args.allow_negative_gain;
     let ts = lmn.ts;
@@ -345,4 +352,25 @@ fn table(c: &Controller, ts: f64) -> String {
         u.first().map_or(0.0, |x| x.spec.damping),
         md_table(&h, &rows)
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        variant: VariantArgs,
+    }
+
+    /// `VariantArgs::default()` (what `lcn-variants` starts its variants from) is what the
+    /// flags give when none is passed, and both are the library's default settings.
+    #[test]
+    fn variant_defaults_are_the_flags() {
+        let parsed = Cli::parse_from(["design"]).variant;
+        assert_eq!(parsed, VariantArgs::default());
+        assert_eq!(parsed.settings(), ControllerSettings::default());
+    }
 }

@@ -207,24 +207,10 @@ pub fn run(args: Args) -> Result<()> {
     let bar = progress(chosen.len() * levels.len(), "LCN variants");
     let mut scored = Vec::new();
     for v in chosen {
-        let mut opts = VariantArgs {
-            rise_rule: RiseRuleArg::Thesis,
-            third_pole_rule: ThirdPoleArg::Delta,
-            anti_windup: AntiWindupArg::None,
-            shaper_sum: ShaperSumArg::Clamped,
-            e_min: None,
-            feedback_state: FeedbackStateArg::Advanced,
-        };
+        let mut opts = VariantArgs::default();
         (v.apply)(&mut opts);
         let p3 = third_pole(opts.third_pole_rule.into(), ts);
-        let specs: Vec<UnitSpec> = tr
-            .iter()
-            .map(|&t| UnitSpec {
-                rise_time_s: t,
-                damping: args.damping,
-                p3,
-            })
-            .collect();
+        let specs = UnitSpec::for_rise_times(&tr, args.damping, p3);
         let c = Controller::design(lmn.clone(), &specs, opts.settings())
             .with_context(|| format!("variant {}: design", v.name))?;
         let mut pg = c.pattern_generator().context("pattern generator")?;
