@@ -36,7 +36,8 @@ fn char_poly(m: [[f64; 3]; 3]) -> [f64; 3] {
     [-tr, minors, -det]
 }
 
-/// Designs from the rise times and checks: p1, p2 of every unit against the table (1 %),
+/// Designs from the rise times and checks: p1, p2 of every unit against the table to its
+/// printed digit (half a unit of 0.1: `w_n t_r = 3.2`, docs/control.md),
 /// and the closed loop of each unit, A_aug - b_aug K (eq. C.25-C.27) built here from the
 /// model file and the stored gains, has the characteristic polynomial
 /// (s - p1)(s - p2)(s - p3) of the designed poles (1e-6 relative per coefficient).
@@ -67,11 +68,11 @@ fn check(table: &[(f64, f64, f64)], rise: &str) {
         assert!((f(&u["rise_time_s"]) * 1e3 - tr).abs() < 1e-9);
         let (q1, q2, q3) = (f(&u["p1"]["re"]), f(&u["p2"]["re"]), f(&u["p3"]["re"]));
         assert!(
-            (q1 - p1).abs() < 0.01 * p1.abs(),
+            (q1 - p1).abs() <= 0.05,
             "unit {i}: p1 {q1} vs {p1}"
         );
         assert!(
-            (q2 - p2).abs() < 0.01 * p2.abs(),
+            (q2 - p2).abs() <= 0.05,
             "unit {i}: p2 {q2} vs {p2}"
         );
         let (kx, ki) = ([f(&u["k_x"][0]), f(&u["k_x"][1])], f(&u["k_i"]));
