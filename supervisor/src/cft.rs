@@ -45,22 +45,30 @@ pub struct BeatWindow {
     pub on: usize,
 }
 
-/// The beats of a run's series (complete beats only), 1 ms samples.
+/// The beats of a run's series (complete beats only), in tick indices. A recording that
+/// skipped ticks has fewer than one tick per millisecond, so a beat's window is cut where
+/// the next beat starts: no tick is counted in two beats.
 pub fn beat_windows(series: &Series) -> Vec<BeatWindow> {
     let Some(&t0) = series.t_ns.first() else {
         return Vec::new();
     };
     let n = series.t_ns.len();
-    series
+    let mut out: Vec<BeatWindow> = series
         .beats
         .iter()
-        .filter_map(|b| {
-            let start = series.t_ns.partition_point(|&t| t < b.start_ns);
-            let period = (b.period_ns / 1_000_000) as usize;
-            let on = (b.on_ns / 1_000_000) as usize;
-            (start < n && b.start_ns >= t0).then_some(BeatWindow { start, period, on })
+        .filter(|b| b.start_ns >= t0)
+        .map(|b| BeatWindow {
+            start: series.t_ns.partition_point(|&t| t < b.start_ns),
+            period: (b.period_ns / 1_000_000) as usize,
+            on: (b.on_ns / 1_000_000) as usize,
         })
-        .collect()
+        .filter(|w| w.start < n)
+        .collect();
+    for i in 1..out.len() {
+        let gap = out[i].start.saturating_sub(out[i - 1].start);
+        out[i - 1].period = out[i - 1].period.min(gap);
+    }
+    out
 }
 
 /// The muscle and sensor the trains drive, and the profile they are judged against.
@@ -297,6 +305,36 @@ mod tests {
             min_hz: 5,
             max_hz: 100,
         }
+    }
+
+    /// A recording that skipped ticks (here 3 in the first beat): the first beat's window
+    /// ends where the second starts, so no tick (and no pulse) counts in both.
+    #[test]
+    fn beat_windows_of_a_recording_with_skipped_ticks_do_not_overlap() {
+        let ms = 1_000_000u64;
+        let t_ns: Vec<u64> = (0..1600u64)
+            .filter(|k| !(100..103).contains(k))
+            .map(|k| 1_000 * ms + k * ms)
+            .collect();
+        let beat = |start: u64| BeatRow {
+            start_ns: 1_000 * ms + start * ms,
+            period_ns: 800 * ms,
+            on_ns: 320 * ms,
+            plateau: f64::NAN,
+            pulses: 0,
+            fti: 0.0,
+            pulses_refused: 0,
+        };
+        let series = Series {
+            t_ns,
+            beats: vec![beat(0), beat(800)],
+            ..Series::default()
+        };
+        let w = beat_windows(&series);
+        assert_eq!(w.len(), 2);
+        assert_eq!((w[0].start, w[1].start), (0, 797));
+        assert_eq!(w[0].period, 797);
+        assert_eq!(w[1].period, 800);
     }
 
     /// A run that *is* one of the CFTs (20 Hz over each contraction): its own point lies
