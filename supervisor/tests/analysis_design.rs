@@ -67,14 +67,8 @@ fn check(table: &[(f64, f64, f64)], rise: &str) {
         let f = |v: &serde_json::Value| v.as_f64().unwrap();
         assert!((f(&u["rise_time_s"]) * 1e3 - tr).abs() < 1e-9);
         let (q1, q2, q3) = (f(&u["p1"]["re"]), f(&u["p2"]["re"]), f(&u["p3"]["re"]));
-        assert!(
-            (q1 - p1).abs() <= 0.05,
-            "unit {i}: p1 {q1} vs {p1}"
-        );
-        assert!(
-            (q2 - p2).abs() <= 0.05,
-            "unit {i}: p2 {q2} vs {p2}"
-        );
+        assert!((q1 - p1).abs() <= 0.05, "unit {i}: p1 {q1} vs {p1}");
+        assert!((q2 - p2).abs() <= 0.05, "unit {i}: p2 {q2} vs {p2}");
         let (kx, ki) = ([f(&u["k_x"][0]), f(&u["k_x"][1])], f(&u["k_i"]));
         let m = &units[i];
         // State [x_I, x]: d x_I = c'x (- r), d x = A x + b u, u = -K_I x_I - K_x' x.
