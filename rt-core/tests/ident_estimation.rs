@@ -22,7 +22,7 @@ use rt_core::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 use rt_core::model::params::ParamLayout;
 use rt_core::model::scheduling::{Prefilter, SchedulingSpec};
 use rt_core::model::simulate::simulate;
-use rt_core::model::validity::ValidityFunctions;
+use rt_core::model::validity::{KnotLayout, ValidityFunctions};
 
 const TS: f64 = 1e-3;
 
@@ -553,6 +553,39 @@ fn knot_optimisation_improves_the_fit_and_keeps_knots_ordered() {
     assert_eq!((k[0], k[k.len() - 1]), (0.0, 1.0));
 }
 
+/// The thesis's knot layout reaches the fit: the identified model keeps the evenly spaced,
+/// extended knots (valid range [0, 1]) and fits data from a clamped-knot network about as
+/// well as the clamped layout does.
+#[test]
+fn uniform_knot_layout_identifies_and_keeps_its_knots() {
+    let truth = ss_truth(false);
+    let recs = records_of(&truth, 12, 4, 0.002, 7);
+    let base = IdentOptions {
+        units: truth.units(),
+        max_iter: 60,
+        ..IdentOptions::default()
+    };
+    let clamped = identify(&recs, &base, &Hooks::silent()).expect("clamped");
+    let uniform = identify(
+        &recs,
+        &IdentOptions {
+            knots: KnotLayout::Uniform,
+            ..base
+        },
+        &Hooks::silent(),
+    )
+    .expect("uniform");
+    let want = ValidityFunctions::uniform_extended(truth.units(), 0.0, 1.0).unwrap();
+    assert_eq!(uniform.lmn.validity, want);
+    assert!(uniform.lmn.validity.knots()[0] < 0.0);
+    assert!(
+        uniform.metrics.test_msse < 10.0 * clamped.metrics.test_msse.max(4e-6),
+        "uniform {} vs clamped {}",
+        uniform.metrics.test_msse,
+        clamped.metrics.test_msse
+    );
+}
+
 /// Prediction mode with a state-space structure and bad options are refused, naming the
 /// problem.
 #[test]
@@ -587,6 +620,14 @@ fn bad_options_are_refused() {
                 ..IdentOptions::default()
             },
             "starts",
+        ),
+        (
+            IdentOptions {
+                optimise_knots: true,
+                knots: KnotLayout::Uniform,
+                ..IdentOptions::default()
+            },
+            "clamped layout",
         ),
         (
             IdentOptions {

@@ -40,7 +40,7 @@ use crate::model::params::ParamLayout;
 use crate::model::scheduling::{
     SchedulingSpec, THESIS_PREFILTER_GAIN, THESIS_PREFILTER_WN, THESIS_PREFILTER_ZETA,
 };
-use crate::model::validity::{MAX_UNITS, ValidityFunctions};
+use crate::model::validity::{KnotLayout, MAX_UNITS, ValidityFunctions};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
@@ -109,6 +109,9 @@ pub struct IdentOptions {
     pub seed: u64,
     /// Scheduling range [lo, hi] of the uniform validity functions.
     pub range: (f64, f64),
+    /// Knot layout of the validity functions: clamped (ours, the default) or the thesis's
+    /// evenly spaced knots extended beyond the range (docs/model.md).
+    pub knots: KnotLayout,
     /// Strength of the prior that keeps units the training data barely reach near the
     /// start (pitfall (d)); 0 disables it (the thesis's pure error criterion). Every
     /// parameter of a unit with less than [`MIN_UNIT_SHARE`] of the training data's
@@ -134,6 +137,7 @@ impl Default for IdentOptions {
             mode: Mode::Simulation,
             learning: Learning::Local,
             optimise_knots: false,
+            knots: KnotLayout::Clamped,
             starts: 1,
             max_iter: 200,
             seed: 1,
@@ -178,6 +182,12 @@ impl IdentOptions {
                 return bad("knot optimisation runs in simulation mode".into());
             }
         }
+        if self.optimise_knots && self.knots == KnotLayout::Uniform {
+            return bad(
+                "knot optimisation moves the interior knots between clamped end knots: use the clamped layout"
+                    .into(),
+            );
+        }
         if !(self.prior.is_finite() && self.prior >= 0.0) {
             return bad(format!("prior {} must be finite and >= 0", self.prior));
         }
@@ -211,6 +221,7 @@ impl IdentOptions {
             "mode": match self.mode { Mode::Prediction => "prediction", Mode::Simulation => "simulation" },
             "learning": match self.learning { Learning::Global => "global", Learning::Local => "local" },
             "optimise_knots": self.optimise_knots,
+            "knots": match self.knots { KnotLayout::Clamped => "clamped", KnotLayout::Uniform => "uniform" },
             "starts": self.starts,
             "max_iter": self.max_iter,
             "seed": self.seed,
@@ -467,7 +478,7 @@ impl Run<'_> {
             ts,
             delay: o.delay_samples(ts),
             scheduling,
-            validity: ValidityFunctions::uniform(o.units, o.range.0, o.range.1)
+            validity: ValidityFunctions::with_layout(o.knots, o.units, o.range.0, o.range.1)
                 .map_err(crate::model::params::ParamError::from)?,
             local: start::replicate(&one, o.units, 0),
             zero_offsets: o.zero_offsets,

@@ -32,7 +32,7 @@ pub use lmn::{Lmn, LocalModelSet, Structure};
 pub use local_model::SsLocalModel;
 pub use network::{CoreState, LocalModels, MAX_DELAY, Network, NetworkError};
 pub use scheduling::{Prefilter, Scheduler, SchedulingSpec};
-pub use validity::{Activation, MAX_ORDER, MAX_UNITS, ValidityFunctions};
+pub use validity::{Activation, KnotLayout, MAX_ORDER, MAX_UNITS, ValidityFunctions};
 
 /// Default sampling period Ts in seconds (1 ms, thesis 5.2.2).
 pub const DEFAULT_TS: f64 = 1e-3;

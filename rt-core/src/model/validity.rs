@@ -15,7 +15,12 @@
 //!   evenly spaced interior knots, so the valid range is exactly [lo, hi] and the edge units
 //!   peak (value 1) at the range ends;
 //! - phi outside the valid range is clamped into it before evaluation (constant extrapolation
-//!   of the edge models).
+//!   of the edge models);
+//! - [`KnotLayout::Uniform`] (`uniform_extended`) is the thesis's reading of "uniformly
+//!   distributed B-spline validity functions" (5.4.1): every knot evenly spaced, extended
+//!   beyond [lo, hi] so that the valid range is exactly [lo, hi]; every unit is the same
+//!   shifted quadratic spline, and the edge units never reach 1 (at lo: 1/2, 1/2 and 0 of
+//!   the first three). Order 3 needs M >= 3; with fewer units it is the clamped layout.
 //!
 //! Everything is generic over [`Scalar`]: with `f64` it is the hot path, with
 //! [`Dual`] it gives exact derivatives with respect to phi ([`ValidityFunctions::d_dphi`]) and
@@ -34,6 +39,16 @@ pub const MAX_KNOTS: usize = MAX_UNITS + MAX_ORDER;
 const POU_GRID: usize = 257;
 /// Tolerance of that check.
 const POU_TOL: f64 = 1e-9;
+
+/// How [`ValidityFunctions::with_layout`] places the knots on [lo, hi].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum KnotLayout {
+    /// Open (clamped) uniform knots: p-fold end knots, even interior knots (ours).
+    #[default]
+    Clamped,
+    /// Every knot evenly spaced, extended beyond the range (the thesis's uniform splines).
+    Uniform,
+}
 
 /// Why a set of validity functions was rejected.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -209,6 +224,45 @@ impl ValidityFunctions<f64> {
             };
         }
         Self::from_knots(&knots[..units + p], p)
+    }
+
+    /// M validity functions of order min(3, M) with every knot evenly spaced by
+    /// `h = (hi - lo) / (M - p + 1)`, the first at `lo - (p - 1) h`: the valid range is
+    /// exactly [lo, hi] and every unit is the same spline shifted by `h` (module docs).
+    pub fn uniform_extended(units: usize, lo: f64, hi: f64) -> Result<Self, ValidityError> {
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(ValidityError::Range { lo, hi });
+        }
+        if !(1..=MAX_UNITS).contains(&units) {
+            return Err(ValidityError::UnitCount { units });
+        }
+        let p = order_for_units(units);
+        if p < MAX_ORDER {
+            // One or two units: the linear hats (or the constant) of the clamped layout.
+            return Self::uniform(units, lo, hi);
+        }
+        let h = (hi - lo) / (units - p + 1) as f64;
+        let mut knots = [0.0; MAX_KNOTS];
+        for (i, k) in knots.iter_mut().take(units + p).enumerate() {
+            *k = lo + (i as f64 - (p - 1) as f64) * h;
+        }
+        // The ends exactly, whatever the rounding of the spacing.
+        knots[p - 1] = lo;
+        knots[units] = hi;
+        Self::from_knots(&knots[..units + p], p)
+    }
+
+    /// M validity functions on [lo, hi] by `layout`.
+    pub fn with_layout(
+        layout: KnotLayout,
+        units: usize,
+        lo: f64,
+        hi: f64,
+    ) -> Result<Self, ValidityError> {
+        match layout {
+            KnotLayout::Clamped => Self::uniform(units, lo, hi),
+            KnotLayout::Uniform => Self::uniform_extended(units, lo, hi),
+        }
     }
 
     /// d rho_i / d phi for the active units, from the same recursion (Dual seeded on phi).
@@ -470,6 +524,47 @@ mod tests {
                 assert!((v - truth).abs() < 1e-14, "unit {i} at {x}: {v} vs {truth}");
             }
         }
+    }
+
+    /// The thesis's uniform splines: knots evenly spaced beyond the range, valid range exactly
+    /// [0, 1], a partition of unity there (against the plain recursion), every unit the same
+    /// shifted shape, and at the range's ends the edge units at 1/2 (a clamped edge unit is 1).
+    #[test]
+    fn uniform_extended_layout() {
+        for m in [3usize, 5, 6, 8] {
+            let vf = ValidityFunctions::with_layout(KnotLayout::Uniform, m, 0.0, 1.0).unwrap();
+            assert_eq!(vf.order(), 3);
+            assert_eq!(vf.valid_range(), (0.0, 1.0));
+            let t = vf.knots().to_vec();
+            let h = 1.0 / (m - 2) as f64;
+            for w in t.windows(2) {
+                assert!((w[1] - w[0] - h).abs() < 1e-12, "{t:?}");
+            }
+            for g in 0..=400 {
+                let x = g as f64 / 400.0;
+                let dense = vf.eval_dense(x);
+                let sum: f64 = dense.iter().take(m).sum();
+                assert!((sum - 1.0).abs() < 1e-12, "M = {m}, phi = {x}: {sum}");
+                if x < 1.0 {
+                    for (i, &v) in dense.iter().enumerate().take(m) {
+                        let truth = cox_de_boor(&t, i, 3, x);
+                        assert!((v - truth).abs() < 1e-13, "unit {i} at {x}");
+                    }
+                }
+            }
+            // Shifted copies: unit i at x equals unit i + 1 at x + h.
+            if m >= 4 {
+                let x = 0.5 * h;
+                assert!((vf.eval_dense(x)[0] - vf.eval_dense(x + h)[1]).abs() < 1e-12);
+            }
+            assert!((vf.eval_dense(0.0)[0] - 0.5).abs() < 1e-12);
+            assert!((vf.eval_dense(0.0)[1] - 0.5).abs() < 1e-12);
+        }
+        // Fewer than three units: the clamped layout (order min(3, M)).
+        assert_eq!(
+            ValidityFunctions::with_layout(KnotLayout::Uniform, 2, 0.0, 1.0).unwrap(),
+            ValidityFunctions::uniform(2, 0.0, 1.0).unwrap()
+        );
     }
 
     #[test]

@@ -3,7 +3,7 @@
 use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
 use rt_core::ident::{IdentOptions, Identified, Learning, RecordSet, identify};
-use rt_core::model::file;
+use rt_core::model::{KnotLayout, file};
 use std::path::{Path, PathBuf};
 
 const AFTER_HELP: &str = "\
@@ -82,6 +82,11 @@ pub struct FitArgs {
     /// Alternate interior-knot optimisation with parameter estimation (5.4.2).
     #[arg(long)]
     pub optimise_knots: bool,
+    /// Knot layout of the validity functions: `clamped` (p-fold end knots, edge units peak
+    /// at the range ends) or `uniform` (the thesis's evenly spaced knots, extended beyond
+    /// [0, 1]; every unit the same shifted spline). docs/model.md.
+    #[arg(long, value_enum, default_value_t = KnotsArg::Clamped)]
+    pub knots: KnotsArg,
     /// Number of network starts for Levenberg-Marquardt (best training error wins).
     #[arg(long, default_value_t = 1)]
     pub starts: usize,
@@ -98,6 +103,15 @@ pub struct FitArgs {
     /// Print every stage and accepted step on stderr.
     #[arg(long, short)]
     pub verbose: bool,
+}
+
+/// `--knots`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum KnotsArg {
+    /// Open uniform knots with p-fold ends (ours).
+    Clamped,
+    /// Evenly spaced knots extended beyond the range (thesis 5.4.1).
+    Uniform,
 }
 
 impl FitArgs {
@@ -145,6 +159,10 @@ impl FitArgs {
             mode: self.mode.into(),
             learning: self.learning.map_or(Learning::Local, Into::into),
             optimise_knots: self.optimise_knots,
+            knots: match self.knots {
+                KnotsArg::Clamped => KnotLayout::Clamped,
+                KnotsArg::Uniform => KnotLayout::Uniform,
+            },
             starts: self.starts,
             max_iter: self.max_iter,
             seed: self.seed,
