@@ -15,6 +15,9 @@
 //!   `[onset + d, onset + period + d)`) over `FTI_1 x pulses`, `FTI_1` the rested muscle's
 //!   twitch over the same window.
 //!
+//! With a stimulation lead (`lead_ms`) the run stimulates a window `lead_ms` shorter than
+//! the contraction it is judged against, and so do the trains (same window, same judge).
+//!
 //! The verdict: `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
 //! the reference's has no more pulses and no larger RMS error than the LCN, one of them
 //! strictly less; `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest
@@ -92,6 +95,10 @@ pub struct FrontSettings {
     pub min_hz: u32,
     /// Highest train frequency, Hz.
     pub max_hz: u32,
+    /// Stimulation lead, ms: the contraction judged (the reference) lasts this much longer
+    /// than the stimulated window the beats of the run give (`supervisor bench
+    /// --stim-lead-ms`); the trains span the stimulated window, as the LCN's pulses do.
+    pub lead_ms: usize,
 }
 
 /// One point of the front (or the LCN's).
@@ -130,7 +137,7 @@ impl FrontSettings {
     fn shape(&self, b: &BeatWindow) -> BeatShape {
         BeatShape {
             period_ms: b.period,
-            on_ms: b.on,
+            on_ms: (b.on + self.lead_ms).min(b.period),
             amplitude: self.amplitude,
             edge_rate_per_s: self.edge_rate_per_s,
             delay: self.delay,
@@ -304,6 +311,7 @@ mod tests {
             edge_rate_per_s: 10.0,
             min_hz: 5,
             max_hz: 100,
+            lead_ms: 0,
         }
     }
 
@@ -342,8 +350,23 @@ mod tests {
     /// cheapest train that tracks as well is at most 1.
     #[test]
     fn a_cft_run_scores_as_its_own_front_point() {
-        let s = settings();
-        let (period, on, beats) = (800usize, 320usize, 4usize);
+        check_own_point(0);
+    }
+
+    /// With a stimulation lead the run and the trains stimulate the shortened window and
+    /// are judged against the whole contraction: the run's point is still its own train's,
+    /// and the reference's FTI is the whole contraction's.
+    #[test]
+    fn with_a_lead_trains_span_the_stimulated_window_judged_on_the_whole() {
+        check_own_point(30);
+    }
+
+    fn check_own_point(lead: usize) {
+        let s = FrontSettings {
+            lead_ms: lead,
+            ..settings()
+        };
+        let (period, on, beats) = (800usize, 320usize - lead, 4usize);
         let n = period * beats + 100;
         let mut pulse = vec![false; n];
         for b in 0..beats {
@@ -376,7 +399,7 @@ mod tests {
         assert_eq!(v.cft_front.len(), 96);
         let own = v.cft_front.iter().find(|p| p.hz == Some(20)).unwrap();
         assert_eq!(own.pulses_per_contraction, v.lcn.pulses_per_contraction);
-        assert_eq!(own.pulses_per_contraction, 7.0);
+        assert_eq!(own.pulses_per_contraction, if lead == 0 { 7.0 } else { 6.0 });
         assert!((own.rms_error - v.lcn.rms_error).abs() < 1e-12);
         assert!((own.ftipp - v.lcn.ftipp).abs() < 1e-12);
         let ratio = v.pulses_vs_equal_rms_cft.unwrap();

@@ -84,8 +84,9 @@ impl SimSettings {
 
 impl SimSettings {
     /// The constant-frequency-train front on this run's muscle and sensor, judged against a
-    /// profile of `amplitude` (5-100 Hz, [`crate::cft`]).
-    pub fn front(&self, amplitude: f64) -> crate::cft::FrontSettings {
+    /// profile of `amplitude` whose contractions last `lead_ms` longer than the stimulated
+    /// ones (5-100 Hz, [`crate::cft`]).
+    pub fn front(&self, amplitude: f64, lead_ms: usize) -> crate::cft::FrontSettings {
         crate::cft::FrontSettings {
             muscle: self.muscle,
             sensor: self.sensor,
@@ -96,6 +97,7 @@ impl SimSettings {
             edge_rate_per_s: self.limits.max_rate_per_s,
             min_hz: 5,
             max_hz: 100,
+            lead_ms,
         }
     }
 }

@@ -129,7 +129,7 @@ fn no_constant_frequency_train_dominates_the_shipped_controller() {
                 target: amplitude,
                 baseline: None,
                 uml: false,
-                front: Some(settings.front(amplitude)),
+                front: Some(settings.front(amplitude, 0)),
             },
             RunTiming::default(),
             String::new(),

@@ -49,6 +49,12 @@ pub struct Args {
     /// Target contraction, normalised force.
     #[arg(long, default_value_t = 0.3)]
     pub amplitude: f64,
+    /// Stimulation lead, ms: stimulate this much shorter than the contraction (`--duty`)
+    /// and judge the run, and the constant-frequency trains over the same shorter window,
+    /// against the whole contraction (the muscle relaxes over ~100 ms after its last pulse;
+    /// docs/bench.md, "The CFT front"). 0: stimulate the whole contraction.
+    #[arg(long, default_value_t = 0)]
+    pub stim_lead_ms: u32,
     /// Outer loop (thesis Controller 1).
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub outer_loop: OnOff,
@@ -117,7 +123,10 @@ fn check(a: &Args) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("--outer-gain: {e}"))?;
     let spec = ProfileSpec::Cardiac(cardiac(a));
     spec.validate(&supervisor::limits::ReferenceLimits::default())
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+        .map_err(|e| match a.stim_lead_ms {
+            0 => anyhow::anyhow!("{e}"),
+            l => anyhow::anyhow!("{e} (with --stim-lead-ms {l})"),
+        })?;
     if !a.controller.is_file() {
         bail!(
             "controller file {} not found (run from the repository root, or give --controller; models/README.md says how it is made)",
@@ -136,10 +145,11 @@ fn outer_settings(a: &Args) -> supervisor::outer_loop::OuterLoopSettings {
     }
 }
 
+/// The profile rt-core follows: the contraction shortened by the stimulation lead.
 fn cardiac(a: &Args) -> CardiacSpec {
     CardiacSpec {
         bpm: a.hr,
-        duty: a.duty,
+        duty: a.duty - f64::from(a.stim_lead_ms) * 1e-3 * a.hr / 60.0,
         amplitude: a.amplitude,
         edge_rate_per_s: None,
         outer_loop: Some(a.outer_loop == OnOff::On),
@@ -316,7 +326,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
             )
             .ok()
         })
-        .map(|s| s.front(a.amplitude));
+        .map(|s| s.front(a.amplitude, a.stim_lead_ms as usize));
     let summary = analyse(
         rec,
         &AnalysisInput {
@@ -368,7 +378,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         outer_settings(a),
         a.seconds,
     )?;
-    let front = settings.front(a.amplitude);
+    let front = settings.front(a.amplitude, a.stim_lead_ms as usize);
     let run = simulate(&controller, &settings)?;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let beats_csv = out.join("beats.csv");
