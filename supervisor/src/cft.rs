@@ -399,7 +399,10 @@ mod tests {
         assert_eq!(v.cft_front.len(), 96);
         let own = v.cft_front.iter().find(|p| p.hz == Some(20)).unwrap();
         assert_eq!(own.pulses_per_contraction, v.lcn.pulses_per_contraction);
-        assert_eq!(own.pulses_per_contraction, if lead == 0 { 7.0 } else { 6.0 });
+        assert_eq!(
+            own.pulses_per_contraction,
+            if lead == 0 { 7.0 } else { 6.0 }
+        );
         assert!((own.rms_error - v.lcn.rms_error).abs() < 1e-12);
         assert!((own.ftipp - v.lcn.ftipp).abs() < 1e-12);
         let ratio = v.pulses_vs_equal_rms_cft.unwrap();

@@ -13,7 +13,8 @@
 //! 2. activation `rho(phi_k)` of the core's scheduling value (model library);
 //! 3. `u_cont = -K_I(phi) x_I - K_x(phi)' z[k]` (LCN, eq. C.26), clamped at zero unless
 //!    the shaper sums the signed signal ([`ShaperSum`]);
-//! 4. pulse = shaper(`u_cont`) (eq. 6.8); at `r = 0` the shaper rests instead (no pulse,
+//! 4. pulse = shaper(`u_cont`) (eq. 6.8); at rest (`r = 0`, or a reference ramping down to
+//!    zero: [`TickInput::resting`]) the shaper rests instead (no pulse,
 //!    its energy cleared: no stimulation while the muscle is to be at rest), and with
 //!    [`AntiWindup::None`] the integrator is reset (every contraction starts from rest, as
 //!    the thesis's step responses do; plain integral action would otherwise integrate the
