@@ -201,15 +201,21 @@ pub fn order_for_units(units: usize) -> usize {
     units.min(MAX_ORDER)
 }
 
+/// The range and unit count every knot layout needs.
+fn check_layout(units: usize, lo: f64, hi: f64) -> Result<(), ValidityError> {
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return Err(ValidityError::Range { lo, hi });
+    }
+    if !(1..=MAX_UNITS).contains(&units) {
+        return Err(ValidityError::UnitCount { units });
+    }
+    Ok(())
+}
+
 impl ValidityFunctions<f64> {
     /// M validity functions on an open uniform knot vector over [lo, hi], order min(3, M).
     pub fn uniform(units: usize, lo: f64, hi: f64) -> Result<Self, ValidityError> {
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(ValidityError::Range { lo, hi });
-        }
-        if !(1..=MAX_UNITS).contains(&units) {
-            return Err(ValidityError::UnitCount { units });
-        }
+        check_layout(units, lo, hi)?;
         let p = order_for_units(units);
         let mut knots = [0.0; MAX_KNOTS];
         let interior = units - p;
@@ -230,12 +236,7 @@ impl ValidityFunctions<f64> {
     /// `h = (hi - lo) / (M - p + 1)`, the first at `lo - (p - 1) h`: the valid range is
     /// exactly [lo, hi] and every unit is the same spline shifted by `h` (module docs).
     pub fn uniform_extended(units: usize, lo: f64, hi: f64) -> Result<Self, ValidityError> {
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(ValidityError::Range { lo, hi });
-        }
-        if !(1..=MAX_UNITS).contains(&units) {
-            return Err(ValidityError::UnitCount { units });
-        }
+        check_layout(units, lo, hi)?;
         let p = order_for_units(units);
         if p < MAX_ORDER {
             // One or two units: the linear hats (or the constant) of the clamped layout.
