@@ -1,4 +1,4 @@
-//! Stimulation patterns: the binary pulse input u[k] (1 = a pulse fires at the start of
+//! Stimulation patterns: the binary pulse input u\[k\] (1 = a pulse fires at the start of
 //! sample k), built from pulse times or as constant-frequency trains.
 
 /// Why a pulse pattern was refused.

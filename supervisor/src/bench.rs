@@ -3,7 +3,7 @@
 //! as separate processes on one CAN interface, driven through the control socket.
 //!
 //! [`Stack`] starts, watches and stops the processes (tests use it to kill one mid-run);
-//! `supervisor bench` ([`run_bench`]) runs a cardiac profile for a set time, stops
+//! `supervisor bench` (the binary's `cmd::bench`) runs a cardiac profile for a set time, stops
 //! everything and summarises the recording ([`crate::summary`]).
 
 use std::fs::File;

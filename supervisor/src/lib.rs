@@ -11,7 +11,7 @@
 //! control protocol, the health rules, the supervisor state machine) take time as an
 //! argument and do no I/O, so they are tested without processes. The I/O parts are
 //! [`control`] (Unix socket), [`recording`] (files), [`daemon`] (iceoryx2) and
-//! [`bench`] (child processes).
+//! [`mod@bench`] (child processes).
 #![deny(missing_docs)]
 
 pub mod baseline;

@@ -95,7 +95,7 @@ pub struct DingParams {
 }
 
 impl DingParams {
-    /// Parameter names accepted by [`DingParams::set`] and `--set`, with their units.
+    /// Parameter names accepted by [`DingParams::get_mut`] and `--set`, with their units.
     pub const NAMES: [(&'static str, &'static str); 6] = [
         ("tauc", "s"),
         ("r0", "1"),
