@@ -2,6 +2,7 @@
 //! (COB-ID, name, DLC, cycle time, sender, receivers) and every signal (start bit, length,
 //! byte order, signedness, factor, offset, min, max, unit, multiplexing, value table).
 //! The DBC is parsed by an independent parser (`can-dbc`).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use can_dbc::{ByteOrder as DbcOrder, Dbc, MessageId, MultiplexIndicator, NumericValue, ValueType};
 use fes_can::desc::{ByteOrder, Mux, SignalDesc};

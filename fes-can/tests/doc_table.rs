@@ -4,6 +4,7 @@
 //!
 //! Regenerate after changing the DBC:
 //! `FES_CAN_BLESS=1 cargo test -p fes-can --test doc_table`
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use can_dbc::{Dbc, MessageId, MultiplexIndicator, NumericValue, ValueType};
 use std::fmt::Write as _;

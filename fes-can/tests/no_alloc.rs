@@ -1,5 +1,6 @@
 //! encode and decode never touch the heap: a counting global allocator sees zero
 //! allocations while every message kind is encoded and decoded, valid or not.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};

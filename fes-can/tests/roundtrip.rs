@@ -2,6 +2,7 @@
 //! range; any payload of any length on any identifier decodes to a value or an error
 //! (never a panic), and whatever decodes re-encodes to the very same bytes; any
 //! single-bit error in a PULSE frame is caught.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::{
     Config, ConfigPage, DecodeError, Emcy, ErrorCode, Force, Heartbeat, Message, Nmt, NmtCommand,

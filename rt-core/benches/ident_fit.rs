@@ -5,6 +5,7 @@
 //! The data set is read from `$FES_FAST_DATA` (default `target/ident-data/fast`); record it
 //! first with
 //! `cargo run -p sim-muscle --release -- record --preset fast --seed 1 --out target/ident-data/fast`.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use rt_core::ident::problem::{Horizon, ModelData, Problem, ThetaMap};

@@ -2,6 +2,7 @@
 //! M = 1, 6, 10 units, plus a hand-written f64 baseline (no generics, no enums) of the same
 //! M = 10 step to show the generic code costs nothing.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use rt_core::model::local_model::EigLocalUnit;

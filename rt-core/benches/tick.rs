@@ -3,6 +3,7 @@
 //! measured-force mode (estimator + d-step re-prediction).
 //!
 //! Run: `cargo bench -p rt-core --bench tick`.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::hint::black_box;
 

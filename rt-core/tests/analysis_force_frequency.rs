@@ -1,5 +1,6 @@
 //! Force-frequency curve (Fig. 5.26), the phi/state trace, and simulated-vs-measured
 //! errors (eq. B.8), against closed forms.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;
 

@@ -1,6 +1,7 @@
 //! Optimal stimulation patterns (thesis ch. 6): FTI/FTIpP identities on a linear model,
 //! superposition on a truncated window, method results against direct evaluation, the LCN
 //! run on the control fixture.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;
 #[path = "control_support/mod.rs"]

@@ -1,6 +1,7 @@
 //! Pole placement and estimator design (thesis 6.5.3, App. C.2) against independent truths:
 //! the published pole columns of Tables 6.1/6.2, closed-form gains for a companion-form
 //! plant, and eigenvalues from a Schur decomposition (nalgebra).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use nalgebra::{Complex, Matrix2, Matrix3, Vector2};
 use proptest::prelude::*;

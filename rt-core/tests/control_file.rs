@@ -1,5 +1,6 @@
 //! The controller file `fes-lcn/1`: round trip, and rejection of corrupted, mismatched or
 //! invalid files with errors that name the field.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod control_support;
 

@@ -1,6 +1,7 @@
 //! The pattern generator's closed loop (thesis Fig. 6.8 in the advanced form) against
 //! independent truths: the linear closed loop `A_aug - b_aug K` (eq. C.27) for one unit,
 //! and settling, gap and energy properties with the shaper on a muscle-like LMN.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod control_support;
 

@@ -2,6 +2,7 @@
 //! state from the measured force and the integral action sees the measured error. Checked
 //! against the model mode (identical decisions when the "muscle" is the model itself) and
 //! against the real force of a mismatched plant (simulated independently, thesis form).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod control_support;
 

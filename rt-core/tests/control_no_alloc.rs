@@ -1,5 +1,6 @@
 //! The pattern-generator tick allocates nothing: a counting global allocator watches
 //! 100 000 ticks with M = 10 units, in both feedback modes, plus `reset`.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod control_support;
 

@@ -1,5 +1,6 @@
 //! The pulse shaper (thesis 6.5.2, eq. 6.7-6.8): energy bookkeeping, minimum gap and the
 //! single-pulse-after-saturation safety property, checked against sums kept independently by the test.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};

@@ -1,5 +1,6 @@
 //! The data-set format: exact round trip, overwrite protection, and a clear error naming
 //! file, line and field for every violation the reader must catch.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod dataset_support;
 

@@ -1,5 +1,6 @@
 //! Property tests: whatever bytes a record file or `dataset.json` holds, the reader
 //! returns a value or an error, never panics; every accepted record is valid.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod dataset_support;
 

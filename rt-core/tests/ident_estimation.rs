@@ -4,6 +4,7 @@
 //! network (errors at the noise floor); gauge invariance; knot optimisation; validity
 //! weights against an independent prefilter loop.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng};

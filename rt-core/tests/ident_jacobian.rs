@@ -2,6 +2,7 @@
 //! differences, relative 1e-6, for every structure, both scheduling kinds, both horizons,
 //! a down-sampled model period, and the interior knots.
 #![allow(clippy::needless_range_loop)] // index loops mirror the matrices
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use nalgebra::DMatrix;
 use rt_core::ident::knots::KnotMap;

@@ -1,5 +1,6 @@
 //! Pulse-preserving down-sampling (thesis 5.2.2) and the interpolation back to the base
 //! period, checked on random pulse trains.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use rt_core::ident::resample::{

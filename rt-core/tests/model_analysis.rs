@@ -1,6 +1,7 @@
 //! Static analysis (thesis 2.4.2, 5.4.3) against independent truths: simulated pulse-response
 //! sums, simulated steady states, eigenvalues by construction, and the common-eigenvector test.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::analysis::static_analysis::{
     FrozenModel, analyse, analyse_at, common_eigenvectors, phi_grid,

@@ -1,5 +1,6 @@
 //! The model file `fes-lmn/1`: round trips and rejections that name the problem.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::model::arx::ArxUnit;
 use rt_core::model::file::{self, FileError, SCHEMA};

@@ -1,6 +1,7 @@
 //! Thesis form (input delay line, state x) == advanced form (core state z[k] = x[k+d] plus an
 //! output ring) for random pulse trains, to 1e-12 (thesis 2.2.2; docs/model.md item 4).
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use rt_core::model::arx::ArxUnit;

@@ -2,6 +2,7 @@
 //! counterpart, a direct delta-form ARX simulation, a derived stability bound, and finite
 //! differences for the Dual-number sensitivities.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use rt_core::model::arx::ArxUnit;

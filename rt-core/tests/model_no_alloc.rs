@@ -1,6 +1,7 @@
 //! The network step never touches the heap: a counting global allocator observes zero
 //! allocations (and zero bytes) over 100 000 steps of an M = 10 network, in both forms.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::model::local_model::EigLocalUnit;
 use rt_core::model::network::Network;

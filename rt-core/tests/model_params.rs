@@ -2,6 +2,7 @@
 //! Dual Jacobian of the free-run MSSE through the parameterisation maps against central
 //! finite differences.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::model::arx::ArxUnit;
 use rt_core::model::lmn::{Lmn, LocalModelSet, Provenance};

@@ -1,5 +1,6 @@
 //! The input-scheduling prefilter (thesis 5.4.1, eq. 5.3-5.4), discretised exactly (ZOH).
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::model::scheduling::Prefilter;
 

@@ -1,6 +1,7 @@
 //! Validity functions (thesis 2.2.3): partition of unity, non-negativity, and exact
 //! derivatives checked against central finite differences.
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use rt_core::model::validity::{MAX_UNITS, ValidityFunctions};

@@ -2,6 +2,7 @@
 //! (`rt_core::rt::alloc::trace_first_heap_allocation`): it names the allocating function,
 //! is taken once, skips the allocations of an `untraced` section and of the installation
 //! probe, and does not count its own allocations. One test: the trace is process-wide.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::rt::alloc::{
     self, CountingAllocator, current_thread_allocations, take_first_heap_allocation,

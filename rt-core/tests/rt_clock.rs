@@ -1,5 +1,6 @@
 //! The periodic clock on the real CLOCK_MONOTONIC: absolute deadlines on one grid, no
 //! early wake-ups, no drift (the grid does not accumulate lateness).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::time::Duration;
 

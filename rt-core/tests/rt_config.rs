@@ -1,4 +1,5 @@
 //! The rt-core configuration file: documented defaults, round trip, path resolution.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::path::PathBuf;
 

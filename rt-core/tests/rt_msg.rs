@@ -1,5 +1,6 @@
 //! Message contracts: pinned layouts (a change must be deliberate and renamed `v2`), type
 //! names, and validation tables.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use core::mem::{align_of, offset_of, size_of};
 

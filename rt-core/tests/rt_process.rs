@@ -1,6 +1,7 @@
 //! The rt-core process end to end: rt-probe records every StimTick while the real binary
 //! runs; the tests check the stream against the rules (gap-free seq, final tick on
 //! SIGTERM, no catch-up after a stall, staleness ramp, degraded environments).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod rt_common;
 

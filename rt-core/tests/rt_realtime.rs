@@ -5,6 +5,7 @@
 //! Dropping the rights reliably, even as root: the child is this test binary re-executed
 //! with RLIMIT_RTPRIO = 0 and CAP_SYS_NICE removed from its capability bounding set before
 //! exec (see `rt_common::without_rt_rights`), so it comes out of exec without CAP_SYS_NICE.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod rt_common;
 

@@ -1,6 +1,7 @@
 //! Telemetry: the lock-free queue counts overflows instead of blocking, the histograms are
 //! bounded and exact to their stated precision, and an interval log written by the
 //! telemetry code is read back by hdrhistogram's own interval-log reader with equal counts.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::time::{Duration, SystemTime};
 

@@ -1,4 +1,5 @@
 //! Cost of one 1 ms `Muscle::step` (4 RK4 substeps), with and without fatigue.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::hint::black_box;
 

@@ -2,6 +2,7 @@
 //! equations: adaptive Dormand-Prince 5(4) (tolerance 1e-10) on CN, F (and, with fatigue,
 //! A, Km, tau1) as plain ODEs, with the pulse sum of the CN equation evaluated directly.
 //! Acceptance: every sample within 0.1 % of the peak force.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use sim_muscle::ding::{DingParams, FatigueParams, PulseWidthParams};
 use sim_muscle::muscle::{Muscle, MuscleConfig};

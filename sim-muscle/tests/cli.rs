@@ -1,6 +1,7 @@
 //! The `sim-muscle` binary: output formats, data sets read back through
 //! `rt_core::dataset`, determinism, and bad flags (clear error, non-zero exit, nothing
 //! written).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod support;
 

@@ -1,6 +1,7 @@
 //! An LMN model file as the muscle: the plant's samples equal rt-core's own free-run
 //! simulation of the model (`rt_core::model::simulate::simulate`), scaled to newtons and
 //! aligned to the MusclePlant timing; the CLI runs it with `--model`.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod support;
 

@@ -1,5 +1,6 @@
 //! The virtual stimulator steps the muscle every 1 ms: `Muscle::step` (with fatigue, a
 //! 7.5 ms delay and a sensor) must not allocate. A counting global allocator checks it.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::rt::alloc::{self, CountingAllocator};
 use sim_muscle::ding::FatigueParams;

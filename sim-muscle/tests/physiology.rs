@@ -1,6 +1,7 @@
 //! The presets show what the thesis's muscles show (4.2.3, 5.4.3, 6.3, 6.4): the fast
 //! muscle's catch-like effect, the slow muscle's FTIpP <= 1, saturating force-frequency
 //! curves, and, with the fatigue extension, a steady loss of force.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use sim_muscle::ding::FatigueParams;
 use sim_muscle::metrics::{ftipp, response_fti};

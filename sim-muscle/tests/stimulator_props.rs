@@ -14,6 +14,7 @@
 //! and an operational stimulator has heard the host (heartbeat or start) within its
 //! watchdog time. A liveness property keeps the safety ones from holding by refusing
 //! everything: a plain legal stream is applied pulse for pulse.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::counter::AliveCounter;
 use fes_can::{

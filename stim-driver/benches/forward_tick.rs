@@ -6,6 +6,7 @@
 //! STATUS every 10 ticks keeps the stimulator watchdog fed, as on the bus.
 //!
 //! Run: `cargo bench -p stim-driver --bench forward_tick`.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::hint::black_box;
 

@@ -4,6 +4,7 @@
 //!
 //! Then the same on a real bus: [`driver_on_the_bus`] runs the `stim-driver` binary in the
 //! vcan harness against the virtual stimulator (module `on_bus`).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::{Emcy, ErrorCode, Message, NmtCommand, NmtState, Nodes, StimLimits, StimState};
 use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};

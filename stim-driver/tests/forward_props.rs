@@ -18,6 +18,7 @@
 //!   publisher", which then never tripped).
 //!
 //! The interlocks' own limits over whole trains are `interlock_props.rs`.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::{Emcy, ErrorCode, Message, NmtState, StimState};
 use proptest::prelude::*;

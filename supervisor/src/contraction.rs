@@ -194,13 +194,12 @@ impl ContractionEstimator {
     /// (a later sample has arrived), or more than [`CLOSE_GRACE_NS`] before `now_ns`.
     pub fn poll(&mut self, latest_sample_ns: u64, now_ns: u64) -> Vec<BeatMeasurement> {
         let mut done = Vec::new();
-        while let Some(w) = self.open.front() {
-            let complete = w.to_ns <= latest_sample_ns || w.to_ns + CLOSE_GRACE_NS <= now_ns;
-            if !complete {
-                break;
+        let complete =
+            |w: &Window| w.to_ns <= latest_sample_ns || w.to_ns + CLOSE_GRACE_NS <= now_ns;
+        while self.open.front().is_some_and(complete) {
+            if let Some(w) = self.open.pop_front() {
+                done.push(self.finish(&w));
             }
-            let w = self.open.pop_front().expect("front exists");
-            done.push(self.finish(&w));
         }
         done
     }

@@ -447,10 +447,13 @@ impl ProfileRunner {
                 setpoint
             }
             ProfileSpec::Cardiac(_) => {
-                let run = self
-                    .cardiac
-                    .as_mut()
-                    .expect("a cardiac profile always has its run state");
+                // A cardiac profile always has its run state; without one, rest.
+                let Some(run) = self.cardiac.as_mut() else {
+                    return Setpoint {
+                        force: 0.0,
+                        rate_per_s: limits.max_rate_per_s,
+                    };
+                };
                 while now_ns >= run.beat.end_ns() {
                     events.push(ProfileEvent::BeatEnded(run.beat));
                     if let Some(p) = run.pending.take() {

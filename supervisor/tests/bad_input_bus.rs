@@ -4,6 +4,7 @@
 //! announce itself with a boot-up heartbeat) and open no station. stim-driver's malformed
 //! configurations get the same check in its own sweep
 //! (`stim-driver/tests/forward_path.rs::malformed_configurations_are_refused_clearly_without_a_panic`).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::process::Command;
 

@@ -1,4 +1,5 @@
 //! The control protocol's parser never panics and refuses what it cannot read.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use supervisor::protocol::{

@@ -12,6 +12,7 @@
 //! applies no pulse again (nobody re-arms); a fault beyond the chain's reaction threshold
 //! ends with the stimulator out of operation and the supervisor in `fault`; the recording
 //! reads back as a data set. Each process's exit is clean at the end, or it was a victim.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};

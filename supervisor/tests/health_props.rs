@@ -14,6 +14,7 @@
 //! * armed means every watched process was heard within its timeout.
 //!
 //! A liveness companion keeps these from holding by never arming.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use proptest::prelude::*;
 use rt_core::msg::{DeviceState, DriverStatus, ForceSample, Reference, StimTick};

@@ -2,6 +2,7 @@
 //! of the common-eigenvector network against the linear delta model on the sim-muscle
 //! `fast` and `slow` data sets (thesis protocol, seed 1), recorded here with sim-muscle's
 //! library exactly as `sim-muscle record --preset P --seed 1` does.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::dataset::{DataSet, WriteMode};
 use rt_core::ident::{Hooks, IdentOptions, RecordSet, identify};

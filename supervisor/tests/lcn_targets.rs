@@ -5,6 +5,7 @@
 //!
 //! The step runs are the variant table's (`StepSettings::variant_table`: step at 50 ms,
 //! 3 s, the hold scored over 1.5-3 s in whole inter-pulse intervals, convention 11).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::path::Path;
 

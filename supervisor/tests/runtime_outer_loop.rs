@@ -4,6 +4,7 @@
 //! The controller is rt-core's control fixture (a fast-muscle-like LMN, thesis Table 6.1
 //! rise times), which is *not* fitted to the Ding muscle: the model mismatch is part of
 //! the test, as on a rig.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 #[path = "../../rt-core/tests/control_support/mod.rs"]
 mod control_support;

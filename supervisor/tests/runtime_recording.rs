@@ -1,5 +1,6 @@
 //! The recorder: a run becomes a readable `fes-dataset/1` data set plus message streams;
 //! a crash leaves a readable data set; a full disk is an error, never a panic.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};

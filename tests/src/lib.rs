@@ -9,6 +9,8 @@
 //! * [`stack`]: building the four binaries and reading the virtual stimulator's record,
 //!   for tests that run the whole stack (`supervisor::bench::Stack`).
 #![deny(missing_docs)]
+// A testkit: its helpers panic on a failed setup step by design (a failed test).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 pub mod bus;
 pub mod child;

@@ -1,6 +1,7 @@
 //! Self-tests of the vcan harness: a test body really gets a working CAN interface; a
 //! failure inside the environment fails the test; misconfiguration fails loudly (never
 //! skips); `vcan-run` propagates exit status and output.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::process::Command;
 use std::time::Duration;

@@ -3,6 +3,7 @@
 //! codec) are understood by the stimulator; the `candump -L` log of the run decodes with
 //! `python3 -m cantools decode fes-can/dbc/fes.dbc` with no unknown frame, and cantools
 //! reads the same values as the Rust decoder.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod common;
 

@@ -13,6 +13,7 @@
 //!   and the lateness (the p99 ratio or the late-wake-up rate).
 //!
 //! Needs root (SCHED_FIFO), cyclictest and stress-ng, as the rt-core tests do.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod systemd_support;
 

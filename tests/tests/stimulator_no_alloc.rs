@@ -1,6 +1,7 @@
 //! The stimulator's state machine runs its 1 ms path without heap allocation: a counting
 //! global allocator sees zero allocations over 20 000 ticks with pulses, heartbeats,
 //! rejected frames (CRC, counter, length, state, rate), a watchdog fault and re-arming.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use rt_core::rt::alloc::{self, CountingAllocator};
 

@@ -5,6 +5,7 @@
 //! while pulses resume, re-arming by NMT start, and SIGTERM (final STATUS, exit 0).
 //! The FORCE stream must have no sequence gap over the whole session. A second test runs
 //! the Ding muscle (fast preset) behind the stimulator and replays its record offline.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod common;
 

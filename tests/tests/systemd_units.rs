@@ -10,6 +10,7 @@
 //! - `notify`: the real rt-core binary against a fake service manager (READY, watchdog
 //!   feeding only while the loop ticks, STOPPING), in one test binary with the above;
 //! - `boot` (`#[ignore]`d, minutes): the units booted by a real systemd in a UML guest.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 #[path = "systemd_units/boot.rs"]
 mod boot;

@@ -29,6 +29,10 @@ impl LatencyHistogram {
     pub const SIGNIFICANT_DIGITS: u8 = 3;
 
     /// An empty histogram with the fixed range.
+    #[expect(
+        clippy::expect_used,
+        reason = "the bounds are constants that satisfy HdrHistogram's preconditions"
+    )]
     pub fn new() -> Self {
         let mut hist =
             Histogram::new_with_bounds(Self::LOWEST_NS, Self::HIGHEST_NS, Self::SIGNIFICANT_DIGITS)

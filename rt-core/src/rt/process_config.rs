@@ -370,6 +370,10 @@ impl RtCoreConfig {
     }
 
     /// The configuration as TOML.
+    #[expect(
+        clippy::expect_used,
+        reason = "every field is TOML-representable, so serialisation cannot fail"
+    )]
     pub fn to_toml(&self) -> String {
         // Every field is a TOML-representable value (strings, integers, finite floats,
         // tables); serialisation of this type cannot fail.

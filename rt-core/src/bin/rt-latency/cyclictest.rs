@@ -89,6 +89,10 @@ impl CyclictestHistogram {
     /// The same samples as a [`LatencyHistogram`] in ns, each at the middle of its
     /// whole-microsecond bucket (`b + 0.5` µs, as the ratios compare), overflows at the
     /// maximum; written to `cyclictest.hlog` so that every curve is read the same way.
+    #[expect(
+        clippy::expect_used,
+        reason = "the bounds are LatencyHistogram's constants, valid for HdrHistogram"
+    )]
     pub fn to_latency_histogram(&self) -> LatencyHistogram {
         let mut raw = hdrhistogram::Histogram::<u64>::new_with_bounds(
             LatencyHistogram::LOWEST_NS,
