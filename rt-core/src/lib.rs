@@ -18,10 +18,11 @@
 #![deny(clippy::missing_safety_doc)]
 
 pub mod analysis;
-pub mod control;
 pub mod dataset;
 pub mod ident;
-pub mod model;
 pub mod msg;
-pub mod num;
 pub mod rt;
+
+/// The thesis's equations, from the `fes-model` crate (re-exported so that every path
+/// `rt_core::{num, model, control}` keeps working).
+pub use fes_model::{control, model, num};
