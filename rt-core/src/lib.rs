@@ -20,9 +20,11 @@
 pub mod analysis;
 pub mod dataset;
 pub mod ident;
-pub mod msg;
 pub mod rt;
 
 /// The thesis's equations, from the `fes-model` crate (re-exported so that every path
 /// `rt_core::{num, model, control}` keeps working).
 pub use fes_model::{control, model, num};
+
+/// The iceoryx2 message contracts, from the `fes-rt` crate (`rt_core::msg` unchanged).
+pub use fes_rt::msg;

@@ -12,7 +12,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use fes_can::{MessageKind, StimState};
-use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{DriverState, Liveness, NullSink};
 use stim_driver::forward::ForwardPath;

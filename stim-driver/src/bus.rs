@@ -21,10 +21,10 @@ use std::time::Duration;
 use crossbeam::queue::ArrayQueue;
 use fes_can::hostbus::{self, HostBus, Station};
 use fes_can::{Message, MessageKind, Nodes};
-use rt_core::msg::service::{BACKPRESSURE, ServiceError, open_pubsub};
-use rt_core::msg::{Contract, ForceSample};
-use rt_core::rt::clock::monotonic_ns;
-use rt_core::rt::runner::create_node;
+use fes_rt::msg::service::{BACKPRESSURE, ServiceError, open_pubsub};
+use fes_rt::msg::{Contract, ForceSample};
+use fes_rt::rt::clock::monotonic_ns;
+use fes_rt::rt::node::create_node;
 use socketcan::errors::{CanError, ControllerProblems};
 use socketcan::{
     CanErrorFrame, CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions,

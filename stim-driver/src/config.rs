@@ -44,7 +44,7 @@
 //! [force]
 //! max_n = 40.0                   # required: the muscle's maximal force, normalises ForceSample
 //!
-//! [rt]                           # the forward thread (rt_core::rt::RtConfig)
+//! [rt]                           # the forward thread (fes_rt::rt::RtConfig)
 //! priority = 79
 //!
 //! # [bus_rt]                     # optional: make the receive thread real-time too
@@ -64,10 +64,10 @@
 use std::path::{Path, PathBuf};
 
 use fes_can::{Nodes, StimLimits};
-use rt_core::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
-use rt_core::rt::RtConfig;
-use rt_core::rt::config::RtConfigError;
-use rt_core::rt::config_file::{self, FileError};
+use fes_rt::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
+use fes_rt::rt::RtConfig;
+use fes_rt::rt::config::RtConfigError;
+use fes_rt::rt::config_file::{self, FileError};
 use serde::{Deserialize, Serialize};
 
 use crate::forward::ForwardSettings;
@@ -303,7 +303,7 @@ pub struct TelemetryConfig {
     /// Events the queue from the forward thread holds (256..=1048576).
     pub queue_capacity: usize,
     /// Keep the backtrace of the forward loop's first heap allocation, if one happens, and
-    /// log it at exit (`rt_core::rt::alloc::trace_first_heap_allocation`; costs nothing
+    /// log it at exit (`fes_rt::rt::alloc::trace_first_heap_allocation`; costs nothing
     /// until then). Default true.
     pub trace_allocations: bool,
 }
@@ -670,7 +670,7 @@ mod tests {
         let rig = DriverConfig::parse(include_str!("../../deploy/etc/fes/stim-driver.toml"))
             .expect("deploy/etc/fes/stim-driver.toml");
         let mut expected = DriverConfig::with_defaults("can0", 40.0);
-        expected.rt.on_missing_rights = rt_core::rt::config::MissingRightsPolicy::Refuse;
+        expected.rt.on_missing_rights = fes_rt::rt::config::MissingRightsPolicy::Refuse;
         assert_eq!(rig, expected);
     }
 

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 
 use crossbeam::queue::ArrayQueue;
 use fes_can::{Emcy, NmtState, Status, StimState};
-use rt_core::msg::{DeviceState, ValidationError};
+use fes_rt::msg::{DeviceState, ValidationError};
 
 use crate::fault::{ArmRefusal, Fault};
 use crate::interlock::Violation;

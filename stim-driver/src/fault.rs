@@ -6,7 +6,7 @@
 //! protocol's own codes stop at 0xFF0B; these never appear on the bus).
 
 use fes_can::ErrorCode;
-use rt_core::msg::DriverStatus;
+use fes_rt::msg::DriverStatus;
 
 /// A condition that stops stimulation: NMT stop on the bus, the driver's safe state, and
 /// nothing forwarded until an explicit re-arm.

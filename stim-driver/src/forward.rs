@@ -26,7 +26,7 @@
 //! STATUS that still shows the stimulator operational gets another NMT stop.
 
 use fes_can::{ErrorCode, NmtState, Nodes, Status, StimLimits, StimState};
-use rt_core::msg::{Contract, DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::msg::{Contract, DriverCommand, DriverCommandKind, StimTick};
 
 use crate::event::{
     BringUp, BusErrorKind, BusEvent, Counters, DriverEvent, DriverState, EventSink, FrameKind,
@@ -129,7 +129,7 @@ impl<T: CanTx> ForwardPath<T> {
             mode: Mode::Disarmed,
             counters: Counters {
                 state: DriverState::Starting.device_state() as u8,
-                stimulator_state: rt_core::msg::DeviceState::Unknown as u8,
+                stimulator_state: fes_rt::msg::DeviceState::Unknown as u8,
                 ..Counters::default()
             },
             settings,

@@ -27,7 +27,7 @@
 //! jitter cannot make a legal pattern fail), and check 5 ties them to real time: for two
 //! pulses let through, the time between their sends is at least `min_ipi - max_pulse_delay`.
 
-use rt_core::msg::{Contract, StimTick, ValidationError};
+use fes_rt::msg::{Contract, StimTick, ValidationError};
 
 /// The largest `max_pulses` the rate history can hold (CONFIG's `max_pulses` range).
 pub const MAX_RATE_PULSES: usize = 1000;

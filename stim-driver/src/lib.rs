@@ -16,7 +16,7 @@
 //! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state).
 //! - [`runner`] (the real-time forward thread), [`report`] (logs, DriverStatus,
 //!   TimingReport), [`telemetry`], [`liveness`], [`txstamp`]: the process. systemd
-//!   notification is rt-core's ([`rt_core::rt::notify`]).
+//!   notification is rt-core's ([`fes_rt::rt::notify`]).
 //! - [`safe_stop`]: the `safe-stop` subcommand.
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]

@@ -16,12 +16,12 @@
 //! This does file-system work, so it runs on the normal-priority report thread; the
 //! forward thread reads the outcome from an atomic.
 
+use fes_rt::msg::Contract;
+use fes_rt::msg::service::{ServiceError, open_pubsub};
 use iceoryx2::node::NodeState;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
-use rt_core::msg::Contract;
-use rt_core::msg::service::{ServiceError, open_pubsub};
 
 use crate::event::Liveness;
 

@@ -16,12 +16,12 @@ use std::time::SystemTime;
 use anyhow::{Context, anyhow};
 use clap::{Parser, Subcommand};
 use fes_can::Nodes;
-use rt_core::rt::alloc::CountingAllocator;
-use rt_core::rt::hlog::HlogWriter;
-use rt_core::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
-use rt_core::rt::realtime::{RtError, enter_realtime};
-use rt_core::rt::runner::RunError;
-use rt_core::rt::signals::install_stop_handler;
+use fes_rt::rt::alloc::CountingAllocator;
+use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::node::RunError;
+use fes_rt::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
+use fes_rt::rt::realtime::{RtError, enter_realtime};
+use fes_rt::rt::signals::install_stop_handler;
 use stim_driver::bus::{BusSettings, run_bus};
 use stim_driver::config::DriverConfig;
 use stim_driver::report::run_report;
@@ -139,7 +139,7 @@ enum Failure {
 }
 
 fn main() -> ExitCode {
-    rt_core::rt::logging::init("stim-driver");
+    fes_rt::rt::logging::init("stim-driver");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     let cli = Cli::parse();
     let result = match cli.command {
@@ -154,7 +154,7 @@ fn main() -> ExitCode {
             Ok(())
         }
     };
-    let line = |e: &anyhow::Error| rt_core::rt::error_text::one_line(e.as_ref());
+    let line = |e: &anyhow::Error| fes_rt::rt::error_text::one_line(e.as_ref());
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(Failure::Config(e)) => {
@@ -437,7 +437,7 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
                     .map_or("not counted".to_owned(), |n| n.to_string()),
             );
         }
-        if let Some(trace) = rt_core::rt::alloc::take_first_heap_allocation() {
+        if let Some(trace) = fes_rt::rt::alloc::take_first_heap_allocation() {
             warn!("{trace}");
         }
         if !outcome.stop_sent {
@@ -454,7 +454,7 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
 }
 
 fn device_state_name(state: u8) -> &'static str {
-    use rt_core::msg::DeviceState;
+    use fes_rt::msg::DeviceState;
     match DeviceState::try_from(state) {
         Ok(DeviceState::Boot) => "starting",
         Ok(DeviceState::PreOperational) => "disarmed",

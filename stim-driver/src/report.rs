@@ -15,11 +15,11 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use fes_can::{Message, MessageKind, Nodes};
-use rt_core::msg::service::{BACKPRESSURE, open_pubsub};
-use rt_core::msg::{DeviceState, DriverCommand, DriverStatus, StimTick, TimingReport};
-use rt_core::rt::clock::monotonic_ns;
-use rt_core::rt::hlog::HlogWriter;
-use rt_core::rt::runner::{RunError, create_node};
+use fes_rt::msg::service::{BACKPRESSURE, open_pubsub};
+use fes_rt::msg::{DeviceState, DriverCommand, DriverStatus, StimTick, TimingReport};
+use fes_rt::rt::clock::monotonic_ns;
+use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::node::{RunError, create_node};
 use tracing::{error, info, warn};
 
 use crate::config::DriverConfig;
@@ -249,7 +249,7 @@ pub fn run_report(
         if shared.rt_status.get().is_some_and(|s| s.is_degraded()) {
             flags |= TimingReport::FLAG_DEGRADED;
         }
-        if !rt_core::rt::alloc::counting_allocator_installed() {
+        if !fes_rt::rt::alloc::counting_allocator_installed() {
             flags |= TimingReport::FLAG_ALLOCATIONS_UNCOUNTED;
         }
         let report = telemetry.report(
@@ -348,7 +348,7 @@ fn read_stamps(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rt_core::msg::Contract;
+    use fes_rt::msg::Contract;
 
     #[test]
     fn status_refines_armed_to_stimulating_within_the_window_and_validates() {

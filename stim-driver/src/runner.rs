@@ -19,13 +19,13 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
+use fes_rt::msg::service::{open_pubsub, open_stim_tick_event};
+use fes_rt::msg::{Contract, DriverCommand, StimTick};
+use fes_rt::rt::alloc;
+use fes_rt::rt::clock::monotonic_ns;
+use fes_rt::rt::node::{RunError, create_node};
+use fes_rt::rt::realtime::{RtStatus, enter_realtime};
 use iceoryx2::prelude::FileDescriptorBased;
-use rt_core::msg::service::{open_pubsub, open_stim_tick_event};
-use rt_core::msg::{Contract, DriverCommand, StimTick};
-use rt_core::rt::alloc;
-use rt_core::rt::clock::monotonic_ns;
-use rt_core::rt::realtime::{RtStatus, enter_realtime};
-use rt_core::rt::runner::{RunError, create_node};
 
 use crate::bus::BusCounters;
 use crate::config::DriverConfig;
@@ -197,7 +197,7 @@ pub fn run_forward<T: CanTx>(
         let wake_ns = monotonic_ns();
         if waited.is_err() {
             // A failed wait must not spin: fall back to sleeping to the deadline.
-            rt_core::rt::clock::sleep_until(deadline);
+            fes_rt::rt::clock::sleep_until(deadline);
         }
         if shared.stopping(stop) {
             break;

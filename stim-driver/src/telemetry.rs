@@ -14,10 +14,10 @@
 
 use std::time::Duration;
 
-use rt_core::msg::{LatencySummary, TimingReport, TimingSource};
-use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::{HlogError, HlogWriter};
-use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_WAKE};
+use fes_rt::msg::{LatencySummary, TimingReport, TimingSource};
+use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::rt::hlog::{HlogError, HlogWriter};
+use fes_rt::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_WAKE};
 
 use crate::event::{Counters, DriverEvent};
 
@@ -178,7 +178,7 @@ impl DriverTelemetry {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rt_core::msg::Contract;
+    use fes_rt::msg::Contract;
 
     #[test]
     fn events_fill_the_right_histograms_and_the_report_validates() {

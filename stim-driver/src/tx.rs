@@ -14,7 +14,7 @@ use std::os::fd::{AsRawFd, RawFd};
 
 use fes_can::Frame;
 use fes_can::hostbus::{self, HostBus, RawFrame, Station};
-use rt_core::rt::clock::{monotonic_ns, sleep_until};
+use fes_rt::rt::clock::{monotonic_ns, sleep_until};
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions, StandardId};
 
 /// A write that did not put the frame in the kernel's transmit queue.

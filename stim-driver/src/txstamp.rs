@@ -12,7 +12,7 @@
 use std::io;
 use std::os::fd::{AsRawFd, BorrowedFd, OwnedFd, RawFd};
 
-use rt_core::rt::clock::monotonic_ns;
+use fes_rt::rt::clock::monotonic_ns;
 use socketcan::{CanSocket, SocketOptions};
 
 /// Asks the kernel for software transmit timestamps on `socket`.

@@ -7,7 +7,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::{Emcy, ErrorCode, Message, NmtCommand, NmtState, Nodes, StimLimits, StimState};
-use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
 use stim_driver::fault::{ArmRefusal, Fault};

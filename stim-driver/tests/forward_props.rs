@@ -21,8 +21,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::{Emcy, ErrorCode, Message, NmtState, StimState};
+use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
 use proptest::prelude::*;
-use rt_core::msg::{DriverCommand, DriverCommandKind, StimTick};
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
 use stim_driver::forward::{ForwardPath, ForwardSettings};

@@ -5,8 +5,8 @@
 //! through whole (so the first property cannot hold by refusing everything).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
+use fes_rt::msg::{Contract, StimTick};
 use proptest::prelude::*;
-use rt_core::msg::{Contract, StimTick};
 use stim_driver::interlock::{InterlockLimits, Interlocks, PulseCommand, Verdict, charge_nc};
 
 const MS: u64 = 1_000_000;

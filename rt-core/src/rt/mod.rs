@@ -18,28 +18,18 @@
 //! - [`notify`], [`logging`]: running under systemd: READY/WATCHDOG notification fed only
 //!   while the real-time loop makes progress, and logs to the journal.
 
-pub mod alloc;
-pub mod clock;
-pub mod config;
-pub mod config_file;
-pub mod error_text;
+pub use fes_rt::rt::{
+    MissingRightsPolicy, PeriodicClock, PeriodicSchedule, RtConfig, RtError, RtShortfall, RtStatus,
+    Wakeup, alloc, clock, config, config_file, enter_realtime, error_text, histogram, hlog,
+    logging, monotonic_ns, node, notify, probe, realtime, signals, telemetry,
+};
+
 pub mod feedback;
 pub mod generator;
-pub mod histogram;
-pub mod hlog;
-pub mod logging;
-pub mod notify;
-pub mod probe;
 pub mod process_config;
-pub mod realtime;
 pub mod reference;
 pub mod runner;
-pub mod signals;
 pub mod source;
-pub mod telemetry;
 
-pub use clock::{PeriodicClock, PeriodicSchedule, Wakeup, monotonic_ns};
-pub use config::{MissingRightsPolicy, RtConfig};
 pub use generator::{PatternLoop, PulseSettings};
-pub use realtime::{RtError, RtShortfall, RtStatus, enter_realtime};
 pub use source::{ControllerSource, TestPattern, TickDecision, TickSource};

@@ -16,66 +16,19 @@ use std::time::{Duration, Instant};
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 
+use fes_rt::rt::node::port_err;
+pub use fes_rt::rt::node::{RunError, create_node};
+
 use super::alloc;
-use super::clock::{PeriodError, PeriodicClock, monotonic_ns};
+use super::clock::{PeriodicClock, monotonic_ns};
 use super::generator::PatternLoop;
-use super::hlog::{HlogError, HlogWriter};
+use super::hlog::HlogWriter;
 use super::process_config::RtCoreConfig;
-use super::realtime::{RtError, RtStatus, enter_realtime};
+use super::realtime::{RtStatus, enter_realtime};
 use super::source::TickSource;
 use super::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
-use crate::msg::service::{BACKPRESSURE, ServiceError, open_pubsub, open_stim_tick_event};
+use crate::msg::service::{BACKPRESSURE, open_pubsub, open_stim_tick_event};
 use crate::msg::{Contract, ForceSample, Reference, StimTick, TimingReport, TimingSource};
-
-/// Failure of the real-time loop thread before or while it runs.
-#[derive(Debug, thiserror::Error)]
-pub enum RunError {
-    /// Real time could not be entered (refused, or invalid settings).
-    #[error("refused to start: {0}")]
-    Realtime(#[from] RtError),
-    /// A service could not be opened.
-    #[error(transparent)]
-    Service(#[from] ServiceError),
-    /// A port could not be created or connected.
-    #[error("cannot create the {port}: {detail}")]
-    Port {
-        /// Which port.
-        port: &'static str,
-        /// iceoryx2's reason.
-        detail: String,
-    },
-    /// The period is invalid.
-    #[error(transparent)]
-    Period(#[from] PeriodError),
-    /// The iceoryx2 node could not be created.
-    #[error("cannot create the iceoryx2 node: {0}")]
-    Node(String),
-    /// The interval log could not be written.
-    #[error(transparent)]
-    Hlog(#[from] HlogError),
-}
-
-fn port_err(port: &'static str) -> impl Fn(&dyn std::fmt::Debug) -> RunError {
-    move |e| RunError::Port {
-        port,
-        detail: format!("{e:?}"),
-    }
-}
-
-/// Creates an iceoryx2 node named `name` with iceoryx2's own signal handling disabled (the
-/// process installs [`super::signals::install_stop_handler`]).
-pub fn create_node(name: &str) -> Result<Node<ipc::Service>, RunError> {
-    let node_name = NodeName::new(name).map_err(|e| RunError::Node(format!("{e:?}")))?;
-    // An explicit default configuration: iceoryx2's defaults, without its warning that no
-    // global configuration file was found.
-    let config = iceoryx2::config::Config::default();
-    NodeBuilder::new()
-        .config(&config)
-        .name(&node_name)
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(|e| RunError::Node(format!("{e:?}")))
-}
 
 /// How a finished real-time loop went.
 #[derive(Debug, Clone, PartialEq, Eq)]

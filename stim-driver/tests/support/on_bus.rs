@@ -20,15 +20,15 @@ use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
 use fes_can::{Message, MessageKind, NmtCommand, Nodes, Pulse};
+use fes_rt::msg::service::{BACKPRESSURE, open_pubsub, open_stim_tick_event};
+use fes_rt::msg::{
+    Contract, DeviceState, DriverCommand, DriverCommandKind, DriverStatus, StimTick,
+};
+use fes_rt::rt::clock::{PeriodicClock, monotonic_ns};
+use fes_rt::rt::node::create_node;
 use fes_tests::bus::{RxFrame, Tap};
 use fes_tests::vcan::{Backend, CanEnv};
 use iceoryx2::prelude::*;
-use rt_core::msg::service::{BACKPRESSURE, open_pubsub, open_stim_tick_event};
-use rt_core::msg::{
-    Contract, DeviceState, DriverCommand, DriverCommandKind, DriverStatus, StimTick,
-};
-use rt_core::rt::clock::{PeriodicClock, monotonic_ns};
-use rt_core::rt::runner::create_node;
 
 const EXE: &str = env!("CARGO_BIN_EXE_stim-driver");
 /// Set (to "<prefix>;<script>") when this binary runs as the scripted publisher.

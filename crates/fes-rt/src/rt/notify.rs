@@ -20,9 +20,9 @@
 //!
 //! ```no_run
 //! use std::sync::atomic::{AtomicBool, AtomicU64};
-//! use rt_core::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
+//! use fes_rt::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
 //!
-//! # fn main() -> Result<(), rt_core::rt::notify::NotifyError> {
+//! # fn main() -> Result<(), fes_rt::rt::notify::NotifyError> {
 //! let manager = ServiceManager::from_env()?; // once, at start-up (validates the variables)
 //! let progress = AtomicU64::new(0); // the loop: progress.fetch_add(1, Relaxed) per cycle
 //! let stop = AtomicBool::new(false); // set when the loop ends
