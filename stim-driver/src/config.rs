@@ -676,7 +676,7 @@ mod tests {
 
     #[test]
     fn the_bench_stack_file_parses() {
-        // The file supervisor/src/bench.rs writes (its UML timeouts).
+        // The file workbench/src/bench.rs writes (its UML timeouts).
         let text = r#"schema = "fes-stim-driver/1"
 
 [can]

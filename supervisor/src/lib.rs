@@ -5,18 +5,17 @@
 //! wave of thesis 1.1); closes the slow outer loop ("Controller 1") on the measured
 //! contraction of each beat; watches the health of every process of the stimulation
 //! chain and stops stimulation on any fault; records every message of a run as a
-//! `fes-dataset/1` data set; and runs the end-to-end bench.
+//! `fes-dataset/1` data set. It is the safety daemon and its operator client; it links
+//! neither plotting nor the muscle simulator (the offline tools and the bench are the
+//! workbench, `fes`).
 //!
 //! The pure parts (profiles, outer loop, contraction estimate, reference limits, the
 //! control protocol, the health rules, the supervisor state machine) take time as an
 //! argument and do no I/O, so they are tested without processes. The I/O parts are
-//! [`control`] (Unix socket), [`recording`] (files), [`daemon`] (iceoryx2) and
-//! [`mod@bench`] (child processes).
+//! [`control`] (Unix socket), [`recording`] (files) and [`daemon`] (iceoryx2).
 #![deny(missing_docs)]
 
-pub mod baseline;
-pub mod bench;
-pub mod cft;
+pub mod cli;
 pub mod config;
 pub mod contraction;
 pub mod control;
@@ -26,10 +25,7 @@ pub mod health;
 pub mod limits;
 pub mod outer_loop;
 pub mod pass;
-pub mod plots;
 pub mod profile;
 pub mod protocol;
 pub mod recording;
 pub mod recording_thread;
-pub mod simulation;
-pub mod summary;

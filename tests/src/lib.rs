@@ -7,7 +7,7 @@
 //! * [`child`]: test children die with the test thread that started them.
 //! * [`cli`]: the common assertion of the binaries' bad-input sweeps.
 //! * [`stack`]: building the four binaries and reading the virtual stimulator's record,
-//!   for tests that run the whole stack (`supervisor::bench::Stack`).
+//!   for tests that run the whole stack (`workbench::bench::Stack`).
 #![deny(missing_docs)]
 // A testkit: its helpers panic on a failed setup step by design (a failed test).
 #![allow(clippy::unwrap_used, clippy::expect_used)]

@@ -1,5 +1,5 @@
 //! One identification run (thesis 5.3, 5.4): options, the estimation stages, metrics and
-//! provenance. Used by `supervisor identify`, `sweep`, `compare` and the tests.
+//! provenance. Used by `fes identify`, `sweep`, `compare` and the tests.
 //!
 //! Prediction mode (ARX only): least squares, global or local ([`super::regression`]).
 //!

@@ -1,6 +1,6 @@
 //! Identification of the muscle model (thesis 2.3, 5.2.2, 5.3, 5.4, App. B).
 //!
-//! One implementation of the numerics, used by `supervisor identify / sweep / compare` and
+//! One implementation of the numerics, used by `fes identify / sweep / compare` and
 //! by the tests:
 //!
 //! - [`records`]: a data set's training and test records (split from its metadata).

@@ -1,4 +1,4 @@
-//! Fixtures of the analysis tests (shared with `supervisor/tests/analysis_*.rs`): the thesis's
+//! Fixtures of the analysis tests (shared with `workbench/tests/analysis_*.rs`): the thesis's
 //! Table 5.3 situation as a model built in code, records drawn in code, and a linear model
 //! with closed-form properties.
 #![allow(dead_code)]

@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 use std::time::Duration;
+use supervisor::cli::OnOff;
 
 use anyhow::{Context, bail};
 use supervisor::control;
@@ -42,15 +43,6 @@ pub struct StatusArgs {
     pub json: bool,
     #[command(flatten)]
     socket: SocketArgs,
-}
-
-/// On or off.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum OnOff {
-    /// On.
-    On,
-    /// Off.
-    Off,
 }
 
 /// `supervisor profile <kind>`.

@@ -1,5 +1,5 @@
 //! The outer loop against a simulated plant: the Ding fast muscle with fatigue, driven by
-//! the pattern generator, all in process ([`supervisor::simulation`]).
+//! the pattern generator, all in process ([`workbench::simulation`]).
 //!
 //! The controller is rt-core's control fixture (a fast-muscle-like LMN, thesis Table 6.1
 //! rise times), which is *not* fitted to the Ding muscle: the model mismatch is part of
@@ -17,9 +17,9 @@ use sim_muscle::preset::Preset;
 use supervisor::contraction::ContractionSettings;
 use supervisor::limits::ReferenceLimits;
 use supervisor::outer_loop::OuterLoopSettings;
-use supervisor::plots::{BeatLine, plot_beats};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
-use supervisor::simulation::{SimResult, SimSettings, simulate};
+use workbench::plots::{BeatLine, plot_beats};
+use workbench::simulation::{SimResult, SimSettings, simulate};
 
 const TARGET: f64 = 0.3;
 
@@ -125,7 +125,7 @@ fn fatigue_outer_loop_on_holds_the_target_off_decays() {
 }
 
 /// The shipped controller (`models/fast.lcn.json`, identified from sim-muscle data) in the
-/// bench's chain (`supervisor bench --in-process --fatigue`: sensor noise included): the
+/// bench's chain (`fes bench --in-process --fatigue`: sensor noise included): the
 /// acceptance criterion of issue 8 as the bench measures it. Outer loop on: every beat after
 /// the 10th within 10 % of the target; off: the contraction decays by more than 15 %.
 #[test]
@@ -173,7 +173,7 @@ fn static_mismatch_is_removed_within_the_rate_limit() {
 /// Writes docs/img/outer-loop-fatigue.png (the fixture controller, exact force) and
 /// docs/img/outer-loop-fatigue-bench.png (the shipped controller in the bench's chain):
 /// 60 s, fatigue, outer loop on and off:
-/// `cargo test -p supervisor --release --test runtime_outer_loop -- --ignored --nocapture`.
+/// `cargo test -p workbench --release --test runtime_outer_loop -- --ignored --nocapture`.
 #[test]
 #[ignore = "writes the documentation figures"]
 fn figure_outer_loop_fatigue() {

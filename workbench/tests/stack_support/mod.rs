@@ -5,8 +5,8 @@ use std::path::Path;
 use std::time::Duration;
 
 use fes_tests::stack::workspace_root;
-use supervisor::bench::{Stack, StackOptions, process_logs};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
+use workbench::bench::{Stack, StackOptions, process_logs};
 
 /// Starts the four processes in `dir` from `bins` on `iface` with the default controller
 /// (`uml`: the guest's generous timeouts), waits until the supervisor has heard from every

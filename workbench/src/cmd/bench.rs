@@ -1,4 +1,4 @@
-//! `supervisor bench`: the end-to-end bench (docs/bench.md).
+//! `fes bench`: the end-to-end bench (docs/bench.md).
 //!
 //! Without a CAN interface in reach (no `FES_VCAN_IFACE`), it re-runs itself through
 //! `vcan-run`, which uses native vcan when the kernel has it and a User-Mode Linux guest
@@ -6,7 +6,7 @@
 //! arms, runs the cardiac profile, stops everything and prints the summary.
 //!
 //! `--in-process` runs the same chain in one process in simulated time instead
-//! ([`supervisor::simulation`]: the supervisor's profile and outer loop, rt-core's reference
+//! ([`workbench::simulation`]: the supervisor's profile and outer loop, rt-core's reference
 //! tracking and pattern generator with the same controller file, the same sim-muscle preset
 //! and force sensor): no CAN, no processes, no latencies; the same summary otherwise.
 
@@ -15,24 +15,24 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use supervisor::baseline::{BeatShape, baseline_40hz};
-use supervisor::bench::{Stack, StackOptions, process_logs};
-use supervisor::plots::{
-    LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
-};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
-use supervisor::summary::{
+use workbench::baseline::{BeatShape, baseline_40hz};
+use workbench::bench::{Stack, StackOptions, process_logs};
+use workbench::plots::{
+    LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
+};
+use workbench::summary::{
     AnalysisInput, BaselineFn, Latency, RunTiming, Series, Summary, analyse, read_series, summarise,
 };
 
-use super::client::OnOff;
+use supervisor::cli::OnOff;
 
-/// Arguments of `supervisor bench`.
+/// Arguments of `fes bench`.
 #[derive(Debug, Clone, clap::Args)]
 #[command(
     args_override_self = true,
-    after_help = "Example: supervisor bench --seconds 30 --hr 75 --json bench.json\n\
+    after_help = "Example: fes bench --seconds 30 --hr 75 --json bench.json\n\
 The README's `scripts/bench` builds everything and runs this with --seconds 30 (a later \
 option overrides an earlier one, so `scripts/bench --seconds 60` works)."
 )]
@@ -68,7 +68,7 @@ pub struct Args {
     #[arg(long, default_value = "models/fast.lcn.json")]
     pub controller: PathBuf,
     /// Output directory (configurations, logs, recording, plots); default
-    /// target/bench/<UTC time>.
+    /// `target/bench/<UTC time>`.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Also write the summary as JSON to this file.
@@ -306,7 +306,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     if let Some(f) = failure {
         bail!("bench run failed: {f}");
     }
-    let rec = supervisor::bench::recordings_in(&out.join("recording"));
+    let rec = workbench::bench::recordings_in(&out.join("recording"));
     let Some(rec) = rec.last() else {
         bail!(
             "the supervisor wrote no recording under {}",
@@ -317,7 +317,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     let front = rt_core::control::file::Controller::load(&a.controller)
         .ok()
         .and_then(|c| {
-            supervisor::simulation::SimSettings::bench(
+            workbench::simulation::SimSettings::bench(
                 &c,
                 a.fatigue,
                 ProfileSpec::Cardiac(cardiac(a)),
@@ -361,7 +361,7 @@ fn baseline(amplitude: f64, scale_n: f64, delay: usize) -> BaselineFn {
 
 /// `--in-process`: the chain in simulated time, with the bench's muscle and sensor.
 fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
-    use supervisor::simulation::{SimSettings, simulate};
+    use workbench::simulation::{SimSettings, simulate};
 
     let controller = rt_core::control::file::Controller::load(&a.controller)
         .with_context(|| format!("controller {}", a.controller.display()))?;
@@ -389,7 +389,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         text += &format!(
             "{},{:.3},{},{:.6},{:.6},{},{:.6},{:.6}\n",
             m.beat.index,
-            (m.beat.start_ns - supervisor::simulation::T0_NS) as f64 * 1e-9,
+            (m.beat.start_ns - workbench::simulation::T0_NS) as f64 * 1e-9,
             m.plateau_mean.map_or(String::new(), |p| format!("{p:.6}")),
             m.peak,
             m.fti,

@@ -39,7 +39,7 @@ pub fn open_model(path: &Path) -> Result<OpenedModel> {
     if !bad.is_empty() {
         eprintln!(
             "WARNING: {}: the local models of units {bad:?} are UNSTABLE (|1 + Ts p| >= 1); \
-             results are shown for the model as it is (repair: supervisor modify --stabilise)",
+             results are shown for the model as it is (repair: fes modify --stabilise)",
             path.display()
         );
     }

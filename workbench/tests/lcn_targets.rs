@@ -17,8 +17,8 @@ use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
-use supervisor::simulation::{SimSettings, simulate};
-use supervisor::summary::{AnalysisInput, RunTiming, summarise};
+use workbench::simulation::{SimSettings, simulate};
+use workbench::summary::{AnalysisInput, RunTiming, summarise};
 
 const LEVELS: [f64; 7] = [0.1, 0.15, 0.2, 0.3, 0.5, 0.7, 0.9];
 

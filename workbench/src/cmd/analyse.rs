@@ -1,4 +1,4 @@
-//! `supervisor analyse`: what a model does away from its training data (thesis 2.4, 5.4.3):
+//! `fes analyse`: what a model does away from its training data (thesis 2.4, 5.4.3):
 //! static analysis over phi (Fig. 5.27-5.28), the force-frequency curve (Fig. 5.26) with the
 //! extrapolated range marked, the stability report (2.4.1, Fig. D.4) and, with a data set,
 //! simulated against measured test records (Fig. 5.24). Writes PNG plots, CSV tables and
@@ -18,7 +18,7 @@ use sim_muscle::pattern::constant_train;
 use super::inputs::{Data, OpenedModel, md_table, open_data, open_model, out_dir, sci, write_csv};
 use super::plots::{self, Band, Figure, Line, Panel, color};
 
-/// Arguments of `supervisor analyse`.
+/// Arguments of `fes analyse`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The model file (fes-lmn/1); unstable models are opened and flagged.
@@ -109,7 +109,7 @@ fn stability_section(md: &mut String, model: &OpenedModel, rep: &StaticReport) {
             "> **WARNING: UNSTABLE MODEL.** The local models of units {bad:?} are unstable \
              (|1 + Ts p| >= 1). The model was opened with the stability check disabled; \
              long stimulation in the region these units dominate drives the output away \
-             without bound (thesis 5.4.3, Fig. 5.32). Repair: `supervisor modify --stabilise`.\n"
+             without bound (thesis 5.4.3, Fig. 5.32). Repair: `fes modify --stabilise`.\n"
         );
     }
     let _ = writeln!(

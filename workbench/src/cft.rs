@@ -96,7 +96,7 @@ pub struct FrontSettings {
     /// Highest train frequency, Hz.
     pub max_hz: u32,
     /// Stimulation lead, ms: the contraction judged (the reference) lasts this much longer
-    /// than the stimulated window the beats of the run give (`supervisor bench
+    /// than the stimulated window the beats of the run give (`fes bench
     /// --stim-lead-ms`); the trains span the stimulated window, as the LCN's pulses do.
     pub lead_ms: usize,
 }

@@ -1,4 +1,4 @@
-//! `supervisor design`: the Local Controller Network of a model by pole placement (thesis
+//! `fes design`: the Local Controller Network of a model by pole placement (thesis
 //! 6.5.3, App. C.2), one local controller per unit from a rise time and a damping factor;
 //! prints the layout of Tables 6.1 / 6.2 and writes the controller file `fes-lcn/1`.
 
@@ -99,7 +99,7 @@ impl From<ShaperSumArg> for ShaperSum {
 pub enum FeedbackStateArg {
     /// The advanced core state x[k+d]: no delay in the loop, the designed poles exactly.
     Advanced,
-    /// The model state now, x[k]: the thesis's loop, with the 7 ms delay the design ignores.
+    /// The model state now, x\[k\]: the thesis's loop, with the 7 ms delay the design ignores.
     Delayed,
 }
 
@@ -163,7 +163,7 @@ impl VariantArgs {
     }
 }
 
-/// Arguments of `supervisor design`.
+/// Arguments of `fes design`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The model file (fes-lmn/1; every local model must be stable).
@@ -254,7 +254,7 @@ pub fn run(args: Args) -> Result<()> {
                     return Err(e).with_context(|| format!("model file {}", args.model.display()));
                 }
                 bail!(
-                    "model file {}: {e}\nthe model is unstable (units {bad:?}); a controller needs every local model stable: repair it with `supervisor modify --stabilise`",
+                    "model file {}: {e}\nthe model is unstable (units {bad:?}); a controller needs every local model stable: repair it with `fes modify --stabilise`",
                     args.model.display()
                 );
             }
@@ -292,7 +292,7 @@ pub fn run(args: Args) -> Result<()> {
             "the model's offsets give negative local steady-state gains G = -c'A^-1 b ({}). \
              An LCN whose units mix negative- and positive-gain controllers switches back and \
              forth between them and never settles (thesis 6.5.3). Identify the model with the \
-             offsets fixed at zero (`supervisor identify --zero-offsets`), which keeps every \
+             offsets fixed at zero (`fes identify --zero-offsets`), which keeps every \
              local gain non-negative, or pass --allow-negative-gain to design anyway",
             negative.join(", ")
         );

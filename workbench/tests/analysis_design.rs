@@ -1,4 +1,4 @@
-//! `supervisor design`: Tables 6.1 / 6.2 and the closed-loop poles, and its refusals.
+//! `fes design`: Tables 6.1 / 6.2 and the closed-loop poles, and its refusals.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;

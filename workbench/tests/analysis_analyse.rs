@@ -1,4 +1,4 @@
-//! `supervisor analyse`: static analysis, force-frequency curve, stability report,
+//! `fes analyse`: static analysis, force-frequency curve, stability report,
 //! validation, on the Table 5.3 model; bad inputs.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 

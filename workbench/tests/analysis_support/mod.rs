@@ -29,7 +29,7 @@ pub fn tmp(tag: &str) -> PathBuf {
 
 /// Runs `supervisor` with `args`.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_supervisor"))
+    Command::new(env!("CARGO_BIN_EXE_fes"))
         .args(args)
         .output()
         .expect("run supervisor")

@@ -279,8 +279,8 @@ fn kill_one(
 ) -> Result<(), String> {
     use nix::sys::signal::Signal;
     use std::time::{Duration, Instant};
-    use supervisor::bench::process_logs;
     use supervisor::protocol::Command as Cmd;
+    use workbench::bench::process_logs;
 
     let dir = std::env::temp_dir().join(format!("fes-kill-{victim}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -444,7 +444,7 @@ fn killing_any_one_process_stops_stimulation_and_names_it() {
 /// its arrival timestamps; then the supervisor's control loop answered no status within
 /// 10 s; then no FORCE for 3.5 s, which the supervisor rightly reports as a silent
 /// stimulator before the kill). Run it on a machine with vcan (native, real time):
-/// `cargo test -p supervisor --test runtime_recording -- --ignored killing --nocapture`.
+/// `cargo test -p workbench --test runtime_recording -- --ignored killing --nocapture`.
 #[test]
 #[ignore = "needs a native vcan: the UML guest stalls for seconds (see the doc comment)"]
 fn killing_any_one_process_on_vcan_stops_stimulation_and_names_it() {

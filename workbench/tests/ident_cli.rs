@@ -1,4 +1,4 @@
-//! `supervisor identify / sweep / compare` end to end, bad inputs, and the acceptance ratios
+//! `fes identify / sweep / compare` end to end, bad inputs, and the acceptance ratios
 //! of the common-eigenvector network against the linear delta model on the sim-muscle
 //! `fast` and `slow` data sets (thesis protocol, seed 1), recorded here with sim-muscle's
 //! library exactly as `sim-muscle record --preset P --seed 1` does.
@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-const BIN: &str = env!("CARGO_BIN_EXE_supervisor");
+const BIN: &str = env!("CARGO_BIN_EXE_fes");
 
 fn tmp(name: &str) -> PathBuf {
     let p = Path::new(env!("CARGO_TARGET_TMPDIR"))

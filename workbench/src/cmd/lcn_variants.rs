@@ -1,4 +1,4 @@
-//! `supervisor lcn-variants`: the pattern generator's loop variants side by side (issue 17,
+//! `fes lcn-variants`: the pattern generator's loop variants side by side (issue 17,
 //! docs/control.md "Variants"). Every candidate reading of the thesis's loop (rise-time
 //! rule, p3, the shaper's sum, the anti-windup rule, the state fed back) is a named
 //! variant of the default; each is designed on the same model with the same rise times,
@@ -107,12 +107,12 @@ const VARIANTS: &[Variant] = &[
     },
 ];
 
-/// Arguments of `supervisor lcn-variants`.
+/// Arguments of `fes lcn-variants`.
 #[derive(Debug, clap::Args)]
 #[command(
     after_help = "Variants: default, legacy, integral-sign, output-clamp, signed-sum, \
     signed-sum-floor, p3-mapped, rise-approximation, delayed-state, thesis (see \
-    docs/control.md, \"Variants\").\n\nExample:\n  supervisor lcn-variants --model \
+    docs/control.md, \"Variants\").\n\nExample:\n  fes lcn-variants --model \
     models/slow.lmn.json --muscle slow --rise-ms auto --out target/variants/slow"
 )]
 pub struct Args {
@@ -126,7 +126,7 @@ pub struct Args {
     /// offsets in place of the muscle).
     #[arg(long)]
     pub plant_model: Option<PathBuf>,
-    /// Rise time per unit, ms, comma-separated, or `auto` (as `supervisor design`).
+    /// Rise time per unit, ms, comma-separated, or `auto` (as `fes design`).
     #[arg(long, default_value = "auto")]
     pub rise_ms: String,
     /// Damping factor xi of the dominant pair.

@@ -1,4 +1,4 @@
-//! `supervisor osp`: optimal stimulation patterns (thesis ch. 6) on a model, on the Ding
+//! `fes osp`: optimal stimulation patterns (thesis ch. 6) on a model, on the Ding
 //! muscle of sim-muscle, or on both side by side (the thesis compared its models with
 //! Kwende's experiments on the real muscles):
 //!
@@ -66,7 +66,7 @@ impl From<MuscleArg> for Preset {
     }
 }
 
-/// Arguments of `supervisor osp`.
+/// Arguments of `fes osp`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// A model file (fes-lmn/1): the methods run on its output.
@@ -144,7 +144,7 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if args.method.contains(&Method::Lcn) && args.controller.is_none() {
-        bail!("--method lcn needs --controller (a fes-lcn/1 file from `supervisor design`)");
+        bail!("--method lcn needs --controller (a fes-lcn/1 file from `fes design`)");
     }
     let controller = args
         .controller

@@ -25,8 +25,8 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rt_core::dataset::DataSet;
 use rt_core::rt::clock::monotonic_ns;
-use supervisor::bench::{PROCESSES, Stack, process_logs};
 use supervisor::protocol::Status;
+use workbench::bench::{PROCESSES, Stack, process_logs};
 
 mod stack_support;
 

@@ -1,4 +1,4 @@
-//! `supervisor identify`: one identification run, the model file and its metrics.
+//! `fes identify`: one identification run, the model file and its metrics.
 
 use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
@@ -30,12 +30,12 @@ ERRORS (5.3, eq. B.8, normalised force, always at the data's 1 ms)
   options, the data set, the seed and the fit time.
 
 EXAMPLES
-  supervisor identify --data data/fast --structure ss-eig-common --units 4 --out fast.lmn.json
-  supervisor identify --data data/fast --structure arx-shift --ts-ms 5 --mode prediction \\
+  fes identify --data data/fast --structure ss-eig-common --units 4 --out fast.lmn.json
+  fes identify --data data/fast --structure arx-shift --ts-ms 5 --mode prediction \\
       --units 10 --out fast-arx.lmn.json
   See docs/identification.md.";
 
-/// `supervisor identify` arguments.
+/// `fes identify` arguments.
 #[derive(Debug, clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
@@ -223,7 +223,7 @@ pub fn print_summary(r: &Identified, data_ts_s: f64) {
     }
 }
 
-/// Runs `supervisor identify`.
+/// Runs `fes identify`.
 pub fn run(args: Args) -> Result<()> {
     let records = load_records(&args.data)?;
     let opts = args.fit.options(args.structure, args.units, records.ts)?;

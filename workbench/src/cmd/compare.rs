@@ -1,4 +1,4 @@
-//! `supervisor compare`: the thesis's Tables 5.1 and 5.2 on one data set.
+//! `fes compare`: the thesis's Tables 5.1 and 5.2 on one data set.
 
 use super::identify::load_records;
 use super::{Feedback, fmt_err};
@@ -17,9 +17,9 @@ Sizes swept: prediction-mode rows 1..12, simulation-mode rows 1..8 (--quick: 1..
 most 30 LM iterations, for tests). Expect a few minutes on 2 cores without --quick.
 
 EXAMPLE
-  supervisor compare --data data/fast --out compare-fast";
+  fes compare --data data/fast --out compare-fast";
 
-/// `supervisor compare` arguments.
+/// `fes compare` arguments.
 #[derive(Debug, clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
@@ -77,7 +77,7 @@ pub fn table(rows: &[CompareRow]) -> String {
     s
 }
 
-/// Runs `supervisor compare`.
+/// Runs `fes compare`.
 pub fn run(args: Args) -> Result<()> {
     let records = load_records(&args.data)?;
     if let Some(dir) = &args.out {

@@ -1,4 +1,4 @@
-//! `supervisor modify --stabilise`: the thesis's model modification (5.4.3): every unstable
+//! `fes modify --stabilise`: the thesis's model modification (5.4.3): every unstable
 //! local eigenvalue is replaced by a slow stable one and that unit's offsets are
 //! re-estimated on the training data (`rt_core::analysis::stabilise`). Prints Table 5.4
 //! (training/test MSSE before and after), writes the model, and draws the long-train
@@ -17,7 +17,7 @@ use sim_muscle::pattern::constant_train;
 use super::inputs::{Data, md_table, open_data, open_model, sci};
 use super::plots::{self, Figure, Line, Panel, color};
 
-/// Arguments of `supervisor modify`.
+/// Arguments of `fes modify`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The model file (fes-lmn/1); opened even when unstable.
@@ -85,7 +85,7 @@ pub fn run(args: Args) -> Result<()> {
     fixed.provenance.extra.insert(
         "modified".into(),
         serde_json::json!({
-            "tool": format!("supervisor modify {}", env!("CARGO_PKG_VERSION")),
+            "tool": format!("fes modify {}", env!("CARGO_PKG_VERSION")),
             "from": args.model.display().to_string(),
             "data_set": data.dir.display().to_string(),
             "eigenvalues_replaced": result.changes.iter().map(|c| serde_json::json!({

@@ -1,4 +1,4 @@
-//! `supervisor modify --stabilise` on the thesis's Table 5.3 situation.
+//! `fes modify --stabilise` on the thesis's Table 5.3 situation.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;

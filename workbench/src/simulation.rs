@@ -1,5 +1,5 @@
 //! The whole chain in one process, in simulated time: the supervisor's profile and outer
-//! loop ([`crate::core`]), rt-core's reference tracking (`rt::reference`) and pattern
+//! loop ([`supervisor::core`]), rt-core's reference tracking (`rt::reference`) and pattern
 //! generator (the controller file's LCN + shaper + LMN), and sim-muscle's Ding muscle
 //! (optionally fatiguing, optionally with its force sensor), 1 ms per step.
 //!
@@ -14,13 +14,13 @@ use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::plant::{MusclePlant, Pulse};
 use sim_muscle::sensor::{ForceSensor, SensorConfig};
 
-use crate::contraction::ContractionSettings;
-use crate::core::{BeatRecord, SupervisorCore};
-use crate::limits::ReferenceLimits;
-use crate::outer_loop::OuterLoopSettings;
-use crate::profile::ProfileSpec;
-use crate::protocol::Command;
 use crate::summary::{BeatRow, Series};
+use supervisor::contraction::ContractionSettings;
+use supervisor::core::{BeatRecord, SupervisorCore};
+use supervisor::limits::ReferenceLimits;
+use supervisor::outer_loop::OuterLoopSettings;
+use supervisor::profile::ProfileSpec;
+use supervisor::protocol::Command;
 
 /// What to simulate.
 #[derive(Debug, Clone)]
@@ -46,7 +46,7 @@ pub struct SimSettings {
 }
 
 impl SimSettings {
-    /// The bench's chain (`supervisor bench --in-process`): sim-muscle's fast preset
+    /// The bench's chain (`fes bench --in-process`): sim-muscle's fast preset
     /// (optionally fatiguing, Ding 2003) measured by the bench's sensor
     /// (`sim-muscle stimulator --measured --offset-n 0`: default noise, seed 1), normalised
     /// by the controller's model, beats measured with the model's delay, default limits.

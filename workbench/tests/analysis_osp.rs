@@ -1,4 +1,4 @@
-//! `supervisor osp` on sim-muscle's Ding presets (the thesis's findings, 6.2-6.4), side by
+//! `fes osp` on sim-muscle's Ding presets (the thesis's findings, 6.2-6.4), side by
 //! side with a model, and the LCN method; bad inputs.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 

@@ -3,7 +3,7 @@
 //! as separate processes on one CAN interface, driven through the control socket.
 //!
 //! [`Stack`] starts, watches and stops the processes (tests use it to kill one mid-run);
-//! `supervisor bench` (the binary's `cmd::bench`) runs a cardiac profile for a set time, stops
+//! `fes bench` (the binary's `cmd::bench`) runs a cardiac profile for a set time, stops
 //! everything and summarises the recording ([`crate::summary`]).
 
 use std::fs::File;
@@ -14,9 +14,9 @@ use std::time::{Duration, Instant};
 
 use rt_core::control::file::Controller;
 
-use crate::control;
-use crate::profile::ProfileSpec;
-use crate::protocol::{Command, Response, Status};
+use supervisor::control;
+use supervisor::profile::ProfileSpec;
+use supervisor::protocol::{Command, Response, Status};
 
 /// A bench failure.
 #[derive(Debug, thiserror::Error)]
@@ -300,7 +300,7 @@ stimulator_pid = {sim_pid}
 [recording]
 dir = "{dir}/recording"
 scale_n = {scale_n}
-source = "supervisor bench"
+source = "fes bench"
 "#,
                 socket = socket.display(),
                 // A bench shares its machine with builds and editors: a second

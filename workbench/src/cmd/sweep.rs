@@ -1,4 +1,4 @@
-//! `supervisor sweep`: every network size of one structure, the table and bar plot of thesis
+//! `fes sweep`: every network size of one structure, the table and bar plot of thesis
 //! Figs. 5.13-5.21, and the size with the lowest test MSSE (the thesis's rule).
 
 use super::identify::{FitArgs, load_records};
@@ -11,23 +11,23 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 const AFTER_HELP: &str = "\
-Fits --units sizes one after the other (each as `supervisor identify` would), prints the
+Fits --units sizes one after the other (each as `fes identify` would), prints the
 table (train MSPE for ARX structures, train MSSE, test MSSE; eq. B.8 at 1 ms) and marks
 with * the size with the lowest test MSSE: the thesis's rule for the network size (5.4).
 With --out DIR also writes sweep.md, sweep.json, sweep.png (bars like Figs. 5.13-5.21,
 log scale) and one model file per size (units_<M>.lmn.json).
 
 EXAMPLE
-  supervisor sweep --data data/fast --structure ss-eig-common --units 1..10 --out sweep-fast";
+  fes sweep --data data/fast --structure ss-eig-common --units 1..10 --out sweep-fast";
 
-/// `supervisor sweep` arguments.
+/// `fes sweep` arguments.
 #[derive(Debug, clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
     /// Data-set directory (fes-dataset/1).
     #[arg(long)]
     pub data: PathBuf,
-    /// Local model structure (see `supervisor identify --help`).
+    /// Local model structure (see `fes identify --help`).
     #[arg(long, value_enum)]
     pub structure: StructureArg,
     /// Sizes: `A..B` (inclusive, as the thesis writes 1..10), `A..=B`, or one number.
@@ -199,7 +199,7 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
     Ok(())
 }
 
-/// Runs `supervisor sweep`.
+/// Runs `fes sweep`.
 pub fn run(args: Args) -> Result<()> {
     let records = load_records(&args.data)?;
     let opts = args

@@ -1,0 +1,13 @@
+//! The workbench library: the end-to-end bench ([`mod@bench`]: the four processes on one
+//! bus), the chain in simulated time ([`simulation`]), the run's summary and verdicts
+//! ([`summary`], [`baseline`], [`cft`]) and their figures ([`plots`]). It builds on the
+//! supervisor's pure parts (profiles, outer loop, protocol) and links the muscle simulator
+//! and plotting, which the safety daemon does not.
+#![deny(missing_docs)]
+
+pub mod baseline;
+pub mod bench;
+pub mod cft;
+pub mod plots;
+pub mod simulation;
+pub mod summary;
