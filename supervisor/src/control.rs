@@ -6,20 +6,30 @@
 //! configured `user`, or root (when `allow_root`), or its primary or supplementary groups
 //! must include the configured `group`. Others get one error line and are disconnected.
 //!
-//! The server thread only reads, parses and checks; commands are carried out by the
-//! daemon's main loop (which owns the state), through a channel, and the response goes
-//! back on the same connection. One connection is served at a time, each with a read
-//! timeout, so a stalled client cannot hold the socket for long.
+//! The server only reads, parses and checks; commands are carried out by the daemon's main
+//! loop (which owns the state), through a channel, and the response goes back on the same
+//! connection. Nothing a client does can hold up another client or the operator's stop:
+//!
+//! - every connection is served by a thread of its own (at most [`MAX_CLIENTS`] at once;
+//!   beyond that a connection is told "busy" and closed at once);
+//! - the peer's credentials are checked **before** anything is read: a peer the policy does
+//!   not admit gets its one error line and is disconnected unread;
+//! - a request must arrive whole within [`CLIENT_DEADLINE`] in total (not per read), at most
+//!   [`MAX_LINE`] bytes;
+//! - **the stop socket** ([`stop_socket_path`], `supervisor-stop.sock` beside the control
+//!   socket, same mode and policy): connecting to it *is* the stop command. The server
+//!   reads nothing from it, checks the peer, hands `stop` to the main loop and answers;
+//!   `supervisor stop` uses it (issue 19, item 2).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::fs::{DirBuilderExt, FileTypeExt, PermissionsExt};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::config::ControlConfig;
 use crate::protocol::{self, Command, MAX_LINE, ProtocolError, Request, Response, VERSION};
@@ -179,15 +189,27 @@ pub struct Pending {
     pub reply: mpsc::SyncSender<Response>,
 }
 
-/// The listening socket and its thread.
-pub struct ControlServer {
-    path: PathBuf,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+/// The stop socket that goes with the control socket at `socket`:
+/// `<dir>/<stem>-stop.sock` (`/run/fes/supervisor-stop.sock` for the default).
+pub fn stop_socket_path(socket: &Path) -> PathBuf {
+    let stem = socket
+        .file_stem()
+        .map_or_else(|| "supervisor".into(), |s| s.to_string_lossy().into_owned());
+    socket.with_file_name(format!("{stem}-stop.sock"))
 }
 
-/// How long a client may take to send its request.
-pub const CLIENT_READ_TIMEOUT: Duration = Duration::from_secs(2);
+/// The listening sockets (control and stop) and their threads.
+pub struct ControlServer {
+    path: PathBuf,
+    stop_path: PathBuf,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+/// How long a client may take to send its whole request.
+pub const CLIENT_DEADLINE: Duration = Duration::from_secs(1);
+/// Connections served at once on the control socket; more are refused as busy.
+pub const MAX_CLIENTS: usize = 32;
 /// How long the server waits for the main loop's answer.
 pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -224,41 +246,37 @@ impl ControlServer {
                 .create(parent)
                 .map_err(io("create directory", parent))?;
         }
-        match std::fs::symlink_metadata(&path) {
-            Ok(meta) if meta.file_type().is_socket() => {
-                if UnixStream::connect(&path).is_ok() {
-                    return Err(ControlError::InUse { path });
-                }
-                std::fs::remove_file(&path).map_err(io("remove stale socket", &path))?;
-            }
-            Ok(_) => return Err(ControlError::NotASocket { path }),
-            Err(_) => {}
-        }
-        let listener = UnixListener::bind(&path).map_err(io("bind", &path))?;
-        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(cfg.mode))
-            .map_err(io("chmod", &path))?;
-        if let Some(gid) = policy.gid {
-            nix::unistd::chown(&path, None, Some(nix::unistd::Gid::from_raw(gid))).map_err(
-                |e| ControlError::Io {
-                    op: "chgrp",
-                    path: path.clone(),
-                    source: e.into(),
-                },
-            )?;
-        }
-        listener
-            .set_nonblocking(true)
-            .map_err(io("configure", &path))?;
+        let listener = bind(&path, cfg.mode, policy.gid)?;
+        let stop_path = stop_socket_path(&path);
+        let stop_listener = bind(&stop_path, cfg.mode, policy.gid)?;
         let stop = Arc::new(AtomicBool::new(false));
-        let stop2 = Arc::clone(&stop);
-        let thread = std::thread::Builder::new()
-            .name("control".into())
-            .spawn(move || serve(listener, policy, requests, stop2))
-            .map_err(io("start thread for", &cfg.socket))?;
+        let policy = Arc::new(policy);
+        let spawn = |name: &str, f: Box<dyn FnOnce() + Send>| {
+            std::thread::Builder::new()
+                .name(name.into())
+                .spawn(f)
+                .map_err(io("start thread for", &cfg.socket))
+        };
+        let control = {
+            let (policy, requests, stop) =
+                (Arc::clone(&policy), requests.clone(), Arc::clone(&stop));
+            spawn(
+                "control",
+                Box::new(move || serve(listener, policy, requests, stop)),
+            )?
+        };
+        let stopper = {
+            let stop = Arc::clone(&stop);
+            spawn(
+                "control-stop",
+                Box::new(move || serve_stop(stop_listener, policy, requests, stop)),
+            )?
+        };
         Ok(Self {
             path,
+            stop_path,
             stop,
-            thread: Some(thread),
+            threads: vec![control, stopper],
         })
     }
 
@@ -266,70 +284,145 @@ impl ControlServer {
     pub fn path(&self) -> &Path {
         &self.path
     }
+
+    /// The stop socket's path.
+    pub fn stop_path(&self) -> &Path {
+        &self.stop_path
+    }
 }
 
 impl Drop for ControlServer {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
+        for t in self.threads.drain(..) {
             let _ = t.join();
         }
         let _ = std::fs::remove_file(&self.path);
+        let _ = std::fs::remove_file(&self.stop_path);
     }
+}
+
+/// Binds a listening socket at `path` (removing a stale one; refusing a live one or a
+/// non-socket), with `mode` and, if given, group `gid`; non-blocking.
+fn bind(path: &Path, mode: u32, gid: Option<u32>) -> Result<UnixListener, ControlError> {
+    let io = |op: &'static str| {
+        let path = path.to_path_buf();
+        move |source| ControlError::Io { op, path, source }
+    };
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if meta.file_type().is_socket() => {
+            if UnixStream::connect(path).is_ok() {
+                return Err(ControlError::InUse {
+                    path: path.to_path_buf(),
+                });
+            }
+            std::fs::remove_file(path).map_err(io("remove stale socket"))?;
+        }
+        Ok(_) => {
+            return Err(ControlError::NotASocket {
+                path: path.to_path_buf(),
+            });
+        }
+        Err(_) => {}
+    }
+    let listener = UnixListener::bind(path).map_err(io("bind"))?;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).map_err(io("chmod"))?;
+    if let Some(gid) = gid {
+        nix::unistd::chown(path, None, Some(nix::unistd::Gid::from_raw(gid))).map_err(|e| {
+            ControlError::Io {
+                op: "chgrp",
+                path: path.to_path_buf(),
+                source: e.into(),
+            }
+        })?;
+    }
+    listener.set_nonblocking(true).map_err(io("configure"))?;
+    Ok(listener)
+}
+
+/// Accepts on `listener` until `stop`, calling `each` with every new connection.
+fn accept_loop(listener: &UnixListener, stop: &AtomicBool, mut each: impl FnMut(UnixStream)) {
+    while !stop.load(Ordering::Relaxed) {
+        match listener.accept() {
+            Ok((stream, _)) => each(stream),
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(50)),
+        }
+    }
+}
+
+/// Writes one response line.
+fn send(stream: &mut UnixStream, r: &Response) -> std::io::Result<()> {
+    stream.write_all(r.to_line().as_bytes())?;
+    stream.write_all(b"\n")?;
+    stream.flush()
 }
 
 fn serve(
     listener: UnixListener,
-    policy: PeerPolicy,
+    policy: Arc<PeerPolicy>,
     requests: mpsc::Sender<Pending>,
     stop: Arc<AtomicBool>,
 ) {
-    while !stop.load(Ordering::Relaxed) {
-        match listener.accept() {
-            Ok((stream, _)) => {
-                let _ = handle(stream, &policy, &requests);
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            Err(_) => std::thread::sleep(Duration::from_millis(100)),
+    let active = Arc::new(AtomicUsize::new(0));
+    accept_loop(&listener, &stop, |mut stream| {
+        if active.fetch_add(1, Ordering::AcqRel) >= MAX_CLIENTS {
+            active.fetch_sub(1, Ordering::AcqRel);
+            let _ = stream.set_write_timeout(Some(CLIENT_DEADLINE));
+            let _ = send(
+                &mut stream,
+                &Response::error(0, "busy: too many control connections; try again"),
+            );
+            return;
         }
-    }
+        let (policy, requests, done) = (Arc::clone(&policy), requests.clone(), Arc::clone(&active));
+        let spawned = std::thread::Builder::new()
+            .name("control-client".into())
+            .spawn(move || {
+                let _ = handle(stream, &policy, &requests);
+                done.fetch_sub(1, Ordering::AcqRel);
+            });
+        if spawned.is_err() {
+            active.fetch_sub(1, Ordering::AcqRel);
+        }
+    });
 }
 
-fn handle(
-    stream: UnixStream,
-    policy: &PeerPolicy,
+/// The stop socket: every admitted connection is a stop, nothing is read.
+fn serve_stop(
+    listener: UnixListener,
+    policy: Arc<PeerPolicy>,
+    requests: mpsc::Sender<Pending>,
+    stop: Arc<AtomicBool>,
+) {
+    accept_loop(&listener, &stop, |mut stream| {
+        let _ = stream.set_nonblocking(false);
+        let _ = stream.set_write_timeout(Some(CLIENT_DEADLINE));
+        let Ok(peer) = peer_of(&stream) else {
+            return;
+        };
+        if let Err(e) = policy.check(&peer) {
+            let _ = send(&mut stream, &Response::error(0, e));
+            return;
+        }
+        let request = Request {
+            v: VERSION,
+            id: 0,
+            command: Command::Stop,
+        };
+        let _ = answer(&mut stream, request, peer, &requests);
+    });
+}
+
+/// Hands `request` to the main loop and writes its answer.
+fn answer(
+    stream: &mut UnixStream,
+    request: Request,
+    peer: Peer,
     requests: &mpsc::Sender<Pending>,
 ) -> std::io::Result<()> {
-    stream.set_nonblocking(false)?;
-    stream.set_read_timeout(Some(CLIENT_READ_TIMEOUT))?;
-    stream.set_write_timeout(Some(CLIENT_READ_TIMEOUT))?;
-    let mut writer = stream.try_clone()?;
-    let mut send = |r: Response| -> std::io::Result<()> {
-        writer.write_all(r.to_line().as_bytes())?;
-        writer.write_all(b"\n")?;
-        writer.flush()
-    };
-    let peer = peer_of(&stream)?;
-    // The request is read (bounded) before a refusal too: refusing and closing first raced
-    // the client's write, which then failed with EPIPE and never showed why it was refused.
-    let mut reader = BufReader::new(stream.take(MAX_LINE as u64 + 2));
-    let mut line = Vec::new();
-    let read = reader.read_until(b'\n', &mut line);
-    if let Err(e) = policy.check(&peer) {
-        return send(Response::error(0, e));
-    }
-    read?;
-    if line.last() == Some(&b'\n') {
-        line.pop();
-    } else if line.len() > MAX_LINE {
-        return send(Response::error(0, ProtocolError::TooLong.to_string()));
-    }
-    let request = match protocol::parse_request(&line) {
-        Ok(r) => r,
-        Err(e) => return send(Response::error(0, e.to_string())),
-    };
     let id = request.id;
     let (tx, rx) = mpsc::sync_channel(1);
     if requests
@@ -340,12 +433,93 @@ fn handle(
         })
         .is_err()
     {
-        return send(Response::error(id, "the supervisor is shutting down"));
+        return send(
+            stream,
+            &Response::error(id, "the supervisor is shutting down"),
+        );
     }
     match rx.recv_timeout(ANSWER_TIMEOUT) {
-        Ok(resp) => send(resp),
-        Err(_) => send(Response::error(id, "the supervisor did not answer in time")),
+        Ok(resp) => send(stream, &resp),
+        Err(_) => send(
+            stream,
+            &Response::error(id, "the supervisor did not answer in time"),
+        ),
     }
+}
+
+/// Reads one request line of at most [`MAX_LINE`] bytes within `deadline` in total.
+/// `Ok(None)`: the line is too long.
+fn read_line(stream: &mut UnixStream, deadline: Instant) -> std::io::Result<Option<Vec<u8>>> {
+    let mut line = Vec::new();
+    let mut buf = [0u8; 4096];
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::TimedOut,
+                "the request did not arrive in time",
+            ));
+        }
+        stream.set_read_timeout(Some(left))?;
+        let n = stream.read(&mut buf)?;
+        if n == 0 {
+            return Ok(Some(line));
+        }
+        line.extend_from_slice(&buf[..n]);
+        if let Some(i) = line.iter().position(|&b| b == b'\n') {
+            line.truncate(i);
+            return Ok(Some(line));
+        }
+        if line.len() > MAX_LINE {
+            return Ok(None);
+        }
+    }
+}
+
+fn handle(
+    mut stream: UnixStream,
+    policy: &PeerPolicy,
+    requests: &mpsc::Sender<Pending>,
+) -> std::io::Result<()> {
+    let deadline = Instant::now() + CLIENT_DEADLINE;
+    stream.set_nonblocking(false)?;
+    stream.set_write_timeout(Some(CLIENT_DEADLINE))?;
+    let peer = peer_of(&stream)?;
+    // The policy first: a peer it does not admit is answered and disconnected unread (the
+    // client reads the answer even when its own write fails, `request`).
+    if let Err(e) = policy.check(&peer) {
+        return send(&mut stream, &Response::error(0, e));
+    }
+    let line = match read_line(&mut stream, deadline) {
+        Ok(Some(line)) => line,
+        Ok(None) => {
+            return send(
+                &mut stream,
+                &Response::error(0, ProtocolError::TooLong.to_string()),
+            );
+        }
+        Err(e)
+            if e.kind() == std::io::ErrorKind::TimedOut
+                || e.kind() == std::io::ErrorKind::WouldBlock =>
+        {
+            return send(
+                &mut stream,
+                &Response::error(
+                    0,
+                    format!(
+                        "the request did not arrive within {} ms",
+                        CLIENT_DEADLINE.as_millis()
+                    ),
+                ),
+            );
+        }
+        Err(e) => return Err(e),
+    };
+    let request = match protocol::parse_request(&line) {
+        Ok(r) => r,
+        Err(e) => return send(&mut stream, &Response::error(0, e.to_string())),
+    };
+    answer(&mut stream, request, peer, requests)
 }
 
 /// A client failure.
@@ -369,13 +543,9 @@ pub enum ClientError {
     Protocol(#[from] ProtocolError),
 }
 
-/// Sends `command` to the daemon at `socket` and returns its response.
-pub fn request(
-    socket: &Path,
-    command: Command,
-    timeout: Duration,
-) -> Result<Response, ClientError> {
-    let stream = UnixStream::connect(socket).map_err(|source| {
+/// Connects to `socket`, with an error that says what to check.
+fn connect(socket: &Path) -> Result<UnixStream, ClientError> {
+    UnixStream::connect(socket).map_err(|source| {
         let hint = match source.kind() {
             std::io::ErrorKind::NotFound | std::io::ErrorKind::ConnectionRefused => {
                 " (is `supervisor run` running? is --socket right?)"
@@ -390,19 +560,11 @@ pub fn request(
             source,
             hint,
         }
-    })?;
-    stream.set_read_timeout(Some(timeout))?;
-    stream.set_write_timeout(Some(timeout))?;
-    let req = Request {
-        v: VERSION,
-        id: u64::from(std::process::id()),
-        command,
-    };
-    let mut w = stream.try_clone()?;
-    let line = serde_json::to_string(&req).map_err(|e| ProtocolError::Malformed(e.to_string()))?;
-    w.write_all(line.as_bytes())?;
-    w.write_all(b"\n")?;
-    w.flush()?;
+    })
+}
+
+/// Reads the daemon's one response line.
+fn read_response(stream: UnixStream) -> Result<Response, ClientError> {
     let mut reader = BufReader::new(stream.take(16 * MAX_LINE as u64));
     let mut resp = Vec::new();
     reader.read_until(b'\n', &mut resp)?;
@@ -413,6 +575,63 @@ pub fn request(
         )));
     }
     Ok(protocol::parse_response(&resp)?)
+}
+
+/// Sends `command` to the daemon at `socket` and returns its response.
+pub fn request(
+    socket: &Path,
+    command: Command,
+    timeout: Duration,
+) -> Result<Response, ClientError> {
+    let stream = connect(socket)?;
+    stream.set_read_timeout(Some(timeout))?;
+    stream.set_write_timeout(Some(timeout))?;
+    let req = Request {
+        v: VERSION,
+        id: u64::from(std::process::id()),
+        command,
+    };
+    let mut w = stream.try_clone()?;
+    let line = serde_json::to_string(&req).map_err(|e| ProtocolError::Malformed(e.to_string()))?;
+    let sent = w
+        .write_all(line.as_bytes())
+        .and_then(|()| w.write_all(b"\n"))
+        .and_then(|()| w.flush());
+    // A refused peer is answered and disconnected before its request is read, so the write
+    // may fail (EPIPE) while the answer is already waiting: read it first.
+    match read_response(stream) {
+        Ok(r) => Ok(r),
+        Err(e) => {
+            sent?;
+            Err(e)
+        }
+    }
+}
+
+/// The operator's stop over the stop socket beside `socket` ([`stop_socket_path`]):
+/// connecting is the command, nothing is sent. Falls back to the control socket when there
+/// is no stop socket (a daemon from before it existed).
+pub fn request_stop(socket: &Path, timeout: Duration) -> Result<Response, ClientError> {
+    let stop = stop_socket_path(socket);
+    match UnixStream::connect(&stop) {
+        Ok(stream) => {
+            stream.set_read_timeout(Some(timeout))?;
+            read_response(stream)
+        }
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::NotFound | std::io::ErrorKind::ConnectionRefused
+            ) =>
+        {
+            request(socket, Command::Stop, timeout)
+        }
+        Err(source) => Err(ClientError::Connect {
+            path: stop,
+            source,
+            hint: "",
+        }),
+    }
 }
 
 #[cfg(test)]

@@ -346,3 +346,194 @@ fn malformed_configurations_are_refused_by_name_and_create_nothing() {
     assert!(!dir.join("run").exists() && !dir.join("recordings").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A control server with a main loop that answers every request and records its commands.
+struct StopFixture {
+    server: Option<ControlServer>,
+    seen: std::sync::Arc<std::sync::Mutex<Vec<supervisor::protocol::Command>>>,
+    main_loop: Option<std::thread::JoinHandle<()>>,
+    dir: PathBuf,
+}
+
+impl StopFixture {
+    fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("sv-stop-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let cfg = ControlConfig {
+            socket: dir.join("s.sock"),
+            mode: 0o666,
+            ..ControlConfig::default()
+        };
+        let me = nix::unistd::geteuid().as_raw();
+        let policy = PeerPolicy {
+            own_uid: me,
+            uid: None,
+            gid: None,
+            allow_root: me == 0,
+        };
+        let (tx, rx) = std::sync::mpsc::channel::<supervisor::control::Pending>();
+        let server = ControlServer::start_with_policy(&cfg, policy, tx).unwrap();
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let seen2 = std::sync::Arc::clone(&seen);
+        let main_loop = std::thread::spawn(move || {
+            while let Ok(p) = rx.recv() {
+                seen2.lock().unwrap().push(p.request.command.clone());
+                let _ = p
+                    .reply
+                    .send(Response::ok(p.request.id, String::from("done"), None));
+            }
+        });
+        Self {
+            server: Some(server),
+            seen,
+            main_loop: Some(main_loop),
+            dir,
+        }
+    }
+
+    fn socket(&self) -> PathBuf {
+        self.server.as_ref().unwrap().path().to_path_buf()
+    }
+
+    /// `n` clients that write a byte every 100 ms and never a newline; each returns how
+    /// long it held its connection and the server's answer.
+    fn tricklers(&self, n: usize) -> Vec<std::thread::JoinHandle<(Duration, String)>> {
+        (0..n)
+            .map(|_| {
+                let s = self.socket();
+                std::thread::spawn(move || {
+                    let mut c = UnixStream::connect(&s).unwrap();
+                    let t0 = Instant::now();
+                    while c.write_all(b" ").is_ok() && t0.elapsed() < Duration::from_secs(10) {
+                        std::thread::sleep(Duration::from_millis(100));
+                    }
+                    let mut answer = String::new();
+                    let _ = BufReader::new(&c).read_line(&mut answer);
+                    (t0.elapsed(), answer)
+                })
+            })
+            .collect()
+    }
+
+    /// A stop over the stop socket: the answer and how long it took.
+    fn stop(&self) -> (Response, Duration) {
+        let t = Instant::now();
+        let r = supervisor::control::request_stop(&self.socket(), Duration::from_secs(2)).unwrap();
+        (r, t.elapsed())
+    }
+}
+
+impl Drop for StopFixture {
+    fn drop(&mut self) {
+        drop(self.server.take());
+        if let Some(t) = self.main_loop.take() {
+            let _ = t.join();
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The operator's stop cannot be held up (issue 19, item 2). 16 clients trickle a byte every
+/// 100 ms and never finish their request, and 16 peers the policy does not admit (run as
+/// uid 65534 when the test runs as root) connect and hold; meanwhile a `status` on the control
+/// socket and a stop on the stop socket are each answered within 100 ms, the stop reaches the
+/// main loop as `stop`, every trickling client is cut off at the total deadline
+/// ([`CLIENT_DEADLINE`]) and every foreign peer is refused unread. (Served one connection at
+/// a time, as before, the `status` waits behind the tricklers and this test fails.)
+#[test]
+fn the_stop_is_answered_while_trickling_and_refused_peers_hold_connections() {
+    use supervisor::control::{CLIENT_DEADLINE, request};
+    use supervisor::protocol::Command as Cmd;
+
+    let f = StopFixture::new("trickle");
+    let socket = f.socket();
+    let tricklers = f.tricklers(16);
+    let me = nix::unistd::geteuid().as_raw();
+    let mut foreign = Vec::new();
+    if me == 0 {
+        use std::os::unix::process::CommandExt;
+        for _ in 0..16 {
+            foreign.push(
+                Command::new("python3")
+                    .args([
+                        "-c",
+                        "import socket,sys,time\ns=socket.socket(socket.AF_UNIX)\ns.connect(sys.argv[1])\nprint(s.recv(4096).decode().strip(), flush=True)\ntime.sleep(3)",
+                    ])
+                    .arg(&socket)
+                    .uid(65534)
+                    .gid(65534)
+                    .stdout(Stdio::piped())
+                    .spawn()
+                    .unwrap(),
+            );
+        }
+    } else {
+        eprintln!(
+            "not root: the 16 foreign peers of this test need uid 65534; only the tricklers run"
+        );
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let t = Instant::now();
+    let r = request(&socket, Cmd::Status, Duration::from_secs(2)).unwrap();
+    let status_time = t.elapsed();
+    assert!(r.ok, "{r:?}");
+    let (r, stop_time) = f.stop();
+    assert!(r.ok, "{r:?}");
+    // The issue's target is 100 ms (measured here: a few ms). The functional bound is half
+    // the total deadline: served behind a trickler, an answer waits at least a whole
+    // deadline (1 s), so this separates "not held up" from "held up" on any host.
+    eprintln!("status answered in {status_time:?}, stop in {stop_time:?}");
+    assert!(
+        status_time < CLIENT_DEADLINE / 2 && stop_time < CLIENT_DEADLINE / 2,
+        "status answered in {status_time:?}, stop in {stop_time:?}"
+    );
+    for t in tricklers {
+        let (held, answer) = t.join().unwrap();
+        assert!(
+            held < CLIENT_DEADLINE + Duration::from_millis(500),
+            "a trickling client held its connection for {held:?}"
+        );
+        assert!(answer.contains("did not arrive within"), "{answer}");
+    }
+    for child in foreign {
+        let out = child.wait_with_output().unwrap();
+        let line = String::from_utf8_lossy(&out.stdout);
+        assert!(line.contains("permission denied: uid 65534"), "{line}");
+    }
+    assert_eq!(*f.seen.lock().unwrap(), [Cmd::Status, Cmd::Stop]);
+}
+
+/// With every control connection taken ([`MAX_CLIENTS`] tricklers), the control socket
+/// answers "busy" at once instead of queueing, and the stop socket still stops at once: the
+/// stop never waits for a slot (sent over the control socket instead, this test fails: it
+/// gets "busy").
+#[test]
+fn the_stop_socket_works_when_every_control_connection_is_taken() {
+    use supervisor::control::{CLIENT_DEADLINE, MAX_CLIENTS, request};
+    use supervisor::protocol::Command as Cmd;
+
+    let f = StopFixture::new("full");
+    let tricklers = f.tricklers(MAX_CLIENTS);
+    std::thread::sleep(Duration::from_millis(300));
+    let t = Instant::now();
+    let r = request(&f.socket(), Cmd::Status, Duration::from_secs(2)).unwrap();
+    assert!(
+        !r.ok && r.error.as_deref().is_some_and(|e| e.starts_with("busy")),
+        "{r:?}"
+    );
+    let busy_time = t.elapsed();
+    let (r, stop_time) = f.stop();
+    assert!(r.ok, "{r:?}");
+    // Functional bound as above (the target, 100 ms, is met by a few ms here).
+    eprintln!("busy answered in {busy_time:?}, stop in {stop_time:?}");
+    assert!(
+        busy_time < CLIENT_DEADLINE / 2 && stop_time < CLIENT_DEADLINE / 2,
+        "busy in {busy_time:?}, stop in {stop_time:?}"
+    );
+    assert_eq!(*f.seen.lock().unwrap(), [Cmd::Stop]);
+    for t in tricklers {
+        t.join().unwrap();
+    }
+}

@@ -126,10 +126,15 @@ fn pairs(text: &str, what: &str) -> anyhow::Result<Vec<(f64, f64)>> {
         .collect()
 }
 
-fn send(socket: &SocketArgs, command: Command) -> anyhow::Result<Response> {
+fn check_timeout(socket: &SocketArgs) -> anyhow::Result<()> {
     if !(socket.timeout_s.is_finite() && socket.timeout_s > 0.0 && socket.timeout_s <= 600.0) {
         bail!("--timeout-s {} must be in (0, 600]", socket.timeout_s);
     }
+    Ok(())
+}
+
+fn send(socket: &SocketArgs, command: Command) -> anyhow::Result<Response> {
+    check_timeout(socket)?;
     Ok(control::request(
         &socket.socket,
         command,
@@ -229,7 +234,11 @@ pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
 
 /// `supervisor stop`.
 pub fn stop(a: SocketArgs) -> anyhow::Result<()> {
-    finish(send(&a, Command::Stop)?)
+    check_timeout(&a)?;
+    finish(control::request_stop(
+        &a.socket,
+        Duration::from_secs_f64(a.timeout_s),
+    )?)
 }
 
 /// `supervisor arm`.
