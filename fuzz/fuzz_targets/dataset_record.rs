@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use libfuzzer_sys::fuzz_target;
-use rt_core::dataset::parse_record_csv;
+use fes_dataset::parse_record_csv;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok((t, p, f)) = parse_record_csv(Path::new("r.csv"), data, 1e-3) {

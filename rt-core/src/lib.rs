@@ -1,25 +1,19 @@
-//! # rt-core: the model, the controller and the real-time pattern generator
+//! # rt-core: the 1 ms real-time pattern generator
 //!
-//! One implementation of the thesis's equations (Gollee, *A non-linear approach to
-//! modelling and control of electrically stimulated skeletal muscle*), shared by
-//! identification, analysis, the 1 ms real-time loop and the simulator:
+//! The process that runs the thesis's Local Controller Network and pulse shaper (Gollee,
+//! *A non-linear approach to modelling and control of electrically stimulated skeletal
+//! muscle*, ch. 6.5, Fig. 6.8) once per millisecond and publishes its pulse decisions:
 //!
-//! - [`model`]: the Local Model Network (ch. 2, 5.4): validity functions, scheduling,
-//!   input delay, local models, the network, and the model file.
-//! - [`control`]: the Local Controller Network (ch. 3, 6.5, App. C), the pulse shaper
-//!   (6.5.2) and the pattern-generator tick (Fig. 6.8).
-//! - [`ident`]: identification (2.3, 5.3, 5.4, App. B).
-//! - [`analysis`]: static analysis and optimal stimulation patterns (2.4, 5.4.3, ch. 6).
-//! - [`dataset`]: the on-disk data-set format (records of pulses and force).
-//! - [`msg`]: iceoryx2 message contracts shared by every process.
-//! - [`rt`]: real-time thread plumbing (SCHED_FIFO, affinity, absolute-time sleeps,
-//!   telemetry into HdrHistograms).
+//! - [`rt`]: the pattern generator's tick without I/O, the process configuration and the
+//!   runner (real-time and telemetry threads over iceoryx2), on the plumbing of `fes-rt`.
+//! - [`model`], [`control`], [`num`]: the thesis's equations, re-exported from `fes-model`.
+//! - [`msg`]: the iceoryx2 message contracts, re-exported from `fes-rt`.
+//!
+//! Identification, analysis and the data-set format live in `fes-ident`; nothing here
+//! links them.
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
-pub mod analysis;
-pub mod dataset;
-pub mod ident;
 pub mod rt;
 
 /// The thesis's equations, from the `fes-model` crate (re-exported so that every path

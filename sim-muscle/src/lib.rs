@@ -13,7 +13,7 @@
 //! - [`pattern`], [`simulate`]: pulse trains and the loop that runs a plant over one.
 //! - [`metrics`]: FTI and FTIpP (eq. 6.1-6.3).
 //! - [`protocol`], [`recorder`]: the thesis recording protocol (5.1) producing data sets in
-//!   the `rt_core::dataset` format.
+//!   the `fes_dataset` format.
 //! - [`plot`]: records drawn like thesis Fig. 5.2.
 #![deny(missing_docs)]
 

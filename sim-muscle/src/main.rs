@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use rt_core::dataset::{DataSet, WriteMode};
+use fes_dataset::{DataSet, WriteMode};
 use sim_muscle::ding::{FatigueParams, PulseWidthParams};
 use sim_muscle::lmn_plant::LmnPlant;
 use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};

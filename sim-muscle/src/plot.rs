@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
+use fes_dataset::DataSet;
 use plotters::prelude::*;
-use rt_core::dataset::DataSet;
 
 /// Why a plot could not be drawn.
 #[derive(Debug, thiserror::Error)]

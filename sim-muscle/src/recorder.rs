@@ -1,10 +1,10 @@
 //! The data-set recorder: runs a plant through a protocol's records, each from rest,
 //! removes the offset, normalises the force to [0, 1] and builds an
-//! `rt_core::dataset::DataSet`.
+//! `fes_dataset::DataSet`.
 
 use std::collections::BTreeMap;
 
-use rt_core::dataset::{DataSet, Header, Record, Split};
+use fes_dataset::{DataSet, Header, Record, Split};
 
 use crate::plant::{MusclePlant, Pulse};
 use crate::protocol::{ProtocolConfig, ProtocolError, RecordPlan};

@@ -21,7 +21,7 @@ pub fn simulate(plant: &mut dyn MusclePlant, train: &[bool], pulse: Pulse) -> Ve
 }
 
 /// The Ding muscle as a pattern-to-force map for the optimal-stimulation-pattern methods
-/// of rt-core (`rt_core::analysis::osp`): each pattern runs from rest, the rest force
+/// of rt-core (`fes_ident::analysis::osp`): each pattern runs from rest, the rest force
 /// removed, in newtons.
 #[derive(Debug, Clone)]
 pub struct MuscleResponse {
@@ -35,12 +35,12 @@ impl MuscleResponse {
     }
 }
 
-impl rt_core::analysis::osp::ForceResponse for MuscleResponse {
+impl fes_ident::analysis::osp::ForceResponse for MuscleResponse {
     fn ts(&self) -> f64 {
         self.muscle.ts()
     }
 
-    fn force(&self, train: &[bool]) -> Result<Vec<f64>, rt_core::analysis::osp::OspError> {
+    fn force(&self, train: &[bool]) -> Result<Vec<f64>, fes_ident::analysis::osp::OspError> {
         let mut m = self.muscle.clone();
         m.reset();
         let rest = m.initial_force();

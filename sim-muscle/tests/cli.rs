@@ -1,5 +1,5 @@
 //! The `sim-muscle` binary: output formats, data sets read back through
-//! `rt_core::dataset`, determinism, and bad flags (clear error, non-zero exit, nothing
+//! `fes_dataset`, determinism, and bad flags (clear error, non-zero exit, nothing
 //! written).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
@@ -7,7 +7,7 @@ mod support;
 
 use std::fs;
 
-use rt_core::dataset::DataSet;
+use fes_dataset::DataSet;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::pattern::from_samples;
 use sim_muscle::plant::Pulse;

@@ -5,7 +5,7 @@
 
 mod support;
 
-use rt_core::dataset::DataSet;
+use fes_dataset::DataSet;
 use rt_core::model::file;
 use rt_core::model::lmn::Stability;
 use sim_muscle::lmn_plant::{LmnPlant, LmnPlantError};

@@ -1,6 +1,6 @@
 //! Recording of a stimulation run: every Reference, StimTick, ForceSample, DriverStatus,
 //! TimingReport, event and beat, to disk, as a `fes-dataset/1` data set
-//! (`rt_core::dataset`, docs/sim-muscle.md) plus one CSV per message stream, so a bench
+//! (`fes_dataset`, docs/sim-muscle.md) plus one CSV per message stream, so a bench
 //! run can be fed straight back into identification.
 //!
 //! A run directory (mode 0750, files 0640) holds:
@@ -598,7 +598,7 @@ impl Recorder {
         let train: Vec<usize> = (0..n).step_by(2).collect();
         let test: Vec<usize> = (1..n).step_by(2).collect();
         let meta = serde_json::json!({
-            "schema": rt_core::dataset::SCHEMA,
+            "schema": fes_dataset::SCHEMA,
             "source": self.settings.source,
             "preset": null,
             "parameters": {},

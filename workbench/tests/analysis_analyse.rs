@@ -57,7 +57,7 @@ fn unstable_model_report() {
     assert_eq!(rows[0][ex], "false");
     assert_eq!(rows[149][ex], "true");
     // Validation: MSSE per test record recomputed.
-    let ds = rt_core::dataset::DataSet::read(&data).unwrap();
+    let ds = fes_dataset::DataSet::read(&data).unwrap();
     let net = fixtures::unstable().network().unwrap();
     let (h, rows) = csv(&out.join("validation.csv"));
     let got = column(&h, &rows, "msse");

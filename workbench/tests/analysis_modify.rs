@@ -4,7 +4,7 @@
 mod analysis_support;
 
 use analysis_support::*;
-use rt_core::analysis::trace::simulate_trace;
+use fes_ident::analysis::trace::simulate_trace;
 use rt_core::model::file;
 use rt_core::model::lmn::LocalModelSet;
 

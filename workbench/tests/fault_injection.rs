@@ -19,11 +19,11 @@ use std::time::{Duration, Instant};
 
 use fes_can::hostbus::{HostBus, RawFrame, Station};
 use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
+use fes_dataset::DataSet;
 use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows};
 use nix::sys::signal::Signal;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rt_core::dataset::DataSet;
 use rt_core::rt::clock::monotonic_ns;
 use supervisor::protocol::Status;
 use workbench::bench::{PROCESSES, Stack, process_logs};

@@ -4,8 +4,8 @@
 //! library exactly as `sim-muscle record --preset P --seed 1` does.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use rt_core::dataset::{DataSet, WriteMode};
-use rt_core::ident::{Hooks, IdentOptions, RecordSet, identify};
+use fes_dataset::{DataSet, WriteMode};
+use fes_ident::ident::{Hooks, IdentOptions, RecordSet, identify};
 use rt_core::model::{Structure, file};
 use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
 use sim_muscle::plant::MusclePlant;

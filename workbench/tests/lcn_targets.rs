@@ -9,8 +9,8 @@
 
 use std::path::Path;
 
-use rt_core::analysis::osp::ForceResponse;
-use rt_core::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
+use fes_ident::analysis::osp::ForceResponse;
+use fes_ident::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
 use rt_core::control::file::Controller;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;

@@ -6,7 +6,7 @@
 //! the test, as on a rig.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-#[path = "../../rt-core/tests/control_support/mod.rs"]
+#[path = "../../crates/fes-model/tests/it/control_support.rs"]
 mod control_support;
 
 use std::path::Path;

@@ -6,7 +6,7 @@ use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use rt_core::dataset::DataSet;
+use fes_dataset::DataSet;
 use rt_core::msg::{ForceSample, Reference, StimTick};
 use supervisor::recording::{Recorder, RecorderSettings};
 

@@ -8,10 +8,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use rt_core::analysis::force_frequency::{ForceFrequencyPoint, force_frequency};
-use rt_core::analysis::static_analysis::{StaticReport, analyse};
-use rt_core::analysis::trace::phi_range;
-use rt_core::analysis::validation::{fit_record, msse};
+use fes_ident::analysis::force_frequency::{ForceFrequencyPoint, force_frequency};
+use fes_ident::analysis::static_analysis::{StaticReport, analyse};
+use fes_ident::analysis::trace::phi_range;
+use fes_ident::analysis::validation::{fit_record, msse};
 use rt_core::model::{Lmn, Network, Scheduler};
 use sim_muscle::pattern::constant_train;
 

@@ -3,7 +3,7 @@
 use super::identify::load_records;
 use super::{Feedback, fmt_err};
 use anyhow::{Context, Result};
-use rt_core::ident::sweep::{COMPARE_UNITS, CompareRow, QUICK_UNITS, compare, setups};
+use fes_ident::ident::sweep::{COMPARE_UNITS, CompareRow, QUICK_UNITS, compare, setups};
 use std::path::PathBuf;
 
 const AFTER_HELP: &str = "\

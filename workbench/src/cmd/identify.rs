@@ -2,7 +2,7 @@
 
 use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
-use rt_core::ident::{IdentOptions, Identified, Learning, RecordSet, identify};
+use fes_ident::ident::{IdentOptions, Identified, Learning, RecordSet, identify};
 use rt_core::model::{KnotLayout, file};
 use std::path::{Path, PathBuf};
 
@@ -98,7 +98,7 @@ pub struct FitArgs {
     pub seed: u64,
     /// Strength of the prior keeping units the data barely reach near the start (pitfall
     /// d; 0 = the thesis's pure error criterion). See docs/identification.md.
-    #[arg(long, default_value_t = rt_core::ident::identify::DEFAULT_PRIOR)]
+    #[arg(long, default_value_t = fes_ident::ident::identify::DEFAULT_PRIOR)]
     pub prior: f64,
     /// Print every stage and accepted step on stderr.
     #[arg(long, short)]

@@ -5,8 +5,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use fes_dataset::DataSet;
 use indicatif::{ProgressBar, ProgressStyle};
-use rt_core::dataset::DataSet;
 use rt_core::model::file;
 use rt_core::model::lmn::{Lmn, UnitStability};
 
@@ -86,7 +86,7 @@ impl Data {
     }
 }
 
-/// Reads and validates a data set (`rt_core::dataset`: every record finite, at least two
+/// Reads and validates a data set (`fes_dataset`: every record finite, at least two
 /// records, a non-empty train and test split) and checks its sampling period against the
 /// model's.
 pub fn open_data(dir: &Path, model_ts: f64) -> Result<Data> {
@@ -101,7 +101,7 @@ pub fn open_data(dir: &Path, model_ts: f64) -> Result<Data> {
             model_ts * 1e3
         );
     }
-    let series = |r: &rt_core::dataset::Record| Series {
+    let series = |r: &fes_dataset::Record| Series {
         name: r.file.clone(),
         kind: r.kind.clone(),
         u: r.pulse.iter().map(|&p| if p { 1.0 } else { 0.0 }).collect(),

@@ -12,8 +12,8 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use rt_core::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
-use rt_core::analysis::osp::{ForceResponse, ModelResponse};
+use fes_ident::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
+use fes_ident::analysis::osp::{ForceResponse, ModelResponse};
 use rt_core::control::file::Controller;
 use rt_core::control::lcn_design::UnitSpec;
 use rt_core::control::poles::third_pole;

@@ -18,8 +18,8 @@ pub mod plots;
 pub mod sweep;
 
 use clap::ValueEnum;
+use fes_ident::ident::{Hooks, Learning, Mode, Progress, SchedulingKind};
 use indicatif::{ProgressBar, ProgressStyle};
-use rt_core::ident::{Hooks, Learning, Mode, Progress, SchedulingKind};
 use rt_core::model::Structure;
 use std::time::Instant;
 

@@ -1,6 +1,6 @@
 //! `fes modify --stabilise`: the thesis's model modification (5.4.3): every unstable
 //! local eigenvalue is replaced by a slow stable one and that unit's offsets are
-//! re-estimated on the training data (`rt_core::analysis::stabilise`). Prints Table 5.4
+//! re-estimated on the training data (`fes_ident::analysis::stabilise`). Prints Table 5.4
 //! (training/test MSSE before and after), writes the model, and draws the long-train
 //! response before and after (Fig. 5.32(a)) next to it.
 
@@ -8,9 +8,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use rt_core::analysis::stabilise::{DEFAULT_EIGENVALUE, Stabilised, stabilise};
-use rt_core::analysis::trace::{Trace, simulate_trace};
-use rt_core::analysis::validation::msse;
+use fes_ident::analysis::stabilise::{DEFAULT_EIGENVALUE, Stabilised, stabilise};
+use fes_ident::analysis::trace::{Trace, simulate_trace};
+use fes_ident::analysis::validation::msse;
 use rt_core::model::{Lmn, file};
 use sim_muscle::pattern::constant_train;
 

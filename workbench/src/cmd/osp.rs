@@ -11,21 +11,21 @@
 //!   references; its pattern also drives `--model` and/or the Ding muscle (Fig. 6.6(b)).
 //!
 //! FTI (eq. 6.2) is summed over one window of `--window-ms` from the pattern's start (the
-//! twitch included), with the rest force removed (`rt_core::analysis::osp`).
+//! twitch included), with the rest force removed (`fes_ident::analysis::osp`).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
-use rt_core::analysis::osp::iterative::{Iterative, iterative_method};
-use rt_core::analysis::osp::lcn::{
+use fes_ident::analysis::osp::iterative::{Iterative, iterative_method};
+use fes_ident::analysis::osp::lcn::{
     LcnRun, PatternShape, ShapeCriteria, pattern_shape, run_pattern_generator, steady_mean,
     step_reference,
 };
-use rt_core::analysis::osp::random::{RandomPattern, best_and_worst, random_method};
-use rt_core::analysis::osp::trains::{TrainSurface, train_surface};
-use rt_core::analysis::osp::{Evaluator, ForceResponse, ModelResponse};
+use fes_ident::analysis::osp::random::{RandomPattern, best_and_worst, random_method};
+use fes_ident::analysis::osp::trains::{TrainSurface, train_surface};
+use fes_ident::analysis::osp::{Evaluator, ForceResponse, ModelResponse};
 use rt_core::control::file::Controller;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
@@ -712,7 +712,7 @@ fn iterative(args: &Args, subjects: &[Subject], md: &mut String) -> Result<()> {
 fn iterative_panels(s: &Subject, it: &Iterative, ms: f64) -> Vec<(u32, Panel)> {
     let mk = |title: &str,
               y_label: String,
-              f: &dyn Fn(&rt_core::analysis::osp::PatternResult) -> f64,
+              f: &dyn Fn(&fes_ident::analysis::osp::PatternResult) -> f64,
               twitch: f64| {
         let mut lines = Vec::new();
         let mut best = Vec::new();

@@ -4,8 +4,8 @@
 use super::identify::{FitArgs, load_records};
 use super::{Feedback, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
+use fes_ident::ident::sweep::{Sweep, SweepRow, sweep};
 use plotters::prelude::*;
-use rt_core::ident::sweep::{Sweep, SweepRow, sweep};
 use rt_core::model::file;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};

@@ -2,16 +2,16 @@
 //! data-set fixtures (the rt-core test fixtures, shared by path).
 #![allow(dead_code)]
 
-#[path = "../../../rt-core/tests/control_support/mod.rs"]
+#[path = "../../../crates/fes-model/tests/it/control_support.rs"]
 pub mod control;
-#[path = "../../../rt-core/tests/analysis_support/mod.rs"]
+#[path = "../../../crates/fes-ident/tests/it/analysis_support.rs"]
 pub mod fixtures;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use rt_core::dataset::{DataSet, Header, Record, Split, WriteMode};
+use fes_dataset::{DataSet, Header, Record, Split, WriteMode};
 use rt_core::model::{Lmn, file};
 
 /// A fresh empty directory under the system temp dir.
