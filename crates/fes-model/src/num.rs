@@ -13,6 +13,9 @@
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
+#[cfg(not(feature = "std"))]
+pub(crate) mod math;
+
 /// A real number type the model equations can be evaluated in.
 ///
 /// Implemented for `f64` (values) and [`Dual<N>`] (values plus `N` exact partial
@@ -83,6 +86,24 @@ pub trait Scalar:
     }
 }
 
+/// The math methods of [`Scalar`] for `f64`: std's inherent methods, or without std those of
+/// `math::FloatMath` (`libm`). Spelled out per build because without std `f64::exp` would
+/// resolve to `Scalar::exp` itself.
+macro_rules! f64_math {
+    ($($name:ident),*) => {$(
+        #[cfg(feature = "std")]
+        #[inline(always)]
+        fn $name(self) -> Self {
+            f64::$name(self)
+        }
+        #[cfg(not(feature = "std"))]
+        #[inline(always)]
+        fn $name(self) -> Self {
+            math::FloatMath::$name(self)
+        }
+    )*};
+}
+
 impl Scalar for f64 {
     #[inline(always)]
     fn from_f64(v: f64) -> Self {
@@ -92,26 +113,7 @@ impl Scalar for f64 {
     fn value(self) -> f64 {
         self
     }
-    #[inline(always)]
-    fn exp(self) -> Self {
-        f64::exp(self)
-    }
-    #[inline(always)]
-    fn ln(self) -> Self {
-        f64::ln(self)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        f64::sqrt(self)
-    }
-    #[inline(always)]
-    fn sin(self) -> Self {
-        f64::sin(self)
-    }
-    #[inline(always)]
-    fn cos(self) -> Self {
-        f64::cos(self)
-    }
+    f64_math!(exp, ln, sqrt, sin, cos);
     #[inline(always)]
     fn is_finite(self) -> bool {
         f64::is_finite(self)

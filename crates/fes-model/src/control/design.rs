@@ -29,6 +29,8 @@ use crate::model::SsLocalModel;
 use crate::model::local_model::eig2;
 
 use super::poles::{Pole, RiseTimeRule};
+#[cfg(not(feature = "std"))]
+use crate::num::math::ComplexMath as _;
 
 /// The three closed-loop poles of one local loop with integral action (eq. C.27): the
 /// dominant pair `p1, p2` and the integrator pole `p3` (6.5.3), delta domain, 1/s.

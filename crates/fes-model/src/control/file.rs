@@ -9,9 +9,19 @@
 //! requires the stored results to match within [`MATCH_TOLERANCE`] (relative): a corrupted
 //! file, or gains designed for another model, is rejected with an error naming the unit
 //! and the field.
+//!
+//! Reading and writing files ([`Controller`]'s `load` and `save`) needs the `std` feature;
+//! [`Controller::from_json_str`] and [`Controller::to_json_string`] work on text in every
+//! build.
 
+#[cfg(feature = "std")]
 use std::path::{Path, PathBuf};
 
+use alloc::{
+    format,
+    string::{String, ToString},
+    vec::Vec,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::model::Network;
@@ -107,7 +117,8 @@ pub struct ControllerSettings {
 /// Why a controller file could not be read, written or accepted.
 #[derive(Debug, thiserror::Error)]
 pub enum ControllerFileError {
-    /// The file could not be read or written.
+    /// The file could not be read or written (`std` only).
+    #[cfg(feature = "std")]
     #[error("{path}: {source}")]
     Io {
         /// The file.
@@ -276,7 +287,8 @@ impl Controller {
         Ok(serde_json::to_string_pretty(&self.to_file()?)?)
     }
 
-    /// Write the file.
+    /// Write the file (`std` only).
+    #[cfg(feature = "std")]
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), ControllerFileError> {
         let text = self.to_json_string()?;
         std::fs::write(path.as_ref(), text).map_err(|source| ControllerFileError::Io {
@@ -285,7 +297,8 @@ impl Controller {
         })
     }
 
-    /// Read and validate a file.
+    /// Read and validate a file (`std` only).
+    #[cfg(feature = "std")]
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ControllerFileError> {
         let text =
             std::fs::read_to_string(path.as_ref()).map_err(|source| ControllerFileError::Io {

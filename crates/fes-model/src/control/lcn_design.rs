@@ -11,6 +11,7 @@ use super::design::{
     design_estimator,
 };
 use super::poles::{Pole, RiseTimeRule, SpecError, default_third_pole, dominant_pair_by};
+use alloc::vec::Vec;
 
 /// The thesis's damping factor: `xi = 1.2`, no overshoot (6.5.3).
 pub const THESIS_DAMPING: f64 = 1.2;

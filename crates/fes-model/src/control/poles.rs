@@ -16,6 +16,8 @@
 //! xi = 1.2: within 0.83 % of the tables, not their rule); it is kept so that controller
 //! files designed with it still load and for comparison.
 
+#[cfg(not(feature = "std"))]
+use crate::num::math::{ComplexMath as _, FloatMath as _};
 use nalgebra::Complex;
 use serde::{Deserialize, Serialize};
 

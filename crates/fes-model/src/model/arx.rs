@@ -16,6 +16,9 @@
 //! Ts^n and expand (q - 1)^i); simulation always uses the shift coefficients.
 
 use crate::num::Scalar;
+#[cfg(not(feature = "std"))]
+use crate::num::math::FloatMath as _;
+use alloc::{vec, vec::Vec};
 use nalgebra::{Complex, Matrix3};
 
 /// Highest supported ARX order n.

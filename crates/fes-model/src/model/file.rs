@@ -2,17 +2,27 @@
 //!
 //! Loading validates everything and rejects a bad file with an error that names the field
 //! (`units[2].eigenvalues[1]: ...`); a JSON syntax error quotes the offending line (JSON has
-//! no NaN or Infinity, so such values surface there). [`load`] also requires every local
-//! model to be stable; [`load_allow_unstable`] skips only that requirement and returns the
+//! no NaN or Infinity, so such values surface there). `load` also requires every local
+//! model to be stable; `load_allow_unstable` skips only that requirement and returns the
 //! per-unit stability as data (analysis and `modify --stabilise` must open an unstable model
-//! to repair it).
+//! to repair it). Reading and writing files (`load`, `load_allow_unstable`, `save`) needs the
+//! `std` feature; [`from_json_str`] and [`to_json_string`] work on text in every build.
 
 use super::arx::{ArxUnit, MAX_ARX_ORDER};
-use super::lmn::{Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure, UnitStability};
+#[cfg(feature = "std")]
+use super::lmn::UnitStability;
+use super::lmn::{Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure};
 use super::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 use super::scheduling::SchedulingSpec;
 use super::validity::ValidityFunctions;
+use alloc::{
+    format,
+    string::{String, ToString},
+    vec,
+    vec::Vec,
+};
 use serde_json::{Map, Value, json};
+#[cfg(feature = "std")]
 use std::path::{Path, PathBuf};
 
 /// The schema version string this code reads and writes.
@@ -21,7 +31,8 @@ pub const SCHEMA: &str = "fes-lmn/1";
 /// Why a model file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
-    /// The file could not be read or written.
+    /// The file could not be read or written (`std` only).
+    #[cfg(feature = "std")]
     #[error("{path}: {source}")]
     Io {
         /// The file.
@@ -55,20 +66,23 @@ fn bad(field: impl Into<String>, problem: impl Into<String>) -> FileError {
     })
 }
 
-/// Loads a model and requires every local model to be stable.
+/// Loads a model and requires every local model to be stable (`std` only).
+#[cfg(feature = "std")]
 pub fn load(path: impl AsRef<Path>) -> Result<Lmn, FileError> {
     from_json_str(&read(path.as_ref())?, Stability::Require)
 }
 
 /// Loads a model without the stability requirement (everything else is still validated) and
-/// returns the per-unit stability report.
+/// returns the per-unit stability report (`std` only).
+#[cfg(feature = "std")]
 pub fn load_allow_unstable(path: impl AsRef<Path>) -> Result<(Lmn, Vec<UnitStability>), FileError> {
     let lmn = from_json_str(&read(path.as_ref())?, Stability::Report)?;
     let report = lmn.stability();
     Ok((lmn, report))
 }
 
-/// Writes a model as pretty JSON (validated first, stability not required).
+/// Writes a model as pretty JSON (validated first, stability not required; `std` only).
+#[cfg(feature = "std")]
 pub fn save(lmn: &Lmn, path: impl AsRef<Path>) -> Result<(), FileError> {
     let text = to_json_string(lmn)?;
     std::fs::write(path.as_ref(), text).map_err(|source| FileError::Io {
@@ -77,6 +91,7 @@ pub fn save(lmn: &Lmn, path: impl AsRef<Path>) -> Result<(), FileError> {
     })
 }
 
+#[cfg(feature = "std")]
 fn read(path: &Path) -> Result<String, FileError> {
     std::fs::read_to_string(path).map_err(|source| FileError::Io {
         path: path.to_path_buf(),

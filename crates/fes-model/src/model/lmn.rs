@@ -10,9 +10,16 @@ use super::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel, eigenvalue_i
 use super::network::{MAX_DELAY, Network, NetworkError};
 use super::scheduling::{Scheduler, SchedulingSpec};
 use super::validity::ValidityFunctions;
+#[cfg(not(feature = "std"))]
+use crate::num::math::ComplexMath as _;
+use alloc::collections::BTreeMap;
+use alloc::{
+    format,
+    string::{String, ToString},
+    vec::Vec,
+};
 use nalgebra::Complex;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 
 /// The local model structure and parameterisation (names used by the CLI and the file).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -19,7 +19,10 @@
 //! modes that flip sign every sample, which no sampled real continuous pole produces
 //! ((e^{s Ts} - 1)/Ts lies in (-1/Ts, 0) for s < 0). All maps are generic over [`Scalar`].
 
+#[cfg(not(feature = "std"))]
+use crate::num::math::ComplexMath as _;
 use crate::num::{Scalar, sigmoid};
+use alloc::vec::Vec;
 use nalgebra::Complex;
 
 /// A second-order delta-domain local model in direct form (eq. 2.13 with D.2.2).

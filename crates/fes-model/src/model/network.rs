@@ -21,6 +21,8 @@ use super::local_model::SsLocalModel;
 use super::scheduling::Scheduler;
 use super::validity::{Activation, MAX_UNITS, ValidityFunctions};
 use crate::num::Scalar;
+#[cfg(not(feature = "std"))]
+use crate::num::math::ComplexMath as _;
 
 /// Largest supported input delay in samples.
 pub const MAX_DELAY: usize = 1000;

@@ -28,6 +28,11 @@ use super::network::Network;
 use super::scheduling::Scheduler;
 use super::validity::ValidityFunctions;
 use crate::num::Scalar;
+use alloc::{
+    format,
+    string::{String, ToString},
+    vec::Vec,
+};
 
 /// Why theta could not be mapped.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -12,6 +12,8 @@
 //! input the local models see, so the whole network is an undelayed LPV core followed by a
 //! pure d-sample output delay (see [`super::network`]).
 
+#[cfg(not(feature = "std"))]
+use crate::num::math::FloatMath as _;
 use serde::{Deserialize, Serialize};
 
 /// The thesis's prefilter gain K (eq. 5.4).
