@@ -2,7 +2,7 @@
 //! typed, allocation-free frame codec, the PULSE CRC and the freshness counters.
 //!
 //! The DBC is the single source of truth; [`table`] restates it for the codec and
-//! `tests/dbc_consistency.rs` proves the two agree. The protocol borrows CANopen's
+//! `tests/it/dbc_consistency.rs` proves the two agree. The protocol borrows CANopen's
 //! identifier layout and NMT / heartbeat / EMCY meanings (see `docs/can-protocol.md`).
 //!
 //! ```

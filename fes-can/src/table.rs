@@ -1,6 +1,6 @@
 //! The descriptor table: the codec's statement of `dbc/fes.dbc`.
 //!
-//! `tests/dbc_consistency.rs` parses the DBC and compares every message (COB-ID, DLC,
+//! `tests/it/dbc_consistency.rs` parses the DBC and compares every message (COB-ID, DLC,
 //! cycle time, sender) and every signal (start bit, length, byte order, signedness,
 //! factor, offset, min, max, unit, multiplexing, value table) with this table.
 

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use libfuzzer_sys::fuzz_target;
 use fes_dataset::parse_record_csv;
+use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok((t, p, f)) = parse_record_csv(Path::new("r.csv"), data, 1e-3) {

@@ -20,7 +20,7 @@ use stim_driver::tx::CountingSink;
 
 const MS: u64 = 1_000_000;
 
-#[path = "../tests/support/recording_bus.rs"]
+#[path = "../tests/it/support/recording_bus.rs"]
 mod recording_bus;
 use recording_bus::status;
 

@@ -321,7 +321,7 @@ fn a_controller_that_does_not_fit_the_loop_is_refused_at_start() {
 /// Not a test: writes the 10-unit controller used by the latency measurement
 /// (docs/realtime.md) to the path in `RT_DEMO_CONTROLLER`.
 #[test]
-#[ignore = "tool: RT_DEMO_CONTROLLER=path cargo test -p rt-core --test rt_process -- --ignored export_demo_controller"]
+#[ignore = "tool: RT_DEMO_CONTROLLER=path cargo test -p rt-core --test it rt_process::export_demo_controller -- --ignored"]
 fn export_demo_controller() {
     let path =
         std::env::var("RT_DEMO_CONTROLLER").expect("set RT_DEMO_CONTROLLER to the output path");

@@ -609,7 +609,7 @@ fn stop_cancels_output_and_nmt_to_other_nodes_is_ignored() {
 
 /// A reset node restores the protocol state, not the tissue: a host that resets and
 /// restarts the stimulator between two pulses gets neither a shorter IPI nor a fresh rate
-/// window. (Found by `tests/stimulator_props.rs`: the reset cleared the pulse history.)
+/// window. (Found by `tests/it/stimulator_props.rs`: the reset cleared the pulse history.)
 #[test]
 fn reset_node_keeps_the_minimum_ipi_and_the_rate_window() {
     let limits = StimLimits {

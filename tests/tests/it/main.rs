@@ -1,0 +1,15 @@
+//! The system tests, one binary: the test harness itself, interop with python-can and
+//! cantools, the virtual stimulator on vcan and its allocation-free tick, the systemd
+//! units (static checks, and the boot test in a VM), and the latency regression against
+//! the checked-in baseline.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
+
+mod common;
+mod systemd_support;
+
+mod harness;
+mod interop;
+mod latency_regression;
+mod stimulator_no_alloc;
+mod stimulator_vcan;
+mod systemd_units;

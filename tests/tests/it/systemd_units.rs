@@ -1,0 +1,541 @@
+//! The systemd units and the installer, checked without booting systemd:
+//!
+//! - `systemd-analyze verify` accepts every rendered unit of both variants (rig, bench),
+//!   with no output at all, and rejects a unit with a typo (the check can fail);
+//! - the unit graph starts the stack in order (CAN -> stimulator -> driver -> rt-core ->
+//!   supervisor) and stops what depends on a stopped unit (driver -> rt-core, stimulator);
+//! - the real-time settings of the units agree with the shipped configuration files;
+//! - the safety, iceoryx2 and hardening settings are there;
+//! - the installer keeps the operator's configuration and rejects bad options;
+//! - `notify`: the real rt-core binary against a fake service manager (READY, watchdog
+//!   feeding only while the loop ticks, STOPPING), in one test binary with the above;
+//! - `boot` (`#[ignore]`d, minutes): the units booted by a real systemd in a UML guest.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
+
+mod boot;
+mod notify;
+use crate::systemd_support;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use std::process::Command;
+
+use systemd_support::{Scratch, UnitFile, build_stack, cpu_set, stage, workspace_root};
+
+const UNIT_DIR: &str = "etc/systemd/system";
+const SERVICES: [&str; 5] = [
+    "fes-can.service",
+    "fes-sim-muscle.service",
+    "fes-stim-driver.service",
+    "fes-rt-core.service",
+    "fes-supervisor.service",
+];
+/// Processes that share iceoryx2 services.
+const ICEORYX2_USERS: [&str; 3] = [
+    "fes-stim-driver.service",
+    "fes-rt-core.service",
+    "fes-supervisor.service",
+];
+
+/// A staged bench (or rig) install with deterministic CPU placement.
+fn staged(mode: &str) -> (Scratch, BTreeMap<String, UnitFile>) {
+    let bins = build_stack();
+    let scratch = Scratch::new(&format!("units{}", mode.trim_start_matches('-')));
+    stage(
+        mode,
+        &scratch.path,
+        &bins,
+        &["--rt-cpus", "1", "--housekeeping-cpus", "0"],
+    );
+    let units = read_units(&scratch.path.join(UNIT_DIR));
+    (scratch, units)
+}
+
+fn read_units(dir: &Path) -> BTreeMap<String, UnitFile> {
+    let mut units = BTreeMap::new();
+    for entry in std::fs::read_dir(dir).expect("unit directory") {
+        let path = entry.expect("dir entry").path();
+        if path.is_file() {
+            let u = UnitFile::load(&path);
+            units.insert(u.name.clone(), u);
+        }
+    }
+    units
+}
+
+/// Runs `systemd-analyze verify` on every unit in `dir` (the unit search path starts
+/// there); returns (exit status ok, all output).
+fn analyze_verify(dir: &Path) -> (bool, String) {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .expect("unit directory")
+        .map(|e| e.expect("dir entry").path())
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    let out = Command::new("systemd-analyze")
+        .arg("verify")
+        .args(&files)
+        .env("SYSTEMD_UNIT_PATH", format!("{}:", dir.display()))
+        .env("SYSTEMD_LOG_COLOR", "0")
+        .output()
+        .expect("systemd-analyze (package systemd; scripts/setup installs it)");
+    let mut text = String::from_utf8_lossy(&out.stdout).into_owned();
+    text.push_str(&String::from_utf8_lossy(&out.stderr));
+    (out.status.success(), text)
+}
+
+/// Copies the staged units to `dir`, pointing their executables at the staged binaries
+/// (the units name /usr/local/bin/..., which exists only on the installed machine;
+/// `systemd-analyze verify` checks that every command is executable).
+fn units_for_verify(staged_root: &Path, dir: &Path) {
+    std::fs::create_dir_all(dir).expect("verify dir");
+    let bindir = staged_root.join("usr/local/bin");
+    for entry in std::fs::read_dir(staged_root.join(UNIT_DIR)).expect("units") {
+        let path = entry.expect("entry").path();
+        if !path.is_file() {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).expect("unit text");
+        let text = text.replace("/usr/local/bin/", &format!("{}/", bindir.display()));
+        std::fs::write(dir.join(path.file_name().expect("name")), text).expect("write");
+    }
+}
+
+#[test]
+fn systemd_analyze_verify_accepts_every_unit_silently() {
+    for mode in ["--rig", "--bench"] {
+        let (scratch, units) = staged(mode);
+        let expected: BTreeSet<&str> = if mode == "--bench" {
+            SERVICES.iter().copied().chain(["fes.target"]).collect()
+        } else {
+            SERVICES
+                .iter()
+                .copied()
+                .filter(|u| *u != "fes-sim-muscle.service")
+                .chain(["fes.target"])
+                .collect()
+        };
+        let got: BTreeSet<&str> = units.keys().map(String::as_str).collect();
+        assert_eq!(got, expected, "{mode}: installed units");
+        let dir = scratch.path.join("verify");
+        units_for_verify(&scratch.path, &dir);
+        let (ok, text) = analyze_verify(&dir);
+        println!("{mode}: systemd-analyze verify: ok={ok} output={text:?}");
+        assert!(
+            ok && text.trim().is_empty(),
+            "{mode}: systemd-analyze verify must pass without any output:\n{text}"
+        );
+    }
+}
+
+/// The verification above can fail: an unknown key, or a command that does not exist.
+#[test]
+fn systemd_analyze_verify_rejects_broken_units() {
+    let (scratch, _) = staged("--bench");
+    let dir = scratch.path.join("verify");
+    units_for_verify(&scratch.path, &dir);
+    let unit = dir.join("fes-rt-core.service");
+    let good = std::fs::read_to_string(&unit).expect("unit");
+    for (what, broken) in [
+        (
+            "typo in a key",
+            good.replace("NoNewPrivileges=yes", "NoNewPrivilege=yes"),
+        ),
+        (
+            "missing executable",
+            good.replace("/bin/rt-core ", "/bin/rt-core-missing "),
+        ),
+    ] {
+        assert_ne!(broken, good, "{what}: the edit applies");
+        std::fs::write(&unit, &broken).expect("write");
+        let (ok, text) = analyze_verify(&dir);
+        assert!(
+            !(ok && text.trim().is_empty()),
+            "{what}: verify did not complain"
+        );
+        println!("{what}: {}", text.trim());
+    }
+}
+
+/// Start order implied by After=/Before= among the stack's units (Kahn's algorithm; a
+/// cycle is a failure).
+fn start_order(units: &BTreeMap<String, UnitFile>) -> Vec<String> {
+    let names: BTreeSet<&String> = units.keys().collect();
+    let mut after: BTreeMap<&str, BTreeSet<&str>> = BTreeMap::new();
+    for (name, u) in units {
+        after.entry(name).or_default();
+        for dep in u.words("Unit", "After") {
+            if let Some(d) = names.get(&dep) {
+                after.entry(name).or_default().insert(d);
+            }
+        }
+        for dep in u.words("Unit", "Before") {
+            if let Some(d) = names.get(&dep) {
+                after.entry(d).or_default().insert(name);
+            }
+        }
+    }
+    let mut order = Vec::new();
+    while !after.is_empty() {
+        let ready: Vec<&str> = after
+            .iter()
+            .filter(|(_, deps)| deps.is_empty())
+            .map(|(n, _)| *n)
+            .collect();
+        assert!(!ready.is_empty(), "ordering cycle among {after:?}");
+        for n in ready {
+            after.remove(n);
+            for deps in after.values_mut() {
+                deps.remove(n);
+            }
+            order.push(n.to_owned());
+        }
+    }
+    order
+}
+
+/// Units stopped when `unit` stops: those that BindsTo= or PartOf= it (or Requires= it,
+/// which propagates an explicit stop), transitively.
+fn stopped_with(units: &BTreeMap<String, UnitFile>, unit: &str) -> BTreeSet<String> {
+    let mut stopped = BTreeSet::from([unit.to_owned()]);
+    loop {
+        let before = stopped.len();
+        for (name, u) in units {
+            let bound = ["BindsTo", "PartOf", "Requires"]
+                .iter()
+                .flat_map(|k| u.words("Unit", k))
+                .any(|d| stopped.contains(&d));
+            if bound {
+                stopped.insert(name.clone());
+            }
+        }
+        if stopped.len() == before {
+            return stopped;
+        }
+    }
+}
+
+#[test]
+fn unit_graph_orders_and_binds_the_stack() {
+    let (_scratch, units) = staged("--bench");
+    let order = start_order(&units);
+    println!("start order: {order:?}");
+    let pos = |u: &str| {
+        order
+            .iter()
+            .position(|n| n == u)
+            .unwrap_or_else(|| panic!("{u} not ordered"))
+    };
+    for pair in SERVICES.windows(2) {
+        assert!(
+            pos(pair[0]) < pos(pair[1]),
+            "{} must start before {}",
+            pair[0],
+            pair[1]
+        );
+    }
+    let u = |n: &str| &units[n];
+    // rt-core needs the driver READY first (Type=notify + After=) and goes with it.
+    assert!(u("fes-rt-core.service").has_word("Unit", "BindsTo", "fes-stim-driver.service"));
+    assert!(u("fes-rt-core.service").has_word("Unit", "After", "fes-stim-driver.service"));
+    // The stimulator is stopped (or restarted) when the driver is.
+    assert_eq!(
+        stopped_with(&units, "fes-stim-driver.service"),
+        BTreeSet::from([
+            "fes-stim-driver.service".to_owned(),
+            "fes-rt-core.service".to_owned(),
+            "fes-sim-muscle.service".to_owned(),
+        ]),
+        "stopping the driver stops rt-core and the stimulator, nothing else"
+    );
+    // The interface going away stops everything that talks over it.
+    let can = stopped_with(&units, "fes-can.service");
+    for s in [
+        "fes-stim-driver.service",
+        "fes-rt-core.service",
+        "fes-sim-muscle.service",
+    ] {
+        assert!(can.contains(s), "{s} must stop with the CAN interface");
+    }
+    // The supervisor survives an rt-core or driver stop (it reports it) ...
+    assert!(!stopped_with(&units, "fes-rt-core.service").contains("fes-supervisor.service"));
+    // ... and the target stops everything.
+    let all = stopped_with(&units, "fes.target");
+    for s in SERVICES {
+        assert!(
+            all.contains(s),
+            "{s} must be PartOf=fes.target (or bound to a part)"
+        );
+    }
+    // The target pulls the core stack in; the installer enables each unit into it.
+    let target = u("fes.target");
+    for s in [
+        "fes-can.service",
+        "fes-stim-driver.service",
+        "fes-rt-core.service",
+        "fes-supervisor.service",
+    ] {
+        assert!(target.has_word("Unit", "Wants", s), "fes.target Wants={s}");
+    }
+    for s in SERVICES {
+        assert!(u(s).has_word("Install", "WantedBy", "fes.target"), "{s}");
+    }
+    assert!(target.has_word("Install", "WantedBy", "multi-user.target"));
+}
+
+/// Reads a TOML file shipped in deploy/.
+fn shipped_toml(rel: &str) -> Option<toml::Table> {
+    let path = workspace_root().join("deploy").join(rel);
+    let text = std::fs::read_to_string(&path).ok()?;
+    Some(
+        text.parse::<toml::Table>()
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    )
+}
+
+/// `[table] key` as an integer.
+fn toml_int(t: &toml::Table, table: &str, key: &str) -> Option<i64> {
+    t.get(table)?.as_table()?.get(key)?.as_integer()
+}
+
+#[test]
+fn real_time_settings_agree_with_the_configuration() {
+    let (_scratch, units) = staged("--bench");
+    let rt_core = &units["fes-rt-core.service"];
+    let driver = &units["fes-stim-driver.service"];
+    let limit = |u: &UnitFile| -> i64 {
+        u.get("Service", "LimitRTPRIO")
+            .unwrap_or_else(|| panic!("{} sets LimitRTPRIO", u.name))
+            .parse()
+            .expect("LimitRTPRIO is a number")
+    };
+    let rt_cpus = cpu_set(&rt_core.get("Service", "CPUAffinity").expect("CPUAffinity"));
+    assert_eq!(rt_cpus, [1]);
+    for u in [rt_core, driver] {
+        assert!(u.is("Service", "CPUSchedulingPolicy", "fifo"), "{}", u.name);
+        assert!(
+            u.is("Service", "CPUSchedulingResetOnFork", "yes"),
+            "{}",
+            u.name
+        );
+        assert!(u.is("Service", "LimitMEMLOCK", "infinity"), "{}", u.name);
+        let main_prio: i64 = u
+            .get("Service", "CPUSchedulingPriority")
+            .expect("CPUSchedulingPriority")
+            .parse()
+            .expect("number");
+        assert!((1..=limit(u)).contains(&main_prio), "{}", u.name);
+        assert!(
+            !u.is("Service", "RestrictRealtime", "yes"),
+            "{}: RestrictRealtime=yes forbids SCHED_FIFO",
+            u.name
+        );
+        // The forward path shares the real-time CPU with rt-core (docs/realtime.md).
+        assert_eq!(
+            cpu_set(&u.get("Service", "CPUAffinity").expect("CPUAffinity")),
+            rt_cpus,
+            "{}",
+            u.name
+        );
+    }
+    assert!(
+        limit(driver) < limit(rt_core),
+        "the driver's forward path runs below rt-core's loop"
+    );
+    for s in ["fes-supervisor.service", "fes-sim-muscle.service"] {
+        let cpus = cpu_set(&units[s].get("Service", "CPUAffinity").expect("CPUAffinity"));
+        assert!(
+            cpus.iter().all(|c| !rt_cpus.contains(c)),
+            "{s} stays off the real-time CPU"
+        );
+        assert_eq!(limit(&units[s]), 0, "{s} has no real-time priority");
+    }
+    // rt-core.toml, rig and bench: the loop's priority is within the unit's limit, and a
+    // pinned core (if any) is one the unit allows.
+    for rel in ["etc/fes/rt-core.toml", "bench/etc/fes/rt-core.toml"] {
+        let t = shipped_toml(rel).expect("rt-core.toml is shipped");
+        let prio = toml_int(&t, "rt", "priority").unwrap_or(80);
+        assert!(
+            prio <= limit(rt_core),
+            "{rel}: [rt] priority {prio} > LimitRTPRIO {}",
+            limit(rt_core)
+        );
+        if let Some(core) = toml_int(&t, "rt", "core") {
+            assert!(
+                rt_cpus.contains(&(core as usize)),
+                "{rel}: [rt] core {core}"
+            );
+        }
+    }
+    // stim-driver.toml (the driver engineer's) when it is shipped: same rules.
+    match shipped_toml("etc/fes/stim-driver.toml") {
+        Some(t) => {
+            for table in ["rt", "bus_rt"] {
+                if let Some(prio) = toml_int(&t, table, "priority") {
+                    assert!(
+                        prio <= limit(driver),
+                        "stim-driver.toml [{table}] priority {prio} > LimitRTPRIO {}",
+                        limit(driver)
+                    );
+                }
+                if let Some(core) = toml_int(&t, table, "core") {
+                    assert!(
+                        rt_cpus.contains(&(core as usize)),
+                        "stim-driver.toml [{table}] core {core}"
+                    );
+                }
+            }
+        }
+        None => println!("deploy/etc/fes/stim-driver.toml not shipped yet: not checked"),
+    }
+}
+
+#[test]
+fn safety_iceoryx2_and_hardening_settings() {
+    let (scratch, units) = staged("--bench");
+    let u = |n: &str| &units[n];
+    let driver = u("fes-stim-driver.service");
+    let stop_post = driver.values("Service", "ExecStopPost").join(" ");
+    assert!(
+        stop_post.contains("/stim-driver safe-stop --iface ${FES_CAN_IFACE}"),
+        "the driver's ExecStopPost stops the stimulator: {stop_post:?}"
+    );
+    for s in ICEORYX2_USERS {
+        let unit = u(s);
+        assert!(unit.is("Service", "Type", "notify"), "{s}: Type=notify");
+        assert!(unit.is("Service", "NotifyAccess", "main"), "{s}");
+        let watchdog: u64 = unit
+            .get("Service", "WatchdogSec")
+            .unwrap_or_else(|| panic!("{s}: WatchdogSec"))
+            .parse()
+            .expect("whole seconds");
+        assert!(watchdog > 0, "{s}");
+        assert!(unit.is("Service", "Restart", "on-failure"), "{s}");
+        assert!(
+            unit.has_word("Service", "RestartPreventExitStatus", "1"),
+            "{s}"
+        );
+        // iceoryx2: one shared /dev/shm and /tmp/iceoryx2 across the stack.
+        assert!(unit.is("Service", "RemoveIPC", "no"), "{s}: RemoveIPC=no");
+        assert!(unit.is("Service", "PrivateTmp", "no"), "{s}: PrivateTmp=no");
+        for key in ["PrivateDevices", "DynamicUser", "PrivateIPC"] {
+            assert!(
+                !unit.is("Service", key, "yes"),
+                "{s}: {key}=yes hides iceoryx2"
+            );
+        }
+        for path in ["/dev/shm", "/tmp/iceoryx2", "/var/lib/fes"] {
+            assert!(
+                unit.has_word("Service", "ReadWritePaths", path),
+                "{s}: ReadWritePaths {path}"
+            );
+        }
+    }
+    assert!(u("fes-rt-core.service").has_word("Service", "RestartPreventExitStatus", "2"));
+    for s in SERVICES.iter().filter(|s| **s != "fes-can.service") {
+        let unit = u(s);
+        assert!(unit.is("Service", "User", "fes"), "{s}: User=fes");
+        for (key, value) in [
+            ("NoNewPrivileges", "yes"),
+            ("ProtectSystem", "strict"),
+            ("ProtectHome", "yes"),
+            ("CapabilityBoundingSet", ""),
+            ("MemoryDenyWriteExecute", "yes"),
+        ] {
+            assert!(unit.is("Service", key, value), "{s}: {key}={value}");
+        }
+        assert!(
+            unit.is("Service", "StandardError", "journal"),
+            "{s}: logs to the journal"
+        );
+    }
+    // The user the units run as is created, and owns iceoryx2's shared directory.
+    let sysusers =
+        std::fs::read_to_string(scratch.path.join("etc/sysusers.d/fes.conf")).expect("sysusers");
+    assert!(
+        sysusers
+            .lines()
+            .any(|l| l.split_whitespace().take(2).eq(["u", "fes"])),
+        "{sysusers}"
+    );
+    let tmpfiles =
+        std::fs::read_to_string(scratch.path.join("etc/tmpfiles.d/fes.conf")).expect("tmpfiles");
+    assert!(
+        tmpfiles.lines().any(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            w.len() >= 5 && w[0] == "d" && w[1] == "/tmp/iceoryx2" && w[3] == "fes"
+        }),
+        "{tmpfiles}"
+    );
+    // Recordings (supervisor.toml's [recording] dir, when shipped) are writable.
+    if let Some(t) = shipped_toml("etc/fes/supervisor.toml")
+        && let Some(dir) = t
+            .get("recording")
+            .and_then(|r| r.get("dir"))
+            .and_then(|d| d.as_str())
+    {
+        let rw = u("fes-supervisor.service").words("Service", "ReadWritePaths");
+        assert!(
+            rw.iter().any(|p| Path::new(dir).starts_with(p)),
+            "supervisor recordings {dir} not under ReadWritePaths {rw:?}"
+        );
+    }
+}
+
+#[test]
+fn installer_keeps_the_operators_configuration() {
+    let bins = build_stack();
+    let scratch = Scratch::new("installer");
+    let root = &scratch.path;
+    stage("--bench", root, &bins, &[]);
+    let conf = root.join("etc/fes/rt-core.toml");
+    let edited = std::fs::read_to_string(&conf).expect("config") + "\n# operator's edit\n";
+    std::fs::write(&conf, &edited).expect("edit");
+    // An upgrade keeps the edit, puts the new default beside it, keeps the interface.
+    let text = stage("--bench", root, &bins, &[]);
+    assert!(text.contains("rt-core.toml.dist"), "{text}");
+    assert_eq!(std::fs::read_to_string(&conf).expect("config"), edited);
+    let env = |root: &Path| std::fs::read_to_string(root.join("etc/fes/can.env")).expect("env");
+    assert!(env(root).contains("FES_CAN_IFACE=vcan0\n"));
+    stage("--bench", root, &bins, &["--iface", "vcan7"]);
+    assert!(env(root).contains("FES_CAN_IFACE=vcan7\n"));
+    stage("--bench", root, &bins, &[]);
+    assert!(
+        env(root).contains("FES_CAN_IFACE=vcan7\n"),
+        "kept without --iface"
+    );
+    // Rig: the device dependency names the interface; no virtual stimulator.
+    stage("--rig", root, &bins, &["--iface", "can1"]);
+    let can = UnitFile::load(&root.join(UNIT_DIR).join("fes-can.service"));
+    assert!(can.has_word("Unit", "BindsTo", "sys-subsystem-net-devices-can1.device"));
+    assert!(!root.join(UNIT_DIR).join("fes-sim-muscle.service").exists());
+    // Bad options: exit status 2 and a message naming the problem.
+    for (args, message) in [
+        (vec!["--bench", "--iface", "a b"], "bad interface name"),
+        (vec!["--rig", "--bitrate", "fast"], "--bitrate"),
+        (vec!["--bench", "--rt-cpus", "x"], "--rt-cpus"),
+        (vec!["--bench", "--iface"], "--iface needs a value"),
+        (vec!["--frobnicate"], "unknown option"),
+        (vec![], "choose --rig, --bench or --uninstall"),
+    ] {
+        let mut full = args.clone();
+        let dest = root.to_str().expect("utf-8");
+        if !args.is_empty() && args != ["--bench", "--iface"] {
+            full.extend(["--destdir", dest]);
+        }
+        let out = Command::new(workspace_root().join("scripts/install"))
+            .args(&full)
+            .output()
+            .expect("run install");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{full:?}: {err}");
+        assert!(err.contains(message), "{full:?}: {err}");
+    }
+    // Uninstall removes units and binaries, keeps configuration.
+    let (ok, text) =
+        systemd_support::run_install(&["--uninstall", "--destdir", root.to_str().expect("utf-8")]);
+    assert!(ok, "{text}");
+    assert!(!root.join(UNIT_DIR).join("fes-rt-core.service").exists());
+    assert!(!root.join("usr/local/bin/rt-core").exists());
+    assert!(conf.exists(), "configuration kept");
+}

@@ -1,0 +1,239 @@
+//! `fes design`: Tables 6.1 / 6.2 and the closed-loop poles, and its refusals.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
+
+use crate::analysis_support;
+
+use analysis_support::control::fast_muscle;
+use analysis_support::*;
+use rt_core::model::lmn::LocalModelSet;
+
+/// Thesis Table 6.1 (fast muscle): t_r (ms), p1, p2.
+const TABLE_6_1: [(f64, f64, f64); 6] = [
+    (100.0, -57.9, -17.0),
+    (30.0, -180.2, -55.6),
+    (30.0, -180.2, -55.6),
+    (10.0, -449.1, -157.8),
+    (20.0, -257.8, -82.3),
+    (30.0, -180.2, -55.6),
+];
+/// Thesis Table 6.2 (slow muscle).
+const TABLE_6_2: [(f64, f64, f64); 5] = [
+    (30.0, -180.2, -55.6),
+    (72.5, -79.0, -23.4),
+    (115.0, -50.5, -14.8),
+    (157.5, -37.2, -10.8),
+    (200.0, -29.4, -8.6),
+];
+
+/// Coefficients [c2, c1, c0] of det(sI - M) = s^3 + c2 s^2 + c1 s + c0 of a 3x3 matrix.
+fn char_poly(m: [[f64; 3]; 3]) -> [f64; 3] {
+    let tr = m[0][0] + m[1][1] + m[2][2];
+    let minors = m[0][0] * m[1][1] - m[0][1] * m[1][0] + m[0][0] * m[2][2] - m[0][2] * m[2][0]
+        + m[1][1] * m[2][2]
+        - m[1][2] * m[2][1];
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    [-tr, minors, -det]
+}
+
+/// Designs from the rise times and checks: p1, p2 of every unit against the table to its
+/// printed digit (half a unit of 0.1: `w_n t_r = 3.2`, docs/control.md),
+/// and the closed loop of each unit, A_aug - b_aug K (eq. C.25-C.27) built here from the
+/// model file and the stored gains, has the characteristic polynomial
+/// (s - p1)(s - p2)(s - p3) of the designed poles (1e-6 relative per coefficient).
+fn check(table: &[(f64, f64, f64)], rise: &str) {
+    let dir = tmp("design");
+    let model = save_model(&dir, "m.json", &fast_muscle(table.len()));
+    let out = dir.join("c.json");
+    let stdout = ok(&[
+        "design",
+        "--model",
+        model.to_str().unwrap(),
+        "--rise-ms",
+        rise,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        stdout.contains("t_r [ms]") && stdout.contains("K_I"),
+        "{stdout}"
+    );
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let lmn = rt_core::model::file::load(&model).unwrap();
+    let units = lmn.ss_units().unwrap();
+    for (i, &(tr, p1, p2)) in table.iter().enumerate() {
+        let u = &c["units"][i];
+        let f = |v: &serde_json::Value| v.as_f64().unwrap();
+        assert!((f(&u["rise_time_s"]) * 1e3 - tr).abs() < 1e-9);
+        let (q1, q2, q3) = (f(&u["p1"]["re"]), f(&u["p2"]["re"]), f(&u["p3"]["re"]));
+        assert!((q1 - p1).abs() <= 0.05, "unit {i}: p1 {q1} vs {p1}");
+        assert!((q2 - p2).abs() <= 0.05, "unit {i}: p2 {q2} vs {p2}");
+        let (kx, ki) = ([f(&u["k_x"][0]), f(&u["k_x"][1])], f(&u["k_i"]));
+        let m = &units[i];
+        // State [x_I, x]: d x_I = c'x (- r), d x = A x + b u, u = -K_I x_I - K_x' x.
+        let cl = [
+            [0.0, m.c[0], m.c[1]],
+            [
+                -m.b[0] * ki,
+                m.a[0][0] - m.b[0] * kx[0],
+                m.a[0][1] - m.b[0] * kx[1],
+            ],
+            [
+                -m.b[1] * ki,
+                m.a[1][0] - m.b[1] * kx[0],
+                m.a[1][1] - m.b[1] * kx[1],
+            ],
+        ];
+        let got = char_poly(cl);
+        let want = [-(q1 + q2 + q3), q1 * q2 + q1 * q3 + q2 * q3, -q1 * q2 * q3];
+        for j in 0..3 {
+            assert!(
+                (got[j] - want[j]).abs() < 1e-6 * want[j].abs(),
+                "unit {i} coefficient {j}: {} vs {}",
+                got[j],
+                want[j]
+            );
+        }
+    }
+}
+
+#[test]
+fn reproduces_table_6_1_and_closed_loop_poles() {
+    check(&TABLE_6_1, "100,30,30,10,20,30");
+}
+
+/// `--rise-ms auto` spreads 30..200 ms evenly: Table 6.2's rise times for 5 units.
+#[test]
+fn auto_reproduces_table_6_2() {
+    check(&TABLE_6_2, "auto");
+}
+
+/// Rise-time count != units, bad numbers, negative local gains from the offsets (with the
+/// zero-offset advice; overridable), an unstable model, an ARX model.
+#[test]
+fn refusals_name_the_problem() {
+    let dir = tmp("design-bad");
+    let m6 = save_model(&dir, "m6.json", &fast_muscle(6));
+    let m = m6.to_str().unwrap();
+    let out = dir.join("c.json");
+    let o = out.to_str().unwrap();
+    fails(
+        &[
+            "design",
+            "--model",
+            m,
+            "--rise-ms",
+            "100,30,30,10,20",
+            "--out",
+            o,
+        ],
+        &["5 rise time(s)", "6 units"],
+    );
+    fails(
+        &[
+            "design",
+            "--model",
+            m,
+            "--rise-ms",
+            "100,30,x,10,20,30",
+            "--out",
+            o,
+        ],
+        &["--rise-ms", "`x`"],
+    );
+    fails(
+        &[
+            "design",
+            "--model",
+            m,
+            "--rise-ms",
+            "100,30,0,10,20,30",
+            "--out",
+            o,
+        ],
+        &["unit 2", "> 0"],
+    );
+    fails(
+        &[
+            "design",
+            "--model",
+            m,
+            "--rise-ms",
+            "auto",
+            "--damping",
+            "0",
+            "--out",
+            o,
+        ],
+        &["--damping"],
+    );
+    assert!(!out.exists());
+
+    // Offsets that make unit 1's gain negative (its output map flipped, offsets free).
+    let mut neg = fast_muscle(3);
+    neg.zero_offsets = false;
+    if let LocalModelSet::SsEigCommon { units, .. } = &mut neg.local {
+        units[1].c = [-units[1].c[0], -units[1].c[1]];
+        units[1].dy = 0.3;
+        units[1].dx = [0.5, 0.0];
+    }
+    let n = save_model(&dir, "neg.json", &neg);
+    let n = n.to_str().unwrap();
+    fails(
+        &["design", "--model", n, "--rise-ms", "auto", "--out", o],
+        &["negative", "unit 1", "--zero-offsets", "6.5.3"],
+    );
+    let err = String::from_utf8_lossy(
+        &run(&[
+            "design",
+            "--model",
+            n,
+            "--rise-ms",
+            "auto",
+            "--out",
+            o,
+            "--allow-negative-gain",
+        ])
+        .stderr,
+    )
+    .into_owned();
+    assert!(out.exists() && err.contains("WARNING"), "{err}");
+
+    let unstable = save_model(&dir, "u.json", &fixtures_unstable());
+    fails(
+        &[
+            "design",
+            "--model",
+            unstable.to_str().unwrap(),
+            "--rise-ms",
+            "auto",
+            "--out",
+            o,
+        ],
+        &["unstable", "modify --stabilise"],
+    );
+
+    let mut empty: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&m6).unwrap()).unwrap();
+    empty["units"] = serde_json::json!([]);
+    let e = dir.join("empty.json");
+    std::fs::write(&e, empty.to_string()).unwrap();
+    fails(
+        &[
+            "design",
+            "--model",
+            e.to_str().unwrap(),
+            "--rise-ms",
+            "auto",
+            "--out",
+            o,
+        ],
+        &["units"],
+    );
+}
+
+fn fixtures_unstable() -> rt_core::model::Lmn {
+    fixtures::unstable()
+}

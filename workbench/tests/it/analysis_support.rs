@@ -1,0 +1,145 @@
+//! Helpers of the analysis CLI tests: temporary directories, running the binary, model and
+//! data-set fixtures (fes-ident's test fixtures, shared by path).
+#![allow(dead_code)]
+
+pub(crate) use crate::control_support as control;
+#[path = "../../../crates/fes-ident/tests/it/analysis_support.rs"]
+pub mod fixtures;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use fes_dataset::{DataSet, Header, Record, Split, WriteMode};
+use rt_core::model::{Lmn, file};
+
+/// A fresh empty directory under the system temp dir.
+pub fn tmp(tag: &str) -> PathBuf {
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let d = std::env::temp_dir().join(format!(
+        "fes-analysis-{tag}-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// Runs `supervisor` with `args`.
+pub fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fes"))
+        .args(args)
+        .output()
+        .expect("run supervisor")
+}
+
+/// Runs and asserts success; returns stdout.
+pub fn ok(args: &[&str]) -> String {
+    let o = run(args);
+    assert!(
+        o.status.success(),
+        "supervisor {args:?} failed:\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Runs, asserts failure and that stderr contains every `needle`; returns stderr.
+pub fn fails(args: &[&str], needles: &[&str]) -> String {
+    let o = run(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(
+        !o.status.success(),
+        "supervisor {args:?} should fail; stdout {}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    for n in needles {
+        assert!(err.contains(n), "stderr of {args:?} lacks {n:?}:\n{err}");
+    }
+    err
+}
+
+/// Saves a model file.
+pub fn save_model(dir: &Path, name: &str, lmn: &Lmn) -> PathBuf {
+    let p = dir.join(name);
+    file::save(lmn, &p).expect("save model");
+    p
+}
+
+/// A noise-free data set of `n` records of `len` samples from `truth` (the first `train`
+/// records train): random thesis-like trains, output = the model's normalised output.
+pub fn save_dataset(
+    dir: &Path,
+    truth: &Lmn,
+    n: usize,
+    len: usize,
+    train: usize,
+    seed: u64,
+) -> PathBuf {
+    let inputs = fixtures::random_inputs(n, len, seed);
+    let outputs = fixtures::outputs(truth, &inputs);
+    let records = inputs
+        .into_iter()
+        .zip(outputs)
+        .enumerate()
+        .map(|(i, (u, y))| {
+            Record::uniform(
+                format!("record_{i:03}.csv"),
+                "random",
+                truth.ts,
+                u.iter().map(|&v| v > 0.5).collect(),
+                y,
+            )
+        })
+        .collect();
+    let ds = DataSet {
+        header: Header {
+            source: "analysis test".into(),
+            preset: None,
+            parameters: Default::default(),
+            seed: Some(seed),
+            noise: serde_json::Value::Null,
+            protocol: serde_json::Value::Null,
+            scale_n: truth.force_scale_n,
+            offset_n: 0.0,
+            ts_s: truth.ts,
+            split: Split::first(train, n),
+        },
+        records,
+    };
+    let p = dir.join("data");
+    ds.write(&p, WriteMode::CreateNew).expect("write data set");
+    p
+}
+
+/// True when the file starts with the PNG signature.
+pub fn is_png(p: &Path) -> bool {
+    std::fs::read(p).is_ok_and(|b| b.starts_with(b"\x89PNG\r\n\x1a\n"))
+}
+
+/// Reads a CSV written by the tools: header names and rows of fields.
+pub fn csv(p: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(p).expect("csv");
+    let mut lines = text.lines();
+    let header = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .map(String::from)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+/// Column `name` of a CSV as numbers.
+pub fn column(h: &[String], rows: &[Vec<String>], name: &str) -> Vec<f64> {
+    let i = h
+        .iter()
+        .position(|x| x == name)
+        .unwrap_or_else(|| panic!("no column {name}"));
+    rows.iter().map(|r| r[i].parse().expect("number")).collect()
+}

@@ -1,0 +1,800 @@
+//! Fault injection on the whole stack (issue 10): the four processes on the host bus
+//! (fes_can::hostbus: the CAN frames over Unix datagrams, at the host's real-time
+//! latencies), a 120 beats/min cardiac profile, and then
+//!
+//! * SIGSTOP of each process at a seeded random moment for a seeded random time, SIGCONT;
+//! * injected on the bus through the tap station: a bus-off error frame, an EMCY storm in
+//!   the stimulator's name, forged PULSE frames, and random frames and datagrams.
+//!
+//! Each case asserts on what the stimulator did (its per-tick record) and what the
+//! supervisor reports: every applied pulse within the stimulator's limits and with the
+//! generator's parameters (never a forged one); once the stimulator has left operation it
+//! applies no pulse again (nobody re-arms); a fault beyond the chain's reaction threshold
+//! ends with the stimulator out of operation and the supervisor in `fault`; the recording
+//! reads back as a data set. Each process's exit is clean at the end, or it was a victim.
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use fes_can::hostbus::{HostBus, RawFrame, Station};
+use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
+use fes_dataset::DataSet;
+use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows};
+use nix::sys::signal::Signal;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rt_core::rt::clock::monotonic_ns;
+use supervisor::protocol::Status;
+use workbench::bench::{PROCESSES, Stack, process_logs};
+
+use crate::stack_support;
+
+/// The stimulator's limits on the bench (its defaults).
+const LIMITS: fes_can::StimLimits = fes_can::StimLimits::DEFAULT;
+
+/// One stack at a time: the cases share two cores and run their loops at SCHED_FIFO.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+struct Bench {
+    stack: Stack,
+    dir: PathBuf,
+    _serial: std::sync::MutexGuard<'static, ()>,
+}
+
+impl Bench {
+    /// Starts the stack on the host bus, arms and starts the cardiac profile.
+    fn start(tag: &str) -> Self {
+        Self::start_with(tag, |_| {})
+    }
+
+    /// As [`Self::start`], with `prepare` run on the (new, empty) stack directory first.
+    fn start_with(tag: &str, prepare: impl FnOnce(&Path)) -> Self {
+        let serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("stack directory");
+        prepare(&dir);
+        let stack = stack_support::start_armed(
+            tag,
+            &dir,
+            &stack_binaries(),
+            format!("hostbus:{}", dir.join("bus").display()),
+            false,
+            format!("fi{}{tag}", std::process::id()),
+        );
+        Self {
+            stack,
+            dir,
+            _serial: serial,
+        }
+    }
+
+    fn bus(&self) -> PathBuf {
+        self.dir.join("bus")
+    }
+
+    fn logs(&self) -> String {
+        process_logs(&self.dir)
+    }
+
+    fn status(&self) -> Status {
+        self.stack
+            .status()
+            .unwrap_or_else(|e| panic!("the supervisor does not answer: {e}\n{}", self.logs()))
+    }
+
+    /// Polls the supervisor until it reports a fault or `timeout` passes.
+    fn wait_fault(&self, timeout: Duration) -> Status {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let s = self.status();
+            if s.state == "fault" || Instant::now() > deadline {
+                return s;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// The stack, when it is still stimulating just before a case injects its fault; `Err`
+    /// (the stack stopped, the safety invariants checked) when a host stall has already
+    /// tripped the chain ([`stack_support::is_timing_trip`]): the attempt is void.
+    fn ready_for_injection(self, case: &str) -> Result<Self, String> {
+        let s = self.status();
+        let Some(trip) = s
+            .fault
+            .filter(|f| s.state == "fault" && stack_support::is_timing_trip(f))
+        else {
+            return Ok(self);
+        };
+        let done = self.finish();
+        done.check_safety(&format!("{case} (void attempt)"), 0);
+        Err(format!("{trip}; driver: {}", done.driver_trips))
+    }
+
+    /// Stops the stack and returns the stimulator's record, the recording's sample count
+    /// and the exit codes.
+    fn finish(self) -> Finished {
+        let recordings = self.stack.recordings();
+        let dir = self.dir.clone();
+        let exits = self.stack.stop(Duration::from_secs(5));
+        let rows = stimulator_rows(&dir.join("stimulator.csv"));
+        let run = recordings.last().expect("a recording run");
+        let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{}: {e}", run.display()));
+        let samples = ds.records.iter().map(|r| r.len()).sum();
+        let logs = process_logs(&dir);
+        let driver_trips = stack_support::driver_trips(&dir);
+        let rt_core_log = std::fs::read_to_string(dir.join("rt-core.log")).unwrap_or_default();
+        let _ = std::fs::remove_dir_all(&dir);
+        Finished {
+            rows,
+            samples,
+            exits,
+            logs,
+            driver_trips,
+            rt_core_log,
+        }
+    }
+}
+
+struct Finished {
+    rows: Vec<StimRow>,
+    samples: usize,
+    exits: Vec<(&'static str, Option<i32>)>,
+    logs: String,
+    /// The driver's `SAFE STATE` lines ([`stack_support::driver_trips`]).
+    driver_trips: String,
+    /// rt-core's whole log.
+    rt_core_log: String,
+}
+
+const OPERATING: [&str; 2] = ["stimulating", "armed"];
+
+impl Finished {
+    /// The invariants of every case: applied pulses within the limits and identical in
+    /// amplitude and width to the generator's first; no pulse once the stimulator left
+    /// operation after `from_ns`; a readable recording. Returns when the stimulator left
+    /// operation after `from_ns`, if it did.
+    fn check(&self, case: &str, from_ns: u64) -> Option<u64> {
+        assert!(
+            self.rows
+                .iter()
+                .filter(|r| r.pulse.is_some() && r.t_ns < from_ns)
+                .count()
+                > 5,
+            "{case}: no stimulation before the fault\n{}",
+            self.logs
+        );
+        let left = self.check_safety(case, from_ns);
+        assert!(
+            self.samples >= 500,
+            "{case}: only {} samples recorded",
+            self.samples
+        );
+        left
+    }
+
+    /// The safety invariants alone (those of [`Self::check`] that hold however early a
+    /// fault came): applied pulses within the limits, with the generator's parameters and
+    /// the minimum IPI, and none once the stimulator left operation after `from_ns`.
+    fn check_safety(&self, case: &str, from_ns: u64) -> Option<u64> {
+        let pulses: Vec<&StimRow> = self.rows.iter().filter(|r| r.pulse.is_some()).collect();
+        let (_, amp0, width0) = pulses.first().and_then(|r| r.pulse)?;
+        let mut prev: Option<u64> = None;
+        let mut ticks_sorted: Vec<u64> = pulses.iter().map(|r| r.tick).collect();
+        ticks_sorted.sort_unstable();
+        for (r, &tick) in pulses.iter().zip(&ticks_sorted) {
+            let (_, amp, width) = r.pulse.unwrap();
+            assert!(
+                amp == amp0 && width == width0,
+                "{case}: a pulse of {amp} mA / {width} us at tick {} (the generator's are {amp0} / {width0})",
+                r.tick
+            );
+            assert!(
+                amp * 10.0 <= f64::from(LIMITS.max_amplitude_100ua) + 1e-9
+                    && width <= f64::from(LIMITS.max_width_us),
+                "{case}: pulse beyond the limits at tick {}",
+                r.tick
+            );
+            if let Some(p) = prev {
+                assert!(
+                    tick - p >= u64::from(LIMITS.min_ipi_ms),
+                    "{case}: pulses at ticks {p} and {tick}, closer than the minimum IPI"
+                );
+            }
+            prev = Some(tick);
+        }
+        let left = self
+            .rows
+            .iter()
+            .find(|r| r.t_ns > from_ns && !OPERATING.contains(&r.state.as_str()))
+            .map(|r| r.t_ns);
+        if let Some(t) = left {
+            let after: Vec<u64> = pulses
+                .iter()
+                .filter(|r| r.t_ns > t)
+                .map(|r| (r.t_ns - t) / 1_000_000)
+                .collect();
+            let around: Vec<String> = self
+                .rows
+                .iter()
+                .filter(|r| r.t_ns + 5_000_000 >= t && (r.state != "fault" || r.pulse.is_some()))
+                .take(40)
+                .map(|r| format!("{} {} {} {:?}", r.tick, r.t_ns, r.state, r.pulse))
+                .collect();
+            assert!(
+                after.is_empty(),
+                "{case}: pulses {after:?} ms after the stimulator left operation (re-armed by itself?)\n{}",
+                around.join("\n")
+            );
+        }
+        left
+    }
+
+    /// The stimulator's last recorded state.
+    fn last_state(&self) -> &str {
+        self.rows.last().map_or("", |r| r.state.as_str())
+    }
+
+    /// Every process but `victim` exited on SIGTERM; rt-core's hot path allocated nothing
+    /// (a peer connecting late is counted apart).
+    fn clean_exits_except(&self, case: &str, victim: Option<&str>) {
+        self.clean_exits(case, victim, true);
+    }
+
+    /// As [`Self::clean_exits_except`]; `no_alloc`: also require rt-core's 0 hot-path
+    /// allocations. (A CI run saw 1 in a SIGSTOP case; the SIGSTOP cases report the count
+    /// instead, see docs/safety.md.)
+    fn clean_exits(&self, case: &str, victim: Option<&str>, no_alloc: bool) {
+        for (name, code) in &self.exits {
+            if Some(*name) != victim {
+                assert!(
+                    code.is_some(),
+                    "{case}: {name} had to be killed at the end\n{}",
+                    self.logs
+                );
+            }
+        }
+        if victim != Some("rt-core") && no_alloc {
+            assert_eq!(
+                self.rt_core_allocations(),
+                Some(0),
+                "{case}: rt-core allocated on its hot path; {}\n{}",
+                self.rt_core_allocation_trace(),
+                self.logs
+            );
+        }
+    }
+
+    /// rt-core's hot-path allocations, from its final log line.
+    fn rt_core_allocations(&self) -> Option<u64> {
+        let log = &self.rt_core_log;
+        let i = log.rfind(" hot-path heap allocations")?;
+        log[..i].rsplit(' ').next()?.parse().ok()
+    }
+
+    /// Where rt-core's first hot-path heap allocation came from (its exit log:
+    /// `[telemetry] trace_allocations`), or a note that it logged none.
+    fn rt_core_allocation_trace(&self) -> String {
+        self.rt_core_log
+            .find("first heap allocation on a tracked thread")
+            .map_or("no allocation trace in rt-core's log".into(), |i| {
+                self.rt_core_log[i..].chars().take(6000).collect()
+            })
+    }
+}
+
+/// Runs `attempt` (given its number) until it is not void, three attempts at most. An
+/// attempt is void when a host stall tripped the chain before the case could inject its
+/// fault ([`Bench::ready_for_injection`]); CI saw such trips about once in a few minutes of
+/// stack time. Every void attempt is printed.
+fn repeat_void(case: &str, mut attempt: impl FnMut(u32) -> Result<(), String>) {
+    for n in 1..=3 {
+        match attempt(n) {
+            Ok(()) => return,
+            Err(why) => eprintln!("{case}: attempt {n} void ({why}); again"),
+        }
+    }
+    panic!("{case}: three attempts in a row were voided by host stalls");
+}
+
+/// The stall beyond which the chain must have stopped stimulation, per victim, ms: the
+/// driver's StimTick watchdog (20 ms) for rt-core, the stimulator's heartbeat watchdog
+/// (100 ms) for the driver, the driver's stimulator timeout (100 ms) for the stimulator,
+/// the supervisor's self-stall limit (1000 ms on the bench) for the supervisor; with
+/// margin.
+fn must_stop_after_ms(victim: &str) -> u64 {
+    match victim {
+        "supervisor" => 1200,
+        _ => 200,
+    }
+}
+
+/// The range of stall times drawn for a victim, ms: both sides of its threshold.
+fn stall_range_ms(victim: &str) -> std::ops::Range<u64> {
+    match victim {
+        "supervisor" => 20..2500,
+        _ => 20..900,
+    }
+}
+
+/// SIGSTOP of each process at a seeded moment (0.3-1.5 s into the profile) for a seeded
+/// time (20-900 ms; the supervisor 20-2500 ms), then SIGCONT. Three seeds per process.
+#[test]
+fn seeded_sigstop_of_each_process_fails_safe_and_never_rearms() {
+    let mut summary = Vec::new();
+    for (index, victim) in PROCESSES.into_iter().enumerate() {
+        for seed in 1..=3u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed * 7919 + index as u64);
+            let at_ms: u64 = rng.random_range(300..1500);
+            let stall_ms: u64 = rng.random_range(stall_range_ms(victim));
+            let case = format!("SIGSTOP {victim} seed {seed} ({stall_ms} ms at {at_ms} ms)");
+            repeat_void(&case, |n| {
+                let bench = Bench::start(&format!("stop{}{seed}{n}", &victim[..3]));
+                std::thread::sleep(Duration::from_millis(700 + at_ms));
+                let bench = bench.ready_for_injection(&case)?;
+                let stopped_ns = monotonic_ns();
+                bench
+                    .stack
+                    .signal(victim, Signal::SIGSTOP)
+                    .expect("SIGSTOP");
+                std::thread::sleep(Duration::from_millis(stall_ms));
+                bench
+                    .stack
+                    .signal(victim, Signal::SIGCONT)
+                    .expect("SIGCONT");
+                let must_stop = stall_ms >= must_stop_after_ms(victim);
+                let status = if must_stop {
+                    bench.wait_fault(Duration::from_secs(3))
+                } else {
+                    std::thread::sleep(Duration::from_millis(1000));
+                    bench.status()
+                };
+                std::thread::sleep(Duration::from_millis(500));
+                let done = bench.finish();
+                let left = done.check(&case, stopped_ns);
+                done.clean_exits(&case, None, false);
+                if must_stop {
+                    assert_eq!(status.state, "fault", "{case}: {status:?}\n{}", done.logs);
+                    let fault = status.fault.clone().unwrap_or_default();
+                    assert!(
+                        fault.starts_with(victim),
+                        "{case}: the supervisor blames another process: {fault}"
+                    );
+                    assert!(
+                        left.is_some() && !OPERATING.contains(&done.last_state()),
+                        "{case}: the stimulator is still {}\n{}",
+                        done.last_state(),
+                        done.logs
+                    );
+                }
+                summary.push(format!(
+                "{case}: supervisor {} {:?}; stimulator {} (left operation {}); rt-core hot-path allocations {:?}",
+                status.state,
+                status.fault.unwrap_or_default(),
+                done.last_state(),
+                left.map_or("never".into(), |t| format!(
+                    "{:.1} ms after SIGSTOP",
+                    (t - stopped_ns) as f64 / 1e6
+                )),
+                done.rt_core_allocations()
+            ));
+                if done.rt_core_allocations().is_some_and(|n| n > 0) {
+                    summary.push(format!("  {}", done.rt_core_allocation_trace()));
+                }
+                Ok(())
+            });
+        }
+    }
+    for s in &summary {
+        eprintln!("{s}");
+    }
+}
+
+fn tap(bench: &Bench) -> HostBus {
+    HostBus::open(&bench.bus(), Station::Tap, None).expect("the tap station")
+}
+
+/// Runs an injection case: `inject` sends through the tap; `must_stop`: the chain must
+/// end stopped with the supervisor in fault; otherwise it must keep stimulating.
+fn injection_case(case: &str, must_stop: bool, inject: impl Fn(&HostBus, &Path)) {
+    repeat_void(case, |n| injection_attempt(case, n, must_stop, &inject));
+}
+
+/// One attempt of [`injection_case`].
+fn injection_attempt(
+    case: &str,
+    attempt: u32,
+    must_stop: bool,
+    inject: &impl Fn(&HostBus, &Path),
+) -> Result<(), String> {
+    let bench = Bench::start(&format!("{case}{attempt}"));
+    let tap = tap(&bench);
+    std::thread::sleep(Duration::from_millis(1500));
+    let bench = bench.ready_for_injection(case)?;
+    let from_ns = monotonic_ns();
+    inject(&tap, &bench.bus());
+    let status = if must_stop {
+        bench.wait_fault(Duration::from_secs(3))
+    } else {
+        std::thread::sleep(Duration::from_millis(1500));
+        bench.status()
+    };
+    let checked_ns = monotonic_ns();
+    std::thread::sleep(Duration::from_millis(300));
+    drop(tap);
+    let done = bench.finish();
+    let left = done.check(case, from_ns);
+    done.clean_exits_except(case, None);
+    if must_stop {
+        assert_eq!(status.state, "fault", "{case}: {status:?}\n{}", done.logs);
+        assert!(
+            left.is_some() && !OPERATING.contains(&done.last_state()),
+            "{case}: the stimulator is still {}",
+            done.last_state()
+        );
+    } else {
+        assert_eq!(status.state, "armed", "{case}: {status:?}\n{}", done.logs);
+        let pulses_after = done
+            .rows
+            .iter()
+            .filter(|r| r.t_ns > from_ns && r.pulse.is_some())
+            .count();
+        assert!(
+            pulses_after > 10 && left.is_none_or(|t| t > checked_ns),
+            "{case}: stimulation stopped ({pulses_after} pulses after)\n{}",
+            done.logs
+        );
+    }
+    eprintln!(
+        "{case}: supervisor {} {:?}; stimulator {}",
+        status.state,
+        status.fault.unwrap_or_default(),
+        done.last_state()
+    );
+    Ok(())
+}
+
+/// A bus-off error frame reaches the driver and the stimulator: the driver trips, the
+/// stimulator reports a communication error, stimulation ends.
+#[test]
+fn an_injected_bus_off_stops_stimulation() {
+    injection_case("bus-off", true, |tap, _| {
+        // CAN_ERR_BUSOFF (linux/can/error.h).
+        tap.send(&RawFrame::error(0x40, &[])).expect("inject");
+    });
+}
+
+/// 2000 EMCY frames in the stimulator's name within about 200 ms: the driver trips on the
+/// first and survives the storm (its event queues are bounded), stimulation ends.
+#[test]
+fn an_emcy_storm_stops_stimulation_and_crashes_nothing() {
+    injection_case("emcy-storm", true, |tap, _| {
+        let nodes = Nodes::DEFAULT;
+        for i in 0..2000u32 {
+            let f = Message::Emcy(Emcy::new(
+                ErrorCode::Generic,
+                StimState::Fault,
+                i as u16,
+                0xBEEF,
+            ))
+            .encode_for(&nodes)
+            .expect("EMCY encodes");
+            tap.send(&RawFrame::data(f.id, f.payload()).unwrap())
+                .expect("inject");
+            if i % 10 == 0 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+    });
+}
+
+/// Forged PULSE frames (random payloads, so bad CRCs and counters, and an amplitude the
+/// generator never uses) at the stimulator's PULSE identifier: it applies none of them
+/// (the invariant check: every applied pulse has the generator's amplitude and width) and
+/// stops on the corruption.
+#[test]
+fn forged_pulse_frames_are_never_applied() {
+    injection_case("forged-pulse", true, |tap, _| {
+        let id = Nodes::DEFAULT.id_of(fes_can::MessageKind::Pulse);
+        let mut rng = ChaCha8Rng::seed_from_u64(42);
+        for _ in 0..200 {
+            let r: [u8; 8] = rng.random();
+            tap.send(&RawFrame::data(id, &r).unwrap()).expect("inject");
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    });
+}
+
+/// Noise on the bus that is nobody's: datagrams that are not CAN frames, extended and
+/// remote frames, and standard frames at identifiers outside the protocol (random
+/// payloads). Filtered or dropped as malformed; stimulation goes on.
+#[test]
+fn foreign_frames_and_garbage_datagrams_are_ignored() {
+    injection_case("noise", false, |tap, bus| {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let raw = std::os::unix::net::UnixDatagram::unbound().unwrap();
+        for i in 0..500u32 {
+            let r: [u8; 8] = rng.random();
+            match i % 4 {
+                0 => {
+                    for s in [Station::Driver, Station::Stimulator] {
+                        let len = rng.random_range(0..40usize);
+                        let _ = raw.send_to(&[0xA5; 40][..len], bus.join(s.file_name()));
+                    }
+                }
+                1 => {
+                    let f = RawFrame {
+                        can_id: fes_can::hostbus::EFF_FLAG
+                            | rng.random_range(0..=libc::CAN_EFF_MASK),
+                        len: 8,
+                        data: r,
+                    };
+                    tap.send(&f).unwrap();
+                }
+                2 => {
+                    let f = RawFrame {
+                        can_id: fes_can::hostbus::RTR_FLAG | 0x110,
+                        len: 0,
+                        data: [0; 8],
+                    };
+                    tap.send(&f).unwrap();
+                }
+                _ => {
+                    // Identifiers the protocol does not use (a frame of the wrong length
+                    // at one it uses, e.g. a host heartbeat at 0x701, is a protocol
+                    // error: the forged-frame case).
+                    let id = loop {
+                        let id = rng.random_range(0x200..0x800u16);
+                        if Nodes::DEFAULT.kind_of(u32::from(id)).is_none() {
+                            break id;
+                        }
+                    };
+                    tap.send(&RawFrame::data(id, &r).unwrap()).unwrap();
+                }
+            }
+            // About 4 frames per millisecond: what a 1 Mbit/s CAN bus carries besides
+            // the protocol's own traffic (at most about 8 frames per millisecond).
+            if i % 4 == 0 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+    });
+}
+
+/// Unmounts a filesystem on drop.
+struct Mounted(PathBuf);
+
+impl Drop for Mounted {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// The recording's disk fills up mid-run (a 512 KiB tmpfs mounted at the recording
+/// directory, full after about 2 s): the supervisor stops stimulation and says why, the
+/// stimulator ends stopped, and what was written before reads back as a data set. Needs
+/// root (mount); without it the case says so and passes vacuously. An attempt that a
+/// host stall ends first (a timing trip, see [`stack_support::is_timing_trip`]) is checked for safety
+/// and repeated, three attempts at most.
+#[test]
+fn a_full_recording_disk_stops_stimulation_and_keeps_what_was_written() {
+    repeat_void("disk full", full_disk_attempt);
+}
+
+/// One attempt of [`a_full_recording_disk_stops_stimulation_and_keeps_what_was_written`]:
+/// `Err` with the fault when a timing trip came first (after checking the invariants).
+fn full_disk_attempt(attempt: u32) -> Result<(), String> {
+    let mut mounted = None;
+    let bench = Bench::start_with(&format!("diskfull{attempt}"), |dir| {
+        let rec = dir.join("recording");
+        std::fs::create_dir_all(&rec).unwrap();
+        let ok = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=512k,mode=0750", "tmpfs"])
+            .arg(&rec)
+            .status()
+            .is_ok_and(|s| s.success());
+        if ok {
+            mounted = Some(Mounted(rec));
+        }
+    });
+    let Some(mounted) = mounted else {
+        eprintln!("SKIPPED: cannot mount a tmpfs here (not root?)");
+        return Ok(());
+    };
+    let status = bench.wait_fault(Duration::from_secs(30));
+    // The fault was raised at most one poll (50 ms) before it was seen.
+    let from_ns = monotonic_ns() - 100_000_000;
+    let fault = status.fault.clone().unwrap_or_default();
+    std::thread::sleep(Duration::from_millis(300));
+    let done = bench.finish();
+    let dir = mounted.0.parent().map(Path::to_path_buf);
+    let cleanup = move || {
+        drop(mounted);
+        if let Some(d) = dir {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    };
+    assert_eq!(status.state, "fault", "{status:?}\n{}", done.logs);
+    assert!(
+        !OPERATING.contains(&done.last_state()),
+        "the stimulator is still {}",
+        done.last_state()
+    );
+    if stack_support::is_timing_trip(&fault) && !fault.contains("No space left") {
+        done.check_safety("disk full (void attempt)", from_ns);
+        cleanup();
+        return Err(format!("{fault}; driver: {}", done.driver_trips));
+    }
+    done.check("disk full", from_ns);
+    assert!(
+        fault.contains("no recording means no evidence") && fault.contains("No space left"),
+        "{fault}\n{}",
+        done.logs
+    );
+    done.clean_exits_except("disk full", None);
+    eprintln!(
+        "disk full: supervisor {fault:?}; stimulator {}; {} samples readable",
+        done.last_state(),
+        done.samples
+    );
+    cleanup();
+    Ok(())
+}
+
+/// A step of CLOCK_REALTIME by `applied_ns` (signed), stepped back when dropped (also when
+/// the case fails).
+struct ClockStep {
+    applied_ns: i64,
+}
+
+/// Moves CLOCK_REALTIME by `delta_ns`.
+fn shift_realtime(delta_ns: i64) -> nix::Result<()> {
+    use nix::time::{ClockId, clock_gettime, clock_settime};
+    let now = clock_gettime(ClockId::CLOCK_REALTIME)?;
+    let t =
+        i128::from(now.tv_sec()) * 1_000_000_000 + i128::from(now.tv_nsec()) + i128::from(delta_ns);
+    let ts = nix::sys::time::TimeSpec::new(
+        (t.div_euclid(1_000_000_000)) as i64,
+        (t.rem_euclid(1_000_000_000)) as i64,
+    );
+    clock_settime(ClockId::CLOCK_REALTIME, ts)
+}
+
+impl ClockStep {
+    fn step(delta_ns: i64) -> nix::Result<Self> {
+        shift_realtime(delta_ns)?;
+        Ok(Self {
+            applied_ns: delta_ns,
+        })
+    }
+}
+
+impl Drop for ClockStep {
+    fn drop(&mut self) {
+        let _ = shift_realtime(-self.applied_ns);
+    }
+}
+
+/// CLOCK_REALTIME steps forward by 10 s, back to the true time a second later, 10 s behind
+/// it and back again a second after that: the stack does not notice. Every loop, timeout
+/// and watchdog runs on CLOCK_MONOTONIC; the kernel receive timestamps (CLOCK_REALTIME)
+/// are mapped onto it and bounded (`socket_loop::arrival_ns`).
+/// Stimulation goes on, the stimulator never leaves operation, pulses keep their spacing.
+/// Needs CAP_SYS_TIME; without it the case says so and passes vacuously. The system clock
+/// is put back (to within the time the two steps take) even if the case fails.
+#[test]
+fn clock_realtime_steps_change_nothing() {
+    repeat_void("clock steps", clock_steps_attempt);
+}
+
+/// One attempt of [`clock_realtime_steps_change_nothing`].
+fn clock_steps_attempt(attempt: u32) -> Result<(), String> {
+    let bench = Bench::start(&format!("clock{attempt}"));
+    std::thread::sleep(Duration::from_millis(1500));
+    let bench = bench.ready_for_injection("clock steps")?;
+    let from_ns = monotonic_ns();
+    let forward = match ClockStep::step(10_000_000_000) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("SKIPPED: cannot set CLOCK_REALTIME here ({e})");
+            return Ok(());
+        }
+    };
+    std::thread::sleep(Duration::from_millis(1000));
+    drop(forward); // steps it back
+    let back = ClockStep::step(-10_000_000_000).expect("second step");
+    std::thread::sleep(Duration::from_millis(1000));
+    drop(back);
+    std::thread::sleep(Duration::from_millis(500));
+    let status = bench.status();
+    let checked_ns = monotonic_ns();
+    let done = bench.finish();
+    assert_eq!(status.state, "armed", "{status:?}\n{}", done.logs);
+    let left = done.check("clock steps", from_ns);
+    assert!(
+        left.is_none_or(|t| t > checked_ns),
+        "the stimulator left operation during the clock steps\n{}",
+        done.logs
+    );
+    let during = done
+        .rows
+        .iter()
+        .filter(|r| r.t_ns > from_ns && r.t_ns < checked_ns && r.pulse.is_some())
+        .count();
+    // 2.5 s at 120 beats/min: 5 beats of about 6 pulses.
+    assert!(
+        during >= 20,
+        "only {during} pulses during the steps\n{}",
+        done.logs
+    );
+    done.clean_exits_except("clock steps", None);
+    eprintln!(
+        "clock steps: supervisor {}; {during} pulses during the steps",
+        status.state
+    );
+    Ok(())
+}
+
+/// Every file and directory under `root` whose name starts with `prefix` (recursively).
+fn files_under(root: &Path, prefix: &str, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(root) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        let name = e.file_name().to_string_lossy().into_owned();
+        if p.is_dir() {
+            out.push(p.clone());
+            files_under(&p, "", out);
+        } else if name.starts_with(prefix) {
+            out.push(p);
+        }
+    }
+}
+
+/// Issue 10, item 4: while the stack runs, the iceoryx2 shared memory and its management
+/// files (`/dev/shm/iox2_*`, `/tmp/iceoryx2/...`) and the host bus directory are private to
+/// the owner: no write access for the group, no access for others. (iceoryx2's one global
+/// 16-byte management segment, `*.global_mgmt`, is shared by design: it is how any user's
+/// process finds the node registry; it holds no message data.)
+#[test]
+fn shared_memory_and_bus_paths_are_private() {
+    use std::os::unix::fs::PermissionsExt;
+    let bench = Bench::start("perm");
+    std::thread::sleep(Duration::from_millis(1000));
+    let mut paths = Vec::new();
+    files_under(Path::new("/dev/shm"), "iox2_", &mut paths);
+    files_under(Path::new("/tmp/iceoryx2"), "", &mut paths);
+    paths.push(bench.bus());
+    files_under(&bench.bus(), "", &mut paths);
+    let data = paths
+        .iter()
+        .filter(|p| p.to_string_lossy().ends_with(".data"))
+        .count();
+    let mut open = Vec::new();
+    for p in &paths {
+        if p.to_string_lossy().ends_with(".global_mgmt") {
+            continue;
+        }
+        let Ok(meta) = std::fs::symlink_metadata(p) else {
+            continue; // removed meanwhile (another test's node)
+        };
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o027 != 0 {
+            open.push(format!("{:o} {}", mode, p.display()));
+        }
+    }
+    let done = bench.finish();
+    assert!(data > 0, "no iceoryx2 data segment seen: {paths:?}");
+    assert!(
+        open.is_empty(),
+        "paths open to others:\n{}",
+        open.join("\n")
+    );
+    done.clean_exits_except("permissions", None);
+    eprintln!(
+        "permissions: {} paths checked ({data} data segments), all private",
+        paths.len()
+    );
+}
