@@ -5,6 +5,8 @@ use std::io::{self, BufWriter, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use rt_core::rt::exit::Exit;
+
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fes_dataset::{DataSet, WriteMode};
@@ -633,10 +635,10 @@ fn main() -> ExitCode {
         Command::Stimulator(a) => stimulator_cmd(a),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => Exit::Done.into(),
         Err(e) => {
             eprintln!("sim-muscle: error: {e:#}");
-            ExitCode::from(2)
+            Exit::Failed.into()
         }
     }
 }

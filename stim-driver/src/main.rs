@@ -9,6 +9,8 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+use fes_rt::rt::exit::Exit;
 use std::sync::atomic::Ordering;
 use std::sync::mpsc;
 use std::time::SystemTime;
@@ -130,11 +132,11 @@ const ENV_CAN_IFACE: &str = "FES_CAN_IFACE";
 
 /// Why the process did not end cleanly.
 enum Failure {
-    /// Bad configuration or usage: exit 1.
+    /// Bad configuration: exit 1 (`Exit::Failed`).
     Config(anyhow::Error),
-    /// Real time refused: exit 2.
+    /// Real time refused: exit 1 (`Exit::Failed`).
     Refused(String),
-    /// A run-time failure: exit 3.
+    /// A run-time failure: exit 4 (`Exit::Fault`; systemd restarts it).
     Run(anyhow::Error),
 }
 
@@ -156,18 +158,18 @@ fn main() -> ExitCode {
     };
     let line = |e: &anyhow::Error| fes_rt::rt::error_text::one_line(e.as_ref());
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => Exit::Done.into(),
         Err(Failure::Config(e)) => {
             error!("{}", line(&e));
-            ExitCode::from(1)
+            Exit::Failed.into()
         }
         Err(Failure::Refused(text)) => {
             error!("{text}");
-            ExitCode::from(2)
+            Exit::Failed.into()
         }
         Err(Failure::Run(e)) => {
             error!("{}", line(&e));
-            ExitCode::from(3)
+            Exit::Fault.into()
         }
     }
 }

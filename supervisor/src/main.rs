@@ -3,7 +3,11 @@
 //! The live runtime (`run`) and the operator client (`set`, `profile`, `stop`, `arm`,
 //! `status`): one variant of [`Command`] per subcommand, each dispatched to its
 //! `cmd::<name>` module. Offline model work and the bench are the workbench's (`fes`).
+use std::process::ExitCode;
+
 use clap::{Parser, Subcommand};
+use rt_core::rt::exit::Exit;
+use supervisor::control::ClientError;
 
 mod cmd;
 
@@ -31,14 +35,39 @@ enum Command {
     Status(cmd::client::StatusArgs),
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> ExitCode {
     let cli = Cli::parse();
-    match cli.command {
+    let result = match cli.command {
         Command::Run(args) => cmd::run::run(args),
         Command::Set(args) => cmd::client::set(args),
         Command::Profile(args) => cmd::client::profile(args),
         Command::Stop(args) => cmd::client::stop(args),
         Command::Arm(args) => cmd::client::arm(args),
         Command::Status(args) => cmd::client::status(args),
+    };
+    match result {
+        Ok(()) => Exit::Done.into(),
+        Err(e) => {
+            // The format of anyhow's own `main` report: the error and its causes.
+            eprintln!("Error: {e:?}");
+            exit_for(&e).into()
+        }
+    }
+}
+
+/// The exit code of a failed command: 3 when no daemon answered at the socket (the
+/// operator's stop did not reach anything: a script must not read that as "refused"),
+/// 1 otherwise (README "Exit codes").
+fn exit_for(e: &anyhow::Error) -> Exit {
+    let unreachable = e.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<ClientError>(),
+            Some(ClientError::Connect { .. })
+        )
+    });
+    if unreachable {
+        Exit::Unreachable
+    } else {
+        Exit::Failed
     }
 }

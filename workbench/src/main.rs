@@ -40,9 +40,9 @@ enum Command {
     Bench(cmd::bench::Args),
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    match cli.command {
+    let result = match cli.command {
         Command::Identify(args) => cmd::identify::run(args),
         Command::Sweep(args) => cmd::sweep::run(args),
         Command::Compare(args) => cmd::compare::run(args),
@@ -52,5 +52,13 @@ fn main() -> anyhow::Result<()> {
         Command::Osp(args) => cmd::osp::run(args),
         Command::LcnVariants(args) => cmd::lcn_variants::run(args),
         Command::Bench(args) => cmd::bench::run(args),
+    };
+    match result {
+        Ok(()) => rt_core::rt::exit::Exit::Done.into(),
+        Err(e) => {
+            // The format of anyhow's own `main` report: the error and its causes.
+            eprintln!("Error: {e:?}");
+            rt_core::rt::exit::Exit::Failed.into()
+        }
     }
 }

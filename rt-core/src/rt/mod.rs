@@ -20,7 +20,7 @@
 
 pub use fes_rt::rt::{
     MissingRightsPolicy, PeriodicClock, PeriodicSchedule, RtConfig, RtError, RtShortfall, RtStatus,
-    Wakeup, alloc, clock, config, config_file, enter_realtime, error_text, histogram, hlog,
+    Wakeup, alloc, clock, config, config_file, enter_realtime, error_text, exit, histogram, hlog,
     logging, monotonic_ns, node, notify, probe, realtime, signals, telemetry,
 };
 

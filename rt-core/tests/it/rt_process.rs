@@ -482,7 +482,7 @@ fn a_missing_core_is_refused_in_one_line_or_run_best_effort_as_configured() {
     config.rt.on_missing_rights = rt_core::rt::MissingRightsPolicy::Refuse;
     let path = write_config(&dir, &config);
     let (status, stderr) = start_rt_core(&path, false).finish(Duration::from_secs(10));
-    assert_eq!(status.code(), Some(2), "{stderr}");
+    assert_eq!(status.code(), Some(1), "{stderr}");
     let refusal: Vec<&str> = stderr.lines().filter(|l| l.contains("refused")).collect();
     assert_eq!(refusal.len(), 1, "{stderr}");
     assert!(
@@ -519,7 +519,7 @@ fn without_sched_fifo_rights_it_refuses_or_runs_best_effort_as_configured() {
     config.rt.on_missing_rights = rt_core::rt::MissingRightsPolicy::Refuse;
     let path = write_config(&dir, &config);
     let (status, stderr) = start_rt_core(&path, true).finish(Duration::from_secs(10));
-    assert_eq!(status.code(), Some(2), "{stderr}");
+    assert_eq!(status.code(), Some(1), "{stderr}");
     let refusal: Vec<&str> = stderr.lines().filter(|l| l.contains("refused")).collect();
     assert_eq!(refusal.len(), 1, "{stderr}");
     assert!(

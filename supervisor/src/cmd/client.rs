@@ -148,7 +148,7 @@ fn finish(r: Response) -> anyhow::Result<()> {
         Ok(())
     } else {
         eprintln!("refused: {}", r.error.unwrap_or_default());
-        std::process::exit(1);
+        std::process::exit(rt_core::rt::exit::Exit::Failed.code().into());
     }
 }
 

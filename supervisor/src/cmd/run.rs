@@ -58,7 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match outcome.fault {
         Some(f) => {
             eprintln!("supervisor: stopped with fault: {f}");
-            std::process::exit(3);
+            std::process::exit(rt_core::rt::exit::Exit::Fault.code().into());
         }
         None => {
             eprintln!("supervisor: stopped");

@@ -537,3 +537,27 @@ fn the_stop_socket_works_when_every_control_connection_is_taken() {
         t.join().unwrap();
     }
 }
+
+/// The exit-code convention (README "Exit codes"): no daemon at the socket is 3 for every
+/// client command, the stop included, so that a script never reads "nothing answered" as
+/// "refused" (1) or as done (0); a command line clap does not understand is 2.
+#[test]
+fn no_daemon_is_exit_3_and_bad_usage_is_exit_2() {
+    let dir = std::env::temp_dir().join(format!("fes-sup-nodaemon-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let socket = dir.join("none.sock");
+    for args in [
+        &["status"][..],
+        &["stop"],
+        &["arm"],
+        &["set", "--force", "0.1"],
+    ] {
+        let o = cli(&socket, args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(3), "{args:?}: {err}");
+        assert!(err.contains("cannot connect to"), "{args:?}: {err}");
+    }
+    let o = cli(&socket, &["status", "--no-such-flag"]);
+    assert_eq!(o.status.code(), Some(2));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

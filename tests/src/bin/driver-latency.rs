@@ -142,7 +142,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
-            ExitCode::from(1)
+            rt_core::rt::exit::Exit::Failed.into()
         }
     }
 }

@@ -8,6 +8,7 @@ pub mod clock;
 pub mod config;
 pub mod config_file;
 pub mod error_text;
+pub mod exit;
 pub mod histogram;
 pub mod hlog;
 pub mod logging;

@@ -11,6 +11,8 @@ mod source;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+use rt_core::rt::exit::Exit;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{OnceLock, mpsc};
 use std::time::SystemTime;
@@ -102,7 +104,7 @@ struct Cli {
 
 /// Why the process did not run to a clean stop.
 enum Failure {
-    /// Real time refused: exit 2.
+    /// Real time refused: exit 1 (`Exit::Failed`).
     Refused(String),
     /// Anything else: exit 1.
     Other(anyhow::Error),
@@ -119,14 +121,14 @@ fn main() -> ExitCode {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     let cli = Cli::parse();
     match run(&cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => Exit::Done.into(),
         Err(Failure::Refused(line)) => {
             error!("{line}");
-            ExitCode::from(2)
+            Exit::Failed.into()
         }
         Err(Failure::Other(e)) => {
             error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
-            ExitCode::from(1)
+            Exit::Failed.into()
         }
     }
 }

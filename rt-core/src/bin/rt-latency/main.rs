@@ -213,7 +213,7 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
-            std::process::ExitCode::from(1)
+            rt_core::rt::exit::Exit::Failed.into()
         }
     }
 }

@@ -14,6 +14,8 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+use rt_core::rt::exit::Exit;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, SystemTime};
 
@@ -70,14 +72,14 @@ fn main() -> ExitCode {
         .init();
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     match run(&Cli::parse()) {
-        Ok(true) => ExitCode::SUCCESS,
+        Ok(true) => Exit::Done.into(),
         Ok(false) => {
             tracing::warn!("ended without rt-core's final tick");
-            ExitCode::from(3)
+            Exit::Failed.into()
         }
         Err(e) => {
             tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
-            ExitCode::from(1)
+            Exit::Failed.into()
         }
     }
 }

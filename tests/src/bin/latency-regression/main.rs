@@ -19,6 +19,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
+use rt_core::rt::exit::Exit;
+
 use anyhow::{Context, bail};
 use clap::Parser;
 use rt_core::rt::histogram::LatencyHistogram;
@@ -83,11 +85,13 @@ struct Cli {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(&cli) {
-        Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => ExitCode::from(1),
+        Ok(true) => Exit::Done.into(),
+        // A regression and an error both fail (the exit-code convention); the error says
+        // `latency-regression: error:`, a regression names the measures over their limits.
+        Ok(false) => Exit::Failed.into(),
         Err(e) => {
             eprintln!("latency-regression: error: {e:#}");
-            ExitCode::from(2)
+            Exit::Failed.into()
         }
     }
 }
