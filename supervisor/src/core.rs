@@ -20,6 +20,7 @@ use std::collections::VecDeque;
 use rt_core::msg::{DriverStatus, Reference};
 
 use crate::contraction::{BeatMeasurement, ContractionEstimator, ContractionSettings};
+use crate::health::{Cause, HealthEvent, Process};
 use crate::limits::ReferenceLimits;
 use crate::outer_loop::{OuterLoop, OuterLoopSettings, OuterLoopUpdate};
 use crate::profile::{Beat, ProfileEvent, ProfileRunner, ProfileSpec, Setpoint};
@@ -32,8 +33,76 @@ pub enum ArmState {
     Disarmed,
     /// Stimulation follows the profile.
     Armed,
-    /// Stopped by a fault (the reason); needs an operator `arm`.
-    Fault(String),
+    /// Stopped by a fault; needs an operator `arm`.
+    Fault(Fault),
+}
+
+/// Why stimulation stopped: the typed cause a program acts on, and the words an operator
+/// reads (`supervisor status`, the log).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Fault {
+    /// What stopped it.
+    pub cause: FaultCause,
+    /// The same in words, starting with the process or the subsystem.
+    pub message: String,
+}
+
+/// The typed cause of a [`Fault`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case", tag = "source")]
+pub enum FaultCause {
+    /// A watched process: which, its pid when known, and what happened to it.
+    Process {
+        /// The process.
+        process: Process,
+        /// Its pid, when known.
+        pid: Option<u32>,
+        /// What happened.
+        cause: Cause,
+    },
+    /// The recording failed: no recording means no evidence.
+    Recording,
+    /// The supervisor's own loop stalled while armed.
+    SelfStall,
+}
+
+impl FaultCause {
+    /// A trip judged against time (stall, silence, watchdog, the supervisor's own stall).
+    pub fn is_timing(self) -> bool {
+        match self {
+            FaultCause::Process { cause, .. } => cause.is_timing(),
+            FaultCause::SelfStall => true,
+            FaultCause::Recording => false,
+        }
+    }
+}
+
+impl Fault {
+    /// A fault of `cause`, described by `message`.
+    pub fn new(cause: FaultCause, message: impl Into<String>) -> Self {
+        Self {
+            cause,
+            message: message.into(),
+        }
+    }
+
+    /// The fault a health event raises.
+    pub fn from_event(e: &HealthEvent) -> Self {
+        Self::new(
+            FaultCause::Process {
+                process: e.process,
+                pid: e.pid,
+                cause: e.cause,
+            },
+            e.message.clone(),
+        )
+    }
+}
+
+impl std::fmt::Display for Fault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
 }
 
 impl ArmState {
@@ -300,14 +369,14 @@ impl SupervisorCore {
         self.profile = Some(run);
     }
 
-    /// Stops stimulation because of a fault (reason in words). Returns false when already
-    /// in a fault (the first reason is kept).
-    pub fn fault(&mut self, reason: String) -> bool {
+    /// Stops stimulation because of `fault`. Returns false when already in a fault (the
+    /// first fault is kept).
+    pub fn fault(&mut self, fault: Fault) -> bool {
         if let ArmState::Fault(_) = self.state {
             return false;
         }
-        self.note(format!("FAULT: {reason}; stimulation stopped"));
-        self.state = ArmState::Fault(reason);
+        self.note(format!("FAULT: {fault}; stimulation stopped"));
+        self.state = ArmState::Fault(fault);
         self.clear_profile();
         self.orders.push(DriverOrder::SafeStop);
         true
@@ -435,6 +504,36 @@ mod tests {
     }
 
     #[test]
+    fn a_fault_cause_reads_as_documented_json_and_back() {
+        let died = FaultCause::Process {
+            process: Process::RtCore,
+            pid: Some(7),
+            cause: Cause::Died,
+        };
+        let json = serde_json::to_value(died).unwrap();
+        assert_eq!(
+            json,
+            serde_json::json!({"source": "process", "process": "RtCore", "pid": 7,
+                               "cause": {"kind": "died"}})
+        );
+        assert_eq!(serde_json::from_value::<FaultCause>(json).unwrap(), died);
+        let emcy = FaultCause::Process {
+            process: Process::SimMuscle,
+            pid: None,
+            cause: Cause::Emcy { code: 0x8130 },
+        };
+        let back: FaultCause =
+            serde_json::from_str(&serde_json::to_string(&emcy).unwrap()).unwrap();
+        assert_eq!(back, emcy);
+        assert!(!emcy.is_timing() && !died.is_timing());
+        assert!(FaultCause::SelfStall.is_timing());
+        assert_eq!(
+            serde_json::to_value(FaultCause::Recording).unwrap(),
+            serde_json::json!({"source": "recording"})
+        );
+    }
+
+    #[test]
     fn disarmed_publishes_stop_and_refuses_set() {
         let mut c = core();
         let r = c.reference(MS);
@@ -514,8 +613,13 @@ mod tests {
         c.command(&cardiac(0.3), 0, Ok(())).unwrap();
         assert_eq!(c.reference(MS).force, 0.3);
         assert_eq!(c.take_orders(), vec![DriverOrder::Arm]);
-        assert!(c.fault("rt-core (pid 7) died".into()));
-        assert!(!c.fault("second".into()));
+        let died = FaultCause::Process {
+            process: Process::RtCore,
+            pid: Some(7),
+            cause: Cause::Died,
+        };
+        assert!(c.fault(Fault::new(died, "rt-core (pid 7) died")));
+        assert!(!c.fault(Fault::new(FaultCause::Recording, "second")));
         let r = c.reference(2 * MS);
         assert!(r.is_stop());
         assert_eq!(c.take_orders(), vec![DriverOrder::SafeStop]);

@@ -23,7 +23,7 @@ use rt_core::rt::clock::{monotonic_ns, sleep_until};
 
 use crate::config::SupervisorConfig;
 use crate::control::{ControlServer, Pending};
-use crate::core::{ArmState, DriverOrder, SupervisorCore};
+use crate::core::{ArmState, DriverOrder, Fault, FaultCause, SupervisorCore};
 use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
 use crate::pass;
 use crate::protocol::{Command, Response, Status};
@@ -50,7 +50,7 @@ pub struct Outcome {
     /// Recording directories written.
     pub recordings: Vec<PathBuf>,
     /// The fault in force at exit, if any.
-    pub fault: Option<String>,
+    pub fault: Option<Fault>,
 }
 
 fn ipc<E: std::fmt::Debug>(what: &'static str) -> impl Fn(E) -> DaemonError {
@@ -189,7 +189,7 @@ pub fn run(
         if *core.state() == ArmState::Armed
             && let Some(reason) = cfg.health.self_stall(gap)
         {
-            core.fault(reason);
+            core.fault(Fault::new(FaultCause::SelfStall, reason));
         }
 
         // 1. Inputs.
@@ -290,7 +290,10 @@ pub fn run(
                         run.recorder = Some(r);
                     }
                     Err(e) => {
-                        core.fault(format!("{e}; no recording means no evidence"));
+                        core.fault(Fault::new(
+                            FaultCause::Recording,
+                            format!("{e}; no recording means no evidence"),
+                        ));
                     }
                 }
             }
@@ -330,7 +333,10 @@ pub fn run(
         record(&mut run, &mut core, Item::Flush(now));
         if let Some(e) = run.recorder.as_ref().and_then(RecorderThread::failure) {
             run.recorder = None;
-            core.fault(format!("{e}; no recording means no evidence"));
+            core.fault(Fault::new(
+                FaultCause::Recording,
+                format!("{e}; no recording means no evidence"),
+            ));
         }
         if *core.state() != ArmState::Armed
             && let Some(mut rec) = run.recorder.take()
@@ -410,7 +416,10 @@ fn record(run: &mut Run, core: &mut SupervisorCore, item: Item) {
         && let Err(e) = r.send(item)
     {
         run.recorder = None;
-        core.fault(format!("{e}; no recording means no evidence"));
+        core.fault(Fault::new(
+            FaultCause::Recording,
+            format!("{e}; no recording means no evidence"),
+        ));
     }
 }
 
@@ -448,7 +457,11 @@ fn status(
     Status {
         state: core.state().name().into(),
         fault: match core.state() {
-            ArmState::Fault(f) => Some(f.clone()),
+            ArmState::Fault(f) => Some(f.message.clone()),
+            _ => None,
+        },
+        fault_cause: match core.state() {
+            ArmState::Fault(f) => Some(f.cause),
             _ => None,
         },
         uptime_s: (now - start_ns) as f64 * 1e-9,

@@ -21,7 +21,7 @@ use rt_core::msg::{
 };
 use serde::{Deserialize, Serialize};
 
-use crate::protocol::ProcessStatus;
+use crate::protocol::{ProcessState, ProcessStatus};
 
 /// The processes of the chain.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -215,8 +215,66 @@ pub struct HealthEvent {
     pub process: Process,
     /// Fault or warning.
     pub severity: Severity,
-    /// What happened, in words (starts with the process name).
+    /// What happened, typed: what a program acts on.
+    pub cause: Cause,
+    /// The process id, when known.
+    pub pid: Option<u32>,
+    /// What happened, in words (starts with the process name): what a person reads.
     pub message: String,
+}
+
+/// What happened to a watched process: the typed cause of a [`HealthEvent`], carried into
+/// the supervisor's fault ([`crate::core::FaultCause`]) and the status (`fault_cause`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Cause {
+    /// The process is gone, a zombie, or its iceoryx2 node is dead.
+    Died,
+    /// Alive (or stopped by a signal) but silent beyond its timeout.
+    Stalled,
+    /// Its node is gone after it ended (a final message, or the node removed).
+    Exited,
+    /// The stimulator sends no force while the driver is alive.
+    Silent,
+    /// The driver's watchdog tripped (ticks or the stimulator silent).
+    WatchdogTripped,
+    /// A message that failed validation.
+    InvalidMessage,
+    /// The pattern generator produced a non-finite value.
+    NonFinite,
+    /// rt-core sent its final tick.
+    Finished,
+    /// An EMCY from the driver or the stimulator.
+    Emcy {
+        /// The EMCY code (fes-can `ErrorCode` or a driver fault code).
+        code: u16,
+    },
+    /// The driver or the stimulator reports its FAULT state.
+    DeviceFault {
+        /// The last fault code.
+        code: u16,
+    },
+    /// Messages lost before the supervisor read them (warning).
+    LostMessages,
+    /// rt-core runs without real-time guarantees (warning).
+    BestEffort,
+    /// The driver refused pulses (warning).
+    PulsesRejected,
+    /// CAN transmit errors (warning).
+    TransmitErrors,
+    /// Heap allocations on a hot path (warning).
+    HeapAllocation,
+}
+
+impl Cause {
+    /// A trip judged against time (a stall, a silence, a watchdog): on a loaded host it
+    /// may be the host's noise, not the chain's fault.
+    pub fn is_timing(self) -> bool {
+        matches!(
+            self,
+            Cause::Stalled | Cause::Silent | Cause::WatchdogTripped
+        )
+    }
 }
 
 /// What a stream of messages says about a process.
@@ -234,6 +292,7 @@ struct Watch {
     node_gone: bool,
     condition: Condition,
     reason: String,
+    cause: Option<Cause>,
     finished: bool,
     /// `last_ns` when the fault was raised: a fault clears only after a newer message.
     last_at_fault: Option<u64>,
@@ -250,6 +309,7 @@ impl Watch {
             node_gone: false,
             condition: Condition::Waiting,
             reason: String::new(),
+            cause: None,
             finished: false,
             last_at_fault: None,
             died_pid: None,
@@ -311,7 +371,16 @@ impl HealthMonitor {
         &self.settings
     }
 
-    fn raise(&mut self, p: Process, severity: Severity, message: String) {
+    /// The pid of `p`, when known (its iceoryx2 node; the stimulator's from the settings).
+    fn pid_of(&self, p: Process) -> Option<u32> {
+        match p {
+            Process::SimMuscle => self.settings.stimulator_pid,
+            _ => self.watch[p.index()].node.as_ref().map(|n| n.pid),
+        }
+    }
+
+    fn raise(&mut self, p: Process, severity: Severity, cause: Cause, message: String) {
+        let pid = self.pid_of(p);
         if severity == Severity::Fault {
             let w = &mut self.watch[p.index()];
             if w.condition == Condition::Faulted {
@@ -319,11 +388,14 @@ impl HealthMonitor {
             }
             w.condition = Condition::Faulted;
             w.reason = message.clone();
+            w.cause = Some(cause);
             w.last_at_fault = w.last_ns;
         }
         self.events.push(HealthEvent {
             process: p,
             severity,
+            cause,
+            pid,
             message,
         });
     }
@@ -347,6 +419,7 @@ impl HealthMonitor {
             self.raise(
                 Process::RtCore,
                 Severity::Fault,
+                Cause::InvalidMessage,
                 format!("rt-core sent an invalid StimTick (seq {}): {e}", tick.seq),
             );
             return;
@@ -357,6 +430,7 @@ impl HealthMonitor {
             self.raise(
                 Process::RtCore,
                 Severity::Warning,
+                Cause::LostMessages,
                 format!(
                     "supervisor lost {lost} StimTick(s) before seq {} (slow receiver)",
                     tick.seq
@@ -368,6 +442,7 @@ impl HealthMonitor {
             self.raise(
                 Process::RtCore,
                 Severity::Fault,
+                Cause::NonFinite,
                 format!(
                     "rt-core: the pattern generator produced a non-finite value (tick {})",
                     tick.seq
@@ -379,6 +454,7 @@ impl HealthMonitor {
             self.raise(
                 Process::RtCore,
                 Severity::Fault,
+                Cause::Finished,
                 format!("rt-core stopped: final tick {} received", tick.seq),
             );
         }
@@ -387,6 +463,7 @@ impl HealthMonitor {
             self.raise(
                 Process::RtCore,
                 Severity::Warning,
+                Cause::BestEffort,
                 "rt-core runs best-effort (no real-time guarantee)".into(),
             );
         }
@@ -398,6 +475,7 @@ impl HealthMonitor {
             self.raise(
                 Process::StimDriver,
                 Severity::Fault,
+                Cause::InvalidMessage,
                 format!(
                     "stim-driver forwarded an invalid ForceSample (seq {}): {e}",
                     sample.seq
@@ -414,6 +492,7 @@ impl HealthMonitor {
             self.raise(
                 Process::StimDriver,
                 Severity::Fault,
+                Cause::InvalidMessage,
                 format!(
                     "stim-driver sent an invalid DriverStatus (seq {}): {e}",
                     s.seq
@@ -440,6 +519,7 @@ impl HealthMonitor {
                 self.raise(
                     Process::RtCore,
                     Severity::Fault,
+                    Cause::WatchdogTripped,
                     format!(
                         "rt-core: no StimTick for {age:.0} ms (stim-driver's watchdog tripped)"
                     ),
@@ -451,6 +531,7 @@ impl HealthMonitor {
                 self.raise(
                     Process::SimMuscle,
                     Severity::Fault,
+                    Cause::WatchdogTripped,
                     format!(
                         "sim-muscle (stimulator): {} (stim-driver's watchdog tripped)",
                         emcy_name(s.fault_code)
@@ -460,6 +541,7 @@ impl HealthMonitor {
                 self.raise(
                     Process::StimDriver,
                     Severity::Fault,
+                    Cause::WatchdogTripped,
                     format!(
                         "stim-driver: watchdog tripped: {} ({} in all)",
                         emcy_name(s.fault_code),
@@ -487,6 +569,7 @@ impl HealthMonitor {
             self.raise(
                 who,
                 severity,
+                Cause::Emcy { code: s.fault_code },
                 format!("{}: EMCY {}", who.name(), emcy_name(s.fault_code)),
             );
         }
@@ -494,6 +577,7 @@ impl HealthMonitor {
             self.raise(
                 Process::SimMuscle,
                 Severity::Fault,
+                Cause::DeviceFault { code: s.fault_code },
                 format!(
                     "sim-muscle (stimulator) in FAULT, last EMCY {}",
                     emcy_name(s.fault_code)
@@ -504,6 +588,7 @@ impl HealthMonitor {
             self.raise(
                 Process::StimDriver,
                 Severity::Fault,
+                Cause::DeviceFault { code: s.fault_code },
                 format!(
                     "stim-driver in FAULT (fault code {})",
                     emcy_name(s.fault_code)
@@ -514,6 +599,7 @@ impl HealthMonitor {
             self.raise(
                 Process::StimDriver,
                 Severity::Warning,
+                Cause::PulsesRejected,
                 format!(
                     "stim-driver: {} pulse(s) rejected ({} in all)",
                     s.pulses_rejected - prev_rejected,
@@ -525,6 +611,7 @@ impl HealthMonitor {
             self.raise(
                 Process::StimDriver,
                 Severity::Warning,
+                Cause::TransmitErrors,
                 format!(
                     "stim-driver: {} CAN transmit error(s)",
                     s.can_tx_errors - prev_tx
@@ -555,6 +642,7 @@ impl HealthMonitor {
             self.raise(
                 p,
                 Severity::Warning,
+                Cause::HeapAllocation,
                 format!(
                     "{name}: {} heap allocation(s) on the hot path",
                     r.hot_path_allocations - prev_alloc
@@ -655,20 +743,24 @@ impl HealthMonitor {
                 let drv_state = drv_pid.map(probe);
                 let pid_txt = drv_pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
                 let reason = match drv_state {
-                    Some(ProcState::Gone | ProcState::Zombie) => Some("died: the process is gone"),
-                    _ if drv_dead => Some("died: its iceoryx2 node is dead"),
-                    Some(ProcState::Stopped) => Some("stalled: stopped by a signal"),
+                    Some(ProcState::Gone | ProcState::Zombie) => {
+                        Some((Cause::Died, "died: the process is gone"))
+                    }
+                    _ if drv_dead => Some((Cause::Died, "died: its iceoryx2 node is dead")),
+                    Some(ProcState::Stopped) => {
+                        Some((Cause::Stalled, "stalled: stopped by a signal"))
+                    }
                     _ => None,
                 };
-                if let Some(reason) = reason {
-                    if reason.starts_with("died") {
+                if let Some((cause, reason)) = reason {
+                    if cause == Cause::Died {
                         self.watch[Process::StimDriver.index()].died_pid = drv_pid;
                     }
                     let message = format!(
                         "stim-driver{pid_txt} {reason}; no force sample forwarded for {:.0} ms",
                         ms(age)
                     );
-                    self.raise(Process::StimDriver, Severity::Fault, message);
+                    self.raise(Process::StimDriver, Severity::Fault, cause, message);
                     continue;
                 }
             }
@@ -678,6 +770,13 @@ impl HealthMonitor {
                 Process::SimMuscle => "FORCE sample",
             };
             let pid_txt = pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
+            let cause = match (pstate, dead_now) {
+                (Some(ProcState::Gone | ProcState::Zombie), _) | (_, true) => Cause::Died,
+                (Some(ProcState::Stopped), _) => Cause::Stalled,
+                _ if w.node_gone || w.finished => Cause::Exited,
+                _ if p == Process::SimMuscle => Cause::Silent,
+                _ => Cause::Stalled,
+            };
             let message = match (pstate, dead_now) {
                 (Some(ProcState::Gone), _) => format!(
                     "{}{pid_txt} died: the process is gone; last {what} {:.0} ms ago",
@@ -720,7 +819,7 @@ impl HealthMonitor {
             if dead_now {
                 self.watch[p.index()].died_pid = pid;
             }
-            self.raise(p, Severity::Fault, message);
+            self.raise(p, Severity::Fault, cause, message);
         }
     }
 
@@ -768,6 +867,7 @@ impl HealthMonitor {
             if w.condition == Condition::Faulted && heard_since && fresh && !dead && !w.finished {
                 w.condition = Condition::Ok;
                 w.reason.clear();
+                w.cause = None;
             }
         }
     }
@@ -779,17 +879,17 @@ impl HealthMonitor {
             .filter(|p| self.settings.watched(**p))
             .map(|&p| {
                 let w = &self.watch[p.index()];
-                let state = match w.condition {
-                    Condition::Waiting => "waiting",
-                    Condition::Ok => "ok",
-                    Condition::Faulted if w.reason.contains(" died") => "dead",
-                    Condition::Faulted if w.reason.contains(" stalled") => "stalled",
-                    Condition::Faulted if w.reason.contains(" exited") => "exited",
-                    Condition::Faulted => "fault",
+                let state = match (w.condition, w.cause) {
+                    (Condition::Waiting, _) => ProcessState::Waiting,
+                    (Condition::Ok, _) => ProcessState::Ok,
+                    (Condition::Faulted, Some(Cause::Died)) => ProcessState::Dead,
+                    (Condition::Faulted, Some(Cause::Stalled)) => ProcessState::Stalled,
+                    (Condition::Faulted, Some(Cause::Exited)) => ProcessState::Exited,
+                    (Condition::Faulted, _) => ProcessState::Fault,
                 };
                 ProcessStatus {
                     name: p.name().into(),
-                    state: state.into(),
+                    state,
                     pid: match p {
                         Process::SimMuscle => self.settings.stimulator_pid,
                         _ => w.node.as_ref().map(|n| n.pid),
@@ -918,7 +1018,7 @@ mod tests {
             "{}",
             ev[0].message
         );
-        assert_eq!(h.statuses(30 * MS)[0].state, "dead");
+        assert_eq!(h.statuses(30 * MS)[0].state, ProcessState::Dead);
         assert!(h.ready().is_err());
     }
 

@@ -4,7 +4,7 @@
 //! check (a fault stops stimulation at once: the first names the stop, later ones are
 //! noted).
 
-use crate::core::SupervisorCore;
+use crate::core::{Fault, SupervisorCore};
 use crate::health::{HealthEvent, HealthMonitor, ProcState, Severity};
 use crate::protocol::Command;
 
@@ -40,7 +40,7 @@ pub fn check_health(
     for e in &events {
         match e.severity {
             Severity::Fault => {
-                if !core.fault(e.message.clone()) {
+                if !core.fault(Fault::from_event(e)) {
                     core.note(format!("also: {}", e.message));
                 }
             }

@@ -15,6 +15,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::core::FaultCause;
+
 use crate::profile::ProfileSpec;
 
 /// The protocol version this build speaks.
@@ -204,8 +206,8 @@ pub fn parse_response(line: &[u8]) -> Result<Response, ProtocolError> {
 pub struct ProcessStatus {
     /// `rt-core`, `stim-driver` or `sim-muscle`.
     pub name: String,
-    /// `ok`, `waiting` (not seen yet), `stalled`, `dead`, `stopped` or `fault`.
-    pub state: String,
+    /// `ok`, `waiting` (not seen yet), `stalled`, `dead`, `exited` or `fault`.
+    pub state: ProcessState,
     /// Process id, if known (iceoryx2 node details).
     #[serde(default)]
     pub pid: Option<u32>,
@@ -217,14 +219,58 @@ pub struct ProcessStatus {
     pub detail: String,
 }
 
+/// A watched process's state, from the typed cause of its fault (JSON: the lowercase name).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ProcessState {
+    /// Not heard from yet.
+    #[default]
+    Waiting,
+    /// Heard from within its timeout, no fault.
+    Ok,
+    /// Silent beyond its timeout while alive (or stopped by a signal).
+    Stalled,
+    /// Gone, a zombie, or its iceoryx2 node dead.
+    Dead,
+    /// Ended: its node is gone after a final message.
+    Exited,
+    /// Any other fault (EMCY, device fault, invalid message, ...).
+    Fault,
+}
+
+impl ProcessState {
+    /// The lowercase name (as in the JSON).
+    pub fn name(self) -> &'static str {
+        match self {
+            ProcessState::Waiting => "waiting",
+            ProcessState::Ok => "ok",
+            ProcessState::Stalled => "stalled",
+            ProcessState::Dead => "dead",
+            ProcessState::Exited => "exited",
+            ProcessState::Fault => "fault",
+        }
+    }
+}
+
+impl std::fmt::Display for ProcessState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// The daemon's state, as `supervisor status` shows it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Status {
     /// `disarmed`, `armed` or `fault`.
     pub state: String,
-    /// The fault that stopped stimulation, while in `fault`.
+    /// The fault that stopped stimulation, while in `fault`, in words.
     #[serde(default)]
     pub fault: Option<String>,
+    /// The same fault typed (`{"source": "process", "process": "RtCore", "pid": 7,
+    /// "cause": {"kind": "died"}}`, `{"source": "recording"}`, `{"source": "self_stall"}`):
+    /// what a program acts on instead of matching the words.
+    #[serde(default)]
+    pub fault_cause: Option<FaultCause>,
     /// Seconds since start.
     pub uptime_s: f64,
     /// Last published reference: force.

@@ -16,7 +16,7 @@ use rt_core::control::file::Controller;
 
 use supervisor::control;
 use supervisor::profile::ProfileSpec;
-use supervisor::protocol::{Command, Response, Status};
+use supervisor::protocol::{Command, ProcessState, Response, Status};
 
 /// A bench failure.
 #[derive(Debug, thiserror::Error)]
@@ -446,14 +446,14 @@ source = "fes bench"
         loop {
             self.check_alive()?;
             let s = self.status()?;
-            if s.processes.iter().all(|p| p.state == "ok") {
+            if s.processes.iter().all(|p| p.state == ProcessState::Ok) {
                 return Ok(s);
             }
             if Instant::now() > deadline {
                 let waiting: Vec<String> = s
                     .processes
                     .iter()
-                    .filter(|p| p.state != "ok")
+                    .filter(|p| p.state != ProcessState::Ok)
                     .map(|p| format!("{} {} {}", p.name, p.state, p.detail))
                     .collect();
                 return Err(BenchError::Process(format!(

@@ -101,10 +101,8 @@ impl Bench {
     /// tripped the chain ([`stack_support::is_timing_trip`]): the attempt is void.
     fn ready_for_injection(self, case: &str) -> Result<Self, String> {
         let s = self.status();
-        let Some(trip) = s
-            .fault
-            .filter(|f| s.state == "fault" && stack_support::is_timing_trip(f))
-        else {
+        let timing = stack_support::is_timing_trip(&s);
+        let Some(trip) = s.fault.filter(|_| timing) else {
             return Ok(self);
         };
         let done = self.finish();
@@ -621,7 +619,7 @@ fn full_disk_attempt(attempt: u32) -> Result<(), String> {
         "the stimulator is still {}",
         done.last_state()
     );
-    if stack_support::is_timing_trip(&fault) && !fault.contains("No space left") {
+    if stack_support::is_timing_trip(&status) {
         done.check_safety("disk full (void attempt)", from_ns);
         cleanup();
         return Err(format!("{fault}; driver: {}", done.driver_trips));

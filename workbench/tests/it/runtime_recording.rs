@@ -8,6 +8,8 @@ use std::process::Command;
 
 use fes_dataset::DataSet;
 use rt_core::msg::{ForceSample, Reference, StimTick};
+use supervisor::core::FaultCause;
+use supervisor::health::Cause;
 use supervisor::recording::{Recorder, RecorderSettings};
 
 const MS: u64 = 1_000_000;
@@ -301,7 +303,7 @@ fn kill_one(
     if let Some(trip) = before
         .fault
         .clone()
-        .filter(|f| before.state == "fault" && stack_support::is_timing_trip(f))
+        .filter(|_| stack_support::is_timing_trip(&before))
     {
         let _ = stack.stop(Duration::from_secs(5));
         let trips = stack_support::driver_trips(&dir);
@@ -330,9 +332,15 @@ fn kill_one(
             "{victim}: {status:?}\n{}",
             process_logs(&dir)
         );
+        // Typed: the killed process, and that it died (not stalled, not exited).
         assert!(
-            fault.starts_with(victim) && fault.contains("died"),
-            "{victim} killed, the supervisor reports: {fault}"
+            matches!(
+                status.fault_cause,
+                Some(FaultCause::Process { process, cause: Cause::Died, .. })
+                    if process.name() == victim
+            ),
+            "{victim} killed, the supervisor reports: {fault} ({:?})",
+            status.fault_cause
         );
         assert!(
             status.reference_stop && status.reference == 0.0,

@@ -5,7 +5,9 @@ use std::path::Path;
 use std::time::Duration;
 
 use fes_tests::stack::workspace_root;
+use supervisor::core::FaultCause;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
+use supervisor::protocol::Status;
 use workbench::bench::{Stack, StackOptions, process_logs};
 
 /// Starts the four processes in `dir` from `bins` on `iface` with the default controller
@@ -52,15 +54,9 @@ pub fn start_armed(
 /// more than the driver's 20 ms StimTick watchdog happens now and then (CI saw one), and
 /// the chain rightly stops stimulation for it. A case checks the safety invariants on
 /// such a run all the same; only its own cause was not exercised, so it runs again.
-pub fn is_timing_trip(fault: &str) -> bool {
-    [
-        "watchdog tripped",
-        " stalled",
-        "no StimTick for",
-        " silent: ",
-    ]
-    .iter()
-    .any(|k| fault.contains(k))
+/// Judged by the status's typed cause (`fault_cause`), not by its words.
+pub fn is_timing_trip(status: &Status) -> bool {
+    status.state == "fault" && status.fault_cause.is_some_and(FaultCause::is_timing)
 }
 
 /// The driver's `SAFE STATE` log lines in the stack directory `dir` (what tripped, e.g.
