@@ -19,7 +19,6 @@ pub mod counter;
 pub mod crc;
 pub mod desc;
 pub mod error;
-pub mod hostbus;
 pub mod ids;
 pub mod message;
 pub mod table;

@@ -3,7 +3,7 @@
 //! [`ForceSample`] on iceoryx2, and hands STATUS, EMCY, heartbeats, error frames and link
 //! changes to the forward thread through a preallocated lock-free queue.
 //!
-//! On the host bus (`hostbus:<dir>`, [`fes_can::hostbus`]) it holds the driver station's
+//! On the host bus (`hostbus:<dir>`, [`fes_hostbus`]) it holds the driver station's
 //! socket and applies the same identifier filter itself; error frames there are the ones
 //! a tap injects, and the link is always up.
 //!
@@ -19,8 +19,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
-use fes_can::hostbus::{self, HostBus, Station};
 use fes_can::{Message, MessageKind, Nodes};
+use fes_hostbus::{self as hostbus, HostBus, Station};
 use fes_rt::msg::service::{BACKPRESSURE, ServiceError, open_pubsub};
 use fes_rt::msg::{Contract, ForceSample};
 use fes_rt::rt::clock::monotonic_ns;
@@ -172,7 +172,7 @@ const ACCEPTED: [MessageKind; 4] = [
 ];
 
 /// The receive socket: the stimulator's frames and every error frame, on a CAN interface
-/// or on the host bus ([`fes_can::hostbus`]).
+/// or on the host bus ([`fes_hostbus`]).
 enum RxSocket {
     Can(CanSocket),
     Host(HostBus),

@@ -480,9 +480,9 @@ impl DriverConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         config_file::check_schema(&self.schema, SCHEMA)?;
         let c = &self.can;
-        match fes_can::hostbus::bus_dir(&c.iface) {
+        match fes_hostbus::bus_dir(&c.iface) {
             Some(dir) => config_file::range(
-                fes_can::hostbus::validate_dir(dir).is_ok(),
+                fes_hostbus::validate_dir(dir).is_ok(),
                 "can.iface",
                 &c.iface,
                 "hostbus:<absolute directory of at most 91 bytes> (the host bus)",

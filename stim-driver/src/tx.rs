@@ -6,14 +6,14 @@
 //! and then dropped and reported, so the forward path never blocks on the bus.
 //! [`CountingSink`] stands in for the bus in benchmarks and tests, and [`DatagramTx`] (a
 //! Unix socket pair) in the latency suite's forward-path measurement on hosts without CAN.
-//! [`HostBusTx`] writes to the host bus ([`fes_can::hostbus`], an interface named
+//! [`HostBusTx`] writes to the host bus ([`fes_hostbus`], an interface named
 //! `hostbus:<dir>`), and [`BusTx`] is whichever of the two the configured interface names.
 
 use std::io;
 use std::os::fd::{AsRawFd, RawFd};
 
 use fes_can::Frame;
-use fes_can::hostbus::{self, HostBus, RawFrame, Station};
+use fes_hostbus::{self as hostbus, HostBus, RawFrame, Station};
 use fes_rt::rt::clock::{monotonic_ns, sleep_until};
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions, StandardId};
 
@@ -173,7 +173,7 @@ fn write_with_retry(
 }
 
 /// The host-bus transmit side: one datagram per station, never blocking (like vcan, a
-/// station that is absent or behind misses the frame; see [`fes_can::hostbus`]).
+/// station that is absent or behind misses the frame; see [`fes_hostbus`]).
 #[derive(Debug)]
 pub struct HostBusTx {
     bus: HostBus,

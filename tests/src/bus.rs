@@ -57,10 +57,10 @@ pub struct Tap {
 impl Tap {
     /// Starts recording `iface` (a CAN interface, or `hostbus:<dir>` as its tap station).
     pub fn open(iface: &str) -> io::Result<Self> {
-        if let Some(dir) = fes_can::hostbus::bus_dir(iface) {
+        if let Some(dir) = fes_hostbus::bus_dir(iface) {
             // The tap station of a host bus: every data frame the driver and the
             // stimulator send.
-            use fes_can::hostbus::{HostBus, Station};
+            use fes_hostbus::{HostBus, Station};
             let bus = HostBus::open(dir, Station::Tap, Some(READ_TIMEOUT))?;
             return Self::record("hostbus-tap", move || match bus.recv() {
                 Ok(Some(r)) if !r.frame.is_error() => {
@@ -75,7 +75,7 @@ impl Tap {
         socket.set_read_timeout(READ_TIMEOUT)?;
         Self::record("can-tap", move || match socket.read_frame() {
             Ok(frame) => {
-                use fes_can::hostbus::{EFF_FLAG, RTR_FLAG};
+                use fes_hostbus::{EFF_FLAG, RTR_FLAG};
                 let id = frame.raw_id()
                     | if frame.is_extended() { EFF_FLAG } else { 0 }
                     | if matches!(frame, CanFrame::Remote(_)) {
@@ -396,13 +396,13 @@ impl Drop for HeartbeatSender {
 /// [`SilentBus::iface`], then [`SilentBus::assert_silent`].
 pub struct SilentBus {
     dir: std::path::PathBuf,
-    tap: fes_can::hostbus::HostBus,
+    tap: fes_hostbus::HostBus,
 }
 
 impl SilentBus {
     /// A fresh bus in a temporary directory named after `tag` and this process.
     pub fn new(tag: &str) -> Self {
-        use fes_can::hostbus::{HostBus, Station};
+        use fes_hostbus::{HostBus, Station};
         let dir = std::env::temp_dir().join(format!("fes-silent-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let tap = HostBus::open(&dir, Station::Tap, None).expect("the tap station");
@@ -411,13 +411,13 @@ impl SilentBus {
 
     /// The interface name to give the process under test.
     pub fn iface(&self) -> String {
-        format!("{}{}", fes_can::hostbus::SCHEME, self.dir.display())
+        format!("{}{}", fes_hostbus::SCHEME, self.dir.display())
     }
 
     /// Panics naming `case` if a frame reached the tap or a driver or stimulator station
     /// was opened.
     pub fn assert_silent(&self, case: &str) {
-        use fes_can::hostbus::Station;
+        use fes_hostbus::Station;
         std::thread::sleep(Duration::from_millis(20));
         if let Some(r) = self.tap.recv().expect("tap read") {
             panic!("{case}: a frame reached the bus: {:?}", r.frame);

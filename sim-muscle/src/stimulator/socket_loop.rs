@@ -1,5 +1,5 @@
 //! The thin adapter between a SocketCAN interface (or the host bus, `hostbus:<dir>`,
-//! [`fes_can::hostbus`]) and the state machine: a 1 ms
+//! [`fes_hostbus`]) and the state machine: a 1 ms
 //! absolute-time loop that drains received frames into [`Stimulator::on_frame`], runs
 //! [`Stimulator::tick`] and sends what the machine produced.
 //!
@@ -13,8 +13,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context as _;
-use fes_can::hostbus::{self, HostBus, RawFrame, Station};
 use fes_can::{ErrorCode, Message, MessageKind, Nodes, decode};
+use fes_hostbus::{self as hostbus, HostBus, RawFrame, Station};
 use nix::errno::Errno;
 use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions};
 
@@ -106,7 +106,7 @@ const ACCEPTED: [MessageKind; 4] = [
 ];
 
 /// The stimulator's socket: a CAN interface, or the stimulator station of the host bus
-/// (`hostbus:<dir>`, [`fes_can::hostbus`]: frames in the same `struct can_frame` layout,
+/// (`hostbus:<dir>`, [`fes_hostbus`]: frames in the same `struct can_frame` layout,
 /// the same identifier filter applied here, error frames only as a tap injects them).
 #[derive(Debug)]
 enum StimSocket {

@@ -845,7 +845,7 @@ fn driver_on_the_bus() {
 }
 
 /// The same scenarios (1-4; the link-down scenario needs a CAN interface) with the driver and
-/// the virtual stimulator on the host bus (`fes_can::hostbus`: the same CAN frames over Unix
+/// the virtual stimulator on the host bus (`fes_hostbus`: the same CAN frames over Unix
 /// datagrams, docs/vcan.md), observed by its tap station: runs by default on hosts without
 /// CAN, at the host's timing.
 #[test]

@@ -51,7 +51,7 @@ pub enum Backend {
     Native,
     /// A User-Mode Linux guest's `vcan0`.
     Uml,
-    /// The host bus (`fes_can::hostbus`, `hostbus:<dir>`): the CAN frames over Unix
+    /// The host bus (`fes_hostbus`, `hostbus:<dir>`): the CAN frames over Unix
     /// datagrams, on the host; not CAN (no `ip link`, no candump). For whole-stack tests
     /// on hosts without CAN, at the host's timing (docs/vcan.md).
     HostBus,
@@ -63,7 +63,7 @@ impl CanEnv {
         let dir = std::env::temp_dir().join(format!("fes-hostbus-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         Self {
-            iface: format!("{}{}", fes_can::hostbus::SCHEME, dir.display()),
+            iface: format!("{}{}", fes_hostbus::SCHEME, dir.display()),
             backend: Backend::HostBus,
         }
     }

@@ -177,7 +177,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if host_bus {
         std::fs::create_dir_all(&out).with_context(|| format!("create {}", out.display()))?;
         let out = std::fs::canonicalize(&out)?;
-        let iface = format!("{}{}", fes_can::hostbus::SCHEME, out.join("bus").display());
+        let iface = format!("{}{}", fes_hostbus::SCHEME, out.join("bus").display());
         return inside(&a, &bin_dir, &out, iface, false);
     }
     if !in_can_env {
@@ -223,7 +223,7 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
         a.controller.display(),
         if uml {
             "User-Mode Linux guest: timings are functional only"
-        } else if fes_can::hostbus::bus_dir(&iface).is_some() {
+        } else if fes_hostbus::bus_dir(&iface).is_some() {
             "the host bus: Unix datagrams carrying the CAN frames, real-time on this host"
         } else {
             "native"

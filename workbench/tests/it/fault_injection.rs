@@ -1,5 +1,5 @@
 //! Fault injection on the whole stack (issue 10): the four processes on the host bus
-//! (fes_can::hostbus: the CAN frames over Unix datagrams, at the host's real-time
+//! (fes_hostbus: the CAN frames over Unix datagrams, at the host's real-time
 //! latencies), a 120 beats/min cardiac profile, and then
 //!
 //! * SIGSTOP of each process at a seeded random moment for a seeded random time, SIGCONT;
@@ -17,9 +17,9 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use fes_can::hostbus::{HostBus, RawFrame, Station};
 use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
 use fes_dataset::DataSet;
+use fes_hostbus::{HostBus, RawFrame, Station};
 use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows};
 use nix::sys::signal::Signal;
 use rand::{RngExt, SeedableRng};
@@ -523,8 +523,7 @@ fn foreign_frames_and_garbage_datagrams_are_ignored() {
                 }
                 1 => {
                     let f = RawFrame {
-                        can_id: fes_can::hostbus::EFF_FLAG
-                            | rng.random_range(0..=libc::CAN_EFF_MASK),
+                        can_id: fes_hostbus::EFF_FLAG | rng.random_range(0..=libc::CAN_EFF_MASK),
                         len: 8,
                         data: r,
                     };
@@ -532,7 +531,7 @@ fn foreign_frames_and_garbage_datagrams_are_ignored() {
                 }
                 2 => {
                     let f = RawFrame {
-                        can_id: fes_can::hostbus::RTR_FLAG | 0x110,
+                        can_id: fes_hostbus::RTR_FLAG | 0x110,
                         len: 0,
                         data: [0; 8],
                     };

@@ -424,7 +424,7 @@ fn kill_one_of_three(bins: &Path, iface: Option<&str>, uml: bool, victim: &str, 
 
 /// "Killing any one process mid-run leaves the stimulator stopped and the supervisor
 /// reporting which process died; the recording up to that moment is readable." The four
-/// processes on the host bus (the CAN frames over Unix datagrams, fes_can::hostbus), one
+/// processes on the host bus (the CAN frames over Unix datagrams, fes_hostbus), one
 /// stack per victim and seed, at the host's real-time latencies; the moment of the kill is
 /// drawn from a seeded generator (1.0-2.5 s into the profile), two seeds per victim.
 #[test]
