@@ -21,7 +21,9 @@ use std::time::Duration;
 use crossbeam::queue::ArrayQueue;
 use fes_can::{Message, MessageKind, Nodes};
 use fes_hostbus::{self as hostbus, HostBus, Station};
-use fes_rt::msg::service::{BACKPRESSURE, ServiceError, open_pubsub};
+use fes_rt::msg::PortError;
+use fes_rt::msg::port;
+use fes_rt::msg::service::ServiceError;
 use fes_rt::msg::{Contract, ForceSample};
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::node::create_node;
@@ -158,6 +160,9 @@ pub enum BusError {
     /// iceoryx2.
     #[error(transparent)]
     Service(#[from] ServiceError),
+    /// The ForceSample publisher could not be made.
+    #[error(transparent)]
+    Port(#[from] PortError),
     /// iceoryx2 node or port.
     #[error("receive thread: {0}")]
     Ipc(String),
@@ -292,12 +297,7 @@ pub fn run_bus(
 ) -> Result<(), BusError> {
     let socket = open_socket(settings)?;
     let node = create_node("stim-driver-bus").map_err(|e| BusError::Ipc(e.to_string()))?;
-    let service = open_pubsub::<ForceSample>(&node, &settings.prefix)?;
-    let publisher = service
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .create()
-        .map_err(|e| BusError::Ipc(format!("ForceSample publisher: {e:?}")))?;
+    let publisher = port::publisher::<ForceSample>(&node, &settings.prefix)?;
     on_ready();
 
     let push = |e: BusEvent| {

@@ -15,7 +15,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use fes_can::{Message, MessageKind, Nodes};
-use fes_rt::msg::service::{BACKPRESSURE, open_pubsub};
+use fes_rt::msg::port;
 use fes_rt::msg::{DeviceState, DriverCommand, DriverStatus, StimTick, TimingReport};
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::hlog::HlogWriter;
@@ -169,22 +169,8 @@ pub fn run_report(
 ) -> Result<ReportOutcome, RunError> {
     let prefix = config.ipc.prefix.as_str();
     let node = create_node(NODE_NAME)?;
-    let port = |what: &'static str| {
-        move |e: &dyn core::fmt::Debug| RunError::Port {
-            port: what,
-            detail: format!("{e:?}"),
-        }
-    };
-    let status_pub = open_pubsub::<DriverStatus>(&node, prefix)?
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .create()
-        .map_err(|e| port("DriverStatus publisher")(&e))?;
-    let timing_pub = open_pubsub::<TimingReport>(&node, prefix)?
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .create()
-        .map_err(|e| port("TimingReport publisher")(&e))?;
+    let status_pub = port::publisher::<DriverStatus>(&node, prefix)?;
+    let timing_pub = port::publisher::<TimingReport>(&node, prefix)?;
     let liveness = LivenessMonitor::<StimTick>::new(&node, prefix)?;
     let supervisor = LivenessMonitor::<DriverCommand>::new(&node, prefix)?;
     let nodes: Nodes = config

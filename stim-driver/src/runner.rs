@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
-use fes_rt::msg::service::{open_pubsub, open_stim_tick_event};
+use fes_rt::msg::port;
 use fes_rt::msg::{Contract, DriverCommand, StimTick};
 use fes_rt::rt::alloc;
 use fes_rt::rt::clock::monotonic_ns;
@@ -120,13 +120,6 @@ fn wait_for_tick(fd: i32, timeout: Duration) -> Result<bool, ()> {
     }
 }
 
-fn port_err(port: &'static str) -> impl Fn(&dyn core::fmt::Debug) -> RunError {
-    move |e| RunError::Port {
-        port,
-        detail: format!("{e:?}"),
-    }
-}
-
 /// Runs the forward thread on the calling thread until `stop` is set or another thread
 /// fails (see the module documentation). `on_ready` is called once real time is entered
 /// and the ports exist, before the first frame is sent.
@@ -143,20 +136,9 @@ pub fn run_forward<T: CanTx>(
         .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
     let prefix = config.ipc.prefix.as_str();
     let node = create_node(NODE_NAME)?;
-    let ticks = open_pubsub::<StimTick>(&node, prefix)?
-        .subscriber_builder()
-        .buffer_size(StimTick::QOS.subscriber_buffer)
-        .create()
-        .map_err(|e| port_err("StimTick subscriber")(&e))?;
-    let commands = open_pubsub::<DriverCommand>(&node, prefix)?
-        .subscriber_builder()
-        .buffer_size(DriverCommand::QOS.subscriber_buffer)
-        .create()
-        .map_err(|e| port_err("DriverCommand subscriber")(&e))?;
-    let listener = open_stim_tick_event(&node, prefix)?
-        .listener_builder()
-        .create()
-        .map_err(|e| port_err("stim-tick listener")(&e))?;
+    let ticks = port::subscriber::<StimTick>(&node, prefix)?;
+    let commands = port::subscriber::<DriverCommand>(&node, prefix)?;
+    let listener = port::stim_tick_listener(&node, prefix)?;
 
     // SAFETY: the descriptor stays owned by `listener`, which outlives every use below; it
     // is only polled, never stored elsewhere or closed here.

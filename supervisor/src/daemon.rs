@@ -14,11 +14,12 @@ use std::sync::mpsc;
 
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
-use rt_core::msg::service::{BACKPRESSURE, open_pubsub};
+use rt_core::msg::service::{ServiceError, open_pubsub};
 use rt_core::msg::{
     Contract, DriverCommand, DriverCommandKind, DriverStatus, ForceSample, Reference, StimTick,
     TimingReport,
 };
+use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
 
 use crate::config::SupervisorConfig;
@@ -36,9 +37,15 @@ pub const POLL_MS: u64 = 5;
 /// A daemon failure (start-up or a broken iceoryx2 port).
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
-    /// iceoryx2 node or port.
+    /// The iceoryx2 node.
     #[error("iceoryx2: {0}")]
-    Ipc(String),
+    Node(#[from] rt_core::rt::node::RunError),
+    /// An iceoryx2 service.
+    #[error("iceoryx2: {0}")]
+    Service(#[from] ServiceError),
+    /// An iceoryx2 port.
+    #[error("iceoryx2: {0}")]
+    Port(#[from] PortError),
     /// Control socket.
     #[error("control socket: {0}")]
     Control(#[from] crate::control::ControlError),
@@ -51,10 +58,6 @@ pub struct Outcome {
     pub recordings: Vec<PathBuf>,
     /// The fault in force at exit, if any.
     pub fault: Option<Fault>,
-}
-
-fn ipc<E: std::fmt::Debug>(what: &'static str) -> impl Fn(E) -> DaemonError {
-    move |e| DaemonError::Ipc(format!("{what}: {e:?}"))
 }
 
 fn node_id(id: &iceoryx2::identifiers::UniqueNodeId) -> u128 {
@@ -112,39 +115,18 @@ pub fn run(
     stop: &AtomicBool,
     on_ready: impl FnOnce(&std::path::Path),
 ) -> Result<Outcome, DaemonError> {
-    let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name).map_err(ipc("node"))?;
+    let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name)?;
     let prefix = cfg.ipc.prefix.as_str();
-    let ref_service = open_pubsub::<Reference>(&node, prefix).map_err(ipc("Reference"))?;
-    let ref_pub = ref_service
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .create()
-        .map_err(ipc("Reference publisher"))?;
-    macro_rules! sub {
-        ($t:ty) => {{
-            let service = open_pubsub::<$t>(&node, prefix).map_err(ipc(stringify!($t)))?;
-            service
-                .subscriber_builder()
-                .buffer_size(<$t>::QOS.subscriber_buffer)
-                .history_request(<$t>::QOS.history)
-                .create()
-                .map_err(ipc(concat!(stringify!($t), " subscriber")))?
-        }};
-    }
-    let cmd_service = open_pubsub::<DriverCommand>(&node, prefix).map_err(ipc("DriverCommand"))?;
-    let cmd_pub = cmd_service
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .create()
-        .map_err(ipc("DriverCommand publisher"))?;
+    let ref_pub = port::publisher::<Reference>(&node, prefix)?;
+    let cmd_pub = port::publisher::<DriverCommand>(&node, prefix)?;
     let mut cmd_seq = 0u64;
-    let ticks = sub!(StimTick);
-    let forces = sub!(ForceSample);
-    let statuses = sub!(DriverStatus);
+    let ticks = port::subscriber::<StimTick>(&node, prefix)?;
+    let forces = port::subscriber::<ForceSample>(&node, prefix)?;
+    let statuses = port::subscriber::<DriverStatus>(&node, prefix)?;
     // The services whose publishers are this stack's rt-core and stim-driver.
-    let tick_service = open_pubsub::<StimTick>(&node, prefix).map_err(ipc("StimTick"))?;
-    let status_service = open_pubsub::<DriverStatus>(&node, prefix).map_err(ipc("DriverStatus"))?;
-    let timings = sub!(TimingReport);
+    let tick_service = open_pubsub::<StimTick>(&node, prefix)?;
+    let status_service = open_pubsub::<DriverStatus>(&node, prefix)?;
+    let timings = port::subscriber::<TimingReport>(&node, prefix)?;
 
     let (tx, rx) = mpsc::channel::<Pending>();
     let server = ControlServer::start(&cfg.control, tx)?;

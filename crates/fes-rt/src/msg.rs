@@ -17,6 +17,7 @@
 mod driver_command;
 mod driver_status;
 mod force_sample;
+pub mod port;
 mod reference;
 pub mod service;
 mod stim_tick;
@@ -27,6 +28,7 @@ pub use driver_command::{DriverCommand, DriverCommandKind};
 pub use driver_status::{DeviceState, DriverStatus};
 pub use force_sample::ForceSample;
 pub use iceoryx2::prelude::ZeroCopySend;
+pub use port::PortError;
 pub use reference::Reference;
 pub use service::{Contract, PubSubQos, ServiceError};
 pub use stim_tick::StimTick;

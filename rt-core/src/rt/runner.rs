@@ -16,7 +16,8 @@ use std::time::{Duration, Instant};
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 
-use fes_rt::rt::node::port_err;
+use fes_rt::msg::port;
+use fes_rt::rt::node::connect_err;
 pub use fes_rt::rt::node::{RunError, create_node};
 
 use super::alloc;
@@ -27,7 +28,6 @@ use super::process_config::RtCoreConfig;
 use super::realtime::{RtStatus, enter_realtime};
 use super::source::TickSource;
 use super::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
-use crate::msg::service::{BACKPRESSURE, open_pubsub, open_stim_tick_event};
 use crate::msg::{Contract, ForceSample, Reference, StimTick, TimingReport, TimingSource};
 
 /// How a finished real-time loop went.
@@ -55,56 +55,31 @@ pub fn run_pattern_loop<S: TickSource>(
     let status = enter_realtime(&config.rt)?;
     let prefix = config.ipc.prefix.as_str();
 
-    let tick_service = open_pubsub::<StimTick>(node, prefix)?;
-    let publisher = tick_service
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .max_loaned_samples(1)
-        .create()
-        .map_err(|e| port_err("StimTick publisher")(&e))?;
-    let reference_service = open_pubsub::<Reference>(node, prefix)?;
-    let references = reference_service
-        .subscriber_builder()
-        .buffer_size(Reference::QOS.subscriber_buffer)
-        .history_request(Reference::QOS.history)
-        .create()
-        .map_err(|e| port_err("Reference subscriber")(&e))?;
+    let publisher = port::publisher::<StimTick>(node, prefix)?;
+    let references = port::subscriber::<Reference>(node, prefix)?;
     let force_subscriber = if config.feedback.enabled {
-        let service = open_pubsub::<ForceSample>(node, prefix)?;
-        Some(
-            service
-                .subscriber_builder()
-                .buffer_size(ForceSample::QOS.subscriber_buffer)
-                .create()
-                .map_err(|e| port_err("ForceSample subscriber")(&e))?,
-        )
+        Some(port::subscriber::<ForceSample>(node, prefix)?)
     } else {
         None
     };
     let notifier = if config.ipc.notify {
-        let event = open_stim_tick_event(node, prefix)?;
-        Some(
-            event
-                .notifier_builder()
-                .create()
-                .map_err(|e| port_err("stim-tick notifier")(&e))?,
-        )
+        Some(port::stim_tick_notifier(node, prefix)?)
     } else {
         None
     };
     publisher
         .update_connections()
-        .map_err(|e| port_err("StimTick connections")(&e))?;
+        .map_err(|e| connect_err("StimTick publisher")(&e))?;
     references
         .update_connections()
-        .map_err(|e| port_err("Reference connections")(&e))?;
+        .map_err(|e| connect_err("Reference subscriber")(&e))?;
     if let Some(n) = &notifier {
         n.update_connections()
-            .map_err(|e| port_err("stim-tick event connections")(&e))?;
+            .map_err(|e| connect_err("stim-tick notifier")(&e))?;
     }
     if let Some(f) = &force_subscriber {
         f.update_connections()
-            .map_err(|e| port_err("ForceSample connections")(&e))?;
+            .map_err(|e| connect_err("ForceSample subscriber")(&e))?;
     }
 
     let mut generator = PatternLoop::new(
@@ -325,12 +300,7 @@ pub fn run_telemetry(
     on_ready: impl FnOnce(),
 ) -> Result<TimingReport, RunError> {
     let node = create_node(&settings.node_name)?;
-    let service = open_pubsub::<TimingReport>(&node, &settings.prefix)?;
-    let publisher = service
-        .publisher_builder()
-        .backpressure_strategy(BACKPRESSURE)
-        .create()
-        .map_err(|e| port_err("TimingReport publisher")(&e))?;
+    let publisher = port::publisher::<TimingReport>(&node, &settings.prefix)?;
     on_ready();
     let start = Instant::now();
     let mut aggregator = TimingAggregator::new();

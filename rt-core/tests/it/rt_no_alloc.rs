@@ -6,6 +6,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use rt_core::msg::port;
 use rt_core::msg::service::{open_pubsub, open_stim_tick_event};
 use rt_core::msg::{Contract, Reference, StimTick};
 use rt_core::rt::clock::monotonic_ns;
@@ -42,15 +43,9 @@ fn run_counting<S: TickSource + Send>(source: S, name: &str) {
 
     // Receiver side first, so that every connection exists before the loop starts.
     let node = create_node("noalloc-test").unwrap();
-    let ticks = open_pubsub::<StimTick>(&node, &prefix).unwrap();
-    let subscriber = ticks.subscriber_builder().create().unwrap();
-    let listener = open_stim_tick_event(&node, &prefix)
-        .unwrap()
-        .listener_builder()
-        .create()
-        .unwrap();
-    let references = open_pubsub::<Reference>(&node, &prefix).unwrap();
-    let reference_publisher = references.publisher_builder().create().unwrap();
+    let subscriber = port::subscriber::<StimTick>(&node, &prefix).unwrap();
+    let listener = port::stim_tick_listener(&node, &prefix).unwrap();
+    let reference_publisher = port::publisher::<Reference>(&node, &prefix).unwrap();
 
     let telemetry = TelemetryChannel::new(1024);
     let stop = AtomicBool::new(false);

@@ -12,7 +12,7 @@ use nix::sys::signal::Signal;
 use rt_common::*;
 use rt_core::control::file::Controller;
 use rt_core::control::pattern_generator::TickInput;
-use rt_core::msg::service::open_pubsub;
+use rt_core::msg::port;
 use rt_core::msg::{Contract, ForceSample, Reference, StimTick, TimingReport};
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::hlog::merge_by_tag;
@@ -25,11 +25,7 @@ const MS: u64 = 1_000_000;
 /// Publishes a fresh Reference with `force` every 10 ms until `stop`.
 fn feed_references(prefix: &str, force: f64, stop: &AtomicBool) {
     let node = create_node("test-reference").unwrap();
-    let publisher = open_pubsub::<Reference>(&node, prefix)
-        .unwrap()
-        .publisher_builder()
-        .create()
-        .unwrap();
+    let publisher = port::publisher::<Reference>(&node, prefix).unwrap();
     let mut seq = 0;
     while !stop.load(Ordering::Relaxed) {
         seq += 1;
@@ -172,11 +168,7 @@ fn the_pattern_generator_runs_from_a_controller_file_exactly_as_offline() {
 /// samples' timestamps, so a test can judge each tick by what was actually sent.
 fn feed_forces(prefix: &str, force: f64, duration: Duration) -> Vec<u64> {
     let node = create_node("test-force").unwrap();
-    let publisher = open_pubsub::<ForceSample>(&node, prefix)
-        .unwrap()
-        .publisher_builder()
-        .create()
-        .unwrap();
+    let publisher = port::publisher::<ForceSample>(&node, prefix).unwrap();
     let end = std::time::Instant::now() + duration;
     let mut seq = 0;
     let mut sent = Vec::new();
@@ -412,11 +404,7 @@ fn a_stale_reference_ramps_the_target_to_zero_at_the_configured_rate() {
     let probe = start_probe(&dir, &prefix);
     // One reference, then silence.
     let node = create_node("test-stale").unwrap();
-    let publisher = open_pubsub::<Reference>(&node, &prefix)
-        .unwrap()
-        .publisher_builder()
-        .create()
-        .unwrap();
+    let publisher = port::publisher::<Reference>(&node, &prefix).unwrap();
     let rt = start_rt_core(&path, false);
     std::thread::sleep(Duration::from_millis(150));
     let issued = monotonic_ns();
@@ -635,16 +623,8 @@ fn slow_and_stopped_consumers_never_block_the_loop() {
     let prefix = prefix("slowconsumer");
     let path = write_config(&dir, &config(&prefix, 4));
     let node = create_node("test-slow-consumer").unwrap();
-    let _never_read_ticks = open_pubsub::<StimTick>(&node, &prefix)
-        .unwrap()
-        .subscriber_builder()
-        .create()
-        .unwrap();
-    let _never_read_reports = open_pubsub::<TimingReport>(&node, &prefix)
-        .unwrap()
-        .subscriber_builder()
-        .create()
-        .unwrap();
+    let _never_read_ticks = port::subscriber::<StimTick>(&node, &prefix).unwrap();
+    let _never_read_reports = port::subscriber::<TimingReport>(&node, &prefix).unwrap();
     let stopped = start_probe(&stopped_dir, &prefix);
     stopped.signal(Signal::SIGSTOP);
     let probe = start_probe(&dir, &prefix);

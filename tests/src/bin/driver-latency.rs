@@ -28,7 +28,7 @@ use std::time::Duration;
 use anyhow::{Context as _, anyhow, bail};
 use clap::Parser;
 use fes_can::Nodes;
-use rt_core::msg::service::open_pubsub;
+use rt_core::msg::port;
 use rt_core::msg::{DeviceState, DriverCommand, DriverCommandKind, LatencySummary};
 use rt_core::rt::alloc::CountingAllocator;
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
@@ -359,10 +359,7 @@ fn run_stimulator(
 /// not end the measurement. Returns how many times the driver became armed.
 fn arm_while_disarmed(prefix: &str, shared: &Shared) -> anyhow::Result<u64> {
     let node = create_node("driver-latency-supervisor")?;
-    let commands = open_pubsub::<DriverCommand>(&node, prefix)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow!("DriverCommand publisher: {e:?}"))?;
+    let commands = port::publisher::<DriverCommand>(&node, prefix)?;
     let armed = |s: u8| {
         matches!(
             DeviceState::try_from(s),

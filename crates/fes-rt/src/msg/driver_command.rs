@@ -82,6 +82,7 @@ impl Contract for DriverCommand {
         max_subscribers: 4,
         subscriber_buffer: 8,
         history: 0,
+        max_loaned_samples: 2,
     };
 
     fn validate(&self) -> Result<(), ValidationError> {

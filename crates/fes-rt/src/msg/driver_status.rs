@@ -177,6 +177,7 @@ impl Contract for DriverStatus {
         max_subscribers: 8,
         subscriber_buffer: 16,
         history: 1,
+        max_loaned_samples: 2,
     };
 
     fn validate(&self) -> Result<(), ValidationError> {

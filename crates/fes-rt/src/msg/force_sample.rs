@@ -36,6 +36,7 @@ impl Contract for ForceSample {
         max_subscribers: 8,
         subscriber_buffer: 64,
         history: 0,
+        max_loaned_samples: 2,
     };
 
     fn validate(&self) -> Result<(), ValidationError> {

@@ -62,6 +62,7 @@ impl Contract for Reference {
         max_subscribers: 8,
         subscriber_buffer: 8,
         history: 1,
+        max_loaned_samples: 2,
     };
 
     fn validate(&self) -> Result<(), ValidationError> {

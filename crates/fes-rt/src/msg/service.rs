@@ -5,6 +5,7 @@
 //! isolation. Every process opens a topic through [`open_pubsub`] (or
 //! [`open_stim_tick_event`]), which applies the topic's [`PubSubQos`]: whichever process comes
 //! first creates the service with exactly these settings, and the others find them compatible.
+//! Ports are made from them only through [`super::port`].
 //!
 //! All topics use safe overflow: a full subscriber buffer drops its *oldest* sample, so a
 //! publisher never blocks and never fails because a receiver is slow (the real-time rule "never
@@ -53,6 +54,9 @@ pub struct PubSubQos {
     pub subscriber_buffer: usize,
     /// Samples a late-joining subscriber receives on connection (0 = none).
     pub history: usize,
+    /// Samples a publisher may hold loaned at once (iceoryx2's default is 2); it sizes the
+    /// publisher's shared-memory segment.
+    pub max_loaned_samples: usize,
 }
 
 /// A message type together with its topic, its quality of service and its validation.

@@ -143,6 +143,7 @@ impl Contract for StimTick {
         // 64 lost ticks there. The shared memory this costs is 8 x 1024 samples.
         subscriber_buffer: 1024,
         history: 0,
+        max_loaned_samples: 1,
     };
 
     fn validate(&self) -> Result<(), ValidationError> {

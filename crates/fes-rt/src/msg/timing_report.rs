@@ -143,6 +143,7 @@ impl Contract for TimingReport {
         max_subscribers: 8,
         subscriber_buffer: 16,
         history: 1,
+        max_loaned_samples: 2,
     };
 
     fn validate(&self) -> Result<(), ValidationError> {

@@ -6,6 +6,7 @@ use iceoryx2::prelude::*;
 use super::clock::PeriodError;
 use super::hlog::HlogError;
 use super::realtime::RtError;
+use crate::msg::port::PortError;
 use crate::msg::service::ServiceError;
 
 /// Failure of the real-time loop thread before or while it runs.
@@ -17,9 +18,12 @@ pub enum RunError {
     /// A service could not be opened.
     #[error(transparent)]
     Service(#[from] ServiceError),
-    /// A port could not be created or connected.
-    #[error("cannot create the {port}: {detail}")]
-    Port {
+    /// A port could not be created.
+    #[error(transparent)]
+    Port(#[from] PortError),
+    /// A port could not connect to its peers.
+    #[error("cannot connect the {port}: {detail}")]
+    Connect {
         /// Which port.
         port: &'static str,
         /// iceoryx2's reason.
@@ -36,9 +40,9 @@ pub enum RunError {
     Hlog(#[from] HlogError),
 }
 
-/// A map from an iceoryx2 port error to [`RunError::Port`] naming the port.
-pub fn port_err(port: &'static str) -> impl Fn(&dyn std::fmt::Debug) -> RunError {
-    move |e| RunError::Port {
+/// A map from an iceoryx2 connection error to [`RunError::Connect`] naming the port.
+pub fn connect_err(port: &'static str) -> impl Fn(&dyn std::fmt::Debug) -> RunError {
+    move |e| RunError::Connect {
         port,
         detail: format!("{e:?}"),
     }

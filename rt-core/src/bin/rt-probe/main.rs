@@ -21,7 +21,7 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::Context;
 use clap::Parser;
-use rt_core::msg::service::{open_pubsub, open_stim_tick_event};
+use rt_core::msg::port;
 use rt_core::msg::{Contract, StimTick, TimingReport, TimingSource};
 use rt_core::rt::clock::{NS_PER_S, monotonic_ns};
 use rt_core::rt::histogram::LatencyHistogram;
@@ -114,19 +114,9 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
     };
 
     let node = create_node("rt-probe")?;
-    let ticks = open_pubsub::<StimTick>(&node, &cli.prefix)?
-        .subscriber_builder()
-        .buffer_size(StimTick::QOS.subscriber_buffer)
-        .create()
-        .map_err(|e| anyhow::anyhow!("StimTick subscriber: {e:?}"))?;
-    let reports = open_pubsub::<TimingReport>(&node, &cli.prefix)?
-        .subscriber_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("TimingReport subscriber: {e:?}"))?;
-    let listener = open_stim_tick_event(&node, &cli.prefix)?
-        .listener_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("stim-tick listener: {e:?}"))?;
+    let ticks = port::subscriber::<StimTick>(&node, &cli.prefix)?;
+    let reports = port::subscriber::<TimingReport>(&node, &cli.prefix)?;
+    let listener = port::stim_tick_listener(&node, &cli.prefix)?;
     println!("ready");
     std::io::stdout().flush()?;
 

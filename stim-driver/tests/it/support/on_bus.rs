@@ -20,7 +20,8 @@ use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
 use fes_can::{Message, MessageKind, NmtCommand, Nodes, Pulse};
-use fes_rt::msg::service::{BACKPRESSURE, open_pubsub, open_stim_tick_event};
+use fes_rt::msg::port;
+use fes_rt::msg::service::{BACKPRESSURE, open_pubsub};
 use fes_rt::msg::{
     Contract, DeviceState, DriverCommand, DriverCommandKind, DriverStatus, StimTick,
 };
@@ -92,11 +93,7 @@ pub fn run_publisher(spec: &str) {
             Err(e) => panic!("StimTick publisher: {e:?}"),
         }
     };
-    let notifier = open_stim_tick_event(&node, prefix)
-        .expect("event service")
-        .notifier_builder()
-        .create()
-        .expect("notifier");
+    let notifier = port::stim_tick_notifier(&node, prefix).expect("notifier");
     let go = Arc::new(AtomicBool::new(false));
     let g = go.clone();
     std::thread::spawn(move || {
@@ -425,12 +422,7 @@ impl TickWatch {
         let (ready_tx, ready_rx) = mpsc::channel();
         std::thread::spawn(move || {
             let node = create_node("sdt-watch").expect("node");
-            let sub = open_pubsub::<StimTick>(&node, &prefix)
-                .expect("service")
-                .subscriber_builder()
-                .buffer_size(StimTick::QOS.subscriber_buffer)
-                .create()
-                .expect("subscriber");
+            let sub = port::subscriber::<StimTick>(&node, &prefix).expect("subscriber");
             let _ = ready_tx.send(());
             while !s.load(Ordering::Relaxed) {
                 while let Ok(Some(t)) = sub.receive() {
@@ -536,18 +528,8 @@ struct Operator {
 impl Operator {
     fn new(prefix: &str) -> Self {
         let node = create_node("sdt-operator").expect("node");
-        let commands = open_pubsub::<DriverCommand>(&node, prefix)
-            .expect("service")
-            .publisher_builder()
-            .backpressure_strategy(BACKPRESSURE)
-            .create()
-            .expect("command publisher");
-        let status = open_pubsub::<DriverStatus>(&node, prefix)
-            .expect("service")
-            .subscriber_builder()
-            .buffer_size(DriverStatus::QOS.subscriber_buffer)
-            .create()
-            .expect("status subscriber");
+        let commands = port::publisher::<DriverCommand>(&node, prefix).expect("command publisher");
+        let status = port::subscriber::<DriverStatus>(&node, prefix).expect("status subscriber");
         Self {
             _node: node,
             commands,

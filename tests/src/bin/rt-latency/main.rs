@@ -30,7 +30,7 @@ use clap::Parser;
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use rt_core::msg::Reference;
-use rt_core::msg::service::open_pubsub;
+use rt_core::msg::port;
 use rt_core::rt::MissingRightsPolicy;
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::histogram::LatencyHistogram;
@@ -772,10 +772,7 @@ fn wait_for_ready(probe: &mut Guarded) -> anyhow::Result<()> {
 /// every second.
 fn publish_references(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
     let node = create_node("rt-latency-reference")?;
-    let publisher = open_pubsub::<Reference>(&node, prefix)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow!("Reference publisher: {e:?}"))?;
+    let publisher = port::publisher::<Reference>(&node, prefix)?;
     let start = Instant::now();
     let mut seq = 0;
     while !stop.load(Ordering::Relaxed) {
