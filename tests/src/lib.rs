@@ -6,6 +6,7 @@
 //!   port that sends PULSE/NMT/CONFIG with correct counters, a heartbeat thread.
 //! * [`child`]: test children die with the test thread that started them.
 //! * [`cli`]: the common assertion of the binaries' bad-input sweeps.
+//! * [`cyclictest`]: running cyclictest and reading its histogram (the latency tools).
 //! * [`stack`]: building the four binaries and reading the virtual stimulator's record,
 //!   for tests that run the whole stack (`workbench::bench::Stack`).
 #![deny(missing_docs)]
@@ -14,6 +15,7 @@
 
 pub mod bus;
 pub mod child;
+pub mod cyclictest;
 pub mod cli;
 pub mod stack;
 pub mod vcan;

@@ -16,7 +16,6 @@
 //!    histograms next to the
 //!    per-round `rt-core-N.hlog` / `rt-probe-N.hlog`.
 
-mod cyclictest;
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -44,7 +43,7 @@ use serde::Serialize;
 /// The driver's hlog tag for StimTick publish → PULSE written (stim-driver's telemetry).
 const TAG_TICK_TO_CAN: &str = "tick_to_can";
 
-use cyclictest::CyclictestHistogram;
+use fes_tests::cyclictest::{self, CyclictestHistogram};
 
 /// Runs the real rt-core loop for N seconds with a subscriber process measuring IPC latency,
 /// then cyclictest with the same period, priority and core, and compares them.
