@@ -11,6 +11,7 @@ use crate::contraction::ContractionSettings;
 use crate::health::HealthSettings;
 use crate::limits::ReferenceLimits;
 use crate::outer_loop::OuterLoopSettings;
+use crate::range::RangeError;
 
 /// The schema tag this version reads.
 pub const SCHEMA: &str = "fes-supervisor/1";
@@ -273,10 +274,7 @@ impl SupervisorConfig {
 
     /// Checks every value; the error is (key, problem).
     pub fn validate(&self) -> Result<(), (String, String)> {
-        let key = |section: &str, e: String| {
-            let (k, p) = e.split_once(' ').unwrap_or(("", e.as_str()));
-            (format!("{section}.{k}"), p.to_string())
-        };
+        let key = |section: &str, e: RangeError| (format!("{section}.{}", e.key), e.problem());
         rt_core::msg::service::validate_prefix(&self.ipc.prefix)
             .map_err(|e| ("ipc.prefix".to_string(), e.to_string()))?;
         if self.ipc.node_name.is_empty() || self.ipc.node_name.len() > 64 {

@@ -18,6 +18,7 @@ use std::collections::VecDeque;
 use serde::{Deserialize, Serialize};
 
 use crate::profile::Beat;
+use crate::range::{self, Interval, RangeError};
 
 /// Where the plateau is and how much of it must have been measured.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -44,23 +45,18 @@ impl Default for ContractionSettings {
 
 impl ContractionSettings {
     /// Checks the ranges; the error names the key.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.plateau_start.is_finite() && (0.0..1.0).contains(&self.plateau_start)) {
-            return Err(format!(
-                "plateau_start {} must be in [0, 1)",
-                self.plateau_start
-            ));
-        }
-        if !(self.delay_ms.is_finite() && (0.0..=1000.0).contains(&self.delay_ms)) {
-            return Err(format!("delay_ms {} must be in [0, 1000]", self.delay_ms));
-        }
-        if !(self.min_coverage.is_finite() && self.min_coverage > 0.0 && self.min_coverage <= 1.0) {
-            return Err(format!(
-                "min_coverage {} must be in (0, 1]",
-                self.min_coverage
-            ));
-        }
-        Ok(())
+    pub fn validate(&self) -> Result<(), RangeError> {
+        range::check(
+            "plateau_start",
+            self.plateau_start,
+            Interval::right_open(0.0, 1.0),
+        )?;
+        range::check("delay_ms", self.delay_ms, Interval::closed(0.0, 1000.0))?;
+        range::check(
+            "min_coverage",
+            self.min_coverage,
+            Interval::left_open(0.0, 1.0),
+        )
     }
 }
 

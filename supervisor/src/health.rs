@@ -22,6 +22,7 @@ use rt_core::msg::{
 use serde::{Deserialize, Serialize};
 
 use crate::protocol::{ProcessState, ProcessStatus};
+use crate::range::{self, Interval, RangeError};
 
 /// The processes of the chain.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -142,17 +143,19 @@ impl Default for HealthSettings {
 
 impl HealthSettings {
     /// Checks the ranges; the error names the key.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), RangeError> {
         for (k, v, lo) in [
-            ("stim_tick_timeout_ms", self.stim_tick_timeout_ms, 2),
-            ("driver_status_timeout_ms", self.driver_status_timeout_ms, 2),
-            ("force_timeout_ms", self.force_timeout_ms, 2),
-            ("node_scan_period_ms", self.node_scan_period_ms, 10),
-            ("self_stall_ms", self.self_stall_ms, 20),
+            ("stim_tick_timeout_ms", self.stim_tick_timeout_ms, 2.0),
+            (
+                "driver_status_timeout_ms",
+                self.driver_status_timeout_ms,
+                2.0,
+            ),
+            ("force_timeout_ms", self.force_timeout_ms, 2.0),
+            ("node_scan_period_ms", self.node_scan_period_ms, 10.0),
+            ("self_stall_ms", self.self_stall_ms, 20.0),
         ] {
-            if !(lo..=60_000).contains(&v) {
-                return Err(format!("{k} {v} must be in [{lo}, 60000]"));
-            }
+            range::check(k, v as f64, Interval::closed(lo, 60_000.0))?;
         }
         Ok(())
     }
@@ -1221,7 +1224,7 @@ mod tests {
             self_stall_ms: 5,
             ..HealthSettings::default()
         };
-        assert!(bad.validate().unwrap_err().contains("self_stall_ms"));
+        assert_eq!(bad.validate().unwrap_err().key, "self_stall_ms");
     }
 
     /// The driver's watchdog tripping because the stimulator went silent names the

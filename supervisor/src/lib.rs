@@ -27,5 +27,6 @@ pub mod outer_loop;
 pub mod pass;
 pub mod profile;
 pub mod protocol;
+pub mod range;
 pub mod recording;
 pub mod recording_thread;

@@ -24,6 +24,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::range::{self, Interval, RangeError};
+
 /// Outer-loop settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -51,23 +53,14 @@ impl Default for OuterLoopSettings {
 
 impl OuterLoopSettings {
     /// Checks the ranges; the error names the key.
-    pub fn validate(&self) -> Result<(), String> {
-        let within = |v: f64, lo_open: bool, lo: f64, hi: f64| {
-            v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi
-        };
-        if !within(self.gain, true, 0.0, 1.0) {
-            return Err(format!("gain {} must be in (0, 1]", self.gain));
-        }
-        if !within(self.max_correction, false, 0.0, 1.0) {
-            return Err(format!(
-                "max_correction {} must be in [0, 1]",
-                self.max_correction
-            ));
-        }
-        if !within(self.max_step, true, 0.0, 1.0) {
-            return Err(format!("max_step {} must be in (0, 1]", self.max_step));
-        }
-        Ok(())
+    pub fn validate(&self) -> Result<(), RangeError> {
+        range::check("gain", self.gain, Interval::left_open(0.0, 1.0))?;
+        range::check(
+            "max_correction",
+            self.max_correction,
+            Interval::closed(0.0, 1.0),
+        )?;
+        range::check("max_step", self.max_step, Interval::left_open(0.0, 1.0))
     }
 }
 

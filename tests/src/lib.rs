@@ -15,7 +15,7 @@
 
 pub mod bus;
 pub mod child;
-pub mod cyclictest;
 pub mod cli;
+pub mod cyclictest;
 pub mod stack;
 pub mod vcan;

@@ -16,7 +16,6 @@
 //!    histograms next to the
 //!    per-round `rt-core-N.hlog` / `rt-probe-N.hlog`.
 
-
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
