@@ -422,11 +422,44 @@ source = "fes bench"
         Ok(r)
     }
 
-    /// Arms stimulation and starts `profile` (both must be accepted).
+    /// Arms stimulation and starts `profile` (both must be accepted), once the driver
+    /// reports itself armed.
+    ///
+    /// The supervisor answers an Arm when it has queued it, not when the driver has acted
+    /// on it (issue 19, "acknowledged commands"): a driver that has not yet seen rt-core's
+    /// StimTick publisher alive refuses it and only logs why (seen once in a full test run:
+    /// the Arm 14 ms before the driver's liveness check saw rt-core; the stack then never
+    /// stimulated). Until the supervisor waits for the driver's answer itself, the bench
+    /// checks the DriverStatus and arms again (stop, arm) when the driver stays disarmed.
     pub fn arm_with(&self, profile: ProfileSpec) -> Result<(), BenchError> {
-        self.must(Command::Arm)?;
-        self.must(Command::Profile { profile })?;
-        Ok(())
+        let armed = |s: &Status| matches!(s.driver_state.as_deref(), Some("Armed" | "Stimulating"));
+        let mut last = None;
+        for attempt in 0..3 {
+            if attempt > 0 {
+                self.must(Command::Stop)?;
+            }
+            self.must(Command::Arm)?;
+            let deadline = Instant::now() + Duration::from_millis(600);
+            loop {
+                let s = self.status()?;
+                if armed(&s) {
+                    self.must(Command::Profile { profile })?;
+                    return Ok(());
+                }
+                last = s.driver_state;
+                if Instant::now() > deadline {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+        Err(BenchError::Refused {
+            command: "arm".into(),
+            reason: format!(
+                "the driver did not arm in three attempts (driver state {})",
+                last.as_deref().unwrap_or("unknown")
+            ),
+        })
     }
 
     /// The supervisor's status.
