@@ -158,11 +158,15 @@ fn session(can: &CanEnv) {
     );
     // The FORCE stream shows each pulse's charge, in order, once, at least min IPI apart.
     let f = forces(&phase);
+    // Changes against the force before the phase (`base_n`), so that a step already in the
+    // phase's first FORCE frame counts too (a UML run once saw 199 of 200 that way).
     let mut steps: Vec<(i32, u32)> = Vec::new(); // (force after the change, sample time)
-    for w in f.windows(2) {
-        if w[1].force_mn != w[0].force_mn {
-            steps.push((w[1].force_mn, w[1].sample_time_us));
+    let mut prev = base_n;
+    for s in &f {
+        if s.force_mn != prev {
+            steps.push((s.force_mn, s.sample_time_us));
         }
+        prev = s.force_mn;
     }
     assert_eq!(steps.len(), 200, "one force step per pulse");
     let mut cum = f64::from(base_n) / 1000.0;
