@@ -160,6 +160,7 @@ pub fn run(
     };
 
     let mut last_pass = monotonic_ns();
+    let mut statuses_in: Vec<DriverStatus> = Vec::with_capacity(64);
     loop {
         let now = monotonic_ns();
         let stopping = stop.load(Ordering::Relaxed);
@@ -174,7 +175,14 @@ pub fn run(
             core.fault(Fault::new(FaultCause::SelfStall, reason));
         }
 
-        // 1. Inputs.
+        // 1. Inputs. The DriverStatuses are taken off their queue first and judged after
+        //    the StimTicks: every tick rt-core published before a status is then known
+        //    when the status is, so a driver watchdog trip is blamed by the tick stream
+        //    around it (health.rs, TickGaps), however late this pass runs.
+        statuses_in.clear();
+        while let Ok(Some(s)) = statuses.receive() {
+            statuses_in.push(*s.payload());
+        }
         while let Ok(Some(s)) = ticks.receive() {
             let t = *s.payload();
             drop(s);
@@ -195,9 +203,7 @@ pub fn run(
                 record(&mut run, &mut core, Item::Force(f, now));
             }
         }
-        while let Ok(Some(s)) = statuses.receive() {
-            let st = *s.payload();
-            drop(s);
+        for st in statuses_in.drain(..) {
             health.on_driver_status(&st, now);
             if st.validate().is_ok() {
                 core.on_driver_status(&st);

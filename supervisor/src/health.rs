@@ -329,7 +329,54 @@ pub struct HealthMonitor {
     timing: BTreeMap<u8, TimingReport>,
     warned_degraded: bool,
     last_tick_seq: u64,
+    /// rt-core's speech by its own clock: the newest StimTick's grid time and the last
+    /// silence between two StimTicks, for blaming a driver watchdog trip.
+    ticks: TickGaps,
     events: Vec<HealthEvent>,
+}
+
+/// The StimTick stream by the ticks' own grid times (CLOCK_MONOTONIC, shared by every
+/// process), not by when the supervisor read them: after a stall of the supervisor's own
+/// loop, the ticks from before a silence of rt-core and the driver's trip can be read in
+/// one pass, and the receive times would then show no silence at all.
+#[derive(Debug, Clone, Copy, Default)]
+struct TickGaps {
+    /// Grid time of the newest tick, ns.
+    newest_ns: Option<u64>,
+    /// The last silence longer than [`TickGaps::SILENCE_NS`]: (last tick before it, first
+    /// tick after it), ns.
+    last_gap: Option<(u64, u64)>,
+}
+
+impl TickGaps {
+    /// Two ticks' grid times this far apart are a silence of rt-core: more than two missed
+    /// 1 ms periods, what the driver's StimTick watchdog (3 ticks on the shipped
+    /// configurations) trips on.
+    const SILENCE_NS: u64 = 2_500_000;
+
+    fn on_tick(&mut self, t_ns: u64) {
+        if let Some(prev) = self.newest_ns
+            && t_ns > prev + Self::SILENCE_NS
+        {
+            self.last_gap = Some((prev, t_ns));
+        }
+        self.newest_ns = Some(self.newest_ns.map_or(t_ns, |p| p.max(t_ns)));
+    }
+
+    /// How long rt-core was silent at some time in `[from_ns, to_ns]` (by the ticks' grid
+    /// times), ns, when it was: the newest tick is older than that window's end by more
+    /// than a silence, or the last silence overlaps the window.
+    fn silence_within(&self, from_ns: u64, to_ns: u64) -> Option<u64> {
+        let quiet_now = self
+            .newest_ns
+            .filter(|&t| to_ns > t + Self::SILENCE_NS)
+            .map(|t| to_ns - t);
+        let gap = self
+            .last_gap
+            .filter(|&(start, end)| start <= to_ns && end >= from_ns)
+            .map(|(start, end)| end - start);
+        quiet_now.or(gap)
+    }
 }
 
 fn ms(ns: u64) -> f64 {
@@ -365,6 +412,7 @@ impl HealthMonitor {
             timing: BTreeMap::new(),
             warned_degraded: false,
             last_tick_seq: 0,
+            ticks: TickGaps::default(),
             events: Vec::new(),
         }
     }
@@ -428,6 +476,7 @@ impl HealthMonitor {
             return;
         }
         self.heard(Process::RtCore, now_ns);
+        self.ticks.on_tick(tick.t_ns);
         if self.last_tick_seq != 0 && tick.seq > self.last_tick_seq + 1 {
             let lost = tick.seq - self.last_tick_seq - 1;
             self.raise(
@@ -510,15 +559,16 @@ impl HealthMonitor {
         let prev_rejected = prev.map_or(0, |p| p.pulses_rejected);
         let prev_tx = prev.map_or(0, |p| p.can_tx_errors);
         if s.watchdog_trips > prev_trips {
-            // The driver's watchdog fires when StimTicks stop: blame rt-core when it has
-            // gone quiet itself.
-            let rt = &self.watch[Process::RtCore.index()];
-            let rt_quiet = self.settings.watch_rt_core
-                && rt
-                    .last_ns
-                    .is_some_and(|t| now_ns.saturating_sub(t) > 5_000_000);
-            if rt_quiet {
-                let age = rt.last_ns.map_or(0.0, |t| ms(now_ns - t));
+            // The driver's StimTick watchdog (no tick in time, a tick too old) fires when
+            // rt-core stops: blame rt-core when it had gone quiet itself between the
+            // driver's previous status and this one, judged by the ticks' and the statuses'
+            // own CLOCK_MONOTONIC stamps (not by when this loop read them).
+            let since_ns = prev.map_or(0, |p| p.t_ns);
+            let rt_silence = self.ticks.silence_within(since_ns, s.t_ns).filter(|_| {
+                self.settings.watch_rt_core && DriverStatus::is_tick_loss(s.fault_code)
+            });
+            if let Some(silence_ns) = rt_silence {
+                let age = ms(silence_ns);
                 self.raise(
                     Process::RtCore,
                     Severity::Fault,
@@ -1075,7 +1125,9 @@ mod tests {
         let mut h = HealthMonitor::new(HealthSettings::default());
         live(&mut h, 10 * MS);
         let mut s = status(99);
+        s.t_ns = 40 * MS;
         s.watchdog_trips = 1;
+        s.fault_code = DriverStatus::FAULT_TICK_TIMEOUT;
         s.state = DeviceState::Fault as u8;
         h.on_driver_status(&s, 40 * MS);
         let ev = h.take_events();
@@ -1096,6 +1148,52 @@ mod tests {
         assert_eq!(ev[0].process, Process::SimMuscle);
         assert_eq!(ev[0].message, "sim-muscle: EMCY 0x8130 heartbeat_lost");
         assert_eq!(ev[0].severity, Severity::Fault);
+    }
+
+    /// The supervisor's own loop late (CI: a 2-core host under load): the ticks from
+    /// before rt-core's silence, the ticks after it and the driver's trip are all read in
+    /// one pass at the same receive time. Judged by the messages' own stamps, rt-core is
+    /// still the one that went quiet; a driver that tripped while the ticks kept coming is
+    /// blamed itself.
+    #[test]
+    fn a_watchdog_trip_is_blamed_by_the_messages_stamps_not_by_when_they_were_read() {
+        let trip = |gap_ms: u64, code: u16| {
+            let mut h = HealthMonitor::new(HealthSettings::default());
+            live(&mut h, 10 * MS);
+            let read_at = 600 * MS;
+            // Ticks every 1 ms up to 100 ms, then (gap_ms later) on again to 600 ms.
+            let resumed = 100 + gap_ms;
+            for (seq, k) in (11..=100).chain(resumed..=600).enumerate() {
+                h.on_stim_tick(&tick(seq as u64 + 12, k * MS), read_at);
+            }
+            let mut s = status(99);
+            s.t_ns = 125 * MS;
+            s.watchdog_trips = 1;
+            s.fault_code = code;
+            s.state = DeviceState::Fault as u8;
+            h.on_driver_status(&s, read_at);
+            h.take_events()
+        };
+        let ev = trip(480, DriverStatus::FAULT_STALE_TICK);
+        assert_eq!(ev[0].process, Process::RtCore, "{ev:?}");
+        assert_eq!(
+            ev[0].message,
+            "rt-core: no StimTick for 480 ms (stim-driver's watchdog tripped)"
+        );
+        // No silence of rt-core: the driver itself is the one that stalled.
+        let ev = trip(1, DriverStatus::FAULT_STALE_TICK);
+        assert_eq!(ev[0].process, Process::StimDriver, "{ev:?}");
+        assert!(
+            ev[0]
+                .message
+                .starts_with("stim-driver: watchdog tripped: 0xFF24"),
+            "{}",
+            ev[0].message
+        );
+        // A silent stimulator is the stimulator's fault, whatever rt-core did meanwhile
+        // (a SIGSTOPped sim-muscle was blamed on a 20 ms hiccup of rt-core's ticks).
+        let ev = trip(20, DriverStatus::FAULT_STIMULATOR_SILENT);
+        assert_eq!(ev[0].process, Process::SimMuscle, "{ev:?}");
     }
 
     /// A stopped stimulator (after a disarm) and the safe state the supervisor ordered are

@@ -145,6 +145,12 @@ impl DriverStatus {
             .map(|(_, n)| *n)
     }
 
+    /// True for the driver faults of its StimTick watchdog (no tick in time, a tick too
+    /// old on arrival): rt-core silent, or the driver itself too late to read it.
+    pub fn is_tick_loss(code: u16) -> bool {
+        matches!(code, Self::FAULT_TICK_TIMEOUT | Self::FAULT_STALE_TICK)
+    }
+
     /// True for the driver faults that say the stimulator stopped answering or left
     /// operation (silent, reset, not operational): the stimulator is the cause.
     pub fn is_stimulator_loss(code: u16) -> bool {
