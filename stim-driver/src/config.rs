@@ -16,7 +16,7 @@
 //! [stimulator]                   # the run's limits, sent in CONFIG (stricter than its own)
 //! max_amplitude_ua = 100000      # multiple of 100 uA, <= 150 mA
 //! max_width_us = 500
-//! min_ipi_ms = 2
+//! min_ipi_ms = 1                # on arrival; <= (min_ipi_us - max_pulse_delay_us) / 1000
 //! max_pulses = 100
 //! rate_window_ms = 1000
 //! watchdog_ms = 100              # the stimulator's heartbeat watchdog (>= 2 heartbeats)
@@ -472,6 +472,17 @@ impl DriverConfig {
             i.max_pulse_delay_us,
             ">= 1",
         )?;
+        // The stimulator judges the minimum IPI on the pulses' arrival; two pulses let
+        // through here leave at least min_ipi - max_pulse_delay apart. A stimulator minimum
+        // above that refuses legal pulses that were sent a little late, and its refusal
+        // trips the chain (a CI run of the kill test: 2 ms against 2000 - 500 us).
+        config_file::range(
+            u64::from(self.stimulator.min_ipi_ms) * 1000
+                <= u64::from(i.min_ipi_us).saturating_sub(u64::from(i.max_pulse_delay_us)),
+            "stimulator.min_ipi_ms",
+            self.stimulator.min_ipi_ms,
+            "<= (interlocks.min_ipi_us - interlocks.max_pulse_delay_us) / 1000",
+        )?;
         limits.validate()?;
         Ok(limits)
     }
@@ -735,6 +746,20 @@ prefix = "bench-1"
         assert!(err("[interlocks]\nchannels = []\n").contains("channels"));
         assert!(err("[interlocks]\nchannels = [16]\n").contains("interlocks.channels"));
         assert!(err("[interlocks]\nmax_pulses = 1001\n").contains("max_pulses"));
+        // A stimulator minimum IPI the driver's legal lateness can break (2 ms on arrival
+        // against 2000 us on grid times less 500 us of allowed delay).
+        let e = err("[stimulator]\nmin_ipi_ms = 2\n");
+        assert!(
+            e.contains("stimulator.min_ipi_ms")
+                && e.contains("interlocks.min_ipi_us - interlocks.max_pulse_delay_us"),
+            "{e}"
+        );
+        assert!(
+            DriverConfig::parse(&format!(
+                "{MIN}[stimulator]\nmin_ipi_ms = 2\n[interlocks]\nmin_ipi_us = 2500\n"
+            ))
+            .is_ok()
+        );
         assert!(err("[ipc]\nprefix = \"/x\"\n").contains("ipc.prefix"));
         assert!(err("[telemetry]\nqueue_capacity = 3\n").contains("queue_capacity"));
         assert!(err("[rt]\npriority = 0\n").contains("rt.priority"));

@@ -85,6 +85,9 @@ fn session(can: &CanEnv) {
     // 2. CONFIG: a stricter amplitude ceiling (50 mA) under config id 1.
     let limits = StimLimits {
         max_amplitude_100ua: 500,
+        // The stimulator's ceiling of this session (`--min-ipi-ms 2`): a CONFIG may not be
+        // looser.
+        min_ipi_ms: 2,
         watchdog_ms,
         ..StimLimits::DEFAULT
     };

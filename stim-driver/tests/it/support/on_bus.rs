@@ -286,9 +286,10 @@ impl Timing {
                 watchdog_ticks: 500,
                 stim_watchdog_ms: 3000,
                 arm_ms: 2000,
-                // Below the 20 ms IPI of the trains: after a stall of the guest the driver
-                // refuses a late pulse rather than sending two back to back.
-                max_pulse_delay_us: 10_000,
+                // After a stall of the guest the driver refuses a late pulse rather than
+                // sending two back to back; at most min_ipi (2000) - the stimulator's
+                // min_ipi (1 ms), which the configuration check requires.
+                max_pulse_delay_us: 1000,
                 margin_ms: 100,
             },
             // This 2-core VM stalls a SCHED_FIFO thread for up to ~3 ms now and then
