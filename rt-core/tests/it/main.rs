@@ -22,6 +22,7 @@ mod rt_no_alloc;
 mod rt_process;
 mod rt_realtime;
 mod rt_telemetry;
+mod timing;
 
 /// The allocation tests share process-wide state (the first-allocation trace, the pool's
 /// bitmap): they run one at a time, whatever the harness's thread count.

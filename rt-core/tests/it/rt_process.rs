@@ -398,7 +398,8 @@ fn a_stale_reference_ramps_the_target_to_zero_at_the_configured_rate() {
     let dir = Scratch::new("stale");
     let prefix = prefix("stale");
     let mut config = config(&prefix, 3);
-    config.reference.stale_after_ms = 50;
+    // Each phase (fresh 300 ms, ramp 200 ms, rest) far longer than the host's stalls.
+    config.reference.stale_after_ms = 300;
     config.reference.stale_ramp_per_s = 4.0;
     let path = write_config(&dir, &config);
     let probe = start_probe(&dir, &prefix);
@@ -409,7 +410,7 @@ fn a_stale_reference_ramps_the_target_to_zero_at_the_configured_rate() {
     std::thread::sleep(Duration::from_millis(150));
     let issued = monotonic_ns();
     publisher.send_copy(Reference::new(1, issued, 0.8)).unwrap();
-    std::thread::sleep(Duration::from_millis(500));
+    std::thread::sleep(Duration::from_millis(900));
     rt.signal(Signal::SIGTERM);
     let (status, stderr) = rt.finish(Duration::from_secs(10));
     assert!(status.success(), "{stderr}");
@@ -438,14 +439,20 @@ fn a_stale_reference_ramps_the_target_to_zero_at_the_configured_rate() {
         .copied()
         .filter(|t| t.has(StimTick::FLAG_STALE_REFERENCE))
         .collect();
-    assert!(fresh.len() > 30 && stale.len() > 300);
-    // Fresh: the reference as sent, for its first 50 ms of age.
+    // Every phase is covered, however many ticks the host let through (at a noisy hour
+    // rt-core missed 40 % of its periods): the fresh reference, the ramp, the rest.
+    assert!(!fresh.is_empty(), "no tick with the fresh reference");
+    assert!(
+        stale.iter().any(|t| t.reference > 0.0 && t.reference < 0.8),
+        "no tick on the ramp"
+    );
+    // Fresh: the reference as sent, for its first 300 ms of age.
     for t in &fresh {
         assert_eq!(t.reference, 0.8);
-        assert!(t.t_wake_ns - issued <= 50 * MS);
+        assert!(t.t_wake_ns - issued <= 300 * MS);
     }
     for t in &stale {
-        assert!(t.t_wake_ns - issued > 50 * MS);
+        assert!(t.t_wake_ns - issued > 300 * MS);
     }
     // Stale: closed form r(t) = max(0, 0.8 - 4.0 * (t - t_last_fresh)), t = wake times.
     let t_last_fresh = fresh.last().unwrap().t_wake_ns;
@@ -612,31 +619,77 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
     assert!(stderr.contains("missing.toml"), "{stderr}");
 }
 
-/// Fault injection: slow consumers on rt-core's output services. Subscribers that never
+/// A run of rt-core with slow consumers on its output services: subscribers that never
 /// read StimTick or TimingReport (in this process) and a whole subscriber process stopped
-/// with SIGSTOP must not block the publisher: with iceoryx2's safe overflow the loop keeps
-/// its period, a live subscriber still receives every tick, and SIGTERM ends it cleanly.
-#[test]
-fn slow_and_stopped_consumers_never_block_the_loop() {
-    let dir = Scratch::new("slowconsumer");
-    let stopped_dir = Scratch::new("slowconsumer-stopped");
-    let prefix = prefix("slowconsumer");
-    let path = write_config(&dir, &config(&prefix, 4));
+/// with SIGSTOP. It runs until a live subscriber here has received more ticks than the
+/// stopped one's buffer holds (so the publisher has met a full buffer), then gets SIGTERM.
+pub struct SlowConsumerRun {
+    /// What the live probe (rt-probe) recorded.
+    pub summary: rt_core::rt::probe::ProbeSummary,
+    /// Its ticks.
+    pub ticks: Vec<rt_core::rt::probe::TickRecord>,
+    /// The host's noise over the run, when asked for.
+    pub noise: Option<fes_testkit::noise::HostNoise>,
+}
+
+/// Runs [`SlowConsumerRun`] (`tag` names its scratch and services); `noise`: measure the
+/// host's noise beside it at rt-core's priority.
+pub fn slow_consumer_run(tag: &str, noise: bool) -> SlowConsumerRun {
+    use std::sync::atomic::AtomicU64;
+    let dir = Scratch::new(tag);
+    let stopped_dir = Scratch::new(&format!("{tag}-stopped"));
+    let prefix = prefix(tag);
+    let mut config = config(&prefix, 4);
+    // Measured: rt-core and the noise probe on the same (last) CPU, which each see the
+    // same stalls of the host (a VM's virtual CPUs are stalled one by one).
+    let core = std::thread::available_parallelism().map_or(0, |n| n.get() - 1);
+    if noise {
+        config.rt.core = Some(core);
+    }
+    let priority = config.rt.priority;
+    let path = write_config(&dir, &config);
     let node = create_node("test-slow-consumer").unwrap();
     let _never_read_ticks = port::subscriber::<StimTick>(&node, &prefix).unwrap();
     let _never_read_reports = port::subscriber::<TimingReport>(&node, &prefix).unwrap();
     let stopped = start_probe(&stopped_dir, &prefix);
     stopped.signal(Signal::SIGSTOP);
     let probe = start_probe(&dir, &prefix);
+    // Past the stopped subscriber's full buffer, with room to spare.
+    let enough = StimTick::QOS.subscriber_buffer as u64 + 200;
     let stop = AtomicBool::new(false);
-    std::thread::scope(|s| {
+    let received = AtomicU64::new(0);
+    let mut noise_probe = None;
+    let noise = std::thread::scope(|s| {
         s.spawn(|| feed_references(&prefix, 0.5, &stop));
+        s.spawn(|| {
+            let node = create_node("test-slow-consumer-count").unwrap();
+            let live = port::subscriber::<StimTick>(&node, &prefix).unwrap();
+            while !stop.load(Ordering::Relaxed) {
+                while let Ok(Some(_)) = live.receive() {
+                    received.fetch_add(1, Ordering::Relaxed);
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        });
         let rt = start_rt_core(&path, false);
-        std::thread::sleep(Duration::from_millis(1500));
+        noise_probe = noise.then(|| fes_testkit::noise::NoiseProbe::start_on(priority, Some(core)));
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while received.load(Ordering::Relaxed) < enough {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "rt-core published only {} ticks in 30 s: blocked by a full subscriber?",
+                received.load(Ordering::Relaxed)
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let noise = noise_probe
+            .take()
+            .map(fes_testkit::noise::NoiseProbe::finish);
         rt.signal(Signal::SIGTERM);
         let (status, stderr) = rt.finish(Duration::from_secs(10));
         stop.store(true, Ordering::Relaxed);
         assert!(status.success(), "rt-core: {status}\n{stderr}");
+        noise
     });
     let (status, _) = probe.finish(Duration::from_secs(10));
     assert!(
@@ -645,23 +698,33 @@ fn slow_and_stopped_consumers_never_block_the_loop() {
     );
     stopped.signal(Signal::SIGCONT);
     stopped.signal(Signal::SIGKILL);
-    let summary = read_summary(&dir);
-    let ticks = read_ticks(&dir);
-    assert!(ticks.len() > 500, "only {} ticks in 1.5 s", ticks.len());
+    SlowConsumerRun {
+        summary: read_summary(&dir),
+        ticks: read_ticks(&dir),
+        noise,
+    }
+}
+
+/// Fault injection: slow consumers on rt-core's output services ([`slow_consumer_run`])
+/// must not block the publisher: with iceoryx2's safe overflow the loop runs on past the
+/// stopped subscriber's full buffer, a live subscriber still receives every tick, the loop
+/// allocates nothing, and SIGTERM ends it cleanly. How well it kept its period meanwhile
+/// is a timing check (`timing::`).
+#[test]
+fn slow_and_stopped_consumers_never_block_the_loop() {
+    let run = slow_consumer_run("slowconsumer", false);
+    let buffer = StimTick::QOS.subscriber_buffer;
+    assert!(
+        run.ticks.len() > buffer + 100,
+        "only {} ticks: the stopped subscriber's buffer ({buffer}) was not passed",
+        run.ticks.len()
+    );
     assert_eq!(
-        (summary.first_seq, summary.lost, summary.invalid),
+        (run.summary.first_seq, run.summary.lost, run.summary.invalid),
         (1, 0, 0)
     );
-    let report = summary.rt_core.expect("timing report");
+    let report = run.summary.rt_core.expect("timing report");
     assert_eq!(report.hot_path_allocations, 0);
-    // The loop kept its grid: no more missed periods than a loaded CI machine causes
-    // anyway (a blocked publisher would miss them all).
-    assert!(
-        report.misses * 10 < report.ticks,
-        "{} missed of {}",
-        report.misses,
-        report.ticks
-    );
 }
 
 /// Fault injection: iceoryx2 resources left stale by a SIGKILLed rt-core. A new rt-core

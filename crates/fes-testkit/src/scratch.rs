@@ -1,0 +1,97 @@
+//! Scratch directories.
+
+use std::path::{Path, PathBuf};
+
+/// A fresh, empty directory for one test, made with `tempfile`: removed on drop when the
+/// test passed; kept, and its path printed, when the test is panicking or `FES_TEST_KEEP`
+/// is set in the environment.
+#[derive(Debug)]
+pub struct Scratch {
+    dir: Option<tempfile::TempDir>,
+    path: PathBuf,
+}
+
+impl Scratch {
+    /// A new directory `fes-<tag>-XXXXXX` under the system's temporary directory.
+    ///
+    /// # Panics
+    /// When the directory cannot be made (a test cannot go on without it).
+    pub fn new(tag: &str) -> Self {
+        Self::new_in(&std::env::temp_dir(), tag)
+    }
+
+    /// A new directory `fes-<tag>-XXXXXX` under `base` (created if missing): tests that
+    /// run a User-Mode Linux guest use the target directory, since the guest has its own
+    /// `/tmp`.
+    ///
+    /// # Panics
+    /// When the directory cannot be made.
+    pub fn new_in(base: &Path, tag: &str) -> Self {
+        if let Err(e) = std::fs::create_dir_all(base) {
+            panic!("scratch base {}: {e}", base.display());
+        }
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("fes-{tag}-"))
+            .tempdir_in(base)
+            .unwrap_or_else(|e| panic!("scratch directory in {}: {e}", base.display()));
+        let path = dir.path().to_path_buf();
+        Self {
+            dir: Some(dir),
+            path,
+        }
+    }
+
+    /// The directory.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// `name` inside the directory.
+    pub fn join(&self, name: impl AsRef<Path>) -> PathBuf {
+        self.path.join(name)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let keep = std::thread::panicking() || std::env::var_os("FES_TEST_KEEP").is_some();
+        if keep && let Some(dir) = self.dir.take() {
+            eprintln!("kept scratch directory {}", dir.keep().display());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn removed_after_a_passing_test_and_unique() {
+        let a = Scratch::new("unit");
+        let b = Scratch::new("unit");
+        assert_ne!(a.path(), b.path());
+        assert!(a.path().is_dir());
+        std::fs::write(a.join("f"), b"x").unwrap_or_else(|e| panic!("{e}"));
+        let p = a.path().to_path_buf();
+        drop(a);
+        assert!(!p.exists());
+    }
+
+    #[test]
+    fn kept_when_the_test_panics() {
+        let path = std::thread::spawn(|| {
+            let s = Scratch::new("unit-panic");
+            let p = s.path().to_path_buf();
+            std::panic::panic_any(p);
+        })
+        .join()
+        .err()
+        .and_then(|e| e.downcast::<PathBuf>().ok())
+        .map(|p| *p);
+        let Some(path) = path else {
+            panic!("the thread did not panic with its path")
+        };
+        assert!(path.is_dir(), "{} was removed", path.display());
+        let _ = std::fs::remove_dir_all(&path);
+    }
+}
