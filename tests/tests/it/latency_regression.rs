@@ -366,10 +366,12 @@ fn short_run_passes_and_a_slowed_tick_is_caught() {
         // each round (its clock runs from the spawn); cyclictest's count nearly exact.
         let ticks = c["ticks"].as_u64().expect("ticks");
         assert!((2500..=5600).contains(&ticks), "{condition}: {ticks} ticks");
-        // cyclictest runs 1 s per round: a host stall costs it the periods it spans (at a
-        // noisy hour of the CI VM, 101 samples at or above one period, it counted 4848).
+        // cyclictest runs 1 s per round: a host stall costs it the periods it spans. How
+        // many is the host's (a quiet hour: 4848; 2026-12-02 at a noisy one: 3901, a
+        // second of stalls in five); the bounds check the parse and the run's length,
+        // as for rt-core's ticks above.
         let samples = c["cyclictest_samples"].as_u64().expect("samples");
-        assert!((4000..=5000).contains(&samples), "{condition}: {samples}");
+        assert!((2500..=5000).contains(&samples), "{condition}: {samples}");
         for key in ["wake_us", "compute_us", "ipc_us", "cyclictest_us"] {
             for p in ["p50", "p99", "p999", "max"] {
                 assert!(

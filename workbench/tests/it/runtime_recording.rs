@@ -364,7 +364,7 @@ fn kill_one(
         // the driver refused 6 of 14 as late, rightly).
         let applied = ticks.iter().filter(|t| t.0 < killed_ns && t.2).count();
         let decided = recordings.last().map_or(0, |run| {
-            raw_ticks(run)
+            stack_support::raw_ticks(run)
                 .iter()
                 .filter(|t| t.t_ns < killed_ns && t.pulse)
                 .count()
@@ -424,42 +424,11 @@ fn kill_one(
     Ok(())
 }
 
-/// One row of a recording's `ticks.csv` (the raw StimTick stream).
-struct RawTick {
-    seq: u64,
-    t_ns: u64,
-    pulse: bool,
-}
-
-/// The recording `run`'s `ticks.csv`.
-fn raw_ticks(run: &Path) -> Vec<RawTick> {
-    let text = std::fs::read_to_string(run.join("ticks.csv")).unwrap_or_default();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .unwrap_or_else(|| panic!("ticks.csv has no column {name}: {header:?}"))
-    };
-    let (seq, t_ns, pulse) = (col("seq"), col("t_ns"), col("pulse"));
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            RawTick {
-                seq: f[seq].parse().expect("seq"),
-                t_ns: f[t_ns].parse().expect("t_ns"),
-                pulse: f[pulse] != "0",
-            }
-        })
-        .collect()
-}
-
 /// Checks that every sample of every record of the recording `run`'s data set is the tick
 /// its record names (`... (tick N)`, then N + 1, ...): its pulse is that tick's pulse in
 /// `ticks.csv`, the raw stream (as far as it was flushed). Returns the number of samples.
 fn records_match_the_ticks(run: &Path, ds: &DataSet) -> Result<usize, String> {
-    let raw = raw_ticks(run);
+    let raw = stack_support::raw_ticks(run);
     let pulse_of: std::collections::HashMap<u64, bool> =
         raw.iter().map(|t| (t.seq, t.pulse)).collect();
     // A killed supervisor leaves each file at its last flush: ticks past the raw stream's

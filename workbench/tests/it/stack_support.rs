@@ -80,3 +80,37 @@ pub fn driver_trips(dir: &Path) -> String {
         .collect::<Vec<_>>()
         .join(" | ")
 }
+
+/// One row of a recording's `ticks.csv` (the raw StimTick stream).
+pub struct RawTick {
+    /// StimTick sequence number.
+    pub seq: u64,
+    /// Its grid time, ns.
+    pub t_ns: u64,
+    /// It fired a pulse.
+    pub pulse: bool,
+}
+
+/// The recording `run`'s `ticks.csv`.
+pub fn raw_ticks(run: &Path) -> Vec<RawTick> {
+    let text = std::fs::read_to_string(run.join("ticks.csv")).unwrap_or_default();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("ticks.csv has no column {name}: {header:?}"))
+    };
+    let (seq, t_ns, pulse) = (col("seq"), col("t_ns"), col("pulse"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            RawTick {
+                seq: f[seq].parse().expect("seq"),
+                t_ns: f[t_ns].parse().expect("t_ns"),
+                pulse: f[pulse] != "0",
+            }
+        })
+        .collect()
+}

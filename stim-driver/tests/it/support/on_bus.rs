@@ -292,16 +292,18 @@ impl Timing {
                 max_pulse_delay_us: 1000,
                 margin_ms: 100,
             },
-            // This 2-core VM stalls a SCHED_FIFO thread for up to ~3 ms now and then
-            // (cyclictest max 2.8 ms; docs/latency.md): a 3-tick watchdog voided every 10 s
-            // run of one CI dry run next to a build, so the host bus uses 10 ticks (the
-            // SIGKILL bound scales with it).
+            // This 2-core VM stalls a SCHED_FIFO thread for up to ~3 ms at a quiet hour
+            // (cyclictest max 2.8 ms; docs/latency.md) and for 20-35 ms every few seconds
+            // at a noisy one (2026-12-02: 10-24 ms old ticks voided all three 10 s runs of
+            // a 10-tick watchdog). These scenarios check what the driver does, so the
+            // host bus uses watchdogs far above that noise (the stall and the SIGKILL
+            // bound scale with them); the native bus keeps the rig's 3 ticks.
             Backend::HostBus => Self {
-                watchdog_ticks: 10,
-                stim_watchdog_ms: 100,
-                arm_ms: 200,
+                watchdog_ticks: 100,
+                stim_watchdog_ms: 300,
+                arm_ms: 500,
                 max_pulse_delay_us: 500,
-                margin_ms: 10,
+                margin_ms: 100,
             },
             _ => Self {
                 watchdog_ticks: 3,
