@@ -1,12 +1,22 @@
-//! The model file: pretty JSON, schema `fes-lmn/1` (format in docs/model.md).
+//! The model file: pretty JSON, schema `fes-lmn/1` (format in docs/model.md, section "Model
+//! file").
 //!
-//! Loading validates everything and rejects a bad file with an error that names the field
-//! (`units[2].eigenvalues[1]: ...`); a JSON syntax error quotes the offending line (JSON has
-//! no NaN or Infinity, so such values surface there). `load` also requires every local
-//! model to be stable; `load_allow_unstable` skips only that requirement and returns the
-//! per-unit stability as data (analysis and `modify --stabilise` must open an unstable model
-//! to repair it). Reading and writing files (`load`, `load_allow_unstable`, `save`) needs the
-//! `std` feature; [`from_json_str`] and [`to_json_string`] work on text in every build.
+//! Reading goes in three steps. The text is parsed as JSON first: a syntax error quotes the
+//! offending line (JSON has no NaN or Infinity, so such values surface there). The value is
+//! then deserialised into private serde structs with `deny_unknown_fields`, one per part of
+//! the format (`ModelDoc`, `SchedulingDoc`, one unit struct per local-model form): a value of
+//! the wrong type, a missing or an unknown field is reported with its path
+//! (`units[2].b: expected 2 numbers, found 1`; a missing field with the path of its object
+//! and its name, ``units[2]: missing field `c` ``). Last, the structs are converted into an
+//! [`Lmn`] and [`Lmn::validate`] checks every value, naming the field
+//! (`units[2].eigenvalues[1]: ...`). The writer fills the same structs, so the two cannot
+//! drift.
+//!
+//! `load` also requires every local model to be stable; `load_allow_unstable` skips only that
+//! requirement and returns the per-unit stability as data (analysis and `modify --stabilise`
+//! must open an unstable model to repair it). Reading and writing files (`load`,
+//! `load_allow_unstable`, `save`) needs the `std` feature; [`from_json_str`] and
+//! [`to_json_string`] work on text in every build.
 
 use super::arx::{ArxUnit, MAX_ARX_ORDER};
 #[cfg(feature = "std")]
@@ -18,10 +28,13 @@ use super::validity::ValidityFunctions;
 use alloc::{
     format,
     string::{String, ToString},
-    vec,
     vec::Vec,
 };
-use serde_json::{Map, Value, json};
+use core::fmt;
+use core::marker::PhantomData;
+use serde::de::{self, Deserializer, IgnoredAny, SeqAccess, Unexpected, Visitor};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
 #[cfg(feature = "std")]
 use std::path::{Path, PathBuf};
 
@@ -102,103 +115,70 @@ fn read(path: &Path) -> Result<String, FileError> {
 /// The file text of a model (validated first, stability not required).
 pub fn to_json_string(lmn: &Lmn) -> Result<String, FileError> {
     lmn.validate(Stability::Report)?;
-    let sched = match lmn.scheduling {
-        SchedulingSpec::Input {
-            gain,
-            natural_frequency_rad_s,
-            damping,
-        } => json!({
-            "kind": "input", "gain": gain,
-            "natural_frequency_rad_s": natural_frequency_rad_s, "damping": damping
-        }),
-        SchedulingSpec::Output => json!({ "kind": "output" }),
-    };
     let zo = lmn.zero_offsets;
-    let with_offsets = |mut o: Map<String, Value>, dx: &[f64; 2], dy: f64| {
-        if !zo {
-            o.insert("dx".into(), json!(dx));
-            o.insert("dy".into(), json!(dy));
-        }
-        Value::Object(o)
-    };
-    let obj = |v: Value| match v {
-        Value::Object(m) => m,
-        _ => Map::new(),
-    };
-    let (units, reference_unit): (Vec<Value>, Option<usize>) = match &lmn.local {
-        LocalModelSet::SsDirect(u) => (
-            u.iter()
-                .map(|m| with_offsets(obj(json!({"a": m.a, "b": m.b, "c": m.c})), &m.dx, m.dy))
-                .collect(),
-            None,
-        ),
-        LocalModelSet::SsEigLocal(u) => (
-            u.iter()
-                .map(|m| {
-                    with_offsets(
-                        obj(json!({"eigenvalues": m.eigenvalues,
-                            "eigenvector_angles_rad": m.eigenvector_angles, "b": m.b, "c": m.c})),
-                        &m.dx,
-                        m.dy,
-                    )
-                })
-                .collect(),
-            None,
-        ),
+    let value = match &lmn.local {
+        LocalModelSet::SsDirect(u) => doc(lmn, u.iter().map(|u| SsDirectDoc::new(u, zo)), None),
+        LocalModelSet::SsEigLocal(u) => doc(lmn, u.iter().map(|u| EigLocalDoc::new(u, zo)), None),
         LocalModelSet::SsEigCommon {
             units,
             reference_unit,
-        } => (
-            units
-                .iter()
-                .map(|m| {
-                    with_offsets(
-                        obj(json!({"eigenvalues": m.eigenvalues, "b": m.b, "c": m.c})),
-                        &m.dx,
-                        m.dy,
-                    )
-                })
-                .collect(),
-            Some(*reference_unit),
-        ),
-        LocalModelSet::ArxShift { order, units } | LocalModelSet::ArxDelta { order, units } => (
-            units
-                .iter()
-                .map(|m| {
-                    let mut o = obj(json!({"a": m.a[..*order], "b": m.b[..*order]}));
-                    if !zo {
-                        o.insert("d".into(), json!(m.d));
-                    }
-                    Value::Object(o)
-                })
-                .collect(),
-            None,
-        ),
-    };
-    let mut root = Map::new();
-    root.insert("schema".into(), json!(SCHEMA));
-    root.insert("ts_s".into(), json!(lmn.ts));
-    root.insert("delay_samples".into(), json!(lmn.delay));
-    root.insert("scheduling".into(), sched);
-    root.insert("order".into(), json!(lmn.validity.order()));
-    root.insert("knots".into(), json!(lmn.validity.knots()));
-    root.insert("structure".into(), json!(lmn.structure().name()));
-    root.insert("zero_offsets".into(), json!(zo));
-    if let Some(r) = reference_unit {
-        root.insert("reference_unit".into(), json!(r));
-    }
-    root.insert("force_scale_n".into(), json!(lmn.force_scale_n));
-    root.insert("units".into(), Value::Array(units));
-    root.insert(
-        "provenance".into(),
-        serde_json::to_value(&lmn.provenance).map_err(|e| bad("provenance", e.to_string()))?,
-    );
-    serde_json::to_string_pretty(&Value::Object(root)).map_err(|e| bad("(model)", e.to_string()))
+        } => {
+            let units = units.iter().map(|u| EigCommonDoc::new(u, zo));
+            doc(lmn, units, Some(*reference_unit))
+        }
+        LocalModelSet::ArxShift { order, units } | LocalModelSet::ArxDelta { order, units } => {
+            doc(lmn, units.iter().map(|u| ArxDoc::new(u, *order, zo)), None)
+        }
+    }?;
+    serde_json::to_string_pretty(&value).map_err(|e| bad("(model)", e.to_string()))
+}
+
+/// The document of `lmn` with its units already converted, as a JSON value: written from
+/// the value, every object's keys come out in sorted order (serde_json's map is sorted), as
+/// model files have always been written.
+fn doc<U: Serialize>(
+    lmn: &Lmn,
+    units: impl Iterator<Item = U>,
+    reference_unit: Option<usize>,
+) -> Result<Value, FileError> {
+    serde_json::to_value(ModelDoc::new(lmn, units, reference_unit))
+        .map_err(|e| bad("(model)", e.to_string()))
 }
 
 /// Parses and validates a model file's text.
 pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError> {
-    let root: Value = serde_json::from_str(text).map_err(|e| {
+    let root = parse(text)?;
+    let head: Head = typed(&root)?;
+    if head.schema != SCHEMA {
+        return Err(bad(
+            "schema",
+            format!(
+                "unsupported schema {:?} (this build reads {SCHEMA:?})",
+                head.schema
+            ),
+        ));
+    }
+    let structure: Structure = head
+        .structure
+        .parse()
+        .map_err(|e: String| bad("structure", e))?;
+    let lmn = match structure {
+        Structure::SsDirect => typed::<ModelDoc<SsDirectDoc>>(&root)?.into_lmn(),
+        Structure::SsEigLocal => typed::<ModelDoc<EigLocalDoc>>(&root)?.into_lmn(),
+        Structure::SsEigCommon => typed::<ModelDoc<EigCommonDoc>>(&root)?.into_lmn(),
+        Structure::ArxShift | Structure::ArxDelta => typed::<ModelDoc<ArxDoc>>(&root)?.into_lmn(),
+    }?;
+    lmn.validate(stability)?;
+    if stability == Stability::Report {
+        // `Require` checks it inside `validate`; a file opened for repair must still run.
+        lmn.check_rest_state()?;
+    }
+    Ok(lmn)
+}
+
+/// The JSON value of the text, or the syntax error with the offending line.
+fn parse(text: &str) -> Result<Value, FileError> {
+    serde_json::from_str(text).map_err(|e| {
         let line = e.line();
         FileError::Syntax {
             line,
@@ -211,377 +191,641 @@ pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError>
                 .trim()
                 .to_string(),
         }
-    })?;
-    let root = Obj::new(&root, "")?;
-    let schema = root.str("schema")?;
-    if schema != SCHEMA {
-        return Err(bad(
-            "schema",
-            format!("unsupported schema {schema:?} (this build reads {SCHEMA:?})"),
-        ));
-    }
-    let ts = root.num("ts_s")?;
-    let delay = root.usize("delay_samples")?;
-    let scheduling = {
-        let s = root.obj("scheduling")?;
-        match s.str("kind")? {
-            "input" => {
-                s.only(&["kind", "gain", "natural_frequency_rad_s", "damping"])?;
-                SchedulingSpec::Input {
-                    gain: s.num("gain")?,
-                    natural_frequency_rad_s: s.num("natural_frequency_rad_s")?,
-                    damping: s.num("damping")?,
-                }
-            }
-            "output" => {
-                s.only(&["kind"])?;
-                SchedulingSpec::Output
-            }
-            other => {
-                return Err(bad(
-                    "scheduling.kind",
-                    format!("unknown kind {other:?} (expected \"input\" or \"output\")"),
-                ));
-            }
+    })
+}
+
+/// Deserialises `T` from the parsed file; an error names the path of the offending value
+/// (`units[2].b`; `(file)` for the top level).
+fn typed<'a, T: Deserialize<'a>>(root: &'a Value) -> Result<T, FileError> {
+    serde_path_to_error::deserialize(root).map_err(|e| {
+        let field = if e.path().iter().next().is_none() {
+            "(file)".to_string()
+        } else {
+            e.path().to_string()
+        };
+        bad(field, e.into_inner().to_string())
+    })
+}
+
+/// The two fields read before the rest: `schema`, checked first so that a file of another
+/// version is reported as such, and `structure`, which selects the unit type of
+/// [`ModelDoc`]. The only struct that ignores other fields: [`ModelDoc`] reads them all.
+#[derive(Deserialize)]
+#[serde(expecting = "a model file (a JSON object)")]
+struct Head {
+    schema: String,
+    structure: String,
+}
+
+/// The whole file (docs/model.md, "Model file"); `U` is the unit of the local-model form
+/// that `structure` names.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields, expecting = "a model file (a JSON object)")]
+struct ModelDoc<U> {
+    schema: String,
+    ts_s: Num,
+    delay_samples: Count,
+    scheduling: SchedulingDoc,
+    order: Count,
+    knots: Vec<Num>,
+    structure: Structure,
+    zero_offsets: bool,
+    /// `ss-eig-common` only: the unit whose b is fixed at (1, 1).
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reference_unit: Option<Count>,
+    force_scale_n: Num,
+    units: Vec<U>,
+    /// Absent or null reads as empty; always written.
+    #[serde(default)]
+    provenance: Option<Provenance>,
+}
+
+impl<U> ModelDoc<U> {
+    /// The document of `lmn`, whose units are already converted.
+    fn new(lmn: &Lmn, units: impl Iterator<Item = U>, reference_unit: Option<usize>) -> Self {
+        Self {
+            schema: SCHEMA.to_string(),
+            ts_s: Num(lmn.ts),
+            delay_samples: Count(lmn.delay),
+            scheduling: lmn.scheduling.into(),
+            order: Count(lmn.validity.order()),
+            knots: lmn.validity.knots().iter().map(|k| Num(*k)).collect(),
+            structure: lmn.structure(),
+            zero_offsets: lmn.zero_offsets,
+            reference_unit: reference_unit.map(Count),
+            force_scale_n: Num(lmn.force_scale_n),
+            units: units.collect(),
+            provenance: Some(lmn.provenance.clone()),
         }
-    };
-    let order = root.usize("order")?;
-    let knots = root.nums("knots")?;
-    let structure: Structure = root
-        .str("structure")?
-        .parse()
-        .map_err(|e: String| bad("structure", e))?;
-    let zero_offsets = root.bool("zero_offsets")?;
-    let force_scale_n = root.num("force_scale_n")?;
-    let units = root.arr("units")?;
-    if knots.len() != units.len() + order {
+    }
+
+    /// The model (not yet validated): the common parts here, the units by their form.
+    fn into_lmn(self) -> Result<Lmn, FileError>
+    where
+        U: UnitDoc,
+    {
+        let validity = validity(&self.knots, self.order.0, self.units.len())?;
+        if self.reference_unit.is_some() && self.structure != Structure::SsEigCommon {
+            return Err(bad(
+                "reference_unit",
+                format!(
+                    "unknown field for structure {} (only ss-eig-common has a reference unit)",
+                    self.structure
+                ),
+            ));
+        }
+        let scheduling = self.scheduling.into_spec()?;
+        let local = U::local(
+            self.units,
+            self.structure,
+            self.zero_offsets,
+            self.reference_unit.map(|r| r.0),
+        )?;
+        Ok(Lmn {
+            ts: self.ts_s.0,
+            delay: self.delay_samples.0,
+            scheduling,
+            validity,
+            local,
+            zero_offsets: self.zero_offsets,
+            force_scale_n: self.force_scale_n.0,
+            provenance: self.provenance.unwrap_or_default(),
+        })
+    }
+}
+
+/// The validity functions of `knots` and `order` for `units` units (the count must be
+/// units + order; [`ValidityFunctions::from_knots`] checks the rest).
+fn validity(
+    knots: &[Num],
+    order: usize,
+    units: usize,
+) -> Result<ValidityFunctions<f64>, FileError> {
+    if units.checked_add(order) != Some(knots.len()) {
         return Err(bad(
             "knots",
             format!(
-                "{} knots given for {} units of order {order}: the knot count must be units + order = {}",
+                "{} knots given for {units} units of order {order}: the knot count must be units + order = {}",
                 knots.len(),
-                units.len(),
-                units.len() + order
+                units.saturating_add(order)
             ),
         ));
     }
-    let validity =
-        ValidityFunctions::from_knots(&knots, order).map_err(|e| bad("knots", e.to_string()))?;
-    let mut allowed_root = vec![
-        "schema",
-        "ts_s",
-        "delay_samples",
-        "scheduling",
-        "order",
-        "knots",
-        "structure",
-        "zero_offsets",
-        "force_scale_n",
-        "units",
-        "provenance",
-    ];
-    if structure == Structure::SsEigCommon {
-        allowed_root.push("reference_unit");
-    }
-    root.only(&allowed_root)?;
-    let unit_objs: Vec<Obj> = units
-        .iter()
-        .enumerate()
-        .map(|(i, u)| Obj::new(u, &format!("units[{i}]")))
-        .collect::<Result<_, _>>()?;
-    let offsets = |u: &Obj| -> Result<([f64; 2], f64), FileError> {
-        if zero_offsets && !u.has("dx") && !u.has("dy") {
-            Ok(([0.0; 2], 0.0))
-        } else {
-            Ok((u.vec2("dx")?, u.num("dy")?))
+    let knots: Vec<f64> = knots.iter().map(|k| k.0).collect();
+    ValidityFunctions::from_knots(&knots, order).map_err(|e| bad("knots", e.to_string()))
+}
+
+/// `scheduling`: `kind` selects the form, whose numbers are the other fields. A struct with
+/// optional fields rather than a serde enum tagged by `kind`: serde reads a tagged enum from a
+/// buffered copy, so an error inside would name only `scheduling`, not the field.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SchedulingDoc {
+    kind: SchedulingKind,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gain: Option<Num>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    natural_frequency_rad_s: Option<Num>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    damping: Option<Num>,
+}
+
+/// `scheduling.kind`.
+#[derive(Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum SchedulingKind {
+    /// Input scheduling: `gain`, `natural_frequency_rad_s` and `damping` are required.
+    Input,
+    /// Output scheduling: no other field.
+    Output,
+}
+
+impl From<SchedulingSpec> for SchedulingDoc {
+    fn from(s: SchedulingSpec) -> Self {
+        match s {
+            SchedulingSpec::Input {
+                gain,
+                natural_frequency_rad_s,
+                damping,
+            } => Self {
+                kind: SchedulingKind::Input,
+                gain: Some(Num(gain)),
+                natural_frequency_rad_s: Some(Num(natural_frequency_rad_s)),
+                damping: Some(Num(damping)),
+            },
+            SchedulingSpec::Output => Self {
+                kind: SchedulingKind::Output,
+                gain: None,
+                natural_frequency_rad_s: None,
+                damping: None,
+            },
         }
-    };
-    let ss_keys = |extra: &[&'static str]| -> Vec<&'static str> {
-        let mut k = vec!["b", "c", "dx", "dy"];
-        k.extend_from_slice(extra);
-        k
-    };
-    let local = match structure {
-        Structure::SsDirect => LocalModelSet::SsDirect(
-            unit_objs
-                .iter()
-                .map(|u| {
-                    u.only(&ss_keys(&["a"]))?;
-                    let rows = u.arr("a")?;
-                    if rows.len() != 2 {
-                        return Err(bad(
-                            u.path("a"),
-                            format!("expected 2 rows, found {}", rows.len()),
-                        ));
-                    }
-                    let r0 = vec_n(&rows[0], &format!("{}[0]", u.path("a")), 2)?;
-                    let r1 = vec_n(&rows[1], &format!("{}[1]", u.path("a")), 2)?;
-                    let (dx, dy) = offsets(u)?;
-                    Ok(SsLocalModel {
-                        a: [[r0[0], r0[1]], [r1[0], r1[1]]],
-                        b: u.vec2("b")?,
-                        c: u.vec2("c")?,
-                        dx,
-                        dy,
-                    })
-                })
-                .collect::<Result<_, FileError>>()?,
-        ),
-        Structure::SsEigLocal => LocalModelSet::SsEigLocal(
-            unit_objs
-                .iter()
-                .map(|u| {
-                    u.only(&ss_keys(&["eigenvalues", "eigenvector_angles_rad"]))?;
-                    let (dx, dy) = offsets(u)?;
-                    Ok(EigLocalUnit {
-                        eigenvalues: u.vec2("eigenvalues")?,
-                        eigenvector_angles: u.vec2("eigenvector_angles_rad")?,
-                        b: u.vec2("b")?,
-                        c: u.vec2("c")?,
-                        dx,
-                        dy,
-                    })
-                })
-                .collect::<Result<_, FileError>>()?,
-        ),
-        Structure::SsEigCommon => LocalModelSet::SsEigCommon {
-            units: unit_objs
-                .iter()
-                .map(|u| {
-                    u.only(&ss_keys(&["eigenvalues"]))?;
-                    let (dx, dy) = offsets(u)?;
-                    Ok(EigCommonUnit {
-                        eigenvalues: u.vec2("eigenvalues")?,
-                        b: u.vec2("b")?,
-                        c: u.vec2("c")?,
-                        dx,
-                        dy,
-                    })
-                })
-                .collect::<Result<_, FileError>>()?,
-            reference_unit: root.usize("reference_unit")?,
-        },
-        Structure::ArxShift | Structure::ArxDelta => {
-            let first = unit_objs.first().ok_or_else(|| bad("units", "no units"))?;
-            let n = first.arr("a")?.len();
-            if !(1..=MAX_ARX_ORDER).contains(&n) {
+    }
+}
+
+impl SchedulingDoc {
+    /// The specification: the fields of the kind present, no other.
+    fn into_spec(self) -> Result<SchedulingSpec, FileError> {
+        let fields = [
+            ("gain", self.gain),
+            ("natural_frequency_rad_s", self.natural_frequency_rad_s),
+            ("damping", self.damping),
+        ];
+        if self.kind == SchedulingKind::Output {
+            return match fields.iter().find(|(_, v)| v.is_some()) {
+                Some((name, _)) => Err(bad(
+                    format!("scheduling.{name}"),
+                    "unknown field for kind \"output\" (it has no other field)",
+                )),
+                None => Ok(SchedulingSpec::Output),
+            };
+        }
+        let [gain, natural_frequency_rad_s, damping] = fields.map(|(name, v)| {
+            v.map(|v| v.0)
+                .ok_or_else(|| bad("scheduling", format!("missing field `{name}`")))
+        });
+        Ok(SchedulingSpec::Input {
+            gain: gain?,
+            natural_frequency_rad_s: natural_frequency_rad_s?,
+            damping: damping?,
+        })
+    }
+}
+
+/// The unit of a local-model form as stored, and how a file's units become the model's.
+trait UnitDoc: Sized {
+    /// The local models of `units` (`structure` tells the two ARX forms apart).
+    fn local(
+        units: Vec<Self>,
+        structure: Structure,
+        zero_offsets: bool,
+        reference_unit: Option<usize>,
+    ) -> Result<LocalModelSet, FileError>;
+}
+
+/// An `ss-direct` unit.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SsDirectDoc {
+    a: Pair<Pair<Num>>,
+    b: Pair<Num>,
+    c: Pair<Num>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dx: Option<Pair<Num>>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dy: Option<Num>,
+}
+
+impl SsDirectDoc {
+    fn new(m: &SsLocalModel<f64>, zero_offsets: bool) -> Self {
+        let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
+        Self {
+            a: Pair(m.a.map(Pair::of)),
+            b: Pair::of(m.b),
+            c: Pair::of(m.c),
+            dx,
+            dy,
+        }
+    }
+
+    fn into_model(self, i: usize, zero_offsets: bool) -> Result<SsLocalModel<f64>, FileError> {
+        let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
+        Ok(SsLocalModel {
+            a: self.a.0.map(Pair::get),
+            b: self.b.get(),
+            c: self.c.get(),
+            dx,
+            dy,
+        })
+    }
+}
+
+impl UnitDoc for SsDirectDoc {
+    fn local(
+        units: Vec<Self>,
+        _: Structure,
+        zero_offsets: bool,
+        _: Option<usize>,
+    ) -> Result<LocalModelSet, FileError> {
+        let units = each(units, |i, u| u.into_model(i, zero_offsets))?;
+        Ok(LocalModelSet::SsDirect(units))
+    }
+}
+
+/// An `ss-eig-local` unit.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EigLocalDoc {
+    eigenvalues: Pair<Num>,
+    eigenvector_angles_rad: Pair<Num>,
+    b: Pair<Num>,
+    c: Pair<Num>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dx: Option<Pair<Num>>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dy: Option<Num>,
+}
+
+impl EigLocalDoc {
+    fn new(m: &EigLocalUnit<f64>, zero_offsets: bool) -> Self {
+        let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
+        Self {
+            eigenvalues: Pair::of(m.eigenvalues),
+            eigenvector_angles_rad: Pair::of(m.eigenvector_angles),
+            b: Pair::of(m.b),
+            c: Pair::of(m.c),
+            dx,
+            dy,
+        }
+    }
+
+    fn into_unit(self, i: usize, zero_offsets: bool) -> Result<EigLocalUnit<f64>, FileError> {
+        let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
+        Ok(EigLocalUnit {
+            eigenvalues: self.eigenvalues.get(),
+            eigenvector_angles: self.eigenvector_angles_rad.get(),
+            b: self.b.get(),
+            c: self.c.get(),
+            dx,
+            dy,
+        })
+    }
+}
+
+impl UnitDoc for EigLocalDoc {
+    fn local(
+        units: Vec<Self>,
+        _: Structure,
+        zero_offsets: bool,
+        _: Option<usize>,
+    ) -> Result<LocalModelSet, FileError> {
+        let units = each(units, |i, u| u.into_unit(i, zero_offsets))?;
+        Ok(LocalModelSet::SsEigLocal(units))
+    }
+}
+
+/// An `ss-eig-common` unit (modal coordinates).
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EigCommonDoc {
+    eigenvalues: Pair<Num>,
+    b: Pair<Num>,
+    c: Pair<Num>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dx: Option<Pair<Num>>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dy: Option<Num>,
+}
+
+impl EigCommonDoc {
+    fn new(m: &EigCommonUnit<f64>, zero_offsets: bool) -> Self {
+        let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
+        Self {
+            eigenvalues: Pair::of(m.eigenvalues),
+            b: Pair::of(m.b),
+            c: Pair::of(m.c),
+            dx,
+            dy,
+        }
+    }
+
+    fn into_unit(self, i: usize, zero_offsets: bool) -> Result<EigCommonUnit<f64>, FileError> {
+        let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
+        Ok(EigCommonUnit {
+            eigenvalues: self.eigenvalues.get(),
+            b: self.b.get(),
+            c: self.c.get(),
+            dx,
+            dy,
+        })
+    }
+}
+
+impl UnitDoc for EigCommonDoc {
+    /// The units with their `reference_unit` (required for this form).
+    fn local(
+        units: Vec<Self>,
+        _: Structure,
+        zero_offsets: bool,
+        reference_unit: Option<usize>,
+    ) -> Result<LocalModelSet, FileError> {
+        let reference_unit =
+            reference_unit.ok_or_else(|| bad("(file)", "missing field `reference_unit`"))?;
+        let units = each(units, |i, u| u.into_unit(i, zero_offsets))?;
+        Ok(LocalModelSet::SsEigCommon {
+            units,
+            reference_unit,
+        })
+    }
+}
+
+/// An `arx-shift` or `arx-delta` unit: `a` and `b` have n entries each (the order).
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ArxDoc {
+    a: Vec<Num>,
+    b: Vec<Num>,
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    d: Option<Num>,
+}
+
+impl ArxDoc {
+    fn new(m: &ArxUnit<f64>, order: usize, zero_offsets: bool) -> Self {
+        let first = |x: &[f64]| x.iter().take(order).map(|v| Num(*v)).collect();
+        Self {
+            a: first(&m.a),
+            b: first(&m.b),
+            d: (!zero_offsets).then_some(Num(m.d)),
+        }
+    }
+
+    fn into_unit(self, i: usize, n: usize, zero_offsets: bool) -> Result<ArxUnit<f64>, FileError> {
+        let mut m = ArxUnit::zero();
+        for (name, from, to) in [("a", &self.a, &mut m.a), ("b", &self.b, &mut m.b)] {
+            if from.len() != n {
                 return Err(bad(
-                    first.path("a"),
-                    format!("ARX order (length of a) {n} is outside 1..={MAX_ARX_ORDER}"),
+                    format!("units[{i}].{name}"),
+                    format!("expected {n} numbers, found {}", from.len()),
                 ));
             }
-            let units = unit_objs
-                .iter()
-                .map(|u| {
-                    u.only(&["a", "b", "d"])?;
-                    let a = vec_n(u.get("a")?, &u.path("a"), n)?;
-                    let b = vec_n(u.get("b")?, &u.path("b"), n)?;
-                    let d = if zero_offsets && !u.has("d") {
-                        0.0
-                    } else {
-                        u.num("d")?
-                    };
-                    let mut m = ArxUnit::zero();
-                    m.a[..n].copy_from_slice(&a);
-                    m.b[..n].copy_from_slice(&b);
-                    m.d = d;
-                    Ok(m)
-                })
-                .collect::<Result<_, FileError>>()?;
-            if structure == Structure::ArxShift {
-                LocalModelSet::ArxShift { order: n, units }
-            } else {
-                LocalModelSet::ArxDelta { order: n, units }
+            for (t, f) in to.iter_mut().zip(from) {
+                *t = f.0;
             }
         }
-    };
-    let provenance = match root.map.get("provenance") {
-        None | Some(Value::Null) => Provenance::default(),
-        Some(v) => {
-            let p = Obj::new(v, "provenance")?;
-            for key in ["train_mspe", "train_msse", "test_msse", "fit_seconds"] {
-                if let Some(x) = p.map.get(key)
-                    && !x.is_null()
-                {
-                    p.num(key)?;
-                }
-            }
-            serde_json::from_value(v.clone()).map_err(|e| bad("provenance", e.to_string()))?
-        }
-    };
-    let lmn = Lmn {
-        ts,
-        delay,
-        scheduling,
-        validity,
-        local,
-        zero_offsets,
-        force_scale_n,
-        provenance,
-    };
-    lmn.validate(stability)?;
-    if stability == Stability::Report {
-        // `Require` checks it inside `validate`; a file opened for repair must still run.
-        lmn.check_rest_state()?;
+        m.d = match self.d {
+            Some(d) => d.0,
+            None if zero_offsets => 0.0,
+            None => return Err(missing(i, "d")),
+        };
+        Ok(m)
     }
-    Ok(lmn)
 }
 
-/// A JSON object with its path, for field-naming errors.
-struct Obj<'a> {
-    map: &'a Map<String, Value>,
-    prefix: String,
-}
-
-impl<'a> Obj<'a> {
-    fn new(v: &'a Value, path: &str) -> Result<Self, FileError> {
-        match v {
-            Value::Object(map) => Ok(Self {
-                map,
-                prefix: path.to_string(),
-            }),
-            other => Err(bad(
-                if path.is_empty() { "(file)" } else { path },
-                format!("expected an object, found {}", kind(other)),
-            )),
+impl UnitDoc for ArxDoc {
+    /// Units of either ARX form. The order n is the length of the first unit's `a`, in
+    /// 1..=[`MAX_ARX_ORDER`].
+    fn local(
+        units: Vec<Self>,
+        structure: Structure,
+        zero_offsets: bool,
+        _: Option<usize>,
+    ) -> Result<LocalModelSet, FileError> {
+        let first = units.first().ok_or_else(|| bad("units", "no units"))?;
+        let order = first.a.len();
+        if !(1..=MAX_ARX_ORDER).contains(&order) {
+            return Err(bad(
+                "units[0].a",
+                format!("ARX order (length of a) {order} is outside 1..={MAX_ARX_ORDER}"),
+            ));
         }
-    }
-
-    fn path(&self, key: &str) -> String {
-        if self.prefix.is_empty() {
-            key.to_string()
+        let units = each(units, |i, u| u.into_unit(i, order, zero_offsets))?;
+        Ok(if structure == Structure::ArxDelta {
+            LocalModelSet::ArxDelta { order, units }
         } else {
-            format!("{}.{key}", self.prefix)
-        }
-    }
-
-    fn has(&self, key: &str) -> bool {
-        self.map.contains_key(key)
-    }
-
-    fn get(&self, key: &str) -> Result<&'a Value, FileError> {
-        self.map
-            .get(key)
-            .ok_or_else(|| bad(self.path(key), "missing field"))
-    }
-
-    fn only(&self, allowed: &[&str]) -> Result<(), FileError> {
-        for k in self.map.keys() {
-            if !allowed.contains(&k.as_str()) {
-                return Err(bad(
-                    self.path(k),
-                    format!("unknown field (expected one of: {})", allowed.join(", ")),
-                ));
-            }
-        }
-        Ok(())
-    }
-
-    fn obj(&self, key: &str) -> Result<Obj<'a>, FileError> {
-        Obj::new(self.get(key)?, &self.path(key))
-    }
-
-    fn str(&self, key: &str) -> Result<&'a str, FileError> {
-        self.get(key)?.as_str().ok_or_else(|| {
-            bad(
-                self.path(key),
-                format!("expected a string, found {}", kind(&self.map[key])),
-            )
+            LocalModelSet::ArxShift { order, units }
         })
-    }
-
-    fn bool(&self, key: &str) -> Result<bool, FileError> {
-        self.get(key)?.as_bool().ok_or_else(|| {
-            bad(
-                self.path(key),
-                format!("expected true or false, found {}", kind(&self.map[key])),
-            )
-        })
-    }
-
-    fn num(&self, key: &str) -> Result<f64, FileError> {
-        number(self.get(key)?, &self.path(key))
-    }
-
-    fn usize(&self, key: &str) -> Result<usize, FileError> {
-        let v = self.get(key)?;
-        v.as_u64()
-            .and_then(|x| usize::try_from(x).ok())
-            .ok_or_else(|| {
-                bad(
-                    self.path(key),
-                    format!("expected a non-negative integer, found {}", kind(v)),
-                )
-            })
-    }
-
-    fn arr(&self, key: &str) -> Result<&'a Vec<Value>, FileError> {
-        let v = self.get(key)?;
-        v.as_array().ok_or_else(|| {
-            bad(
-                self.path(key),
-                format!("expected an array, found {}", kind(v)),
-            )
-        })
-    }
-
-    fn nums(&self, key: &str) -> Result<Vec<f64>, FileError> {
-        let p = self.path(key);
-        self.arr(key)?
-            .iter()
-            .enumerate()
-            .map(|(i, v)| number(v, &format!("{p}[{i}]")))
-            .collect()
-    }
-
-    fn vec2(&self, key: &str) -> Result<[f64; 2], FileError> {
-        let v = vec_n(self.get(key)?, &self.path(key), 2)?;
-        Ok([v[0], v[1]])
     }
 }
 
-fn vec_n(v: &Value, path: &str, n: usize) -> Result<Vec<f64>, FileError> {
-    let a = v.as_array().ok_or_else(|| {
-        bad(
-            path,
-            format!("expected an array of {n} numbers, found {}", kind(v)),
-        )
-    })?;
-    if a.len() != n {
-        return Err(bad(
-            path,
-            format!("expected {n} numbers, found {}", a.len()),
-        ));
-    }
-    a.iter()
+/// Converts every unit, passing its index for the error's path.
+fn each<U, M>(
+    units: Vec<U>,
+    convert: impl Fn(usize, U) -> Result<M, FileError>,
+) -> Result<Vec<M>, FileError> {
+    units
+        .into_iter()
         .enumerate()
-        .map(|(i, x)| number(x, &format!("{path}[{i}]")))
+        .map(|(i, u)| convert(i, u))
         .collect()
 }
 
-fn number(v: &Value, path: &str) -> Result<f64, FileError> {
-    match v.as_f64() {
-        Some(x) if x.is_finite() => Ok(x),
-        Some(x) => Err(bad(path, format!("{x} is not a finite number"))),
-        None => Err(bad(
-            path,
-            format!("expected a finite number, found {}", kind(v))
-                + if v.is_null() {
-                    " (NaN or a missing value?)"
-                } else {
-                    ""
-                },
-        )),
+/// A state-space unit's `dx` and `dy` as written: omitted with `zero_offsets`.
+fn offsets_out(zero_offsets: bool, dx: [f64; 2], dy: f64) -> (Option<Pair<Num>>, Option<Num>) {
+    if zero_offsets {
+        (None, None)
+    } else {
+        (Some(Pair::of(dx)), Some(Num(dy)))
     }
 }
 
-fn kind(v: &Value) -> &'static str {
-    match v {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "an array",
-        Value::Object(_) => "an object",
+/// A state-space unit's `dx` and `dy` as read: both given, or both omitted with
+/// `zero_offsets` (then zero).
+fn offsets_in(
+    i: usize,
+    zero_offsets: bool,
+    dx: Option<Pair<Num>>,
+    dy: Option<Num>,
+) -> Result<([f64; 2], f64), FileError> {
+    match (dx, dy) {
+        (Some(dx), Some(dy)) => Ok((dx.get(), dy.0)),
+        (None, None) if zero_offsets => Ok(([0.0; 2], 0.0)),
+        (None, _) => Err(missing(i, "dx")),
+        (Some(_), None) => Err(missing(i, "dy")),
+    }
+}
+
+/// A field of unit `i` that is missing (worded as serde words the others).
+fn missing(i: usize, name: &str) -> FileError {
+    bad(format!("units[{i}]"), format!("missing field `{name}`"))
+}
+
+/// A field that may be omitted but, when present, must hold a value (not null): used with
+/// `#[serde(default, deserialize_with = "present")]` on an `Option`.
+fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Option<T>, D::Error> {
+    T::deserialize(d).map(Some)
+}
+
+/// Two entries: a vector of the state space (`Pair<Num>`) or the rows of `a`. Its reader
+/// counts every entry, so that an error says "expected 2 numbers, found 3" (serde's own
+/// reader of `[T; 2]` says only "expected fewer elements in array"); written as an array.
+#[derive(Serialize)]
+#[serde(transparent)]
+struct Pair<T>([T; 2]);
+
+impl Pair<Num> {
+    fn of(x: [f64; 2]) -> Self {
+        Self(x.map(Num))
+    }
+
+    fn get(self) -> [f64; 2] {
+        self.0.map(|v| v.0)
+    }
+}
+
+/// What the entries of a [`Pair`] are called in an error.
+trait Entries {
+    const NAME: &'static str;
+}
+
+impl Entries for Num {
+    const NAME: &'static str = "numbers";
+}
+
+impl Entries for Pair<Num> {
+    const NAME: &'static str = "rows";
+}
+
+impl<'de, T: Deserialize<'de> + Entries> Deserialize<'de> for Pair<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_seq(PairVisitor(PhantomData))
+    }
+}
+
+struct PairVisitor<T>(PhantomData<T>);
+
+impl<'de, T: Deserialize<'de> + Entries> Visitor<'de> for PairVisitor<T> {
+    type Value = Pair<T>;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "an array of 2 {}", T::NAME)
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Pair<T>, A::Error> {
+        let first = seq.next_element::<T>()?;
+        let second = match first {
+            Some(_) => seq.next_element::<T>()?,
+            None => None,
+        };
+        let mut found = usize::from(first.is_some()) + usize::from(second.is_some());
+        while seq.next_element::<IgnoredAny>()?.is_some() {
+            found += 1;
+        }
+        match (first, second) {
+            (Some(a), Some(b)) if found == 2 => Ok(Pair([a, b])),
+            _ => Err(de::Error::custom(format_args!(
+                "expected 2 {}, found {found}",
+                T::NAME
+            ))),
+        }
+    }
+}
+
+/// A number of the file. Read by its own visitor so that an error says "expected a finite
+/// number" and explains a null (serde_json writes NaN as null); written as a plain f64.
+#[derive(Serialize)]
+#[serde(transparent)]
+struct Num(f64);
+
+impl<'de> Deserialize<'de> for Num {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(NumVisitor)
+    }
+}
+
+struct NumVisitor;
+
+impl Visitor<'_> for NumVisitor {
+    type Value = Num;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a finite number")
+    }
+
+    fn visit_f64<E: de::Error>(self, v: f64) -> Result<Num, E> {
+        if v.is_finite() {
+            Ok(Num(v))
+        } else {
+            Err(E::invalid_value(Unexpected::Float(v), &self))
+        }
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<Num, E> {
+        Ok(Num(v as f64))
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<Num, E> {
+        Ok(Num(v as f64))
+    }
+
+    fn visit_unit<E: de::Error>(self) -> Result<Num, E> {
+        Err(E::custom(
+            "invalid type: null, expected a finite number (NaN or a missing value?)",
+        ))
+    }
+}
+
+/// A count of the file (`delay_samples`, `order`, `reference_unit`); an error says
+/// "expected a non-negative integer".
+#[derive(Serialize)]
+#[serde(transparent)]
+struct Count(usize);
+
+impl<'de> Deserialize<'de> for Count {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_u64(CountVisitor)
+    }
+}
+
+struct CountVisitor;
+
+impl Visitor<'_> for CountVisitor {
+    type Value = Count;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a non-negative integer")
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<Count, E> {
+        usize::try_from(v)
+            .map(Count)
+            .map_err(|_| E::invalid_value(Unexpected::Unsigned(v), &self))
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<Count, E> {
+        match u64::try_from(v) {
+            Ok(v) => self.visit_u64(v),
+            Err(_) => Err(E::invalid_value(Unexpected::Signed(v), &self)),
+        }
     }
 }

@@ -218,7 +218,12 @@ fn round_trip_gives_identical_simulation() {
 
 /// Applies `edit` to the JSON of a valid model and returns the loader's error message.
 fn reject(edit: impl FnOnce(&mut Value)) -> String {
-    let mut v: Value = serde_json::from_str(&file::to_json_string(&eig_common()).unwrap()).unwrap();
+    reject_in(&eig_common(), edit)
+}
+
+/// [`reject`] for the JSON of `lmn`.
+fn reject_in(lmn: &Lmn, edit: impl FnOnce(&mut Value)) -> String {
+    let mut v: Value = serde_json::from_str(&file::to_json_string(lmn).unwrap()).unwrap();
     edit(&mut v);
     let text = serde_json::to_string_pretty(&v).unwrap();
     match file::from_json_str(&text, Stability::Require) {
@@ -360,10 +365,11 @@ fn rejects_a_missing_field() {
         });
         assert_names(&msg, &[name, "missing field"]);
     }
+    // serde names a missing field in the message, after the path of its object.
     let msg = reject(|v| {
         v["units"][2].as_object_mut().unwrap().remove("c");
     });
-    assert_names(&msg, &["units[2].c", "missing field"]);
+    assert_names(&msg, &["units[2]", "missing field `c`"]);
 }
 
 #[test]
@@ -444,6 +450,61 @@ fn rejects_other_bad_fields() {
     );
     let e = file::load("/nonexistent/model.lmn.json").unwrap_err();
     assert_names(&e.to_string(), &["/nonexistent/model.lmn.json"]);
+}
+
+/// A field that belongs to another form (another scheduling kind, another structure, or
+/// offsets written as null) is refused, and an error inside `scheduling` names its field.
+#[test]
+fn rejects_fields_of_another_form() {
+    let mut output = table_5_3(false);
+    output.scheduling = SchedulingSpec::Output;
+    assert_names(
+        &reject_in(&output, |v| v["scheduling"]["gain"] = Value::from(1.0)),
+        &["scheduling.gain", "unknown field", "output"],
+    );
+    assert_names(
+        &reject(|v| v["scheduling"]["gain"] = Value::from("high")),
+        &["scheduling.gain", "finite number"],
+    );
+    assert_names(
+        &reject(|v| {
+            v["scheduling"].as_object_mut().unwrap().remove("damping");
+        }),
+        &["scheduling", "missing field `damping`"],
+    );
+    let direct = all_structures().remove(0);
+    assert_names(
+        &reject_in(&direct, |v| v["reference_unit"] = Value::from(0)),
+        &["reference_unit", "unknown field", "ss-direct"],
+    );
+    assert_names(
+        &reject(|v| {
+            v.as_object_mut().unwrap().remove("reference_unit");
+        }),
+        &["missing field `reference_unit`"],
+    );
+    let zero = all_structures().remove(3);
+    assert!(zero.zero_offsets);
+    assert_names(
+        &reject_in(&zero, |v| {
+            v["units"][1]["dx"] = Value::Null;
+            v["units"][1]["dy"] = Value::Null;
+        }),
+        &["units[1].dx", "null"],
+    );
+    assert_names(
+        &reject_in(&zero, |v| v["units"][1]["dx"] = Value::from(vec![0.0, 0.0])),
+        &["units[1]", "missing field `dy`"],
+    );
+    assert_names(
+        &reject_in(&direct, |v| {
+            v["units"][0]["a"]
+                .as_array_mut()
+                .unwrap()
+                .push(Value::from(vec![0.0, 0.0]));
+        }),
+        &["units[0].a", "expected 2 rows, found 3"],
+    );
 }
 
 /// The example in docs/model.md is a valid file.
