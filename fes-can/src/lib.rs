@@ -24,6 +24,14 @@ pub mod message;
 pub mod table;
 pub mod values;
 
+// The integration tests (tests/it) compile into this crate's one test binary: they use only
+// the public API, through the crate's own name (docs/architecture.md, "Tests").
+#[cfg(test)]
+extern crate self as fes_can;
+#[cfg(test)]
+#[path = "../tests/it/main.rs"]
+mod it;
+
 pub use config::{ConfigAssembler, LimitsError, StimLimits};
 pub use counter::{AliveCheck, AliveCounter, AliveError, SequenceCheck, SequenceError};
 pub use error::{DecodeError, EncodeError};

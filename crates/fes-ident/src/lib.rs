@@ -15,6 +15,14 @@
 pub mod analysis;
 pub mod ident;
 
+// The integration tests (tests/it) compile into this crate's one test binary: they use only
+// the public API, through the crate's own name (docs/architecture.md, "Tests").
+#[cfg(test)]
+extern crate self as fes_ident;
+#[cfg(test)]
+#[path = "../tests/it/main.rs"]
+mod it;
+
 /// The data-set format, from the `fes-dataset` crate (`fes_ident::dataset`).
 pub use fes_dataset as dataset;
 /// The thesis's equations, from the `fes-model` crate (so that `crate::model` paths read

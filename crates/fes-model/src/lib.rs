@@ -28,3 +28,11 @@ extern crate alloc;
 pub mod control;
 pub mod model;
 pub mod num;
+
+// The integration tests (tests/it) compile into this crate's one test binary: they use only
+// the public API, through the crate's own name (docs/architecture.md, "Tests").
+#[cfg(test)]
+extern crate self as fes_model;
+#[cfg(test)]
+#[path = "../tests/it/main.rs"]
+mod it;

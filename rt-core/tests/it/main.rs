@@ -17,10 +17,14 @@ mod rt_common;
 mod rt_alloc_trace;
 mod rt_clock;
 mod rt_config;
+mod rt_feedback;
+mod rt_generator;
 mod rt_msg;
 mod rt_no_alloc;
 mod rt_process;
 mod rt_realtime;
+mod rt_reference;
+mod rt_source;
 mod rt_telemetry;
 mod timing;
 

@@ -7,9 +7,12 @@
 mod common;
 mod systemd_support;
 
+mod cyclictest;
 mod harness;
+mod hostbus;
 mod interop;
 mod latency_regression;
 mod stimulator_no_alloc;
 mod stimulator_vcan;
 mod systemd_units;
+mod testkit;

@@ -2,7 +2,7 @@
 //! errors (eq. B.8), against closed forms.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::analysis_support;
+use super::analysis_support;
 
 use analysis_support::*;
 use fes_ident::analysis::force_frequency::{ForceFrequencyError, force_frequency};

@@ -3,8 +3,8 @@
 //! run on the control fixture.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::analysis_support;
-use crate::control_support;
+use super::analysis_support;
+use super::control_support;
 
 use analysis_support::*;
 use fes_ident::analysis::osp::iterative::iterative_method;

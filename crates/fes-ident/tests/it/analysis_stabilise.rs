@@ -2,7 +2,7 @@
 //! re-estimating that unit's offsets, on the Table 5.3 situation built in code.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::analysis_support;
+use super::analysis_support;
 
 use analysis_support::*;
 use fes_ident::analysis::stabilise::{

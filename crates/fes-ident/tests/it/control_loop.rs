@@ -3,7 +3,7 @@
 //! and settling, gap and energy properties with the shaper on a muscle-like LMN.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::control_support;
+use super::control_support;
 
 use control_support::{DELAY, TS, fast_muscle, fast_muscle_with_offsets, table_6_1_specs};
 use fes_ident::control::design::augmented;

@@ -2,7 +2,7 @@
 //! file, line and field for every violation the reader must catch.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::dataset_support;
+use super::dataset_support;
 
 use std::fs;
 

@@ -2,7 +2,7 @@
 //! returns a value or an error, never panics; every accepted record is valid.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::dataset_support;
+use super::dataset_support;
 
 use std::path::Path;
 

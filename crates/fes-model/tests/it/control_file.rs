@@ -2,7 +2,7 @@
 //! invalid files with errors that name the field.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::control_support;
+use super::control_support;
 
 use control_support::{TS, fast_muscle, table_6_1_specs};
 use fes_model::control::design::{DesignError, DesignOptions, EstimatorPoles};
@@ -218,7 +218,7 @@ fn a_negative_gain_model_needs_the_explicit_override() {
     assert!(file.design.allow_negative_gain);
 }
 
-use crate::json_mutation;
+use super::json_mutation;
 
 /// Cases of the controller-file fuzz target: about 2.5 s in a debug build on one core.
 const CONTROLLER_FUZZ_CASES: u32 = 2500;

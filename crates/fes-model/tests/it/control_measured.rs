@@ -4,7 +4,7 @@
 //! against the real force of a mismatched plant (simulated independently, thesis form).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::control_support;
+use super::control_support;
 
 use control_support::{TS, fast_muscle, table_6_1_specs};
 use fes_model::control::design::EstimatorPoles;

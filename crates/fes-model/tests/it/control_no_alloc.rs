@@ -2,7 +2,7 @@
 //! 100 000 ticks with M = 10 units, in both feedback modes, plus `reset`.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::control_support;
+use super::control_support;
 
 use control_support::{TS, fast_muscle, table_6_1_specs};
 use fes_model::control::design::EstimatorPoles;
@@ -10,7 +10,7 @@ use fes_model::control::file::{Controller, ControllerSettings};
 use fes_model::control::pattern_generator::{FeedbackMode, TickInput};
 use fes_model::control::poles::dominant_pair;
 
-use crate::alloc_count::allocations_in;
+use super::alloc_count::allocations_in;
 
 #[test]
 fn tick_and_reset_never_allocate_with_ten_units() {

@@ -518,7 +518,7 @@ fn documented_example_loads() {
     assert_eq!(lmn.provenance.test_msse, Some(0.0005));
 }
 
-use crate::json_mutation;
+use super::json_mutation;
 
 /// Cases of the model-file fuzz target: about 2.5 s in a debug build on one core.
 const MODEL_FUZZ_CASES: u32 = 3000;

@@ -3,7 +3,7 @@
 #![allow(clippy::needless_range_loop)] // index loops mirror the equations
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::alloc_count::measure;
+use super::alloc_count::measure;
 use fes_model::model::local_model::EigLocalUnit;
 use fes_model::model::network::Network;
 use fes_model::model::scheduling::{Scheduler, SchedulingSpec};

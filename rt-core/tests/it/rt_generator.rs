@@ -1,0 +1,129 @@
+//! `rt_core::rt::generator` (moved from its unit tests: the crate has one test binary).
+
+use core::time::Duration;
+use rt_core::msg::Contract;
+use rt_core::msg::{Reference, StimTick};
+use rt_core::rt::clock::PeriodicSchedule;
+use rt_core::rt::generator::*;
+use rt_core::rt::reference::ReferencePolicy;
+use rt_core::rt::reference::Target;
+use rt_core::rt::source::TestPattern;
+use rt_core::rt::source::{TickDecision, TickSource};
+
+const MS: u64 = 1_000_000;
+
+fn pattern_loop(ipi: u32) -> PatternLoop<TestPattern> {
+    PatternLoop::new(
+        TestPattern::new(ipi).unwrap(),
+        ReferencePolicy {
+            stale_after_ns: 100 * MS,
+            stale_ramp_per_s: 1.0,
+        },
+        None,
+        PulseSettings {
+            channel: 2,
+            amplitude_ua: 20_000,
+            width_us: 200,
+        },
+        false,
+    )
+}
+
+/// A source that returns NaN on its third call.
+struct Faulty(u32);
+impl TickSource for Faulty {
+    fn tick(&mut self, _r: &Target, _m: Option<f64>) -> TickDecision {
+        self.0 += 1;
+        TickDecision {
+            pulse: true,
+            phi: if self.0 == 3 { f64::NAN } else { 0.0 },
+            ..TickDecision::default()
+        }
+    }
+    fn reset(&mut self) {}
+    fn min_pulse_gap_ticks(&self) -> u32 {
+        1
+    }
+}
+
+#[test]
+fn ticks_are_valid_gap_free_and_carry_the_pulse_settings() {
+    let mut l = pattern_loop(4);
+    let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
+    l.offer_reference(&Reference::new(1, MS, 0.5), MS).unwrap();
+    for k in 0..20u64 {
+        let w = sched.advance(MS + k * MS + 30_000);
+        let (t, ev) = l.step(&w);
+        assert!(!ev.source_fault);
+        t.validate().unwrap();
+        assert_eq!(t.seq, k + 1);
+        assert_eq!(t.t_ns, MS + k * MS);
+        assert_eq!(t.fires(), k % 4 == 0);
+        if t.fires() {
+            assert_eq!((t.amplitude_ua, t.width_us, t.channel), (20_000, 200, 2));
+        }
+        assert_eq!(t.ref_seq, 1);
+    }
+    let f = l.final_tick(30 * MS);
+    f.validate().unwrap();
+    assert_eq!(f.seq, 21);
+    assert!(f.has(StimTick::FLAG_FINAL) && !f.fires());
+}
+
+#[test]
+fn a_stall_yields_one_tick_with_the_misses_and_no_burst() {
+    let mut l = pattern_loop(2);
+    let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
+    l.offer_reference(&Reference::new(1, MS, 0.5), MS).unwrap();
+    let (a, _) = l.step(&sched.advance(MS));
+    assert!(a.fires());
+    // 100 ms stall.
+    let (b, _) = l.step(&sched.advance(2 * MS + 100 * MS));
+    assert_eq!(b.seq, a.seq + 1);
+    assert_eq!(b.missed_periods, 100);
+    assert!(b.has(StimTick::FLAG_OVERRUN));
+    assert!(!b.fires(), "the source is called once: its gap still holds");
+    let (c, _) = l.step(&sched.advance(103 * MS));
+    assert!(c.fires() && c.missed_periods == 0);
+}
+
+#[test]
+fn a_non_finite_decision_is_a_fault_without_a_pulse() {
+    let mut l = PatternLoop::new(
+        Faulty(0),
+        ReferencePolicy {
+            stale_after_ns: 100 * MS,
+            stale_ramp_per_s: 1.0,
+        },
+        None,
+        PulseSettings {
+            channel: 0,
+            amplitude_ua: 1,
+            width_us: 1,
+        },
+        true,
+    );
+    let mut sched = PeriodicSchedule::new(Duration::from_millis(1), 0).unwrap();
+    let faults: Vec<bool> = (0..4)
+        .map(|k| {
+            let (t, ev) = l.step(&sched.advance(k * MS));
+            t.validate().unwrap();
+            assert!(t.has(StimTick::FLAG_DEGRADED));
+            assert_eq!(ev.source_fault, t.has(StimTick::FLAG_SOURCE_FAULT));
+            assert_eq!(t.fires(), !ev.source_fault);
+            ev.source_fault
+        })
+        .collect();
+    assert_eq!(faults, [false, false, true, false]);
+}
+
+#[test]
+fn a_rejected_reference_flags_the_next_tick_only() {
+    let mut l = pattern_loop(2);
+    let mut sched = PeriodicSchedule::new(Duration::from_millis(1), 0).unwrap();
+    assert!(l.offer_reference(&Reference::new(1, 0, 2.0), 0).is_err());
+    let (a, _) = l.step(&sched.advance(0));
+    assert!(a.has(StimTick::FLAG_REFERENCE_REJECTED) && a.has(StimTick::FLAG_NO_REFERENCE));
+    let (b, _) = l.step(&sched.advance(MS));
+    assert!(!b.has(StimTick::FLAG_REFERENCE_REJECTED));
+}

@@ -1,0 +1,125 @@
+//! `rt_core::rt::reference` (moved from its unit tests: the crate has one test binary).
+
+use rt_core::msg::Reference;
+use rt_core::rt::reference::*;
+
+const MS: u64 = 1_000_000;
+
+fn tracker() -> ReferenceTracker {
+    ReferenceTracker::new(ReferencePolicy {
+        stale_after_ns: 100 * MS,
+        stale_ramp_per_s: 2.0,
+    })
+}
+
+#[test]
+fn no_reference_means_zero_target() {
+    let mut t = tracker();
+    let target = t.advance(5 * MS);
+    assert!(target.none);
+    assert_eq!(target.value, 0.0);
+}
+
+#[test]
+fn a_step_reference_applies_at_once_and_a_ramp_follows_its_rate() {
+    let mut t = tracker();
+    t.offer(&Reference::new(1, MS, 0.5), MS).unwrap();
+    assert_eq!(t.advance(MS).value, 0.5);
+    let mut r = Reference::new(2, 2 * MS, 1.0);
+    r.max_rate_per_s = 10.0; // 0.01 per ms
+    t.offer(&r, 2 * MS).unwrap();
+    for k in 1..=50u64 {
+        let v = t.advance(MS + k * MS).value;
+        let expect = (0.5 + 0.01 * k as f64).min(1.0);
+        assert!((v - expect).abs() < 1e-12, "k={k}: {v} vs {expect}");
+    }
+}
+
+/// A reference of zero force reached by a ramp: the target is resting from the first
+/// tick of the ramp down (the pattern generator then fires no pulse while the force is
+/// to fall), and not while it ramps up.
+#[test]
+fn a_ramp_down_to_zero_is_resting_from_its_first_tick() {
+    let mut t = tracker();
+    let mut up = Reference::new(1, MS, 0.4);
+    up.max_rate_per_s = 50.0;
+    t.offer(&up, MS).unwrap();
+    let first = t.advance(MS);
+    assert!(!first.resting && first.value == 0.0, "{first:?}");
+    let rising = t.advance(2 * MS);
+    assert!(!rising.resting && rising.value > 0.0, "{rising:?}");
+    for k in 3..20 {
+        t.advance(k * MS);
+    }
+    let mut down = Reference::new(2, 20 * MS, 0.0);
+    down.max_rate_per_s = 50.0;
+    t.offer(&down, 20 * MS).unwrap();
+    let ramp = t.advance(21 * MS);
+    assert!(ramp.resting && ramp.value > 0.3, "{ramp:?}");
+    assert!(Target::at(0.0).resting && !Target::at(0.2).resting);
+}
+
+#[test]
+fn a_stale_reference_ramps_to_zero_at_the_configured_rate() {
+    let mut t = tracker();
+    t.offer(&Reference::new(1, 0, 0.8), 0).unwrap();
+    assert_eq!(t.advance(0).value, 0.8);
+    // Fresh until 100 ms.
+    let at_100 = t.advance(100 * MS);
+    assert!(!at_100.stale);
+    assert_eq!(at_100.value, 0.8);
+    // From 101 ms on: 2.0 per second = 0.002 per ms, measured from the last advance.
+    let a = t.advance(101 * MS);
+    assert!(a.stale);
+    assert!((a.value - 0.798).abs() < 1e-12);
+    let b = t.advance(201 * MS);
+    assert!((b.value - 0.598).abs() < 1e-12);
+    let c = t.advance(2_000 * MS);
+    assert_eq!(c.value, 0.0);
+    // A fresh reference revives it.
+    t.offer(&Reference::new(2, 2_000 * MS, 0.3), 2_000 * MS)
+        .unwrap();
+    let d = t.advance(2_001 * MS);
+    assert!(!d.stale);
+    assert_eq!(d.value, 0.3);
+}
+
+#[test]
+fn stop_drops_the_target_at_once() {
+    let mut t = tracker();
+    t.offer(&Reference::new(1, 0, 0.8), 0).unwrap();
+    t.advance(0);
+    let mut r = Reference::new(2, MS, 0.8);
+    r.flags = Reference::FLAG_STOP;
+    t.offer(&r, MS).unwrap();
+    let s = t.advance(MS);
+    assert!(s.stop);
+    assert_eq!(s.value, 0.0);
+}
+
+#[test]
+fn invalid_old_and_future_references_are_rejected_and_the_last_one_held() {
+    let mut t = tracker();
+    t.offer(&Reference::new(5, 10 * MS, 0.4), 10 * MS).unwrap();
+    assert!(matches!(
+        t.offer(&Reference::new(6, 10 * MS, 1.5), 10 * MS),
+        Err(ReferenceRejection::Invalid(_))
+    ));
+    assert!(matches!(
+        t.offer(&Reference::new(6, 10 * MS, f64::NAN), 10 * MS),
+        Err(ReferenceRejection::Invalid(_))
+    ));
+    assert_eq!(
+        t.offer(&Reference::new(5, 10 * MS, 0.1), 10 * MS),
+        Err(ReferenceRejection::OutOfOrder {
+            seq: 5,
+            last_seq: 5
+        })
+    );
+    assert!(matches!(
+        t.offer(&Reference::new(7, 100 * MS, 0.1), 10 * MS),
+        Err(ReferenceRejection::FromTheFuture { .. })
+    ));
+    let held = t.advance(11 * MS);
+    assert_eq!((held.value, held.ref_seq), (0.4, 5));
+}
