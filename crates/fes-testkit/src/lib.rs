@@ -1,9 +1,14 @@
-//! What the project's tests share, and nothing else of the project: a dev-dependency of
-//! every crate, so it sits below all of them (no dependency cycle through the system
-//! tests of `fes-tests`).
+//! What the project's tests share: a dev-dependency of every crate, so it sits below all of
+//! them (it links only the leaf crates `fes-can` and `fes-hostbus`, for the bus tap; no
+//! dependency cycle through the system tests of `fes-tests`).
 //!
 //! * [`Scratch`]: a scratch directory, removed when the test passes, kept (and named) when
 //!   it fails or `FES_TEST_KEEP` is set;
+//! * [`vcan`]: a CAN interface for a test (native vcan, a given interface, or a User-Mode
+//!   Linux guest) ([`vcan::with_vcan`]), or for any command (`vcan-run`);
+//! * [`bus`]: host-side helpers for protocol tests: a frame tap with timestamps, a host
+//!   port that sends PULSE/NMT/CONFIG with correct counters, a heartbeat thread;
+//! * [`child`]: test children die with the test thread that started them;
 //! * [`assert_refused`]: the bad-input sweeps' one check that a run refused its input
 //!   clearly (exit code, no panic, the offending name in a short message);
 //! * [`noise`]: the host's own wake-up noise, measured beside a timing check, so that the
@@ -13,9 +18,15 @@
 //! depend on the host's timing live in `timing` modules of the test binaries and are
 //! judged against [`noise::HostNoise`] (docs/architecture.md, "Tests").
 
+// A testkit: its helpers panic on a failed setup step by design (a failed test).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+pub mod bus;
+pub mod child;
 pub mod noise;
 mod refused;
 mod scratch;
+pub mod vcan;
 
 pub use refused::assert_refused;
 pub use scratch::Scratch;

@@ -200,3 +200,36 @@ fn run(priority: u8, stop: &AtomicBool) -> HostNoise {
     noise.periods = deadline.saturating_sub(start) / PERIOD_NS;
     noise
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bound_follows_the_probe() {
+        let quiet = HostNoise {
+            periods: 1000,
+            ..HostNoise::default()
+        };
+        assert_eq!(quiet.allowed_misses(1000), 20);
+        assert!(quiet.is_quiet());
+        let noisy = HostNoise {
+            periods: 1000,
+            missed: 300,
+            late_1ms: 20,
+            ..HostNoise::default()
+        };
+        assert_eq!(noisy.allowed_misses(1000), 620);
+        assert!(!noisy.is_quiet());
+        // A blocked loop misses nearly everything: caught unless the host missed half.
+        assert!(noisy.allowed_misses(1000) < 990);
+    }
+
+    #[test]
+    fn a_probe_counts_the_periods_of_its_run() {
+        let n = measure(1, 0.2);
+        // 200 periods, give or take what a loaded host takes away at either end.
+        assert!((150..=260).contains(&n.periods), "{n}");
+        assert!(n.missed <= n.periods, "{n}");
+    }
+}

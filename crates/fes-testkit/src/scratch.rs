@@ -60,3 +60,38 @@ impl Drop for Scratch {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn removed_after_a_passing_test_and_unique() {
+        let a = Scratch::new("unit");
+        let b = Scratch::new("unit");
+        assert_ne!(a.path(), b.path());
+        assert!(a.path().is_dir());
+        std::fs::write(a.join("f"), b"x").unwrap_or_else(|e| panic!("{e}"));
+        let p = a.path().to_path_buf();
+        drop(a);
+        assert!(!p.exists());
+    }
+
+    #[test]
+    fn kept_when_the_test_panics() {
+        let path = std::thread::spawn(|| {
+            let s = Scratch::new("unit-panic");
+            let p = s.path().to_path_buf();
+            std::panic::panic_any(p);
+        })
+        .join()
+        .err()
+        .and_then(|e| e.downcast::<PathBuf>().ok())
+        .map(|p| *p);
+        let Some(path) = path else {
+            panic!("the thread did not panic with its path")
+        };
+        assert!(path.is_dir(), "{} was removed", path.display());
+        let _ = std::fs::remove_dir_all(&path);
+    }
+}

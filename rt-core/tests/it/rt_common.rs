@@ -1,8 +1,6 @@
 //! Helpers shared by the rt-core process tests: scratch directories, configurations,
 //! starting rt-core and rt-probe, dropping real-time rights in a child.
 
-#![allow(dead_code)]
-
 use std::io::{BufRead, BufReader};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -18,27 +16,7 @@ use rt_core::rt::{MissingRightsPolicy, RtConfig};
 pub const RT_CORE: &str = env!("CARGO_BIN_EXE_rt-core");
 pub const RT_PROBE: &str = env!("CARGO_BIN_EXE_rt-probe");
 
-/// A scratch directory removed on drop.
-pub struct Scratch(pub PathBuf);
-
-impl Scratch {
-    pub fn new(name: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("rt-core-test-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        Scratch(dir)
-    }
-
-    pub fn path(&self, file: &str) -> PathBuf {
-        self.0.join(file)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+pub use fes_testkit::Scratch;
 
 /// A unique iceoryx2 prefix for one test.
 pub fn prefix(name: &str) -> String {
@@ -63,7 +41,7 @@ pub fn config(prefix: &str, ipi_ticks: u32) -> RtCoreConfig {
 }
 
 pub fn write_config(dir: &Scratch, config: &RtCoreConfig) -> PathBuf {
-    let path = dir.path("rt-core.toml");
+    let path = dir.join("rt-core.toml");
     std::fs::write(&path, config.to_toml()).unwrap();
     path
 }
@@ -162,11 +140,11 @@ pub fn start_probe(dir: &Scratch, prefix: &str) -> Proc {
         .arg("--prefix")
         .arg(prefix)
         .arg("--record")
-        .arg(dir.path("ticks.csv"))
+        .arg(dir.join("ticks.csv"))
         .arg("--summary")
-        .arg(dir.path("probe.json"))
+        .arg(dir.join("probe.json"))
         .arg("--hlog")
-        .arg(dir.path("probe.hlog"))
+        .arg(dir.join("probe.hlog"))
         // Above rt-core's 60: tests run in parallel, and a probe that falls 64 ticks behind
         // loses ticks (safe overflow), which the tests would report as gaps.
         .args(["--priority", "70", "--idle-timeout-ms", "5000"])
@@ -186,12 +164,12 @@ pub fn start_probe(dir: &Scratch, prefix: &str) -> Proc {
 }
 
 pub fn read_summary(dir: &Scratch) -> ProbeSummary {
-    serde_json::from_slice(&std::fs::read(dir.path("probe.json")).unwrap()).unwrap()
+    serde_json::from_slice(&std::fs::read(dir.join("probe.json")).unwrap()).unwrap()
 }
 
 pub fn read_ticks(dir: &Scratch) -> Vec<TickRecord> {
     read_records(BufReader::new(
-        std::fs::File::open(dir.path("ticks.csv")).unwrap(),
+        std::fs::File::open(dir.join("ticks.csv")).unwrap(),
     ))
     .unwrap()
 }

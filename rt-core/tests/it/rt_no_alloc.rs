@@ -102,7 +102,7 @@ fn the_loop_makes_no_heap_allocation_and_exactly_one_pool_allocation_per_publish
 fn so_does_the_loop_running_a_ten_unit_pattern_generator() {
     let _exclusive = crate::exclusive_allocator();
     let dir = rt_common::Scratch::new("noalloc");
-    let path = dir.path("controller.json");
+    let path = dir.join("controller.json");
     rt_common::write_controller(&path, 10);
     let source = ControllerSource::load(&path, Duration::from_millis(1)).unwrap();
     assert_eq!(source.units(), 10);

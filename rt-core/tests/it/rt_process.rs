@@ -41,7 +41,7 @@ fn ticks_are_gap_free_and_sigterm_ends_with_a_final_tick_and_flushed_histograms(
     let dir = Scratch::new("gapfree");
     let prefix = prefix("gapfree");
     let mut config = config(&prefix, 4);
-    config.telemetry.hlog = Some(dir.path("rt-core.hlog"));
+    config.telemetry.hlog = Some(dir.join("rt-core.hlog"));
     let path = write_config(&dir, &config);
     let probe = start_probe(&dir, &prefix);
     let stop = AtomicBool::new(false);
@@ -97,7 +97,7 @@ fn ticks_are_gap_free_and_sigterm_ends_with_a_final_tick_and_flushed_histograms(
     assert_eq!(report.misses, missed);
     assert_eq!(report.hot_path_allocations, 0);
     assert_eq!(report.flags & TimingReport::FLAG_ALLOCATIONS_UNCOUNTED, 0);
-    let logged = merge_by_tag(&dir.path("rt-core.hlog")).unwrap();
+    let logged = merge_by_tag(&dir.join("rt-core.hlog")).unwrap();
     for tag in [TAG_WAKE, TAG_INPUT, TAG_COMPUTE, TAG_PUBLISH] {
         assert_eq!(logged[tag].count(), report.ticks, "hlog {tag} count");
     }
@@ -134,10 +134,10 @@ fn assert_replay_matches(controller: &Controller, ticks: &[StimTick]) {
 fn the_pattern_generator_runs_from_a_controller_file_exactly_as_offline() {
     let dir = Scratch::new("controller");
     let prefix = prefix("controller");
-    let controller = write_controller(&dir.path("controller.json"), 10);
+    let controller = write_controller(&dir.join("controller.json"), 10);
     let mut config = config(&prefix, 2);
     config.source = SourceConfig::Controller {
-        path: dir.path("controller.json"),
+        path: dir.join("controller.json"),
     };
     let path = write_config(&dir, &config);
     let probe = start_probe(&dir, &prefix);
@@ -192,10 +192,10 @@ fn feed_forces(prefix: &str, force: f64, duration: Duration) -> Vec<u64> {
 fn in_feedback_mode_fresh_force_samples_reach_the_generator_and_stale_ones_do_not() {
     let dir = Scratch::new("feedback");
     let prefix = prefix("feedback");
-    write_measured_controller(&dir.path("controller.json"), 4);
+    write_measured_controller(&dir.join("controller.json"), 4);
     let mut config = config(&prefix, 2);
     config.source = SourceConfig::Controller {
-        path: dir.path("controller.json"),
+        path: dir.join("controller.json"),
     };
     config.feedback.enabled = true;
     config.feedback.max_age_ms = 5;
@@ -281,10 +281,10 @@ fn in_feedback_mode_fresh_force_samples_reach_the_generator_and_stale_ones_do_no
 #[test]
 fn a_controller_that_does_not_fit_the_loop_is_refused_at_start() {
     let dir = Scratch::new("ctrlmismatch");
-    write_controller(&dir.path("controller.json"), 3);
+    write_controller(&dir.join("controller.json"), 3);
     let mut config = config(&prefix("ctrlmismatch"), 2);
     config.source = SourceConfig::Controller {
-        path: dir.path("controller.json"),
+        path: dir.join("controller.json"),
     };
     config.period_us = 2000;
     let (status, stderr) =
@@ -302,7 +302,7 @@ fn a_controller_that_does_not_fit_the_loop_is_refused_at_start() {
     assert_eq!(status.code(), Some(1));
     assert!(stderr.contains("[feedback] enabled = true"), "{stderr}");
 
-    std::fs::write(dir.path("controller.json"), "{\"schema\": \"fes-lcn/1\"}").unwrap();
+    std::fs::write(dir.join("controller.json"), "{\"schema\": \"fes-lcn/1\"}").unwrap();
     config.feedback.enabled = false;
     let (status, stderr) =
         start_rt_core(&write_config(&dir, &config), false).finish(Duration::from_secs(10));
@@ -324,10 +324,10 @@ fn export_demo_controller() {
 fn a_100_ms_stall_skips_periods_keeps_the_phase_and_emits_no_burst() {
     let dir = Scratch::new("stall");
     let prefix = prefix("stall");
-    let controller = write_controller(&dir.path("controller.json"), 10);
+    let controller = write_controller(&dir.join("controller.json"), 10);
     let mut config = config(&prefix, 2);
     config.source = SourceConfig::Controller {
-        path: dir.path("controller.json"),
+        path: dir.join("controller.json"),
     };
     config.reference.stale_after_ms = 2000;
     let path = write_config(&dir, &config);
@@ -605,7 +605,7 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
         "UTF-8",
     ));
     for (text, needle) in cases {
-        let path = dir.path("bad.toml");
+        let path = dir.join("bad.toml");
         std::fs::write(&path, &text).unwrap();
         let text = String::from_utf8_lossy(&text);
         let (status, stderr) = start_rt_core(&path, false).finish(Duration::from_secs(10));
@@ -614,7 +614,7 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
         assert!(!stderr.contains("panicked"), "{text}\n{stderr}");
     }
     let (status, stderr) =
-        start_rt_core(&dir.path("missing.toml"), false).finish(Duration::from_secs(10));
+        start_rt_core(&dir.join("missing.toml"), false).finish(Duration::from_secs(10));
     assert_eq!(status.code(), Some(1));
     assert!(stderr.contains("missing.toml"), "{stderr}");
 }

@@ -841,7 +841,7 @@ use crate::on_bus;
 #[test]
 #[ignore = "needs a native CAN bus or a quiet machine: see the doc comment"]
 fn driver_on_the_bus() {
-    fes_tests::vcan::with_vcan(on_bus::driver_on_the_bus);
+    fes_testkit::vcan::with_vcan(on_bus::driver_on_the_bus);
 }
 
 /// The same scenarios (1-4; the link-down scenario needs a CAN interface) with the driver and
@@ -850,7 +850,7 @@ fn driver_on_the_bus() {
 /// CAN, at the host's timing.
 #[test]
 fn driver_on_the_host_bus() {
-    on_bus::driver_on_the_bus(&fes_tests::vcan::CanEnv::host_bus("driver"));
+    on_bus::driver_on_the_bus(&fes_testkit::vcan::CanEnv::host_bus("driver"));
 }
 
 /// Not a test: the scripted StimTick publisher process that [`driver_on_the_bus`] starts
@@ -939,14 +939,14 @@ fn malformed_configurations_are_refused_clearly_without_a_panic() {
     // Each file is refused twice: by `--check`, and by a real `run` on a host bus with a
     // tap listening, which must see nothing (the configuration is refused before the bus
     // is touched).
-    let bus = fes_tests::bus::SilentBus::new("driver-badcfg");
+    let bus = fes_testkit::bus::SilentBus::new("driver-badcfg");
     let refused = |name: &str, args: &[&str], needle: &str| {
         let out = Command::new(EXE)
             .args(args)
             .env("RUST_BACKTRACE", "0")
             .output()
             .unwrap();
-        fes_tests::cli::assert_refused(name, &out, &[1], needle, 6);
+        fes_testkit::assert_refused(name, &out, &[1], needle, 6);
         bus.assert_silent(name);
     };
     let path = dir.join("bad.toml");

@@ -8,8 +8,8 @@
 
 use std::process::Command;
 
-use fes_tests::bus::SilentBus;
-use fes_tests::cli::assert_refused;
+use fes_testkit::assert_refused;
+use fes_testkit::bus::SilentBus;
 use fes_tests::stack::stack_binaries;
 
 #[test]

@@ -10,7 +10,7 @@
 //! Exit status: the command's; 125 when no CAN environment could be set up.
 
 use clap::Parser;
-use fes_tests::vcan::{self, GuestCommand};
+use fes_testkit::vcan::{self, GuestCommand};
 
 /// Run a command with a CAN interface available (native vcan or a User-Mode Linux guest).
 #[derive(Parser, Debug)]

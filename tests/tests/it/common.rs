@@ -1,15 +1,13 @@
 //! Shared pieces of the stimulator tests: the stimulator process, message pickers and a
 //! small deterministic random generator.
 
-#![allow(dead_code)]
-
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use fes_can::{Emcy, ErrorCode, Force, Message, NmtState, Status};
-use fes_tests::bus::{RxFrame, Tap};
+use fes_testkit::bus::{RxFrame, Tap};
 
 /// The virtual stimulator (with the charge-integrator plant) as a child process whose
 /// log lines are echoed with a `[stim]` prefix.

@@ -6,7 +6,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use fes_tests::vcan::{Backend, with_vcan};
+use fes_testkit::vcan::{Backend, with_vcan};
 use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, StandardId};
 
 #[test]

@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use fes_can::{ErrorCode, Message, MessageKind, Nodes, StimState};
-use fes_tests::bus::{HeartbeatSender, HostPort, Tap};
-use fes_tests::vcan::{CanEnv, with_vcan};
+use fes_testkit::bus::{HeartbeatSender, HostPort, Tap};
+use fes_testkit::vcan::{CanEnv, with_vcan};
 
 #[test]
 fn can_utils_and_cantools_interoperate() {

@@ -15,4 +15,3 @@ mod latency_regression;
 mod stimulator_no_alloc;
 mod stimulator_vcan;
 mod systemd_units;
-mod testkit;

@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use fes_can::{ErrorCode, NmtCommand, StimLimits, StimState};
-use fes_tests::bus::{HeartbeatSender, HostPort, Tap};
-use fes_tests::vcan::{Backend, CanEnv, with_vcan};
+use fes_testkit::bus::{HeartbeatSender, HostPort, Tap};
+use fes_testkit::vcan::{Backend, CanEnv, with_vcan};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::plant::MusclePlant;
 use sim_muscle::preset::Preset;

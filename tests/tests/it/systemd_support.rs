@@ -1,8 +1,6 @@
 //! Shared pieces of the systemd tests: building the stack's binaries, staging an install
 //! with `scripts/install --destdir`, and reading unit files.
 
-#![allow(dead_code)]
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -66,38 +64,14 @@ pub fn build_stack() -> PathBuf {
     dir
 }
 
-/// A scratch directory, removed on drop unless `FES_TEST_KEEP` is set.
-pub struct Scratch {
-    /// Its path.
-    pub path: PathBuf,
+/// A scratch directory inside the target directory (not /tmp: a UML guest hides the host's
+/// /tmp behind its own), from the testkit: removed when the test passes, kept when it fails
+/// or `FES_TEST_KEEP` is set.
+pub fn scratch(tag: &str) -> Scratch {
+    Scratch::new_in(&target_dir().join("test-scratch"), tag)
 }
 
-impl Scratch {
-    /// A fresh directory `<target>/test-scratch/<tag>-<pid>-<n>` (inside the target
-    /// directory, not /tmp: a UML guest hides the host's /tmp behind its own).
-    pub fn new(tag: &str) -> Self {
-        use std::sync::atomic::{AtomicU32, Ordering};
-        static N: AtomicU32 = AtomicU32::new(0);
-        let path = target_dir().join("test-scratch").join(format!(
-            "{tag}-{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path).expect("create scratch directory");
-        Self { path }
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if std::env::var_os("FES_TEST_KEEP").is_some() {
-            eprintln!("keeping {}", self.path.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.path);
-        }
-    }
-}
+pub use fes_testkit::Scratch;
 
 /// Runs `scripts/install` with `args`; returns (success, stdout + stderr).
 pub fn run_install(args: &[&str]) -> (bool, String) {

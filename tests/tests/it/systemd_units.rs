@@ -20,7 +20,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
-use systemd_support::{Scratch, UnitFile, build_stack, cpu_set, stage, workspace_root};
+use systemd_support::{Scratch, UnitFile, build_stack, cpu_set, scratch, stage, workspace_root};
 
 const UNIT_DIR: &str = "etc/systemd/system";
 const SERVICES: [&str; 5] = [
@@ -40,14 +40,14 @@ const ICEORYX2_USERS: [&str; 3] = [
 /// A staged bench (or rig) install with deterministic CPU placement.
 fn staged(mode: &str) -> (Scratch, BTreeMap<String, UnitFile>) {
     let bins = build_stack();
-    let scratch = Scratch::new(&format!("units{}", mode.trim_start_matches('-')));
+    let scratch = scratch(&format!("units{}", mode.trim_start_matches('-')));
     stage(
         mode,
-        &scratch.path,
+        scratch.path(),
         &bins,
         &["--rt-cpus", "1", "--housekeeping-cpus", "0"],
     );
-    let units = read_units(&scratch.path.join(UNIT_DIR));
+    let units = read_units(&scratch.path().join(UNIT_DIR));
     (scratch, units)
 }
 
@@ -117,8 +117,8 @@ fn systemd_analyze_verify_accepts_every_unit_silently() {
         };
         let got: BTreeSet<&str> = units.keys().map(String::as_str).collect();
         assert_eq!(got, expected, "{mode}: installed units");
-        let dir = scratch.path.join("verify");
-        units_for_verify(&scratch.path, &dir);
+        let dir = scratch.path().join("verify");
+        units_for_verify(scratch.path(), &dir);
         let (ok, text) = analyze_verify(&dir);
         println!("{mode}: systemd-analyze verify: ok={ok} output={text:?}");
         assert!(
@@ -132,8 +132,8 @@ fn systemd_analyze_verify_accepts_every_unit_silently() {
 #[test]
 fn systemd_analyze_verify_rejects_broken_units() {
     let (scratch, _) = staged("--bench");
-    let dir = scratch.path.join("verify");
-    units_for_verify(&scratch.path, &dir);
+    let dir = scratch.path().join("verify");
+    units_for_verify(scratch.path(), &dir);
     let unit = dir.join("fes-rt-core.service");
     let good = std::fs::read_to_string(&unit).expect("unit");
     for (what, broken) in [
@@ -451,7 +451,7 @@ fn safety_iceoryx2_and_hardening_settings() {
     }
     // The user the units run as is created, and owns iceoryx2's shared directory.
     let sysusers =
-        std::fs::read_to_string(scratch.path.join("etc/sysusers.d/fes.conf")).expect("sysusers");
+        std::fs::read_to_string(scratch.path().join("etc/sysusers.d/fes.conf")).expect("sysusers");
     assert!(
         sysusers
             .lines()
@@ -459,7 +459,7 @@ fn safety_iceoryx2_and_hardening_settings() {
         "{sysusers}"
     );
     let tmpfiles =
-        std::fs::read_to_string(scratch.path.join("etc/tmpfiles.d/fes.conf")).expect("tmpfiles");
+        std::fs::read_to_string(scratch.path().join("etc/tmpfiles.d/fes.conf")).expect("tmpfiles");
     assert!(
         tmpfiles.lines().any(|l| {
             let w: Vec<&str> = l.split_whitespace().collect();
@@ -485,8 +485,8 @@ fn safety_iceoryx2_and_hardening_settings() {
 #[test]
 fn installer_keeps_the_operators_configuration() {
     let bins = build_stack();
-    let scratch = Scratch::new("installer");
-    let root = &scratch.path;
+    let scratch = scratch("installer");
+    let root = scratch.path();
     stage("--bench", root, &bins, &[]);
     let conf = root.join("etc/fes/rt-core.toml");
     let edited = std::fs::read_to_string(&conf).expect("config") + "\n# operator's edit\n";

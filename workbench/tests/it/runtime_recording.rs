@@ -518,8 +518,8 @@ fn killing_any_one_process_stops_stimulation_and_names_it() {
 #[ignore = "needs a native vcan: the UML guest stalls for seconds (see the doc comment)"]
 fn killing_any_one_process_on_vcan_stops_stimulation_and_names_it() {
     let bins = stack_binaries();
-    fes_tests::vcan::with_vcan(|can| {
-        let timing = if can.backend == fes_tests::vcan::Backend::Uml {
+    fes_testkit::vcan::with_vcan(|can| {
+        let timing = if can.backend == fes_testkit::vcan::Backend::Uml {
             ChainTiming::Uml
         } else {
             ChainTiming::Tolerant

@@ -91,10 +91,12 @@ pub struct RawTick {
     pub pulse: bool,
 }
 
-/// The recording `run`'s `ticks.csv`.
+/// The recording `run`'s `ticks.csv`, its complete lines: a line the recorder could not
+/// finish (a full disk, a killed supervisor) has no newline and is left out.
 pub fn raw_ticks(run: &Path) -> Vec<RawTick> {
     let text = std::fs::read_to_string(run.join("ticks.csv")).unwrap_or_default();
-    let mut lines = text.lines();
+    let complete = text.rfind('\n').map_or("", |end| &text[..=end]);
+    let mut lines = complete.lines();
     let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
     let col = |name: &str| {
         header

@@ -27,8 +27,8 @@ use fes_rt::msg::{
 };
 use fes_rt::rt::clock::{PeriodicClock, monotonic_ns};
 use fes_rt::rt::node::create_node;
-use fes_tests::bus::{RxFrame, Tap};
-use fes_tests::vcan::{Backend, CanEnv};
+use fes_testkit::bus::{RxFrame, Tap};
+use fes_testkit::vcan::{Backend, CanEnv};
 use iceoryx2::prelude::*;
 
 const EXE: &str = env!("CARGO_BIN_EXE_stim-driver");
@@ -189,7 +189,7 @@ struct Publisher {
 
 impl Publisher {
     fn start(prefix: &str, script: &str) -> Self {
-        let mut child = fes_tests::child::dies_with_parent(&mut Command::new(
+        let mut child = fes_testkit::child::dies_with_parent(&mut Command::new(
             std::env::current_exe().expect("test binary"),
         ))
         .args([PUBLISHER_TEST, "--exact", "--ignored", "--nocapture"])
@@ -676,7 +676,7 @@ pub fn driver_on_the_bus(can: &CanEnv) {
     let candump_out = dir.join("candump.log");
     // candump needs a CAN interface; on the host bus the tap is the only observer.
     let mut candump = (!host_bus).then(|| {
-        fes_tests::child::dies_with_parent(&mut Command::new("candump"))
+        fes_testkit::child::dies_with_parent(&mut Command::new("candump"))
             .args(["-L", &can.iface])
             .stdout(std::fs::File::create(&candump_out).unwrap())
             .stderr(Stdio::null())
@@ -685,7 +685,7 @@ pub fn driver_on_the_bus(can: &CanEnv) {
     });
     let log_file = std::fs::File::create(&log).unwrap();
     // A panicking scenario takes the driver with it (the next test would share its load).
-    let mut driver = fes_tests::child::dies_with_parent(&mut Command::new(EXE))
+    let mut driver = fes_testkit::child::dies_with_parent(&mut Command::new(EXE))
         .args(["run", "--config"])
         .arg(&config)
         .env_remove("FES_CAN_IFACE")

@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::systemd_support::{Scratch, build_stack};
+use crate::systemd_support::{Scratch, build_stack, scratch};
 
 /// A fake service manager: the socket rt-core notifies.
 struct FakeManager {
@@ -83,7 +83,7 @@ impl Drop for FakeManager {
 
 /// Writes a test-pattern configuration with its own iceoryx2 prefix.
 fn config(scratch: &Scratch, tag: &str) -> PathBuf {
-    let path = scratch.path.join("rt-core.toml");
+    let path = scratch.path().join("rt-core.toml");
     std::fs::write(
         &path,
         format!(
@@ -182,7 +182,7 @@ fn print(messages: &[(Duration, String)]) {
 
 #[test]
 fn ready_then_fed_watchdog_while_ticking_then_stopping() {
-    let scratch = Scratch::new("notify-ok");
+    let scratch = scratch("notify-ok");
     let config = config(&scratch, "ok");
     let manager = FakeManager::new("ok");
     let watchdog = Duration::from_millis(400);
@@ -229,7 +229,7 @@ fn ready_then_fed_watchdog_while_ticking_then_stopping() {
 
 #[test]
 fn a_watchdog_meant_for_another_process_is_not_fed() {
-    let scratch = Scratch::new("notify-pid");
+    let scratch = scratch("notify-pid");
     let config = config(&scratch, "pid");
     let manager = FakeManager::new("pid");
     let mut child = spawn_rt_core(
@@ -256,7 +256,7 @@ fn a_watchdog_meant_for_another_process_is_not_fed() {
 
 #[test]
 fn a_stalled_loop_stops_feeding_the_watchdog() {
-    let scratch = Scratch::new("notify-stall");
+    let scratch = scratch("notify-stall");
     let config = config(&scratch, "stall");
     let manager = FakeManager::new("stall");
     let watchdog = Duration::from_millis(400);
@@ -304,7 +304,7 @@ fn a_stalled_loop_stops_feeding_the_watchdog() {
 
 #[test]
 fn malformed_variables_are_refused_naming_them() {
-    let scratch = Scratch::new("notify-bad");
+    let scratch = scratch("notify-bad");
     let config = config(&scratch, "bad");
     for (env, name) in [
         (("WATCHDOG_USEC", "2s"), "WATCHDOG_USEC"),
