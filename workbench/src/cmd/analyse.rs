@@ -11,7 +11,8 @@ use anyhow::{Context, Result, bail};
 use fes_ident::analysis::force_frequency::{ForceFrequencyPoint, force_frequency};
 use fes_ident::analysis::static_analysis::{StaticReport, analyse};
 use fes_ident::analysis::trace::phi_range;
-use fes_ident::analysis::validation::{fit_record, msse};
+use fes_ident::analysis::validation::{RecordFit, fit_record, msse};
+use rt_core::model::lmn::UnitStability;
 use rt_core::model::{Lmn, Network, Scheduler};
 use sim_muscle::pattern::constant_train;
 
@@ -136,33 +137,38 @@ fn stability_section(md: &mut String, model: &OpenedModel, rep: &StaticReport) {
          radius 1/Ts = {:.0} /s centred at -1/Ts, Fig. D.4); for real poles -2/Ts < p < 0.\n",
         1.0 / lmn.ts
     );
-    let rows: Vec<Vec<String>> = model
-        .stability
-        .iter()
-        .map(|s| {
-            vec![
-                s.unit.to_string(),
-                s.poles
-                    .iter()
-                    .map(|p| {
-                        if p.im == 0.0 {
-                            format!("{:.2}", p.re)
-                        } else {
-                            format!("{:.2}{:+.2}i", p.re, p.im)
-                        }
-                    })
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                format!("{:.6}", s.radius),
-                if s.stable { "stable" } else { "**UNSTABLE**" }.into(),
-            ]
-        })
-        .collect();
+    let rows: Vec<Vec<String>> = model.stability.iter().map(stability_row).collect();
     md.push_str(&md_table(
         &["unit", "poles (1/s)", "max abs(1 + Ts p)", "verdict"],
         &rows,
     ));
     md.push('\n');
+    eigenvector_note(md, rep);
+}
+
+/// One unit's row of the stability table: its poles, max |1 + Ts p| and verdict.
+fn stability_row(s: &UnitStability) -> Vec<String> {
+    vec![
+        s.unit.to_string(),
+        s.poles
+            .iter()
+            .map(|p| {
+                if p.im == 0.0 {
+                    format!("{:.2}", p.re)
+                } else {
+                    format!("{:.2}{:+.2}i", p.re, p.im)
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+        format!("{:.6}", s.radius),
+        if s.stable { "stable" } else { "**UNSTABLE**" }.into(),
+    ]
+}
+
+/// Whether the eigenvectors are common (then stability by construction, 2.4.1) or local
+/// (the LPV caveat).
+fn eigenvector_note(md: &mut String, rep: &StaticReport) {
     match rep.common_eigenvectors {
         Some(a) => {
             let _ = writeln!(
@@ -237,6 +243,44 @@ fn extrapolation_bands(range: (f64, f64), train_phi: Option<(f64, f64)>) -> Vec<
     bands
 }
 
+/// What the static analysis shows beyond its points: where the frozen model is unstable
+/// and how far the gain ranges.
+struct StaticFindings {
+    /// The phi grid's extent.
+    range: (f64, f64),
+    /// phi intervals where the frozen model is unstable (half a grid step beyond the points).
+    unstable: Vec<(f64, f64)>,
+    /// Smallest and largest gain over phi.
+    gain_span: (f64, f64),
+    /// Grid points where the frozen model is unstable.
+    unstable_points: usize,
+}
+
+fn static_findings(rep: &StaticReport) -> StaticFindings {
+    let phis: Vec<f64> = rep.points.iter().map(|p| p.phi).collect();
+    let range = (phis[0], phis[phis.len() - 1]);
+    let step = if phis.len() > 1 {
+        0.5 * (phis[1] - phis[0])
+    } else {
+        0.0
+    };
+    let unstable: Vec<(f64, bool)> = rep.points.iter().map(|p| (p.phi, !p.stable)).collect();
+    let gain_span = rep
+        .points
+        .iter()
+        .filter_map(|p| p.gain)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), g| {
+            (a.min(g), b.max(g))
+        });
+    StaticFindings {
+        range,
+        unstable: runs(&unstable, step),
+        gain_span,
+        unstable_points: rep.points.iter().filter(|p| !p.stable).count(),
+    }
+}
+
+/// `static.png`, `static.csv` and the report's section.
 fn static_section(
     md: &mut String,
     out: &Path,
@@ -244,24 +288,27 @@ fn static_section(
     rep: &StaticReport,
     train_phi: Option<(f64, f64)>,
 ) -> Result<()> {
+    let found = static_findings(rep);
+    let mut bands = extrapolation_bands(found.range, train_phi);
+    bands.extend(found.unstable.iter().enumerate().map(|(i, &(a, b))| Band {
+        x0: a,
+        x1: b,
+        color: plots::UNSTABLE_BAND,
+        label: (i == 0).then(|| "frozen model unstable".to_string()),
+    }));
+    plots::save(
+        &static_figure(lmn, rep, bands),
+        &out.join("static.png"),
+        (900, 900),
+    )?;
+    write_static_csv(&out.join("static.csv"), lmn.units(), rep)?;
+    static_markdown(md, &found, rep.points.len(), train_phi);
+    Ok(())
+}
+
+/// Fig. 5.27: activations, gain and poles over phi, `bands` shaded in each.
+fn static_figure(lmn: &Lmn, rep: &StaticReport, bands: Vec<Band>) -> Figure {
     let m = lmn.units();
-    let phis: Vec<f64> = rep.points.iter().map(|p| p.phi).collect();
-    let range = (phis[0], phis[phis.len() - 1]);
-    let mut bands = extrapolation_bands(range, train_phi);
-    let step = if phis.len() > 1 {
-        0.5 * (phis[1] - phis[0])
-    } else {
-        0.0
-    };
-    let unstable: Vec<(f64, bool)> = rep.points.iter().map(|p| (p.phi, !p.stable)).collect();
-    for (i, (a, b)) in runs(&unstable, step).into_iter().enumerate() {
-        bands.push(Band {
-            x0: a,
-            x1: b,
-            color: plots::UNSTABLE_BAND,
-            label: (i == 0).then(|| "frozen model unstable".to_string()),
-        });
-    }
     let act = Panel {
         title: Some("activations rho_i(phi)".into()),
         x_label: "phi".into(),
@@ -300,6 +347,19 @@ fn static_section(
         bands: bands.clone(),
         ..Panel::default()
     };
+    Figure {
+        title: format!(
+            "static analysis over phi ({} units, {})",
+            m,
+            lmn.structure()
+        ),
+        columns: vec![vec![(1, act), (1, gain), (1, pole_panel(rep, bands))]],
+    }
+}
+
+/// The real parts of both poles over phi (and the imaginary part of the first when some
+/// pole is complex).
+fn pole_panel(rep: &StaticReport, bands: Vec<Band>) -> Panel {
     let pole = |j: usize, im: bool| -> Vec<(f64, f64)> {
         rep.points
             .iter()
@@ -320,7 +380,7 @@ fn static_section(
     if any_complex {
         pole_lines.push(Line::new(Some("Im p1".to_string()), pole(0, true), color(2)).dashed());
     }
-    let poles = Panel {
+    Panel {
         title: Some("poles of the interpolated model (delta domain)".into()),
         x_label: "phi".into(),
         y_label: "p (1/s)".into(),
@@ -329,17 +389,11 @@ fn static_section(
         bands,
         legend: true,
         ..Panel::default()
-    };
-    let fig = Figure {
-        title: format!(
-            "static analysis over phi ({} units, {})",
-            m,
-            lmn.structure()
-        ),
-        columns: vec![vec![(1, act), (1, gain), (1, poles)]],
-    };
-    plots::save(&fig, &out.join("static.png"), (900, 900))?;
+    }
+}
 
+/// One row per grid point: phi, activations, gain, output offset, poles, stability.
+fn write_static_csv(path: &Path, m: usize, rep: &StaticReport) -> Result<()> {
     let mut header: Vec<String> = vec!["phi".into()];
     header.extend((0..m).map(|i| format!("rho_{i}")));
     header.extend(
@@ -375,16 +429,18 @@ fn static_section(
         })
         .collect();
     let h: Vec<&str> = header.iter().map(String::as_str).collect();
-    write_csv(&out.join("static.csv"), &h, &rows)?;
+    write_csv(path, &h, &rows)
+}
 
+fn static_markdown(
+    md: &mut String,
+    found: &StaticFindings,
+    points: usize,
+    train_phi: Option<(f64, f64)>,
+) {
     let _ = writeln!(md, "## Static analysis over phi (Fig. 5.27)\n");
     let _ = writeln!(md, "![static analysis](static.png)\n");
-    let gains: Vec<f64> = rep.points.iter().filter_map(|p| p.gain).collect();
-    let (gmin, gmax) = gains
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &g| {
-            (a.min(g), b.max(g))
-        });
+    let (gmin, gmax) = found.gain_span;
     let _ = writeln!(
         md,
         "Gain range over phi: {gmin:.4} .. {gmax:.4}{}. Frozen model unstable at {} of {} grid points. Table: `static.csv`.\n",
@@ -393,8 +449,8 @@ fn static_section(
         } else {
             ""
         },
-        rep.points.iter().filter(|p| !p.stable).count(),
-        rep.points.len()
+        found.unstable_points,
+        points
     );
     if let Some((lo, hi)) = train_phi {
         let _ = writeln!(
@@ -402,7 +458,6 @@ fn static_section(
             "The training records drive phi over [{lo:.3}, {hi:.3}] (the model's own scheduler); the shaded range outside it is extrapolation.\n"
         );
     }
-    Ok(())
 }
 
 /// The gain axis from the 5th to the 95th percentile of the gain (widened by half its span
@@ -425,12 +480,34 @@ fn gain_range(rep: &StaticReport) -> Option<(f64, f64)> {
     Some((lo - 0.5 * span, hi + 0.5 * span))
 }
 
-fn ff_section(
-    md: &mut String,
+/// The force-frequency curve and what the report says of it.
+struct ForceFrequency {
+    points: Vec<ForceFrequencyPoint>,
+    /// Per point: its train drives phi outside the training data's range (false without a
+    /// data set).
+    extrapolated: Vec<bool>,
+    /// Frequencies at which the curve is lower than at the frequency before.
+    drops: Vec<f64>,
+}
+
+impl ForceFrequency {
+    /// The lowest frequency whose train drives phi outside the training data's range.
+    fn first_extrapolated(&self) -> Option<f64> {
+        self.points
+            .iter()
+            .zip(&self.extrapolated)
+            .find(|(_, e)| **e)
+            .map(|(p, _)| p.frequency_hz)
+    }
+}
+
+/// Constant trains at 1..`--max-hz` Hz from rest (Fig. 5.26), each point judged against
+/// the training data's phi range.
+fn force_frequency_curve(
     args: &Args,
     net: &Network<f64>,
     train_phi: Option<(f64, f64)>,
-) -> Result<()> {
+) -> Result<ForceFrequency> {
     let ts = net.ts();
     let samples = (args.train_ms as f64 * 1e-3 / ts).round() as usize;
     let from = (args.average_from_ms as f64 * 1e-3 / ts).round() as usize;
@@ -442,11 +519,54 @@ fn ff_section(
                 .with_context(|| format!("{f} Hz train"))
         })
         .collect::<Result<Vec<_>>>()?;
-    let pts = force_frequency(net, &trains, samples, from).context("force-frequency curve")?;
-    let extrap = |p: &ForceFrequencyPoint| {
-        train_phi.is_some_and(|(lo, hi)| p.phi_max > hi + 1e-9 || p.phi_max < lo - 1e-9)
-    };
-    let flags: Vec<(f64, bool)> = pts.iter().map(|p| (p.frequency_hz, extrap(p))).collect();
+    let points = force_frequency(net, &trains, samples, from).context("force-frequency curve")?;
+    let extrapolated = points
+        .iter()
+        .map(|p| train_phi.is_some_and(|(lo, hi)| p.phi_max > hi + 1e-9 || p.phi_max < lo - 1e-9))
+        .collect();
+    let drops = points
+        .windows(2)
+        .filter(|w| w[1].mean_output < w[0].mean_output)
+        .map(|w| w[1].frequency_hz)
+        .collect();
+    Ok(ForceFrequency {
+        points,
+        extrapolated,
+        drops,
+    })
+}
+
+/// `force_frequency.png`, `force_frequency.csv` and the report's section.
+fn ff_section(
+    md: &mut String,
+    args: &Args,
+    net: &Network<f64>,
+    train_phi: Option<(f64, f64)>,
+) -> Result<()> {
+    let ff = force_frequency_curve(args, net, train_phi)?;
+    plots::save(
+        &ff_figure(args, &ff, train_phi),
+        &args.out.join("force_frequency.png"),
+        (900, 650),
+    )?;
+    write_ff_csv(
+        &args.out.join("force_frequency.csv"),
+        &ff,
+        train_phi.is_some(),
+    )?;
+    ff_markdown(md, args, &ff);
+    Ok(())
+}
+
+/// The curve above, the mean and largest phi of each train below; extrapolated
+/// frequencies shaded.
+fn ff_figure(args: &Args, ff: &ForceFrequency, train_phi: Option<(f64, f64)>) -> Figure {
+    let pts = &ff.points;
+    let flags: Vec<(f64, bool)> = pts
+        .iter()
+        .zip(&ff.extrapolated)
+        .map(|(p, &e)| (p.frequency_hz, e))
+        .collect();
     let bands: Vec<Band> = runs(&flags, 0.5)
         .into_iter()
         .enumerate()
@@ -457,77 +577,72 @@ fn ff_section(
             label: (i == 0).then(|| "extrapolation (phi above the training data's)".to_string()),
         })
         .collect();
-    let fig = Figure {
+    let x = Some((0.0, args.max_hz as f64 + 1.0));
+    let curve = Panel {
+        x_label: "stimulation frequency (Hz)".into(),
+        y_label: "mean output (normalised force)".into(),
+        x,
+        lines: vec![Line::new(
+            None,
+            pts.iter()
+                .map(|p| (p.frequency_hz, p.mean_output))
+                .collect(),
+            color(0),
+        )],
+        bands: bands.clone(),
+        hline: Some(0.0),
+        legend: true,
+        ..Panel::default()
+    };
+    let phi = Panel {
+        x_label: "stimulation frequency (Hz)".into(),
+        y_label: "phi".into(),
+        x,
+        lines: vec![
+            Line::new(
+                Some("mean phi".to_string()),
+                pts.iter().map(|p| (p.frequency_hz, p.phi_mean)).collect(),
+                color(1),
+            ),
+            Line::new(
+                Some("max phi".to_string()),
+                pts.iter().map(|p| (p.frequency_hz, p.phi_max)).collect(),
+                color(2),
+            )
+            .dashed(),
+        ],
+        hline: train_phi.map(|r| r.1),
+        bands,
+        legend: true,
+        ..Panel::default()
+    };
+    Figure {
         title: format!(
             "force-frequency curve: mean model output over {}..{} ms of {} ms constant trains",
             args.average_from_ms, args.train_ms, args.train_ms
         ),
-        columns: vec![vec![
-            (
-                3,
-                Panel {
-                    x_label: "stimulation frequency (Hz)".into(),
-                    y_label: "mean output (normalised force)".into(),
-                    x: Some((0.0, args.max_hz as f64 + 1.0)),
-                    lines: vec![Line::new(
-                        None,
-                        pts.iter()
-                            .map(|p| (p.frequency_hz, p.mean_output))
-                            .collect(),
-                        color(0),
-                    )],
-                    bands: bands.clone(),
-                    hline: Some(0.0),
-                    legend: true,
-                    ..Panel::default()
-                },
-            ),
-            (
-                2,
-                Panel {
-                    x_label: "stimulation frequency (Hz)".into(),
-                    y_label: "phi".into(),
-                    x: Some((0.0, args.max_hz as f64 + 1.0)),
-                    lines: vec![
-                        Line::new(
-                            Some("mean phi".to_string()),
-                            pts.iter().map(|p| (p.frequency_hz, p.phi_mean)).collect(),
-                            color(1),
-                        ),
-                        Line::new(
-                            Some("max phi".to_string()),
-                            pts.iter().map(|p| (p.frequency_hz, p.phi_max)).collect(),
-                            color(2),
-                        )
-                        .dashed(),
-                    ],
-                    hline: train_phi.map(|r| r.1),
-                    bands,
-                    legend: true,
-                    ..Panel::default()
-                },
-            ),
-        ]],
-    };
-    plots::save(&fig, &args.out.join("force_frequency.png"), (900, 650))?;
-    let rows: Vec<Vec<String>> = pts
+        columns: vec![vec![(3, curve), (2, phi)]],
+    }
+}
+
+/// One row per frequency; `extrapolated` is empty without a data set (`judged` false).
+fn write_ff_csv(path: &Path, ff: &ForceFrequency, judged: bool) -> Result<()> {
+    let rows: Vec<Vec<String>> = ff
+        .points
         .iter()
-        .map(|p| {
+        .zip(&ff.extrapolated)
+        .map(|(p, e)| {
             vec![
                 format!("{}", p.frequency_hz),
                 format!("{}", p.mean_output),
                 format!("{}", p.phi_mean),
                 format!("{}", p.phi_max),
-                if train_phi.is_some() {
-                    extrap(p).to_string()
-                } else {
-                    "".into()
-                },
+                if judged { e.to_string() } else { "".into() },
             ]
         })
         .collect();
     write_csv(
-        &args.out.join("force_frequency.csv"),
+        path,
         &[
             "frequency_hz",
             "mean_output",
@@ -536,7 +651,10 @@ fn ff_section(
             "extrapolated",
         ],
         &rows,
-    )?;
+    )
+}
+
+fn ff_markdown(md: &mut String, args: &Args, ff: &ForceFrequency) {
     let _ = writeln!(md, "## Force-frequency curve (Fig. 5.26)\n");
     let _ = writeln!(md, "![force-frequency curve](force_frequency.png)\n");
     let _ = writeln!(
@@ -545,32 +663,34 @@ fn ff_section(
          force is the mean model output over {}..{} ms. Table: `force_frequency.csv`.",
         args.train_ms, args.max_hz, args.average_from_ms, args.train_ms
     );
-    let drops: Vec<f64> = pts
-        .windows(2)
-        .filter(|w| w[1].mean_output < w[0].mean_output)
-        .map(|w| w[1].frequency_hz)
-        .collect();
-    if let Some(first) = pts.iter().find(|p| extrap(p)) {
+    if let Some(first) = ff.first_extrapolated() {
         let _ = write!(
             md,
-            " From {} Hz on, the trains drive phi above the training data's maximum: the curve is extrapolated there.",
-            first.frequency_hz
+            " From {first} Hz on, the trains drive phi above the training data's maximum: the curve is extrapolated there."
         );
     }
-    if !drops.is_empty() {
+    if !ff.drops.is_empty() {
         let _ = write!(
             md,
             " The curve falls at {} of {} steps (first at {} Hz): a force that drops as the frequency rises is not a property of muscle (thesis 5.4.3: the 30-40 Hz bump of an unstable local model).",
-            drops.len(),
-            pts.len() - 1,
-            drops[0]
+            ff.drops.len(),
+            ff.points.len() - 1,
+            ff.drops[0]
         );
     }
     md.push_str("\n\n");
-    Ok(())
 }
 
-fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data) -> Result<()> {
+/// The model against the data set's records (Fig. 5.24).
+struct Validation {
+    /// Each test record simulated from rest, in the data set's order.
+    fits: Vec<RecordFit>,
+    /// MSSE over all training / test samples (eq. B.8).
+    train: f64,
+    test: f64,
+}
+
+fn validate(net: &Network<f64>, d: &Data) -> Result<Validation> {
     let fits = d
         .test
         .iter()
@@ -578,83 +698,23 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
         .collect::<Result<Vec<_>>>()?;
     let train = msse(net, d.train_pairs()).context("training MSSE")?;
     let test = msse(net, d.test_pairs()).context("test MSSE")?;
-    let ts_ms = net.ts() * 1e3;
+    Ok(Validation { fits, train, test })
+}
+
+/// `validation.png`, `validation.csv` and the report's section.
+fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data) -> Result<()> {
+    let v = validate(net, d)?;
     let shown = d.test.len().min(args.plot_records.max(1));
-    let mut t0 = 0.0;
-    let mut pulses = Vec::new();
-    let mut meas = Vec::new();
-    let mut sim = Vec::new();
-    let mut seps = Vec::new();
-    let mut texts = Vec::new();
-    let mut hi: f64 = 0.1;
-    for (s, f) in d.test.iter().zip(&fits).take(shown) {
-        if t0 > 0.0 {
-            seps.push(t0);
-            meas.push((f64::NAN, f64::NAN));
-            sim.push((f64::NAN, f64::NAN));
-        }
-        for k in 0..s.u.len() {
-            let t = t0 + k as f64 * ts_ms;
-            if s.u[k] > 0.5 {
-                pulses.push(t);
-            }
-            meas.push((t, s.y[k]));
-            sim.push((t, f.simulated[k]));
-            hi = hi.max(s.y[k]).max(f.simulated[k].min(1.5));
-        }
-        texts.push((
-            t0 + 8.0 * ts_ms,
-            0.0,
-            format!("{}: MSSE {}", s.kind, sci(f.msse)),
-        ));
-        t0 += s.u.len() as f64 * ts_ms;
-    }
-    for t in &mut texts {
-        t.1 = 1.2 * hi;
-    }
-    let fig = Figure {
-        title: format!(
-            "test records: measured (dashed) and simulated from rest (solid); first {shown} of {}",
-            d.test.len()
-        ),
-        columns: vec![vec![
-            (
-                1,
-                Panel {
-                    y_label: "pulse".into(),
-                    x: Some((0.0, t0)),
-                    y: Some((0.0, 1.1)),
-                    y_ticks: Some(2),
-                    compact: true,
-                    impulses: pulses,
-                    separators: seps.clone(),
-                    ..Panel::default()
-                },
-            ),
-            (
-                4,
-                Panel {
-                    x_label: "time (ms), records concatenated, each simulated from rest".into(),
-                    y_label: "force (normalised)".into(),
-                    x: Some((0.0, t0)),
-                    y: Some((-0.1 * hi, 1.25 * hi)),
-                    lines: vec![
-                        Line::new(Some("measured".to_string()), meas, color(7)).dashed(),
-                        Line::new(Some("model".to_string()), sim, color(0)),
-                    ],
-                    separators: seps,
-                    texts,
-                    legend: true,
-                    ..Panel::default()
-                },
-            ),
-        ]],
-    };
-    plots::save(&fig, &args.out.join("validation.png"), (1100, 600))?;
+    let traces = concatenate(d, &v.fits, shown, net.ts() * 1e3);
+    plots::save(
+        &validation_figure(traces, shown, d.test.len()),
+        &args.out.join("validation.png"),
+        (1100, 600),
+    )?;
     let rows: Vec<Vec<String>> = d
         .test
         .iter()
-        .zip(&fits)
+        .zip(&v.fits)
         .map(|(s, f)| vec![s.name.clone(), s.kind.clone(), format!("{}", f.msse)])
         .collect();
     write_csv(
@@ -667,17 +727,115 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
         md,
         "Data set `{}`: training MSSE {}, test MSSE {} (eq. B.8, every record simulated from rest).\n",
         d.dir.display(),
-        sci(train),
-        sci(test)
+        sci(v.train),
+        sci(v.test)
     );
     let _ = writeln!(md, "![validation](validation.png)\n");
     let md_rows: Vec<Vec<String>> = d
         .test
         .iter()
-        .zip(&fits)
+        .zip(&v.fits)
         .map(|(s, f)| vec![s.name.clone(), s.kind.clone(), sci(f.msse)])
         .collect();
     md.push_str(&md_table(&["test record", "kind", "MSSE"], &md_rows));
     md.push('\n');
     Ok(())
+}
+
+/// The first test records laid end to end on one time axis (ms), for the figure.
+struct Concatenated {
+    /// End of the last record.
+    t_end: f64,
+    /// Pulse times.
+    pulses: Vec<f64>,
+    /// Measured and simulated force, broken (NaN) between records.
+    measured: Vec<(f64, f64)>,
+    simulated: Vec<(f64, f64)>,
+    /// Where one record ends and the next begins.
+    separators: Vec<f64>,
+    /// Each record's kind and MSSE, above its start.
+    texts: Vec<(f64, f64, String)>,
+    /// The force axis's top before its margin.
+    top: f64,
+}
+
+fn concatenate(d: &Data, fits: &[RecordFit], shown: usize, ts_ms: f64) -> Concatenated {
+    let mut c = Concatenated {
+        t_end: 0.0,
+        pulses: Vec::new(),
+        measured: Vec::new(),
+        simulated: Vec::new(),
+        separators: Vec::new(),
+        texts: Vec::new(),
+        top: 0.1,
+    };
+    for (s, f) in d.test.iter().zip(fits).take(shown) {
+        let t0 = c.t_end;
+        if t0 > 0.0 {
+            c.separators.push(t0);
+            c.measured.push((f64::NAN, f64::NAN));
+            c.simulated.push((f64::NAN, f64::NAN));
+        }
+        for k in 0..s.u.len() {
+            let t = t0 + k as f64 * ts_ms;
+            if s.u[k] > 0.5 {
+                c.pulses.push(t);
+            }
+            c.measured.push((t, s.y[k]));
+            c.simulated.push((t, f.simulated[k]));
+            c.top = c.top.max(s.y[k]).max(f.simulated[k].min(1.5));
+        }
+        c.texts.push((
+            t0 + 8.0 * ts_ms,
+            0.0,
+            format!("{}: MSSE {}", s.kind, sci(f.msse)),
+        ));
+        c.t_end += s.u.len() as f64 * ts_ms;
+    }
+    for t in &mut c.texts {
+        t.1 = 1.2 * c.top;
+    }
+    c
+}
+
+/// Fig. 5.24: pulses above, measured (dashed) and simulated (solid) force below.
+fn validation_figure(c: Concatenated, shown: usize, records: usize) -> Figure {
+    let (t0, hi) = (c.t_end, c.top);
+    Figure {
+        title: format!(
+            "test records: measured (dashed) and simulated from rest (solid); first {shown} of {records}"
+        ),
+        columns: vec![vec![
+            (
+                1,
+                Panel {
+                    y_label: "pulse".into(),
+                    x: Some((0.0, t0)),
+                    y: Some((0.0, 1.1)),
+                    y_ticks: Some(2),
+                    compact: true,
+                    impulses: c.pulses,
+                    separators: c.separators.clone(),
+                    ..Panel::default()
+                },
+            ),
+            (
+                4,
+                Panel {
+                    x_label: "time (ms), records concatenated, each simulated from rest".into(),
+                    y_label: "force (normalised)".into(),
+                    x: Some((0.0, t0)),
+                    y: Some((-0.1 * hi, 1.25 * hi)),
+                    lines: vec![
+                        Line::new(Some("measured".to_string()), c.measured, color(7)).dashed(),
+                        Line::new(Some("model".to_string()), c.simulated, color(0)),
+                    ],
+                    separators: c.separators,
+                    texts: c.texts,
+                    legend: true,
+                    ..Panel::default()
+                },
+            ),
+        ]],
+    }
 }
