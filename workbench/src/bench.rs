@@ -233,12 +233,7 @@ impl Stack {
     pub fn start(opts: StackOptions) -> Result<Self, BenchError> {
         let d = &opts.dir;
         std::fs::create_dir_all(d).map_err(io(format!("create {}", d.display())))?;
-        for b in PROCESSES {
-            let p = opts.bin_dir.join(b);
-            if !p.is_file() {
-                return Err(BenchError::MissingBinary(p));
-            }
-        }
+        check_binaries(&opts.bin_dir)?;
         let controller =
             Controller::load(&opts.controller).map_err(|e| BenchError::Controller {
                 path: opts.controller.clone(),
@@ -249,185 +244,30 @@ impl Stack {
         let t = opts.timing.timeouts();
         let controller_path = std::fs::canonicalize(&opts.controller)
             .map_err(io(format!("resolve {}", opts.controller.display())))?;
-        let write = |name: &str, text: String| -> Result<PathBuf, BenchError> {
-            let p = d.join(name);
-            std::fs::write(&p, text).map_err(io(format!("write {}", p.display())))?;
-            Ok(p)
-        };
-        let prefix = &opts.prefix;
-        let rt_cfg = write(
-            "rt-core.toml",
-            format!(
-                r#"schema = "fes-rt-core/1"
-period_us = 1000
-
-[source]
-kind = "controller"
-path = "{controller}"
-
-[rt]
-priority = 80
-on_missing_rights = "best-effort"
-
-[reference]
-stale_after_ms = {stale_ms}
-stale_ramp_per_s = 2.0
-
-[telemetry]
-hlog = "{dir}/rt-core.hlog"
-report_period_ms = 1000
-
-[ipc]
-prefix = "{prefix}"
-"#,
-                controller = controller_path.display(),
-                stale_ms = t.reference_stale_ms,
-                dir = d.display(),
-            ),
-        )?;
-        let drv_cfg = write(
-            "stim-driver.toml",
-            format!(
-                r#"schema = "fes-stim-driver/1"
-
-[can]
-iface = "{iface}"
-
-[stimulator]
-watchdog_ms = {stim_wd}
-
-[interlocks]
-max_pulse_delay_us = {late_us}
-
-[watchdog]
-timeout_ticks = {drv_ticks}
-stale_after_ticks = {drv_ticks}
-stimulator_timeout_ms = {stim_wd}
-arm_confirm_ms = {arm_ms}
-command_max_age_ms = {cmd_age}
-
-[force]
-max_n = {scale_n}
-
-[rt]
-priority = 79
-on_missing_rights = "best-effort"
-
-[telemetry]
-hlog = "{dir}/stim-driver.hlog"
-
-[ipc]
-prefix = "{prefix}"
-"#,
-                iface = opts.iface,
-                stim_wd = t.stimulator_watchdog_ms,
-                drv_ticks = t.driver_tick_ticks,
-                arm_ms = t.arm_confirm_ms,
-                late_us = t.max_pulse_delay_us,
-                cmd_age = t.command_max_age_ms,
-                dir = d.display(),
-            ),
-        )?;
+        let rt_cfg = write_config(d, "rt-core.toml", rt_core_toml(&opts, &t, &controller_path))?;
+        let drv_cfg = write_config(d, "stim-driver.toml", stim_driver_toml(&opts, &t, scale_n))?;
         let socket = d.join("supervisor.sock");
-        let mut procs = Vec::new();
-        let spawn = |procs: &mut Vec<Proc1>, name: &'static str, args: Vec<String>| {
-            let log = d.join(format!("{name}.log"));
-            let out = File::create(&log).map_err(io(format!("create {}", log.display())))?;
-            let err = out.try_clone().map_err(io("log"))?;
-            let child = Proc::new(opts.bin_dir.join(name))
-                .args(&args)
-                .stdin(Stdio::null())
-                .stdout(out)
-                .stderr(err)
-                .spawn()
-                .map_err(io(format!("start {name}")))?;
-            procs.push(Proc1 { name, child, log });
-            Ok::<(), BenchError>(())
-        };
-        let mut sim_args: Vec<String> = vec![
-            "stimulator".into(),
-            "--iface".into(),
-            opts.iface.clone(),
-            "--preset".into(),
-            "fast".into(),
-            "--measured".into(),
-            "--offset-n".into(),
-            "0".into(),
-            "--watchdog-ms".into(),
-            t.stimulator_watchdog_ms.to_string(),
-            "--record".into(),
-            d.join("stimulator.csv").display().to_string(),
-        ];
-        if opts.fatigue {
-            sim_args.push("--fatigue".into());
-        }
-        spawn(&mut procs, "sim-muscle", sim_args)?;
+        let mut procs = vec![spawn(&opts, "sim-muscle", sim_muscle_args(&opts, &t))?];
         std::thread::sleep(Duration::from_millis(300));
         let sim_pid = procs[0].child.id();
-        let sup_cfg = write(
-            "supervisor.toml",
-            format!(
-                r#"schema = "fes-supervisor/1"
-
-[ipc]
-prefix = "{prefix}"
-
-[control]
-socket = "{socket}"
-
-[outer_loop]
-enabled = {outer}{gain}
-
-[contraction]
-delay_ms = {delay}.0
-
-[health]
-stim_tick_timeout_ms = {tick_to}
-driver_status_timeout_ms = {status_to}
-force_timeout_ms = {force_to}
-self_stall_ms = {self_stall}
-stimulator_pid = {sim_pid}
-
-[recording]
-dir = "{dir}/recording"
-scale_n = {scale_n}
-source = "fes bench"
-"#,
-                socket = socket.display(),
-                tick_to = t.stim_tick_timeout_ms,
-                status_to = t.driver_status_timeout_ms,
-                force_to = t.force_timeout_ms,
-                self_stall = t.self_stall_ms,
-                outer = opts.outer_loop,
-                gain = opts
-                    .outer_gain
-                    .map_or(String::new(), |g| format!("\ngain = {g:?}")),
-                dir = d.display(),
-            ),
-        )?;
-        spawn(
-            &mut procs,
+        let sup = SupervisorConfig {
+            socket: &socket,
+            delay,
+            sim_pid,
+            scale_n,
+        };
+        let sup_cfg = write_config(d, "supervisor.toml", supervisor_toml(&opts, &t, &sup))?;
+        procs.push(spawn(
+            &opts,
             "stim-driver",
-            vec![
-                "run".into(),
-                "--config".into(),
-                drv_cfg.display().to_string(),
-            ],
-        )?;
-        spawn(
-            &mut procs,
-            "rt-core",
-            vec!["--config".into(), rt_cfg.display().to_string()],
-        )?;
-        spawn(
-            &mut procs,
+            config_args(Some("run"), &drv_cfg),
+        )?);
+        procs.push(spawn(&opts, "rt-core", config_args(None, &rt_cfg))?);
+        procs.push(spawn(
+            &opts,
             "supervisor",
-            vec![
-                "run".into(),
-                "--config".into(),
-                sup_cfg.display().to_string(),
-            ],
-        )?;
+            config_args(Some("run"), &sup_cfg),
+        )?);
         let stack = Self {
             opts,
             procs,
@@ -435,17 +275,24 @@ source = "fes bench"
             scale_n,
             delay,
         };
-        let deadline = Instant::now() + Duration::from_secs(t.start_s);
+        stack.wait_for_control(Duration::from_secs(t.start_s))?;
+        Ok(stack)
+    }
+
+    /// Waits until the supervisor's control socket answers (or `timeout`), failing early
+    /// when a process has exited.
+    fn wait_for_control(&self, timeout: Duration) -> Result<(), BenchError> {
+        let deadline = Instant::now() + timeout;
         loop {
-            stack.check_alive()?;
-            if stack.socket.exists() && stack.command(Command::Status).is_ok() {
-                return Ok(stack);
+            self.check_alive()?;
+            if self.socket.exists() && self.command(Command::Status).is_ok() {
+                return Ok(());
             }
             if Instant::now() > deadline {
                 return Err(BenchError::Process(format!(
                     "the supervisor's control socket {} did not answer; its log:\n{}",
-                    stack.socket.display(),
-                    log_tail(&stack.procs[3].log, 2000)
+                    self.socket.display(),
+                    log_tail(&self.procs[3].log, 2000)
                 )));
             }
             std::thread::sleep(Duration::from_millis(100));
@@ -645,6 +492,210 @@ impl Drop for Stack {
             let _ = p.child.wait();
         }
     }
+}
+
+/// Fails naming the first of the four binaries missing from `bin_dir`.
+fn check_binaries(bin_dir: &Path) -> Result<(), BenchError> {
+    for b in PROCESSES {
+        let p = bin_dir.join(b);
+        if !p.is_file() {
+            return Err(BenchError::MissingBinary(p));
+        }
+    }
+    Ok(())
+}
+
+/// Writes the configuration file `name` into `dir`; returns its path.
+fn write_config(dir: &Path, name: &str, text: String) -> Result<PathBuf, BenchError> {
+    let p = dir.join(name);
+    std::fs::write(&p, text).map_err(io(format!("write {}", p.display())))?;
+    Ok(p)
+}
+
+/// Starts `name` from the binary directory with `args`, its stdout and stderr into
+/// `<name>.log` in the stack directory.
+fn spawn(opts: &StackOptions, name: &'static str, args: Vec<String>) -> Result<Proc1, BenchError> {
+    let log = opts.dir.join(format!("{name}.log"));
+    let out = File::create(&log).map_err(io(format!("create {}", log.display())))?;
+    let err = out.try_clone().map_err(io("log"))?;
+    let child = Proc::new(opts.bin_dir.join(name))
+        .args(&args)
+        .stdin(Stdio::null())
+        .stdout(out)
+        .stderr(err)
+        .spawn()
+        .map_err(io(format!("start {name}")))?;
+    Ok(Proc1 { name, child, log })
+}
+
+/// `[command] --config <path>`.
+fn config_args(command: Option<&str>, config: &Path) -> Vec<String> {
+    command
+        .into_iter()
+        .map(String::from)
+        .chain(["--config".into(), config.display().to_string()])
+        .collect()
+}
+
+/// The virtual stimulator and fast muscle on the stack's interface, recording what it
+/// receives.
+fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts) -> Vec<String> {
+    let mut args: Vec<String> = vec![
+        "stimulator".into(),
+        "--iface".into(),
+        opts.iface.clone(),
+        "--preset".into(),
+        "fast".into(),
+        "--measured".into(),
+        "--offset-n".into(),
+        "0".into(),
+        "--watchdog-ms".into(),
+        t.stimulator_watchdog_ms.to_string(),
+        "--record".into(),
+        opts.dir.join("stimulator.csv").display().to_string(),
+    ];
+    if opts.fatigue {
+        args.push("--fatigue".into());
+    }
+    args
+}
+
+/// `rt-core.toml`: the controller file, the reference's staleness limit, telemetry and
+/// the iceoryx2 prefix.
+fn rt_core_toml(opts: &StackOptions, t: &ChainTimeouts, controller: &Path) -> String {
+    format!(
+        r#"schema = "fes-rt-core/1"
+period_us = 1000
+
+[source]
+kind = "controller"
+path = "{controller}"
+
+[rt]
+priority = 80
+on_missing_rights = "best-effort"
+
+[reference]
+stale_after_ms = {stale_ms}
+stale_ramp_per_s = 2.0
+
+[telemetry]
+hlog = "{dir}/rt-core.hlog"
+report_period_ms = 1000
+
+[ipc]
+prefix = "{prefix}"
+"#,
+        controller = controller.display(),
+        stale_ms = t.reference_stale_ms,
+        dir = opts.dir.display(),
+        prefix = opts.prefix,
+    )
+}
+
+/// `stim-driver.toml`: the CAN interface, the interlocks and watchdogs of the test bed, the
+/// force limit (the controller model's full scale), telemetry and the iceoryx2 prefix.
+fn stim_driver_toml(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> String {
+    format!(
+        r#"schema = "fes-stim-driver/1"
+
+[can]
+iface = "{iface}"
+
+[stimulator]
+watchdog_ms = {stim_wd}
+
+[interlocks]
+max_pulse_delay_us = {late_us}
+
+[watchdog]
+timeout_ticks = {drv_ticks}
+stale_after_ticks = {drv_ticks}
+stimulator_timeout_ms = {stim_wd}
+arm_confirm_ms = {arm_ms}
+command_max_age_ms = {cmd_age}
+
+[force]
+max_n = {scale_n}
+
+[rt]
+priority = 79
+on_missing_rights = "best-effort"
+
+[telemetry]
+hlog = "{dir}/stim-driver.hlog"
+
+[ipc]
+prefix = "{prefix}"
+"#,
+        iface = opts.iface,
+        stim_wd = t.stimulator_watchdog_ms,
+        drv_ticks = t.driver_tick_ticks,
+        arm_ms = t.arm_confirm_ms,
+        late_us = t.max_pulse_delay_us,
+        cmd_age = t.command_max_age_ms,
+        dir = opts.dir.display(),
+        prefix = opts.prefix,
+    )
+}
+
+/// What the supervisor's configuration takes from the running stack.
+struct SupervisorConfig<'a> {
+    /// Its control socket.
+    socket: &'a Path,
+    /// The controller model's delay, samples (= ms).
+    delay: usize,
+    /// The virtual stimulator's process id (its health watches it).
+    sim_pid: u32,
+    /// Newtons per normalised force (the recording's scale).
+    scale_n: f64,
+}
+
+/// `supervisor.toml`: control socket, outer loop, contraction delay, health timeouts of
+/// the test bed, the stimulator's pid, the recording and the iceoryx2 prefix.
+fn supervisor_toml(opts: &StackOptions, t: &ChainTimeouts, s: &SupervisorConfig<'_>) -> String {
+    format!(
+        r#"schema = "fes-supervisor/1"
+
+[ipc]
+prefix = "{prefix}"
+
+[control]
+socket = "{socket}"
+
+[outer_loop]
+enabled = {outer}{gain}
+
+[contraction]
+delay_ms = {delay}.0
+
+[health]
+stim_tick_timeout_ms = {tick_to}
+driver_status_timeout_ms = {status_to}
+force_timeout_ms = {force_to}
+self_stall_ms = {self_stall}
+stimulator_pid = {sim_pid}
+
+[recording]
+dir = "{dir}/recording"
+scale_n = {scale_n}
+source = "fes bench"
+"#,
+        prefix = opts.prefix,
+        socket = s.socket.display(),
+        tick_to = t.stim_tick_timeout_ms,
+        status_to = t.driver_status_timeout_ms,
+        force_to = t.force_timeout_ms,
+        self_stall = t.self_stall_ms,
+        sim_pid = s.sim_pid,
+        delay = s.delay,
+        scale_n = s.scale_n,
+        outer = opts.outer_loop,
+        gain = opts
+            .outer_gain
+            .map_or(String::new(), |g| format!("\ngain = {g:?}")),
+        dir = opts.dir.display(),
+    )
 }
 
 /// Run directories under `root`, oldest first.
