@@ -213,43 +213,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     inside(&a, &bin_dir, &out, iface, uml)
 }
 
+/// The bench on a CAN interface (or the host bus): start the four processes, arm, run the
+/// profile, stop everything, summarise the recording.
 fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> anyhow::Result<()> {
-    let prefix = format!("bench{}", std::process::id());
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let out = std::fs::canonicalize(out)?;
-    println!(
-        "bench: sim-muscle (fast{}), stim-driver, rt-core ({}), supervisor on {iface} ({})",
-        if a.fatigue { ", fatigue" } else { "" },
-        a.controller.display(),
-        if uml {
-            "User-Mode Linux guest: timings are functional only"
-        } else if fes_hostbus::bus_dir(&iface).is_some() {
-            "the host bus: Unix datagrams carrying the CAN frames, real-time on this host"
-        } else {
-            "native"
-        }
-    );
-    let stack = Stack::start(StackOptions {
-        dir: out.clone(),
-        bin_dir: bin_dir.to_path_buf(),
-        controller: a.controller.clone(),
-        iface,
-        timing: if uml {
-            ChainTiming::Uml
-        } else {
-            ChainTiming::Bench
-        },
-        fatigue: a.fatigue,
-        outer_loop: a.outer_loop == OnOff::On,
-        outer_gain: a.outer_gain,
-        prefix,
-    })?;
-    let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
-    if let Err(e) = healthy {
-        let logs = process_logs(&out);
-        let _ = stack.stop(Duration::from_secs(3));
-        bail!("{e}\n{logs}");
-    }
+    announce(a, &iface, uml);
+    let stack = start_healthy(a, bin_dir, &out, iface, uml)?;
     stack.arm_with(ProfileSpec::Cardiac(cardiac(a)))?;
     println!(
         "bench: armed; cardiac profile {} beats/min, duty {}, amplitude {}, outer loop {} for {} s",
@@ -263,15 +233,78 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
         },
         a.seconds
     );
+    let failure = run_profile(&stack, a);
+    let _ = std::io::stdout().flush();
+    let _ = stack.command(Command::Stop);
+    std::thread::sleep(Duration::from_millis(300));
+    let scale_n = stack.scale_n();
+    let delay = stack.delay();
+    let unclean = stop(stack, uml);
+    if let Some(f) = failure {
+        bail!("bench run failed: {f}");
+    }
+    summarise_recording(a, &out, scale_n, delay, uml, &unclean)
+}
+
+/// The bench's first line: the processes, the controller and the bus.
+fn announce(a: &Args, iface: &str, uml: bool) {
+    println!(
+        "bench: sim-muscle (fast{}), stim-driver, rt-core ({}), supervisor on {iface} ({})",
+        if a.fatigue { ", fatigue" } else { "" },
+        a.controller.display(),
+        if uml {
+            "User-Mode Linux guest: timings are functional only"
+        } else if fes_hostbus::bus_dir(iface).is_some() {
+            "the host bus: Unix datagrams carrying the CAN frames, real-time on this host"
+        } else {
+            "native"
+        }
+    );
+}
+
+/// Starts the stack in `out` and waits until the supervisor has heard from every
+/// process; otherwise stops it and fails with the processes' logs.
+fn start_healthy(
+    a: &Args,
+    bin_dir: &Path,
+    out: &Path,
+    iface: String,
+    uml: bool,
+) -> anyhow::Result<Stack> {
+    let stack = Stack::start(StackOptions {
+        dir: out.to_path_buf(),
+        bin_dir: bin_dir.to_path_buf(),
+        controller: a.controller.clone(),
+        iface,
+        timing: if uml {
+            ChainTiming::Uml
+        } else {
+            ChainTiming::Bench
+        },
+        fatigue: a.fatigue,
+        outer_loop: a.outer_loop == OnOff::On,
+        outer_gain: a.outer_gain,
+        prefix: format!("bench{}", std::process::id()),
+    })?;
+    let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
+    if let Err(e) = healthy {
+        let logs = process_logs(out);
+        let _ = stack.stop(Duration::from_secs(3));
+        bail!("{e}\n{logs}");
+    }
+    Ok(stack)
+}
+
+/// Watches the running profile for `--seconds`, printing the status every 5 s; returns why
+/// it ended early (a process exited, the supervisor stopped stimulation), if it did.
+fn run_profile(stack: &Stack, a: &Args) -> Option<String> {
     let start = Instant::now();
     let run_for = Duration::from_secs_f64(a.seconds);
     let mut next_report = Duration::from_secs(5);
-    let mut failure = None;
     while start.elapsed() < run_for {
         std::thread::sleep(Duration::from_millis(200));
         if let Err(e) = stack.check_alive() {
-            failure = Some(e.to_string());
-            break;
+            return Some(e.to_string());
         }
         if start.elapsed() >= next_report {
             next_report += Duration::from_secs(5);
@@ -285,19 +318,18 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
                     s.outer_loop_correction
                 );
                 if let Some(f) = s.fault {
-                    failure = Some(format!("the supervisor stopped stimulation: {f}"));
-                    break;
+                    return Some(format!("the supervisor stopped stimulation: {f}"));
                 }
             }
         }
     }
-    let _ = std::io::stdout().flush();
-    let _ = stack.command(Command::Stop);
-    std::thread::sleep(Duration::from_millis(300));
-    let scale_n = stack.scale_n();
-    let delay = stack.delay();
+    None
+}
+
+/// Stops every process; returns those that did not exit cleanly, as "name (exit ...)".
+fn stop(stack: Stack, uml: bool) -> Vec<String> {
     let exits = stack.stop(Duration::from_secs(if uml { 10 } else { 5 }));
-    let unclean: Vec<String> = exits
+    exits
         .iter()
         .filter(|(_, c)| *c != Some(0))
         .map(|(n, c)| {
@@ -306,10 +338,19 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
                 c.map_or("killed".into(), |c| c.to_string())
             )
         })
-        .collect();
-    if let Some(f) = failure {
-        bail!("bench run failed: {f}");
-    }
+        .collect()
+}
+
+/// Analyses the supervisor's last recording under `out` (with the CFT front of the same
+/// muscle simulated), draws it, prints the summary and writes `--json`.
+fn summarise_recording(
+    a: &Args,
+    out: &Path,
+    scale_n: f64,
+    delay: usize,
+    uml: bool,
+    unclean: &[String],
+) -> anyhow::Result<()> {
     let rec = workbench::bench::recordings_in(&out.join("recording"));
     let Some(rec) = rec.last() else {
         bail!(
@@ -342,8 +383,8 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
         },
     )?;
     let series = read_series(rec)?;
-    let plots = draw(&series, &out, &summary, a, delay, true)?;
-    print_summary(&summary, &plots, &unclean);
+    let plots = draw(&series, out, &summary, a, delay, true)?;
+    print_summary(&summary, &plots, unclean);
     write_json(&summary, &plots, a)
 }
 
