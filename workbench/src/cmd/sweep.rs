@@ -40,12 +40,30 @@ pub struct Args {
     pub fit: FitArgs,
 }
 
+/// A `--units` value that is not a range of network sizes.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum UnitsError {
+    /// A bound is not a whole number.
+    #[error("`{0}` is not a whole number of units")]
+    NotANumber(String),
+    /// The bounds are out of order or outside 1..=MAX_UNITS.
+    #[error("unit range {from}..{to}: need 1 <= A <= B <= {max}")]
+    OutOfRange {
+        /// A.
+        from: usize,
+        /// B.
+        to: usize,
+        /// The largest network size.
+        max: usize,
+    },
+}
+
 /// Parses `A..B`, `A..=B` (both inclusive) or `A`, each in 1..=16.
-pub fn parse_units(s: &str) -> Result<RangeInclusive<usize>, String> {
+pub fn parse_units(s: &str) -> Result<RangeInclusive<usize>, UnitsError> {
     let num = |t: &str| {
         t.trim()
             .parse::<usize>()
-            .map_err(|_| format!("`{t}` is not a whole number of units"))
+            .map_err(|_| UnitsError::NotANumber(t.to_string()))
     };
     let (a, b) = match s.split_once("..") {
         Some((a, b)) => (num(a)?, num(b.trim_start_matches('='))?),
@@ -54,11 +72,13 @@ pub fn parse_units(s: &str) -> Result<RangeInclusive<usize>, String> {
             (a, a)
         }
     };
-    if a == 0 || b > rt_core::model::validity::MAX_UNITS || a > b {
-        return Err(format!(
-            "unit range {a}..{b}: need 1 <= A <= B <= {}",
-            rt_core::model::validity::MAX_UNITS
-        ));
+    let max = rt_core::model::validity::MAX_UNITS;
+    if a == 0 || b > max || a > b {
+        return Err(UnitsError::OutOfRange {
+            from: a,
+            to: b,
+            max,
+        });
     }
     Ok(a..=b)
 }
@@ -95,8 +115,9 @@ pub fn plot(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> 
         .map_err(|m| anyhow::anyhow!("{}: drawing failed: {m}", out.display()))
 }
 
-fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Result<(), String> {
-    let e = |x: &dyn std::fmt::Display| x.to_string();
+/// The log axis's range: a third of the smallest positive error to five times the largest
+/// (1e-6..1 when there is none).
+fn mse_axis(rows: &[SweepRow]) -> (f64, f64) {
     let vals: Vec<f64> = rows
         .iter()
         .flat_map(|r| [r.train_mspe, r.train_msse, r.test_msse])
@@ -105,13 +126,37 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
         .collect();
     let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = vals.iter().copied().fold(0.0, f64::max);
-    let (lo, hi) = if vals.is_empty() {
+    if vals.is_empty() {
         (1e-6, 1.0)
     } else {
         (lo / 3.0, hi * 5.0)
-    };
+    }
+}
+
+/// (units, value) of bar series `s` (0 train MSPE, 1 train MSSE, 2 test MSSE) for every
+/// size where it is defined; None: the fit diverges.
+fn bar_values(rows: &[SweepRow], s: usize) -> Vec<(usize, Option<f64>)> {
+    rows.iter()
+        .filter_map(|r| {
+            let v = [r.train_mspe, r.train_msse, r.test_msse][s];
+            let defined = s > 0 || r.train_mspe.is_some();
+            defined.then_some((r.units, v))
+        })
+        .collect()
+}
+
+/// The left edge of bar `k` (of 3) in the group of a size.
+fn bar_x(units: usize, k: f64) -> f64 {
+    units as f64 - 0.4 + 0.8 * k / 3.0
+}
+
+/// Why drawing the sweep plot failed: plotters' error of its bitmap backend.
+type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
+
+fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Result<(), DrawError> {
+    let (lo, hi) = mse_axis(rows);
     let root = BitMapBackend::new(out, (900, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
+    root.fill(&WHITE)?;
     // Groups centred on the unit counts.
     let (u0, u1) = match (rows.first(), rows.last()) {
         (Some(a), Some(b)) => (a.units as f64, b.units as f64),
@@ -122,8 +167,7 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d((u0 - 0.5)..(u1 + 0.5), (lo..hi).log_scale())
-        .map_err(|x| e(&x))?;
+        .build_cartesian_2d((u0 - 0.5)..(u1 + 0.5), (lo..hi).log_scale())?;
     chart
         .configure_mesh()
         .disable_x_mesh()
@@ -138,8 +182,7 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
         .x_desc("number of units")
         .y_desc("MSE (normalised force)")
         .y_label_formatter(&|y| format!("{y:.0e}"))
-        .draw()
-        .map_err(|x| e(&x))?;
+        .draw()?;
     let colours = [
         RGBColor(60, 60, 60),
         RGBColor(70, 130, 200),
@@ -147,21 +190,12 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
     ];
     let names = ["train MSPE", "train MSSE", "test MSSE"];
     let with_mspe = rows.iter().any(|r| r.train_mspe.is_some());
-    let bar_x = |units: usize, k: f64| units as f64 - 0.4 + 0.8 * k / 3.0;
     for (s, (&colour, name)) in colours.iter().zip(names).enumerate() {
         if s == 0 && !with_mspe {
             continue;
         }
-        let bars: Vec<_> = rows
-            .iter()
-            .filter_map(|r| {
-                let v = [r.train_mspe, r.train_msse, r.test_msse][s];
-                let defined = s > 0 || r.train_mspe.is_some();
-                defined.then_some((r.units, v))
-            })
-            .collect();
         chart
-            .draw_series(bars.iter().map(|&(u, v)| {
+            .draw_series(bar_values(rows, s).iter().map(|&(u, v)| {
                 // A diverging fit: a pale bar to the top of the axis.
                 let (top, style) = match v {
                     Some(v) => (v, colour.filled()),
@@ -171,8 +205,7 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
                     [(bar_x(u, s as f64), lo), (bar_x(u, s as f64 + 1.0), top)],
                     style,
                 )
-            }))
-            .map_err(|x| e(&x))?
+            }))?
             .label(name)
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
     }
@@ -180,22 +213,19 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
         && let Some(t) = rows[b].test_msse
     {
         let u = rows[b].units;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                "*",
-                (bar_x(u, 2.2), t * 1.6),
-                ("sans-serif", 28),
-            )))
-            .map_err(|x| e(&x))?;
+        chart.draw_series(std::iter::once(Text::new(
+            "*",
+            (bar_x(u, 2.2), t * 1.6),
+            ("sans-serif", 28),
+        )))?;
     }
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
+        .draw()?;
+    root.present()?;
     Ok(())
 }
 
