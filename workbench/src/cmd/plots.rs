@@ -9,6 +9,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result, anyhow};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 /// The tab10 palette: distinguishable line colours.
@@ -210,12 +211,62 @@ fn segments(points: &[(f64, f64)], x: &Range<f64>, y: &Range<f64>) -> Vec<Vec<(f
     out
 }
 
+/// A panel's chart: linear axes over f64 ranges.
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A plotters error as the commands report it.
+fn drawing_failed(e: impl std::fmt::Display) -> anyhow::Error {
+    anyhow!("drawing failed: {e}")
+}
+
+/// Draws one panel into `area`: axes, then (bottom to top) shaded bands, the reference
+/// line, separators, impulses, lines, markers, texts and the legend.
 fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
-    let err = |e: &dyn std::fmt::Display| anyhow!("drawing failed: {e}");
     let (xr, yr) = p.ranges();
+    let mut chart = panel_chart(area, p, &xr, &yr)?;
+    draw_bands(&mut chart, p, &xr, &yr)?;
+    draw_guides(&mut chart, p, &xr, &yr)?;
+    draw_lines(&mut chart, p, &xr, &yr)?;
+    draw_markers(&mut chart, p)?;
+    for (x, y, t) in &p.texts {
+        chart
+            .draw_series(std::iter::once(Text::new(
+                t.clone(),
+                (*x, *y),
+                ("sans-serif", 13),
+            )))
+            .map_err(drawing_failed)?;
+    }
+    let labelled = p.lines.iter().any(|l| l.label.is_some())
+        || p.markers.iter().any(|m| m.label.is_some())
+        || p.bands.iter().any(|b| b.label.is_some());
+    if p.legend && labelled {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.3))
+            .label_font(("sans-serif", 12))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(drawing_failed)?;
+    }
+    Ok(())
+}
+
+/// The panel's chart over `xr` x `yr` with its caption, axes and grid drawn (a compact
+/// panel has neither caption nor x axis).
+fn panel_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    p: &Panel,
+    xr: &Range<f64>,
+    yr: &Range<f64>,
+) -> Result<Chart<'a, DB>>
+where
+    DB::ErrorType: 'static,
+{
     let mut builder = ChartBuilder::on(area);
     builder
         .margin(if p.compact { 2 } else { 8 })
@@ -227,7 +278,7 @@ where
     }
     let mut chart = builder
         .build_cartesian_2d(xr.clone(), yr.clone())
-        .map_err(|e| err(&e))?;
+        .map_err(drawing_failed)?;
     let mut mesh = chart.configure_mesh();
     if p.compact {
         mesh.disable_x_axis().disable_x_mesh();
@@ -242,7 +293,20 @@ where
         .x_label_formatter(&|v| fmt_tick(*v))
         .y_label_formatter(&|v| fmt_tick(*v))
         .draw()
-        .map_err(|e| err(&e))?;
+        .map_err(drawing_failed)?;
+    Ok(chart)
+}
+
+/// The shaded x intervals, clipped to `xr`, over the whole height.
+fn draw_bands<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    p: &Panel,
+    xr: &Range<f64>,
+    yr: &Range<f64>,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     for b in &p.bands {
         let x0 = b.x0.max(xr.start);
         let x1 = b.x1.min(xr.end);
@@ -255,20 +319,33 @@ where
                 [(x0, yr.start), (x1, yr.end)],
                 lighten(color, 0.8).filled(),
             )))
-            .map_err(|e| err(&e))?;
+            .map_err(drawing_failed)?;
         if let Some(l) = &b.label {
             s.label(l.as_str()).legend(move |(x, y)| {
                 Rectangle::new([(x, y - 5), (x + 18, y + 5)], lighten(color, 0.6).filled())
             });
         }
     }
+    Ok(())
+}
+
+/// The horizontal reference line, the vertical separators and the impulses (pulses).
+fn draw_guides<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    p: &Panel,
+    xr: &Range<f64>,
+    yr: &Range<f64>,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     if let Some(h) = p.hline {
         chart
             .draw_series(std::iter::once(PathElement::new(
                 vec![(xr.start, h), (xr.end, h)],
                 BLACK.mix(0.4).stroke_width(1),
             )))
-            .map_err(|e| err(&e))?;
+            .map_err(drawing_failed)?;
     }
     for &x in &p.separators {
         chart
@@ -276,7 +353,7 @@ where
                 vec![(x, yr.start), (x, yr.end)],
                 BLACK.mix(0.3).stroke_width(1),
             )))
-            .map_err(|e| err(&e))?;
+            .map_err(drawing_failed)?;
     }
     chart
         .draw_series(
@@ -284,19 +361,33 @@ where
                 .iter()
                 .map(|&x| PathElement::new(vec![(x, 0.0), (x, 1.0)], BLACK.stroke_width(1))),
         )
-        .map_err(|e| err(&e))?;
+        .map_err(drawing_failed)?;
+    Ok(())
+}
+
+/// The lines, split at non-finite points and clamped into the ranges; a labelled line's
+/// first segment carries its legend entry.
+fn draw_lines<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    p: &Panel,
+    xr: &Range<f64>,
+    yr: &Range<f64>,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     for l in &p.lines {
         let style = l.color.stroke_width(l.width);
         let mut first = true;
-        for seg in segments(&l.points, &xr, &yr) {
+        for seg in segments(&l.points, xr, yr) {
             let anno = if l.dashed {
                 chart
                     .draw_series(DashedLineSeries::new(seg, 7, 5, style))
-                    .map_err(|e| err(&e))?
+                    .map_err(drawing_failed)?
             } else {
                 chart
                     .draw_series(LineSeries::new(seg, style))
-                    .map_err(|e| err(&e))?
+                    .map_err(drawing_failed)?
             };
             if first && let Some(label) = &l.label {
                 let c = l.color;
@@ -312,6 +403,14 @@ where
             first = false;
         }
     }
+    Ok(())
+}
+
+/// The marker sets (filled circles or crosses) at their finite points.
+fn draw_markers<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, p: &Panel) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
     for m in &p.markers {
         let (c, size, filled) = (m.color, m.size, m.filled);
         let pts: Vec<(f64, f64)> = m
@@ -323,41 +422,19 @@ where
         let anno = if filled {
             chart
                 .draw_series(pts.iter().map(|&pt| Circle::new(pt, size, c.filled())))
-                .map_err(|e| err(&e))?
+                .map_err(drawing_failed)?
         } else {
             chart
                 .draw_series(
                     pts.iter()
                         .map(|&pt| Cross::new(pt, size, c.stroke_width(1))),
                 )
-                .map_err(|e| err(&e))?
+                .map_err(drawing_failed)?
         };
         if let Some(label) = &m.label {
             anno.label(label.as_str())
                 .legend(move |(x, y)| Circle::new((x + 9, y), size.min(5), c.filled()));
         }
-    }
-    for (x, y, t) in &p.texts {
-        chart
-            .draw_series(std::iter::once(Text::new(
-                t.clone(),
-                (*x, *y),
-                ("sans-serif", 13),
-            )))
-            .map_err(|e| err(&e))?;
-    }
-    let labelled = p.lines.iter().any(|l| l.label.is_some())
-        || p.markers.iter().any(|m| m.label.is_some())
-        || p.bands.iter().any(|b| b.label.is_some());
-    if p.legend && labelled {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK.mix(0.3))
-            .label_font(("sans-serif", 12))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|e| err(&e))?;
     }
     Ok(())
 }
@@ -399,14 +476,13 @@ fn check_png(path: &Path) -> Result<()> {
 pub fn save(fig: &Figure, path: &Path, size: (u32, u32)) -> Result<()> {
     check_png(path)?;
     let draw = || -> Result<()> {
-        let err = |e: &dyn std::fmt::Display| anyhow!("drawing failed: {e}");
         let root = BitMapBackend::new(path, size).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
+        root.fill(&WHITE).map_err(drawing_failed)?;
         let root = if fig.title.is_empty() {
             root
         } else {
             root.titled(&fig.title, ("sans-serif", 18))
-                .map_err(|e| err(&e))?
+                .map_err(drawing_failed)?
         };
         let cols = root.split_evenly((1, fig.columns.len().max(1)));
         for (col, area) in fig.columns.iter().zip(cols) {
@@ -428,7 +504,7 @@ pub fn save(fig: &Figure, path: &Path, size: (u32, u32)) -> Result<()> {
             }
             let _ = used;
         }
-        root.present().map_err(|e| err(&e))?;
+        root.present().map_err(drawing_failed)?;
         Ok(())
     };
     draw().with_context(|| format!("writing {}", path.display()))
@@ -489,113 +565,137 @@ pub fn save_heatmaps(
     size: (u32, u32),
 ) -> Result<()> {
     check_png(path)?;
-    let (lo, mid, hi) = scale;
     let draw = || -> Result<()> {
-        let err = |e: &dyn std::fmt::Display| anyhow!("drawing failed: {e}");
         let root = BitMapBackend::new(path, size).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
+        root.fill(&WHITE).map_err(drawing_failed)?;
         let root = root
             .titled(title, ("sans-serif", 18))
-            .map_err(|e| err(&e))?;
+            .map_err(drawing_failed)?;
         let (maps_area, bar_area) = root.split_horizontally(size.0 as i32 - 110);
         let areas = maps_area.split_evenly((1, maps.len().max(1)));
         for (m, area) in maps.iter().zip(areas) {
-            let step = |v: &[f64]| {
-                if v.len() > 1 {
-                    (v[v.len() - 1] - v[0]) / (v.len() - 1) as f64
-                } else {
-                    1.0
-                }
-            };
-            let (dx, dy) = (step(&m.xs), step(&m.ys));
-            let (x0, x1) = (m.xs[0] - dx / 2.0, m.xs[m.xs.len() - 1] + dx / 2.0);
-            let (y0, y1) = (m.ys[0] - dy / 2.0, m.ys[m.ys.len() - 1] + dy / 2.0);
-            let mut chart = ChartBuilder::on(&area)
-                .margin(8)
-                .margin_right(14)
-                .caption(&m.title, ("sans-serif", 15))
-                .x_label_area_size(38)
-                .y_label_area_size(48)
-                .build_cartesian_2d(x0..x1, y0..y1)
-                .map_err(|e| err(&e))?;
-            chart
-                .configure_mesh()
-                .disable_mesh()
-                .x_desc(m.x_label.as_str())
-                .y_desc(m.y_label.as_str())
-                .y_labels(m.ys.len().min(12))
-                .label_style(("sans-serif", 12))
-                .axis_desc_style(("sans-serif", 13))
-                .x_label_formatter(&|v| fmt_tick(*v))
-                .y_label_formatter(&|v| format!("{v:.0}"))
-                .draw()
-                .map_err(|e| err(&e))?;
-            let cells =
-                m.ys.iter().enumerate().flat_map(|(iy, &y)| {
-                    m.xs.iter().enumerate().map(move |(ix, &x)| (ix, iy, x, y))
-                });
-            chart
-                .draw_series(cells.map(|(ix, iy, x, y)| {
-                    let v = m.z[iy][ix];
-                    Rectangle::new(
-                        [(x - dx / 2.0, y - dy / 2.0), (x + dx / 2.0, y + dy / 2.0)],
-                        diverging(v, lo, mid, hi).filled(),
-                    )
-                }))
-                .map_err(|e| err(&e))?;
-            for (x, y, t) in &m.marks {
-                chart
-                    .draw_series(std::iter::once(Circle::new(
-                        (*x, *y),
-                        6,
-                        BLACK.stroke_width(2),
-                    )))
-                    .map_err(|e| err(&e))?;
-                let tx = if *x > (x0 + x1) / 2.0 {
-                    x - 0.35 * (x1 - x0)
-                } else {
-                    x + 2.0 * dx
-                };
-                chart
-                    .draw_series(std::iter::once(Text::new(
-                        t.clone(),
-                        (tx, *y + 0.3 * dy),
-                        ("sans-serif", 13),
-                    )))
-                    .map_err(|e| err(&e))?;
-            }
+            draw_heatmap(&area, m, scale)?;
         }
-        // Colour bar.
-        let mut bar = ChartBuilder::on(&bar_area)
-            .margin(8)
-            .margin_top(40)
-            .margin_bottom(46)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0.0..1.0, lo..hi)
-            .map_err(|e| err(&e))?;
-        bar.configure_mesh()
-            .disable_mesh()
-            .disable_x_axis()
-            .y_desc(scale_label)
-            .label_style(("sans-serif", 12))
-            .axis_desc_style(("sans-serif", 13))
-            .y_label_formatter(&|v| format!("{v:.2}"))
-            .draw()
-            .map_err(|e| err(&e))?;
-        let n = 100;
-        bar.draw_series((0..n).map(|i| {
-            let a = lo + (hi - lo) * i as f64 / n as f64;
-            let b = lo + (hi - lo) * (i + 1) as f64 / n as f64;
-            Rectangle::new(
-                [(0.0, a), (1.0, b)],
-                diverging(0.5 * (a + b), lo, mid, hi).filled(),
-            )
-        }))
-        .map_err(|e| err(&e))?;
-        root.present().map_err(|e| err(&e))?;
+        draw_colour_bar(&bar_area, scale, scale_label)?;
+        root.present().map_err(drawing_failed)?;
         Ok(())
     };
     draw().with_context(|| format!("writing {}", path.display()))
+}
+
+/// One heat map in `area`: a cell per grid value on the diverging scale, the marked cells
+/// ringed and labelled.
+fn draw_heatmap<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    m: &HeatMap,
+    (lo, mid, hi): (f64, f64, f64),
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let step = |v: &[f64]| {
+        if v.len() > 1 {
+            (v[v.len() - 1] - v[0]) / (v.len() - 1) as f64
+        } else {
+            1.0
+        }
+    };
+    let (dx, dy) = (step(&m.xs), step(&m.ys));
+    let (x0, x1) = (m.xs[0] - dx / 2.0, m.xs[m.xs.len() - 1] + dx / 2.0);
+    let (y0, y1) = (m.ys[0] - dy / 2.0, m.ys[m.ys.len() - 1] + dy / 2.0);
+    let mut chart = ChartBuilder::on(area)
+        .margin(8)
+        .margin_right(14)
+        .caption(&m.title, ("sans-serif", 15))
+        .x_label_area_size(38)
+        .y_label_area_size(48)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(drawing_failed)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(m.x_label.as_str())
+        .y_desc(m.y_label.as_str())
+        .y_labels(m.ys.len().min(12))
+        .label_style(("sans-serif", 12))
+        .axis_desc_style(("sans-serif", 13))
+        .x_label_formatter(&|v| fmt_tick(*v))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .draw()
+        .map_err(drawing_failed)?;
+    let cells =
+        m.ys.iter()
+            .enumerate()
+            .flat_map(|(iy, &y)| m.xs.iter().enumerate().map(move |(ix, &x)| (ix, iy, x, y)));
+    chart
+        .draw_series(cells.map(|(ix, iy, x, y)| {
+            let v = m.z[iy][ix];
+            Rectangle::new(
+                [(x - dx / 2.0, y - dy / 2.0), (x + dx / 2.0, y + dy / 2.0)],
+                diverging(v, lo, mid, hi).filled(),
+            )
+        }))
+        .map_err(drawing_failed)?;
+    for (x, y, t) in &m.marks {
+        chart
+            .draw_series(std::iter::once(Circle::new(
+                (*x, *y),
+                6,
+                BLACK.stroke_width(2),
+            )))
+            .map_err(drawing_failed)?;
+        let tx = if *x > (x0 + x1) / 2.0 {
+            x - 0.35 * (x1 - x0)
+        } else {
+            x + 2.0 * dx
+        };
+        chart
+            .draw_series(std::iter::once(Text::new(
+                t.clone(),
+                (tx, *y + 0.3 * dy),
+                ("sans-serif", 13),
+            )))
+            .map_err(drawing_failed)?;
+    }
+    Ok(())
+}
+
+/// The colour bar of the diverging scale `lo..mid..hi`, labelled `label`.
+fn draw_colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    (lo, mid, hi): (f64, f64, f64),
+    label: &str,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let mut bar = ChartBuilder::on(area)
+        .margin(8)
+        .margin_top(40)
+        .margin_bottom(46)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..1.0, lo..hi)
+        .map_err(drawing_failed)?;
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc(label)
+        .label_style(("sans-serif", 12))
+        .axis_desc_style(("sans-serif", 13))
+        .y_label_formatter(&|v| format!("{v:.2}"))
+        .draw()
+        .map_err(drawing_failed)?;
+    let n = 100;
+    bar.draw_series((0..n).map(|i| {
+        let a = lo + (hi - lo) * i as f64 / n as f64;
+        let b = lo + (hi - lo) * (i + 1) as f64 / n as f64;
+        Rectangle::new(
+            [(0.0, a), (1.0, b)],
+            diverging(0.5 * (a + b), lo, mid, hi).filled(),
+        )
+    }))
+    .map_err(drawing_failed)?;
+    Ok(())
 }
 
 /// Draws the heat maps' grids as 3-D surfaces side by side (thesis Fig. 6.3 style), coloured
@@ -611,12 +711,11 @@ pub fn save_surfaces(
     check_png(path)?;
     let (lo, mid, hi) = scale;
     let draw = || -> Result<()> {
-        let err = |e: &dyn std::fmt::Display| anyhow!("drawing failed: {e}");
         let root = BitMapBackend::new(path, size).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
+        root.fill(&WHITE).map_err(drawing_failed)?;
         let root = root
             .titled(title, ("sans-serif", 18))
-            .map_err(|e| err(&e))?;
+            .map_err(drawing_failed)?;
         let areas = root.split_evenly((1, maps.len().max(1)));
         for (m, area) in maps.iter().zip(areas) {
             let (x0, x1) = (m.xs[0], m.xs[m.xs.len() - 1]);
@@ -631,7 +730,7 @@ pub fn save_surfaces(
                     ("sans-serif", 14),
                 )
                 .build_cartesian_3d(x0..x1, lo..hi, z0..z1)
-                .map_err(|e| err(&e))?;
+                .map_err(drawing_failed)?;
             chart.with_projection(|mut pb| {
                 pb.yaw = 0.6;
                 pb.pitch = 0.35;
@@ -647,7 +746,7 @@ pub fn save_surfaces(
                 .z_formatter(&|v| format!("{v:.0}"))
                 .y_formatter(&|v| format!("{v:.2}"))
                 .draw()
-                .map_err(|e| err(&e))?;
+                .map_err(drawing_failed)?;
             let value = |x: f64, z: f64| {
                 let ix = m.xs.iter().position(|&v| v == x).unwrap_or(0);
                 let iz = m.ys.iter().position(|&v| v == z).unwrap_or(0);
@@ -659,9 +758,9 @@ pub fn save_surfaces(
                     SurfaceSeries::xoz(m.xs.iter().copied(), m.ys.iter().copied(), value)
                         .style_func(&style),
                 )
-                .map_err(|e| err(&e))?;
+                .map_err(drawing_failed)?;
         }
-        root.present().map_err(|e| err(&e))?;
+        root.present().map_err(drawing_failed)?;
         Ok(())
     };
     draw().with_context(|| format!("writing {}", path.display()))
