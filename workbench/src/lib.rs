@@ -11,3 +11,4 @@ pub mod cft;
 pub mod plots;
 pub mod simulation;
 pub mod summary;
+pub mod variant_args;

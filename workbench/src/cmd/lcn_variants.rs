@@ -22,10 +22,11 @@ use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 
-use super::design::{
+use workbench::variant_args::{
     AntiWindupArg, FeedbackStateArg, RiseRuleArg, ShaperSumArg, ThirdPoleArg, VariantArgs,
-    rise_times,
 };
+
+use super::design::rise_times;
 use super::inputs::{md_table, out_dir, parse_list, progress, write_csv};
 use super::osp::MuscleArg;
 
