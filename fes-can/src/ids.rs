@@ -80,6 +80,23 @@ pub enum NodeError {
     /// Host and stimulator must have different node ids (their heartbeats would clash).
     #[error("host and stimulator both use node id {0:#04x}")]
     Same(u8),
+    /// The text is not a number of 0..=255 (decimal or `0x` hexadecimal).
+    #[error("not a node id (decimal 1..=127 or hexadecimal 0x01..=0x7f)")]
+    NotANumber,
+}
+
+/// A node id given as decimal or `0x` hexadecimal text (a command-line option), 1..=127.
+pub fn parse_node_id(s: &str) -> Result<u8, NodeError> {
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u8::from_str_radix(hex, 16),
+        None => s.parse::<u8>(),
+    }
+    .map_err(|_| NodeError::NotANumber)?;
+    if (1..=0x7F).contains(&v) {
+        Ok(v)
+    } else {
+        Err(NodeError::OutOfRange(v))
+    }
 }
 
 /// The node ids of the host and the stimulator.
@@ -158,6 +175,18 @@ impl Nodes {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn node_ids_parse_in_decimal_and_hex_within_canopen_range() {
+        assert_eq!(parse_node_id("16"), Ok(16));
+        assert_eq!(parse_node_id("0x10"), Ok(16));
+        assert_eq!(parse_node_id("0X7f"), Ok(127));
+        assert_eq!(parse_node_id("0"), Err(NodeError::OutOfRange(0)));
+        assert_eq!(parse_node_id("0x80"), Err(NodeError::OutOfRange(0x80)));
+        for bad in ["", "0x", "ten", "256", "-1", "0x1g"] {
+            assert_eq!(parse_node_id(bad), Err(NodeError::NotANumber), "{bad:?}");
+        }
+    }
 
     #[test]
     fn default_ids_follow_the_canopen_layout() {

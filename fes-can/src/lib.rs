@@ -35,7 +35,7 @@ mod it;
 pub use config::{ConfigAssembler, LimitsError, StimLimits};
 pub use counter::{AliveCheck, AliveCounter, AliveError, SequenceCheck, SequenceError};
 pub use error::{DecodeError, EncodeError};
-pub use ids::{MessageKind, NodeError, Nodes, Role};
+pub use ids::{MessageKind, NodeError, Nodes, Role, parse_node_id};
 pub use message::{
     Config, ConfigPage, Emcy, Force, Frame, Heartbeat, Message, Nmt, Pulse, Status, decode,
 };

@@ -315,21 +315,34 @@ struct PlotArgs {
     title: Option<String>,
 }
 
+/// Why a `--set NAME=VALUE` is refused.
+#[derive(Debug, thiserror::Error)]
+enum AssignmentError {
+    #[error("`{0}` is not NAME=VALUE (e.g. tau1=0.04)")]
+    NoEquals(String),
+    #[error("`{0}` has no parameter name before `=`")]
+    NoName(String),
+    #[error("`{0}` is not a number")]
+    NotANumber(String),
+    #[error("`{0}` is not a finite number")]
+    NotFinite(String),
+}
+
 /// Parses `NAME=VALUE` with a finite number.
-fn parse_assignment(s: &str) -> Result<(String, f64), String> {
+fn parse_assignment(s: &str) -> Result<(String, f64), AssignmentError> {
     let (name, value) = s
         .split_once('=')
-        .ok_or_else(|| format!("`{s}` is not NAME=VALUE (e.g. tau1=0.04)"))?;
+        .ok_or_else(|| AssignmentError::NoEquals(s.to_owned()))?;
     let name = name.trim();
     if name.is_empty() {
-        return Err(format!("`{s}` has no parameter name before `=`"));
+        return Err(AssignmentError::NoName(s.to_owned()));
     }
     let v: f64 = value
         .trim()
         .parse()
-        .map_err(|_| format!("`{value}` is not a number"))?;
+        .map_err(|_| AssignmentError::NotANumber(value.to_owned()))?;
     if !v.is_finite() {
-        return Err(format!("`{value}` is not a finite number"));
+        return Err(AssignmentError::NotFinite(value.to_owned()));
     }
     Ok((name.to_string(), v))
 }

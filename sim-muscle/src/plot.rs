@@ -35,12 +35,13 @@ pub enum PlotError {
         path: PathBuf,
     },
     /// Drawing or writing the image failed.
-    #[error("{}: drawing failed: {message}", path.display())]
+    #[error("{}: drawing failed: {source}", path.display())]
     Draw {
         /// The output file.
         path: PathBuf,
         /// What plotters reported.
-        message: String,
+        #[source]
+        source: DrawError,
     },
 }
 
@@ -96,21 +97,23 @@ pub fn plot_records(
             path: out.to_path_buf(),
         });
     }
-    draw(ds, records, title, out, (width, height)).map_err(|message| PlotError::Draw {
+    draw(ds, records, title, out, (width, height)).map_err(|source| PlotError::Draw {
         path: out.to_path_buf(),
-        message,
+        source,
     })
 }
 
-/// The drawing itself; plotters errors become strings.
+/// What plotters reports when drawing to a PNG fails.
+pub type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
+
+/// The drawing itself.
 fn draw(
     ds: &DataSet,
     records: &[usize],
     title: &str,
     out: &Path,
     size: (u32, u32),
-) -> Result<(), String> {
-    let e = |err: &dyn std::fmt::Display| err.to_string();
+) -> Result<(), DrawError> {
     let ts_ms = ds.header.ts_s * 1e3;
     // Start time of each selected record on the concatenated axis.
     let mut starts = Vec::with_capacity(records.len());
@@ -126,31 +129,28 @@ fn draw(
         .min(-0.02);
 
     let root = BitMapBackend::new(out, size).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let root = root.titled(title, ("sans-serif", 18)).map_err(|x| e(&x))?;
+    root.fill(&WHITE)?;
+    let root = root.titled(title, ("sans-serif", 18))?;
     let (upper, lower) = root.split_vertically(size.1 * 18 / 100);
 
     let mut top = ChartBuilder::on(&upper)
         .margin_left(10)
         .margin_right(20)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..total, 0.0..1.25)
-        .map_err(|x| e(&x))?;
+        .build_cartesian_2d(0.0..total, 0.0..1.25)?;
     top.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
         .y_labels(2)
         .y_label_formatter(&|y| format!("{y:.0}"))
         .y_desc("pulse")
-        .draw()
-        .map_err(|x| e(&x))?;
+        .draw()?;
     for (r, &t0) in selected().zip(&starts) {
         let pulses = r.pulse.iter().enumerate().filter(|(_, p)| **p);
         top.draw_series(pulses.map(|(k, _)| {
             let t = t0 + k as f64 * ts_ms;
             PathElement::new(vec![(t, 0.0), (t, 1.0)], BLACK.stroke_width(1))
-        }))
-        .map_err(|x| e(&x))?;
+        }))?;
     }
 
     let mut bottom = ChartBuilder::on(&lower)
@@ -159,40 +159,32 @@ fn draw(
         .margin_bottom(5)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..total, low..1.08)
-        .map_err(|x| e(&x))?;
+        .build_cartesian_2d(0.0..total, low..1.08)?;
     bottom
         .configure_mesh()
         .light_line_style(WHITE.mix(0.0))
         .x_label_formatter(&|x| format!("{x:.0}"))
         .x_desc("time (ms), records concatenated, rests omitted")
         .y_desc("force (normalised)")
-        .draw()
-        .map_err(|x| e(&x))?;
+        .draw()?;
     for ((r, &t0), &i) in selected().zip(&starts).zip(records) {
         let line = r
             .force
             .iter()
             .enumerate()
             .map(|(k, &f)| (t0 + k as f64 * ts_ms, f));
-        bottom
-            .draw_series(LineSeries::new(line, BLUE.stroke_width(1)))
-            .map_err(|x| e(&x))?;
+        bottom.draw_series(LineSeries::new(line, BLUE.stroke_width(1)))?;
         if t0 > 0.0 {
             let separator = PathElement::new(vec![(t0, low), (t0, 1.08)], BLACK.mix(0.3));
-            bottom
-                .draw_series(std::iter::once(separator))
-                .map_err(|x| e(&x))?;
+            bottom.draw_series(std::iter::once(separator))?;
         }
         let label = format!("#{i} {}", r.kind);
-        bottom
-            .draw_series(std::iter::once(Text::new(
-                label,
-                (t0 + 8.0 * ts_ms, 1.04),
-                ("sans-serif", 13),
-            )))
-            .map_err(|x| e(&x))?;
+        bottom.draw_series(std::iter::once(Text::new(
+            label,
+            (t0 + 8.0 * ts_ms, 1.04),
+            ("sans-serif", 13),
+        )))?;
     }
-    root.present().map_err(|x| e(&x))?;
+    root.present()?;
     Ok(())
 }

@@ -16,7 +16,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context as _, bail};
-use fes_can::{Nodes, StimLimits};
+use fes_can::{Nodes, StimLimits, parse_node_id};
 
 use crate::plant::MusclePlant;
 
@@ -32,20 +32,6 @@ pub mod watchdog;
 
 pub use machine::{Settings, SettingsError, Stimulator, Tick, TickReport};
 pub use socket_loop::RunSummary;
-
-/// Parses a node id given as decimal or `0x` hexadecimal.
-fn parse_node_id(s: &str) -> Result<u8, String> {
-    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
-        Some(hex) => u8::from_str_radix(hex, 16),
-        None => s.parse::<u8>(),
-    }
-    .map_err(|e| format!("{s:?} is not a node id: {e}"))?;
-    if (1..=0x7F).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("node id {v:#04x} outside 1..=0x7f (CANopen)"))
-    }
-}
 
 /// Command-line options of the virtual stimulator (`sim-muscle stimulator ...`).
 ///
