@@ -26,8 +26,8 @@ use fes_rt::rt::realtime::{RtError, enter_realtime};
 use fes_rt::rt::signals::install_stop_handler;
 use stim_driver::bus::{BusSettings, run_bus};
 use stim_driver::config::DriverConfig;
-use stim_driver::report::run_report;
-use stim_driver::runner::{Shared, run_forward};
+use stim_driver::report::{ReportOutcome, run_report};
+use stim_driver::runner::{ForwardOutcome, Shared, run_forward};
 use stim_driver::safe_stop::safe_stop;
 use stim_driver::tx::BusTx;
 use stim_driver::txstamp::{self, TxStampReader};
@@ -107,24 +107,11 @@ enum Command {
         #[arg(long, value_name = "IFACE")]
         iface: String,
         /// The stimulator's node id (decimal or 0x..).
-        #[arg(long, default_value = "0x10", value_parser = parse_node)]
+        #[arg(long, default_value = "0x10", value_parser = fes_can::parse_node_id)]
         stim_node: u8,
     },
     /// Print a configuration with every default (interface vcan0, max_n 40 N).
     ExampleConfig,
-}
-
-fn parse_node(s: &str) -> Result<u8, String> {
-    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
-        Some(hex) => u8::from_str_radix(hex, 16),
-        None => s.parse(),
-    }
-    .map_err(|e| format!("{s:?}: {e}"))?;
-    if (1..=127).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("node id {v} is outside 1..=127"))
-    }
 }
 
 /// The environment variable (set by systemd from can.env) that overrides `[can] iface`.
@@ -188,8 +175,45 @@ fn stop_now(iface: &str, stim_node: u8) -> Result<(), Failure> {
 }
 
 fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(), Failure> {
-    // Under systemd the unit's EnvironmentFile (can.env) names the interface that
-    // ExecStopPost's safe-stop uses; the driver uses the same one.
+    let config = load_config(path, iface)?;
+    if check {
+        println!("{}: ok", path.display());
+        return Ok(());
+    }
+    let manager = ServiceManager::from_env()
+        .context("systemd notification")
+        .map_err(Failure::Config)?;
+    let stop = install_stop_handler()
+        .context("installing SIGINT/SIGTERM handlers")
+        .map_err(Failure::Run)?;
+    let outputs = Outputs::open(&config)?;
+    let nodes = config
+        .nodes()
+        .context("configuration")
+        .map_err(Failure::Config)?;
+    let bus_settings = BusSettings {
+        iface: config.can.iface.clone(),
+        nodes,
+        max_force_n: config.force.max_n,
+        prefix: config.ipc.prefix.clone(),
+    };
+    let shared = Shared::new(&config);
+    std::thread::scope(|scope| {
+        run_threads(
+            scope,
+            &config,
+            &shared,
+            &manager,
+            stop,
+            outputs,
+            bus_settings,
+        )
+    })
+}
+
+/// Loads and validates the configuration; `iface` (`--iface`, or `FES_CAN_IFACE` from the
+/// unit's can.env, which ExecStopPost's safe-stop also uses) overrides `[can] iface`.
+fn load_config(path: &std::path::Path, iface: Option<String>) -> Result<DriverConfig, Failure> {
     let iface = iface.or_else(|| std::env::var(ENV_CAN_IFACE).ok().filter(|s| !s.is_empty()));
     let mut config = DriverConfig::load(path)
         .context("configuration")
@@ -223,236 +247,271 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
         c.interlocks.max_width_us,
         c.ipc.prefix
     );
-    if check {
-        println!("{}: ok", path.display());
-        return Ok(());
-    }
-    let manager = ServiceManager::from_env()
-        .context("systemd notification")
-        .map_err(Failure::Config)?;
-    let stop = install_stop_handler()
-        .context("installing SIGINT/SIGTERM handlers")
-        .map_err(Failure::Run)?;
-    let hlog = match &config.telemetry.hlog {
-        Some(p) => Some(
-            HlogWriter::create(p, "stim-driver timing", SystemTime::now())
-                .context("telemetry.hlog")
-                .map_err(Failure::Config)?,
-        ),
-        None => None,
-    };
-    let tx = BusTx::open(&config.can.iface, config.retry_policy())
-        .with_context(|| format!("CAN interface {:?}", config.can.iface))
-        .map_err(Failure::Run)?;
-    let stamps = match &tx {
-        BusTx::Can(tx) => {
-            match txstamp::enable(tx.socket()).and_then(|()| TxStampReader::new(tx.raw_fd())) {
-                Ok(r) => Some(r),
-                Err(e) => {
-                    warn!("no kernel transmit timestamps: {e}");
-                    None
-                }
-            }
-        }
-        BusTx::Host(_) => {
-            warn!(
-                "{}: the host bus (Unix datagrams, no CAN): for tests and benches on hosts without SocketCAN",
-                config.can.iface
-            );
-            None
-        }
-    };
-    let nodes = config
-        .nodes()
-        .context("configuration")
-        .map_err(Failure::Config)?;
-    let bus_settings = BusSettings {
-        iface: config.can.iface.clone(),
-        nodes,
-        max_force_n: config.force.max_n,
-        prefix: config.ipc.prefix.clone(),
-    };
-    let shared = Shared::new(&config);
-    let shared = &shared;
-    let config = &config;
+    Ok(config)
+}
 
-    std::thread::scope(|scope| -> Result<(), Failure> {
-        let fail = |e: anyhow::Error| {
-            shared.failed.store(true, Ordering::Relaxed);
-            e
+/// What the driver writes to: the bus, the kernel's transmit timestamps of CAN frames
+/// (when the socket gives them), the timing log.
+struct Outputs {
+    tx: BusTx,
+    stamps: Option<TxStampReader>,
+    hlog: Option<HlogWriter>,
+}
+
+impl Outputs {
+    fn open(config: &DriverConfig) -> Result<Self, Failure> {
+        let hlog = match &config.telemetry.hlog {
+            Some(p) => Some(
+                HlogWriter::create(p, "stim-driver timing", SystemTime::now())
+                    .context("telemetry.hlog")
+                    .map_err(Failure::Config)?,
+            ),
+            None => None,
         };
-        // Receive thread.
-        let (bus_ready_tx, bus_ready_rx) = mpsc::channel();
-        let bus_thread = std::thread::Builder::new()
-            .name("stim-driver-bus".to_owned())
-            .spawn_scoped(scope, move || -> anyhow::Result<()> {
-                if let Some(rt) = &config.bus_rt {
-                    let status = enter_realtime(rt).context("[bus_rt]")?;
-                    info!("receive thread: {status}");
-                }
-                run_bus(
-                    &bus_settings,
-                    &shared.bus_events,
-                    &shared.status,
-                    &shared.bus,
-                    &shared.forward_ended,
-                    move || {
-                        let _ = bus_ready_tx.send(());
-                    },
-                )
-                .map_err(|e| fail(e.into()))
-            })
-            .context("spawning the receive thread")
+        let tx = BusTx::open(&config.can.iface, config.retry_policy())
+            .with_context(|| format!("CAN interface {:?}", config.can.iface))
             .map_err(Failure::Run)?;
-        if bus_ready_rx.recv().is_err() {
-            shared.forward_ended.store(true, Ordering::Relaxed);
-            let e = match bus_thread.join() {
-                Ok(Err(e)) => e,
-                _ => anyhow!("the receive thread stopped early"),
-            };
-            return Err(Failure::Run(e.context("receive thread")));
-        }
-        // Report thread.
-        let (report_ready_tx, report_ready_rx) = mpsc::channel();
-        let report_thread = std::thread::Builder::new()
-            .name("stim-driver-report".to_owned())
-            .spawn_scoped(scope, move || {
-                run_report(config, shared, hlog, stamps, move || {
-                    let _ = report_ready_tx.send(());
-                })
-                .map_err(|e| fail(e.into()))
-            })
-            .context("spawning the report thread");
-        let report_thread = match report_thread {
-            Ok(t) => t,
-            Err(e) => {
-                shared.forward_ended.store(true, Ordering::Relaxed);
-                return Err(Failure::Run(e));
+        let stamps = match &tx {
+            BusTx::Can(tx) => {
+                match txstamp::enable(tx.socket()).and_then(|()| TxStampReader::new(tx.raw_fd())) {
+                    Ok(r) => Some(r),
+                    Err(e) => {
+                        warn!("no kernel transmit timestamps: {e}");
+                        None
+                    }
+                }
+            }
+            BusTx::Host(_) => {
+                warn!(
+                    "{}: the host bus (Unix datagrams, no CAN): for tests and benches on hosts without SocketCAN",
+                    config.can.iface
+                );
+                None
             }
         };
-        if report_ready_rx.recv().is_err() {
+        Ok(Self { tx, stamps, hlog })
+    }
+}
+
+type Handle<'scope> = std::thread::ScopedJoinHandle<'scope, anyhow::Result<()>>;
+
+/// Marks the driver failed (the forward loop then stops) and passes the error on.
+fn failed(shared: &Shared, e: anyhow::Error) -> anyhow::Error {
+    shared.failed.store(true, Ordering::Relaxed);
+    e
+}
+
+/// Starts the receive thread (bus frames to the forward thread, ForceSample) and waits
+/// until its ports are open.
+fn spawn_bus<'scope>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    config: &'scope DriverConfig,
+    shared: &'scope Shared,
+    settings: BusSettings,
+) -> Result<Handle<'scope>, Failure> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let thread = std::thread::Builder::new()
+        .name("stim-driver-bus".to_owned())
+        .spawn_scoped(scope, move || -> anyhow::Result<()> {
+            if let Some(rt) = &config.bus_rt {
+                let status = enter_realtime(rt).context("[bus_rt]")?;
+                info!("receive thread: {status}");
+            }
+            run_bus(
+                &settings,
+                &shared.bus_events,
+                &shared.status,
+                &shared.bus,
+                &shared.forward_ended,
+                move || {
+                    let _ = ready_tx.send(());
+                },
+            )
+            .map_err(|e| failed(shared, e.into()))
+        })
+        .context("spawning the receive thread")
+        .map_err(Failure::Run)?;
+    if ready_rx.recv().is_err() {
+        shared.forward_ended.store(true, Ordering::Relaxed);
+        let e = match thread.join() {
+            Ok(Err(e)) => e,
+            _ => anyhow!("the receive thread stopped early"),
+        };
+        return Err(Failure::Run(e.context("receive thread")));
+    }
+    Ok(thread)
+}
+
+/// Starts the report thread (logs, DriverStatus, TimingReport, hlog, publisher liveness)
+/// and waits until its ports are open. On failure the other threads see `forward_ended`
+/// and stop; the scope joins them.
+fn spawn_report<'scope>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    config: &'scope DriverConfig,
+    shared: &'scope Shared,
+    hlog: Option<HlogWriter>,
+    stamps: Option<TxStampReader>,
+) -> Result<std::thread::ScopedJoinHandle<'scope, Result<ReportOutcome, anyhow::Error>>, Failure> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let thread = std::thread::Builder::new()
+        .name("stim-driver-report".to_owned())
+        .spawn_scoped(scope, move || {
+            run_report(config, shared, hlog, stamps, move || {
+                let _ = ready_tx.send(());
+            })
+            .map_err(|e| failed(shared, e.into()))
+        })
+        .context("spawning the report thread");
+    let thread = match thread {
+        Ok(t) => t,
+        Err(e) => {
+            shared.forward_ended.store(true, Ordering::Relaxed);
+            return Err(Failure::Run(e));
+        }
+    };
+    if ready_rx.recv().is_err() {
+        shared.forward_ended.store(true, Ordering::Relaxed);
+        let e = match thread.join() {
+            Ok(Err(e)) => e,
+            _ => anyhow!("the report thread stopped early"),
+        };
+        return Err(Failure::Run(e.context("report thread")));
+    }
+    Ok(thread)
+}
+
+/// Runs the driver's threads: receive, report, the systemd notifier (READY=1, then
+/// WATCHDOG=1 only while the forward loop wakes up) and the real-time forward thread, until
+/// the forward thread ends; then joins them and logs the final account.
+fn run_threads<'scope>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    config: &'scope DriverConfig,
+    shared: &'scope Shared,
+    manager: &'scope ServiceManager,
+    stop: &'static std::sync::atomic::AtomicBool,
+    outputs: Outputs,
+    bus_settings: BusSettings,
+) -> Result<(), Failure> {
+    let Outputs { tx, stamps, hlog } = outputs;
+    let bus_thread = spawn_bus(scope, config, shared, bus_settings)?;
+    let report_thread = spawn_report(scope, config, shared, hlog, stamps)?;
+    let notifier = std::thread::Builder::new()
+        .name("stim-driver-notify".to_owned())
+        .spawn_scoped(scope, move || {
+            let settings = NotifierSettings::for_watchdog(manager.watchdog());
+            run_progress_notifier(
+                manager,
+                &settings,
+                shared.status.wakeups(),
+                &[&shared.forward_ended],
+                |wakeups| {
+                    let c = shared.status.load();
+                    format!(
+                        "{}; {} StimTicks, {} pulses sent, {} refused, {wakeups} wake-ups",
+                        device_state_name(c.state),
+                        c.ticks_received,
+                        c.pulses_sent,
+                        c.pulses_rejected
+                    )
+                },
+            )
+        });
+    let forward = std::thread::Builder::new()
+        .name("stim-driver-fwd".to_owned())
+        .stack_size(config.rt.thread_stack_bytes())
+        .spawn_scoped(scope, move || {
+            run_forward(config, tx, shared, stop, |status| {
+                if status.is_degraded() {
+                    warn!("forward thread: {status}");
+                } else {
+                    info!("forward thread: {status}");
+                }
+                info!("running, DISARMED until an Arm command; SIGINT or SIGTERM stops");
+            })
+        });
+    let outcome = match forward {
+        Ok(t) => t.join(),
+        Err(e) => {
             shared.forward_ended.store(true, Ordering::Relaxed);
             let _ = bus_thread.join();
-            let e = match report_thread.join() {
-                Ok(Err(e)) => e,
-                _ => anyhow!("the report thread stopped early"),
-            };
-            return Err(Failure::Run(e.context("report thread")));
+            let _ = report_thread.join();
+            return Err(Failure::Run(
+                anyhow::Error::from(e).context("spawning the forward thread"),
+            ));
         }
-        // systemd: READY=1, then WATCHDOG=1 only while the forward loop wakes up.
-        let notifier = std::thread::Builder::new()
-            .name("stim-driver-notify".to_owned())
-            .spawn_scoped(scope, || {
-                let settings = NotifierSettings::for_watchdog(manager.watchdog());
-                run_progress_notifier(
-                    &manager,
-                    &settings,
-                    shared.status.wakeups(),
-                    &[&shared.forward_ended],
-                    |wakeups| {
-                        let c = shared.status.load();
-                        format!(
-                            "{}; {} StimTicks, {} pulses sent, {} refused, {wakeups} wake-ups",
-                            device_state_name(c.state),
-                            c.ticks_received,
-                            c.pulses_sent,
-                            c.pulses_rejected
-                        )
-                    },
-                )
-            });
-        // The forward thread.
-        let forward = std::thread::Builder::new()
-            .name("stim-driver-fwd".to_owned())
-            .stack_size(config.rt.thread_stack_bytes())
-            .spawn_scoped(scope, move || {
-                run_forward(config, tx, shared, stop, |status| {
-                    if status.is_degraded() {
-                        warn!("forward thread: {status}");
-                    } else {
-                        info!("forward thread: {status}");
-                    }
-                    info!("running, DISARMED until an Arm command; SIGINT or SIGTERM stops");
-                })
-            });
-        let outcome = match forward {
-            Ok(t) => t.join(),
-            Err(e) => {
-                shared.forward_ended.store(true, Ordering::Relaxed);
-                let _ = bus_thread.join();
-                let _ = report_thread.join();
-                return Err(Failure::Run(
-                    anyhow::Error::from(e).context("spawning the forward thread"),
-                ));
-            }
-        };
-        shared.forward_ended.store(true, Ordering::Relaxed);
-        if let Ok(n) = notifier
-            && let Ok(n) = n.join()
-            && manager.is_present()
-            && n.send_errors > 0
-        {
-            warn!("{} systemd notifications could not be sent", n.send_errors);
+    };
+    shared.forward_ended.store(true, Ordering::Relaxed);
+    if let Ok(n) = notifier
+        && let Ok(n) = n.join()
+        && manager.is_present()
+        && n.send_errors > 0
+    {
+        warn!("{} systemd notifications could not be sent", n.send_errors);
+    }
+    let bus = bus_thread
+        .join()
+        .unwrap_or_else(|_| Err(anyhow!("the receive thread panicked")));
+    let report = report_thread
+        .join()
+        .unwrap_or_else(|_| Err(anyhow!("the report thread panicked")));
+    let outcome = outcome.map_err(|_| Failure::Run(anyhow!("the forward thread panicked")))?;
+    let outcome = match outcome {
+        Ok(o) => o,
+        Err(RunError::Realtime(RtError::Refused(status))) => {
+            return Err(Failure::Refused(format!("refused to start: {status}")));
         }
-        let bus = bus_thread
-            .join()
-            .unwrap_or_else(|_| Err(anyhow!("the receive thread panicked")));
-        let report = report_thread
-            .join()
-            .unwrap_or_else(|_| Err(anyhow!("the report thread panicked")));
-        let outcome = outcome.map_err(|_| Failure::Run(anyhow!("the forward thread panicked")))?;
-        let outcome = match outcome {
-            Ok(o) => o,
-            Err(RunError::Realtime(RtError::Refused(status))) => {
-                return Err(Failure::Refused(format!("refused to start: {status}")));
-            }
-            Err(e) => {
-                return Err(Failure::Run(
-                    anyhow::Error::from(e).context("forward thread"),
-                ));
-            }
-        };
-        if let Ok(r) = &report {
-            let t = &r.timing;
-            let us = |ns: u64| ns as f64 / 1000.0;
-            let c = shared.status.load();
-            info!(
-                "final: {} StimTicks ({} missing, {} refused), {} pulses sent, {} refused by \
-                 the interlocks, {} while not armed, {} CAN write errors, {} trips ({} \
-                 watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
-                 stamps; hot-path heap allocations {}",
-                c.ticks_received,
-                c.ticks_lost,
-                c.ticks_refused,
-                c.pulses_sent,
-                c.pulses_rejected,
-                c.pulses_not_armed,
-                c.can_tx_errors,
-                c.trips,
-                c.watchdog_trips,
-                us(t.publish.p50_ns),
-                us(t.publish.p99_ns),
-                us(t.publish.max_ns),
-                r.tx_stamps,
-                outcome
-                    .hot_path_allocations
-                    .map_or("not counted".to_owned(), |n| n.to_string()),
-            );
+        Err(e) => {
+            return Err(Failure::Run(
+                anyhow::Error::from(e).context("forward thread"),
+            ));
         }
-        if let Some(trace) = fes_rt::rt::alloc::take_first_heap_allocation() {
-            warn!("{trace}");
-        }
-        if !outcome.stop_sent {
-            warn!("the final NMT stop could not be written (the stimulator's watchdog stops it)");
-        }
-        bus.map_err(|e| Failure::Run(e.context("receive thread")))?;
-        report.map_err(|e| Failure::Run(e.context("report thread")))?;
-        if shared.failed.load(Ordering::Relaxed) {
-            return Err(Failure::Run(anyhow!("a driver thread failed")));
-        }
-        info!("stopped");
-        Ok(())
-    })
+    };
+    if let Ok(r) = &report {
+        log_final(shared, r, &outcome);
+    }
+    if let Some(trace) = fes_rt::rt::alloc::take_first_heap_allocation() {
+        warn!("{trace}");
+    }
+    if !outcome.stop_sent {
+        warn!("the final NMT stop could not be written (the stimulator's watchdog stops it)");
+    }
+    bus.map_err(|e| Failure::Run(e.context("receive thread")))?;
+    report.map_err(|e| Failure::Run(e.context("report thread")))?;
+    if shared.failed.load(Ordering::Relaxed) {
+        return Err(Failure::Run(anyhow!("a driver thread failed")));
+    }
+    info!("stopped");
+    Ok(())
+}
+
+/// The final account of a run: StimTicks, pulses, refusals, trips, the forward path's
+/// latency and the hot path's allocations.
+fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
+    let t = &r.timing;
+    let us = |ns: u64| ns as f64 / 1000.0;
+    let c = shared.status.load();
+    info!(
+        "final: {} StimTicks ({} missing, {} refused), {} pulses sent, {} refused by \
+         the interlocks, {} while not armed, {} CAN write errors, {} trips ({} \
+         watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
+         stamps; hot-path heap allocations {}",
+        c.ticks_received,
+        c.ticks_lost,
+        c.ticks_refused,
+        c.pulses_sent,
+        c.pulses_rejected,
+        c.pulses_not_armed,
+        c.can_tx_errors,
+        c.trips,
+        c.watchdog_trips,
+        us(t.publish.p50_ns),
+        us(t.publish.p99_ns),
+        us(t.publish.max_ns),
+        r.tx_stamps,
+        outcome
+            .hot_path_allocations
+            .map_or("not counted".to_owned(), |n| n.to_string()),
+    );
 }
 
 fn device_state_name(state: u8) -> &'static str {

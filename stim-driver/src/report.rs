@@ -20,6 +20,8 @@ use fes_rt::msg::{DeviceState, DriverCommand, DriverStatus, StimTick, TimingRepo
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::hlog::HlogWriter;
 use fes_rt::rt::node::{RunError, create_node};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::ipc;
 use tracing::{error, info, warn};
 
 use crate::config::DriverConfig;
@@ -163,147 +165,226 @@ pub struct ReportOutcome {
 pub fn run_report(
     config: &DriverConfig,
     shared: &Shared,
-    mut hlog: Option<HlogWriter>,
+    hlog: Option<HlogWriter>,
     tx_stamps: Option<TxStampReader>,
     on_ready: impl FnOnce(),
 ) -> Result<ReportOutcome, RunError> {
     let prefix = config.ipc.prefix.as_str();
     let node = create_node(NODE_NAME)?;
-    let status_pub = port::publisher::<DriverStatus>(&node, prefix)?;
-    let timing_pub = port::publisher::<TimingReport>(&node, prefix)?;
-    let liveness = LivenessMonitor::<StimTick>::new(&node, prefix)?;
-    let supervisor = LivenessMonitor::<DriverCommand>::new(&node, prefix)?;
+    let ports = ReportPorts {
+        status: port::publisher::<DriverStatus>(&node, prefix)?,
+        timing: port::publisher::<TimingReport>(&node, prefix)?,
+        generator: LivenessMonitor::<StimTick>::new(&node, prefix)?,
+        supervisor: LivenessMonitor::<DriverCommand>::new(&node, prefix)?,
+    };
     let nodes: Nodes = config
         .nodes()
         .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
-    let pulse_id = u32::from(nodes.id_of(MessageKind::Pulse));
     on_ready();
+    let mut reporter = Reporter::new(config, shared, ports, nodes, hlog, tx_stamps);
+    while !shared.forward_ended.load(Ordering::Relaxed) {
+        std::thread::sleep(REPORT_WAKE);
+        reporter.pass(Instant::now())?;
+    }
+    reporter.finish()
+}
 
-    let start = Instant::now();
-    let status_period = Duration::from_millis(config.telemetry.status_period_ms);
-    let report_period = Duration::from_millis(config.telemetry.report_period_ms);
-    let liveness_period = Duration::from_millis(u64::from(config.watchdog.liveness_check_ms));
-    let mut telemetry = DriverTelemetry::new();
-    let mut pulse_times = PulseTimes::new();
-    let mut stamps_paired = 0u64;
-    let mut status_seq = 0u64;
-    let mut report_seq = 0u64;
-    let mut next_status = start;
-    let mut next_report = start + report_period;
-    let mut next_liveness = start;
-    let mut interval_start = Duration::ZERO;
-    let mut last_overflows = 0u64;
+/// The report thread's iceoryx2 ports.
+struct ReportPorts {
+    status: Publisher<ipc::Service, DriverStatus, ()>,
+    timing: Publisher<ipc::Service, TimingReport, ()>,
+    generator: LivenessMonitor<StimTick>,
+    supervisor: LivenessMonitor<DriverCommand>,
+}
 
-    let drain = |telemetry: &mut DriverTelemetry, pulse_times: &mut PulseTimes| -> bool {
+/// The report thread's state between passes.
+struct Reporter<'a> {
+    shared: &'a Shared,
+    ports: ReportPorts,
+    nodes: Nodes,
+    pulse_id: u32,
+    hlog: Option<HlogWriter>,
+    tx_stamps: Option<TxStampReader>,
+    telemetry: DriverTelemetry,
+    pulse_times: PulseTimes,
+    stamps_paired: u64,
+    status_seq: u64,
+    report_seq: u64,
+    start: Instant,
+    status_period: Duration,
+    report_period: Duration,
+    liveness_period: Duration,
+    next_status: Instant,
+    next_report: Instant,
+    next_liveness: Instant,
+    interval_start: Duration,
+    last_overflows: u64,
+}
+
+impl<'a> Reporter<'a> {
+    fn new(
+        config: &DriverConfig,
+        shared: &'a Shared,
+        ports: ReportPorts,
+        nodes: Nodes,
+        hlog: Option<HlogWriter>,
+        tx_stamps: Option<TxStampReader>,
+    ) -> Self {
+        let start = Instant::now();
+        let report_period = Duration::from_millis(config.telemetry.report_period_ms);
+        Self {
+            shared,
+            ports,
+            pulse_id: u32::from(nodes.id_of(MessageKind::Pulse)),
+            nodes,
+            hlog,
+            tx_stamps,
+            telemetry: DriverTelemetry::new(),
+            pulse_times: PulseTimes::new(),
+            stamps_paired: 0,
+            status_seq: 0,
+            report_seq: 0,
+            start,
+            status_period: Duration::from_millis(config.telemetry.status_period_ms),
+            report_period,
+            liveness_period: Duration::from_millis(u64::from(config.watchdog.liveness_check_ms)),
+            next_status: start,
+            next_report: start + report_period,
+            next_liveness: start,
+            interval_start: Duration::ZERO,
+            last_overflows: 0,
+        }
+    }
+
+    /// One pass at `now`: the forward thread's events, the transmit timestamps, the
+    /// publishers' liveness, DriverStatus and TimingReport when due, lost events.
+    fn pass(&mut self, now: Instant) -> Result<(), RunError> {
+        let changed = self.drain();
+        self.read_stamps();
+        if now >= self.next_liveness {
+            self.next_liveness = now + self.liveness_period;
+            self.check_liveness();
+        }
+        if changed || now >= self.next_status {
+            self.next_status = now + self.status_period;
+            self.publish_status();
+        }
+        if now >= self.next_report {
+            self.next_report += self.report_period;
+            self.emit_report(0)?;
+        }
+        let overflows = self.shared.event_overflows.load(Ordering::Relaxed);
+        if overflows != self.last_overflows {
+            warn!(
+                "{} driver events lost (report queue full)",
+                overflows - self.last_overflows
+            );
+            self.last_overflows = overflows;
+        }
+        Ok(())
+    }
+
+    /// The last pass: what is left of the events and stamps, the final DriverStatus and
+    /// the final TimingReport.
+    fn finish(mut self) -> Result<ReportOutcome, RunError> {
+        self.drain();
+        self.read_stamps();
+        let status = self.publish_status();
+        let timing = self.emit_report(TimingReport::FLAG_FINAL)?;
+        Ok(ReportOutcome {
+            timing,
+            status,
+            tx_stamps: self.stamps_paired,
+        })
+    }
+
+    /// Takes the forward thread's events: telemetry, pulse send times, the log. Returns
+    /// whether the driver's state changed.
+    fn drain(&mut self) -> bool {
         let mut state_changed = false;
-        while let Some(event) = shared.events.pop() {
-            telemetry.record(&event);
+        while let Some(event) = self.shared.events.pop() {
+            self.telemetry.record(&event);
             match event {
                 DriverEvent::PulseSent {
                     pulse_seq,
                     t_publish_ns,
                     ..
-                } => pulse_times.insert(pulse_seq, t_publish_ns),
+                } => self.pulse_times.insert(pulse_seq, t_publish_ns),
                 DriverEvent::StateChanged { .. } => state_changed = true,
                 _ => {}
             }
             log_event(&event);
         }
         state_changed
-    };
-    let publish_status = |seq: &mut u64| -> DriverStatus {
-        *seq += 1;
-        let s = driver_status(*seq, monotonic_ns(), &shared.status.load());
+    }
+
+    fn read_stamps(&mut self) {
+        if let Some(reader) = &self.tx_stamps {
+            self.stamps_paired += read_stamps(
+                reader,
+                self.pulse_id,
+                &self.nodes,
+                &mut self.pulse_times,
+                &mut self.telemetry,
+            );
+        }
+    }
+
+    /// The StimTick publisher's and the supervisor's iceoryx2 nodes: alive, dead, gone.
+    fn check_liveness(&mut self) {
+        let check = self.ports.generator.check();
+        self.shared.status.set_liveness(check.liveness);
+        if check.cleaned_up {
+            warn!("removed the dead StimTick publisher's stale iceoryx2 resources");
+        }
+        let check = self.ports.supervisor.check();
+        self.shared.status.set_supervisor_liveness(check.liveness);
+        if check.cleaned_up {
+            warn!("removed the dead supervisor's stale iceoryx2 resources");
+        }
+    }
+
+    fn publish_status(&mut self) -> DriverStatus {
+        self.status_seq += 1;
+        let s = driver_status(self.status_seq, monotonic_ns(), &self.shared.status.load());
         // A failed publish is not fatal: the next one carries the same cumulative numbers.
-        let _ = status_pub.send_copy(s);
+        let _ = self.ports.status.send_copy(s);
         s
-    };
-    let mut emit_report = |telemetry: &mut DriverTelemetry,
-                           seq: &mut u64,
-                           interval_start: &mut Duration,
-                           flags: u8|
-     -> Result<TimingReport, RunError> {
-        let now = start.elapsed();
-        if let Some(log) = &mut hlog {
-            telemetry
-                .write_interval(log, *interval_start, now.saturating_sub(*interval_start))
+    }
+
+    /// Writes the hlog interval and publishes a TimingReport with `flags` (plus DEGRADED
+    /// and ALLOCATIONS_UNCOUNTED as they apply).
+    fn emit_report(&mut self, flags: u8) -> Result<TimingReport, RunError> {
+        let now = self.start.elapsed();
+        if let Some(log) = &mut self.hlog {
+            self.telemetry
+                .write_interval(
+                    log,
+                    self.interval_start,
+                    now.saturating_sub(self.interval_start),
+                )
                 .map_err(|e| RunError::Node(format!("telemetry.hlog: {e}")))?;
         }
-        *interval_start = now;
-        *seq += 1;
+        self.interval_start = now;
+        self.report_seq += 1;
         let mut flags = flags;
-        if shared.rt_status.get().is_some_and(|s| s.is_degraded()) {
+        if self.shared.rt_status.get().is_some_and(|s| s.is_degraded()) {
             flags |= TimingReport::FLAG_DEGRADED;
         }
         if !fes_rt::rt::alloc::counting_allocator_installed() {
             flags |= TimingReport::FLAG_ALLOCATIONS_UNCOUNTED;
         }
-        let report = telemetry.report(
-            *seq,
+        let report = self.telemetry.report(
+            self.report_seq,
             monotonic_ns(),
-            &shared.status.load(),
-            shared.event_overflows.load(Ordering::Relaxed),
-            shared.hot_path_allocations.load(Ordering::Relaxed),
+            &self.shared.status.load(),
+            self.shared.event_overflows.load(Ordering::Relaxed),
+            self.shared.hot_path_allocations.load(Ordering::Relaxed),
             flags,
         );
-        let _ = timing_pub.send_copy(report);
+        let _ = self.ports.timing.send_copy(report);
         Ok(report)
-    };
-
-    while !shared.forward_ended.load(Ordering::Relaxed) {
-        std::thread::sleep(REPORT_WAKE);
-        let now = Instant::now();
-        let changed = drain(&mut telemetry, &mut pulse_times);
-        if let Some(reader) = &tx_stamps {
-            stamps_paired +=
-                read_stamps(reader, pulse_id, &nodes, &mut pulse_times, &mut telemetry);
-        }
-        if now >= next_liveness {
-            next_liveness = now + liveness_period;
-            let check = liveness.check();
-            shared.status.set_liveness(check.liveness);
-            if check.cleaned_up {
-                warn!("removed the dead StimTick publisher's stale iceoryx2 resources");
-            }
-            let check = supervisor.check();
-            shared.status.set_supervisor_liveness(check.liveness);
-            if check.cleaned_up {
-                warn!("removed the dead supervisor's stale iceoryx2 resources");
-            }
-        }
-        if changed || now >= next_status {
-            next_status = now + status_period;
-            publish_status(&mut status_seq);
-        }
-        if now >= next_report {
-            next_report += report_period;
-            emit_report(&mut telemetry, &mut report_seq, &mut interval_start, 0)?;
-        }
-        let overflows = shared.event_overflows.load(Ordering::Relaxed);
-        if overflows != last_overflows {
-            warn!(
-                "{} driver events lost (report queue full)",
-                overflows - last_overflows
-            );
-            last_overflows = overflows;
-        }
     }
-    drain(&mut telemetry, &mut pulse_times);
-    if let Some(reader) = &tx_stamps {
-        stamps_paired += read_stamps(reader, pulse_id, &nodes, &mut pulse_times, &mut telemetry);
-    }
-    let status = publish_status(&mut status_seq);
-    let timing = emit_report(
-        &mut telemetry,
-        &mut report_seq,
-        &mut interval_start,
-        TimingReport::FLAG_FINAL,
-    )?;
-    Ok(ReportOutcome {
-        timing,
-        status,
-        tx_stamps: stamps_paired,
-    })
 }
 
 /// Reads every queued transmit timestamp; a PULSE's is paired with its StimTick's publish
