@@ -310,16 +310,6 @@ fn a_controller_that_does_not_fit_the_loop_is_refused_at_start() {
     assert!(stderr.contains("controller.json"), "{stderr}");
 }
 
-/// Not a test: writes the 10-unit controller used by the latency measurement
-/// (docs/realtime.md) to the path in `RT_DEMO_CONTROLLER`.
-#[test]
-#[ignore = "tool: RT_DEMO_CONTROLLER=path cargo test -p rt-core --test it rt_process::export_demo_controller -- --ignored"]
-fn export_demo_controller() {
-    let path =
-        std::env::var("RT_DEMO_CONTROLLER").expect("set RT_DEMO_CONTROLLER to the output path");
-    write_controller(std::path::Path::new(&path), 10);
-}
-
 #[test]
 fn a_100_ms_stall_skips_periods_keeps_the_phase_and_emits_no_burst() {
     let dir = Scratch::new("stall");

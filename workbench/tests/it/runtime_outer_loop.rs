@@ -17,7 +17,6 @@ use supervisor::contraction::ContractionSettings;
 use supervisor::limits::ReferenceLimits;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
-use workbench::plots::{BeatLine, plot_beats};
 use workbench::simulation::{SimResult, SimSettings, simulate};
 
 const TARGET: f64 = 0.3;
@@ -166,78 +165,5 @@ fn static_mismatch_is_removed_within_the_rate_limit() {
         );
         assert!(g.abs() <= s.outer_loop.max_correction + 1e-12);
         prev = g;
-    }
-}
-
-/// Writes docs/img/outer-loop-fatigue.png (the fixture controller, exact force) and
-/// docs/img/outer-loop-fatigue-bench.png (the shipped controller in the bench's chain):
-/// 60 s, fatigue, outer loop on and off:
-/// `cargo test -p workbench --release --test it runtime_outer_loop:: -- --ignored --nocapture`.
-#[test]
-#[ignore = "writes the documentation figures"]
-fn figure_outer_loop_fatigue() {
-    let fixture = controller();
-    let shipped = shipped_controller();
-    let figures = [
-        ("outer-loop-fatigue.png", "fixture controller", &fixture),
-        (
-            "outer-loop-fatigue-bench.png",
-            "models/fast.lcn.json, bench sensor",
-            &shipped,
-        ),
-    ];
-    for (file, what, c) in figures {
-        let mut lines = Vec::new();
-        for (on, label) in [(true, "outer loop on"), (false, "outer loop off")] {
-            let s = if file == "outer-loop-fatigue.png" {
-                settings(true, on, 364.0, 60.0)
-            } else {
-                SimSettings::bench(c, true, cardiac(), outer(on), 60.0).unwrap()
-            };
-            let r = simulate(c, &s).unwrap();
-            let t0 = r.beats[0].measurement.beat.start_ns;
-            let points: Vec<(f64, f64)> = r
-                .beats
-                .iter()
-                .filter_map(|b| {
-                    let t = (b.measurement.beat.start_ns - t0) as f64 * 1e-9;
-                    b.measurement.plateau_mean.map(|p| (t, p))
-                })
-                .collect();
-            let p: Vec<f64> = points.iter().map(|x| x.1).collect();
-            let fives: Vec<f64> = p[10..].windows(5).map(mean).collect();
-            let worst = |v: &[f64]| {
-                v.iter()
-                    .map(|x| (x - TARGET).abs() / TARGET)
-                    .fold(0.0, f64::max)
-            };
-            eprintln!(
-                "{what}, {label}: first 5 beats {:.4}, last 5 beats {:.4}, mean {:.4}, worst beat after 10 {:.1} %, worst 5-beat mean after 10 {:.1} %",
-                mean(&p[..5]),
-                mean(&p[p.len() - 5..]),
-                mean(&p),
-                100.0 * worst(&p[10..]),
-                100.0 * worst(&fives)
-            );
-            lines.push(BeatLine {
-                label: label.into(),
-                points,
-            });
-        }
-        let out = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../docs/img")
-            .join(file);
-        plot_beats(
-            &out,
-            &format!(
-                "Fast muscle with fatigue, 75 beats/min, target 0.3 ({what}): contraction per beat"
-            ),
-            "plateau force per beat (normalised)",
-            &lines,
-            TARGET,
-            0.1,
-        )
-        .unwrap();
-        eprintln!("wrote {}", out.display());
     }
 }

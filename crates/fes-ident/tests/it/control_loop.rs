@@ -377,11 +377,10 @@ fn output_clamp_rule_biases_the_pulsed_loop() {
 
 /// The settling table of docs/control.md (fast-muscle fixture, M = 6, Table 6.1 rise
 /// times): mean model force over 2-4 s, over whole inter-pulse intervals (`steady_mean`),
-/// for each reference and anti-windup rule. Run with
-/// `cargo test -p fes-ident --test it control_loop:: -- --ignored --nocapture`; it checks the
-/// documented values (to 0.002) so the table cannot silently go stale.
+/// for each reference and anti-windup rule. It checks the documented values (to 0.002) so
+/// the table cannot silently go stale; `cargo test -p fes-ident settling_table --
+/// --nocapture` prints it.
 #[test]
-#[ignore = "prints the documented settling table; run explicitly"]
 fn settling_table_of_the_docs() {
     use fes_ident::analysis::osp::lcn::steady_mean;
     const DOCUMENTED: [(f64, [f64; 3]); 7] = [
