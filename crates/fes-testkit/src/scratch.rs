@@ -52,6 +52,21 @@ impl Scratch {
     }
 }
 
+/// A scratch directory is used where a path is: `&scratch` is a `&Path`.
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.path
+    }
+}
+
 impl Drop for Scratch {
     fn drop(&mut self) {
         let keep = std::thread::panicking() || std::env::var_os("FES_TEST_KEEP").is_some();

@@ -1,6 +1,5 @@
 //! Helpers of the analysis CLI tests: temporary directories, running the binary, model and
 //! data-set fixtures (fes-ident's test fixtures, shared by path).
-#![allow(dead_code)]
 
 pub(crate) use crate::control_support as control;
 #[path = "../../../crates/fes-ident/tests/it/analysis_support.rs"]
@@ -8,22 +7,13 @@ pub mod fixtures;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use fes_dataset::{DataSet, Header, Record, Split, WriteMode};
 use rt_core::model::{Lmn, file};
 
-/// A fresh empty directory under the system temp dir.
-pub fn tmp(tag: &str) -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "fes-analysis-{tag}-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
+/// A fresh empty directory, removed when the test passes (the testkit's).
+pub fn tmp(tag: &str) -> fes_testkit::Scratch {
+    fes_testkit::Scratch::new(tag)
 }
 
 /// Runs `supervisor` with `args`.

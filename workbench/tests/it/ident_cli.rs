@@ -19,13 +19,8 @@ use std::sync::OnceLock;
 
 const BIN: &str = env!("CARGO_BIN_EXE_fes");
 
-fn tmp(name: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("ident_cli")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&p);
-    std::fs::create_dir_all(&p).expect("temp dir");
-    p
+fn tmp(name: &str) -> fes_testkit::Scratch {
+    fes_testkit::Scratch::new_in(Path::new(env!("CARGO_TARGET_TMPDIR")), name)
 }
 
 /// The data set `sim-muscle record --preset <preset> --seed <seed>` writes.

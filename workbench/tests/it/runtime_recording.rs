@@ -68,10 +68,8 @@ fn sample(k: u64) -> ForceSample {
     }
 }
 
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sv-rec-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+fn tempdir(tag: &str) -> fes_testkit::Scratch {
+    fes_testkit::Scratch::new(tag)
 }
 
 /// Feeds `n` ms of a run: ticks first, their force 2 ms later (as over CAN), a beat
@@ -210,7 +208,7 @@ fn disk_full_is_an_error_not_a_panic() {
     std::fs::create_dir_all(&root).unwrap();
     let ok = Command::new("mount")
         .args(["-t", "tmpfs", "-o", "size=96k", "tmpfs"])
-        .arg(&root)
+        .arg(root.path())
         .status()
         .map(|s| s.success())
         .unwrap_or(false);
@@ -225,7 +223,7 @@ fn disk_full_is_an_error_not_a_panic() {
             let _ = std::fs::remove_dir_all(&self.0);
         }
     }
-    let _guard = Unmount(root.clone());
+    let _guard = Unmount(root.to_path_buf());
     let mut r = Recorder::create(&root, "run", settings(), T0).unwrap();
     let mut failure = None;
     for k in 0..200_000u64 {
