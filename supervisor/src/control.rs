@@ -69,6 +69,19 @@ pub enum ControlError {
     },
 }
 
+/// A peer the [`PeerPolicy`] does not admit: its uid and primary gid, in the one line it
+/// is answered before it is disconnected.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "permission denied: uid {uid} (gid {gid}) is not allowed on this socket (see [control] user/group in the supervisor's configuration)"
+)]
+pub struct PermissionDenied {
+    /// The peer's user id.
+    pub uid: u32,
+    /// The peer's primary group id.
+    pub gid: u32,
+}
+
 /// Who may connect.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PeerPolicy {
@@ -135,7 +148,7 @@ impl PeerPolicy {
     }
 
     /// Whether `peer` may use the socket; the error says why not.
-    pub fn check(&self, peer: &Peer) -> Result<(), String> {
+    pub fn check(&self, peer: &Peer) -> Result<(), PermissionDenied> {
         let ok = peer.uid == self.own_uid
             || (peer.uid == 0 && self.allow_root)
             || self.uid == Some(peer.uid)
@@ -145,10 +158,10 @@ impl PeerPolicy {
         if ok {
             Ok(())
         } else {
-            Err(format!(
-                "permission denied: uid {} (gid {}) is not allowed on this socket (see [control] user/group in the supervisor's configuration)",
-                peer.uid, peer.gid
-            ))
+            Err(PermissionDenied {
+                uid: peer.uid,
+                gid: peer.gid,
+            })
         }
     }
 }
@@ -404,7 +417,7 @@ fn serve_stop(
             return;
         };
         if let Err(e) = policy.check(&peer) {
-            let _ = send(&mut stream, &Response::error(0, e));
+            let _ = send(&mut stream, &Response::error(0, e.to_string()));
             return;
         }
         let request = Request {
@@ -488,7 +501,7 @@ fn handle(
     // The policy first: a peer it does not admit is answered and disconnected unread (the
     // client reads the answer even when its own write fails, `request`).
     if let Err(e) = policy.check(&peer) {
-        return send(&mut stream, &Response::error(0, e));
+        return send(&mut stream, &Response::error(0, e.to_string()));
     }
     let line = match read_line(&mut stream, deadline) {
         Ok(Some(line)) => line,
@@ -656,7 +669,7 @@ mod tests {
         assert!(p.check(&peer(600, 1, vec![])).is_ok());
         assert!(p.check(&peer(1000, 700, vec![])).is_ok());
         assert!(p.check(&peer(1000, 1000, vec![4, 700])).is_ok());
-        let e = p.check(&peer(1000, 1000, vec![4])).unwrap_err();
+        let e = p.check(&peer(1000, 1000, vec![4])).unwrap_err().to_string();
         assert!(
             e.starts_with("permission denied: uid 1000 (gid 1000)"),
             "{e}"

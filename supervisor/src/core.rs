@@ -20,8 +20,8 @@ use std::collections::VecDeque;
 use rt_core::msg::{DriverStatus, Reference};
 
 use crate::contraction::{BeatMeasurement, ContractionEstimator, ContractionSettings};
-use crate::health::{Cause, HealthEvent, Process};
-use crate::limits::ReferenceLimits;
+use crate::health::{Cause, HealthEvent, NotReady, Process};
+use crate::limits::{ReferenceLimits, Rejection};
 use crate::outer_loop::{OuterLoop, OuterLoopSettings, OuterLoopUpdate};
 use crate::profile::{Beat, ProfileEvent, ProfileRunner, ProfileSpec, Setpoint};
 use crate::protocol::Command;
@@ -114,6 +114,49 @@ impl ArmState {
             ArmState::Fault(_) => "fault",
         }
     }
+}
+
+/// Why a command that needs stimulation armed (`set`, `profile`) was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NotArmed {
+    /// Disarmed: the operator has not armed, or stopped.
+    #[error("not armed: run `supervisor arm` first")]
+    Disarmed,
+    /// Stopped by a fault, which only an operator `arm` clears.
+    #[error(
+        "stimulation stopped by a fault ({fault}); `supervisor arm` re-arms once the cause is gone"
+    )]
+    Fault {
+        /// The fault in force.
+        fault: Fault,
+    },
+}
+
+/// Why an operator command was refused; it changed nothing. The words are the control
+/// protocol's `error` and the event log's.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    /// The setpoint or the profile is invalid or outside the limits.
+    #[error(transparent)]
+    Rejected {
+        /// What is wrong with it.
+        #[from]
+        source: Rejection,
+    },
+    /// `set` or `profile` while not armed.
+    #[error(transparent)]
+    NotArmed {
+        /// Why not armed.
+        #[from]
+        source: NotArmed,
+    },
+    /// `arm` while the health monitor says a process is not ready.
+    #[error("cannot arm: {source}")]
+    CannotArm {
+        /// What is not ready.
+        #[from]
+        source: NotReady,
+    },
 }
 
 /// An order for the stimulator driver.
@@ -258,8 +301,8 @@ impl SupervisorCore {
         &mut self,
         command: &Command,
         now_ns: u64,
-        ready: Result<(), String>,
-    ) -> Result<String, String> {
+        ready: Result<(), NotReady>,
+    ) -> Result<String, CommandError> {
         let result = self.apply(command, now_ns, ready);
         if matches!(command, Command::Status) {
             return result;
@@ -271,13 +314,11 @@ impl SupervisorCore {
         result
     }
 
-    fn require_armed(&self) -> Result<(), String> {
+    fn require_armed(&self) -> Result<(), NotArmed> {
         match &self.state {
             ArmState::Armed => Ok(()),
-            ArmState::Disarmed => Err("not armed: run `supervisor arm` first".into()),
-            ArmState::Fault(f) => Err(format!(
-                "stimulation stopped by a fault ({f}); `supervisor arm` re-arms once the cause is gone"
-            )),
+            ArmState::Disarmed => Err(NotArmed::Disarmed),
+            ArmState::Fault(f) => Err(NotArmed::Fault { fault: f.clone() }),
         }
     }
 
@@ -285,8 +326,8 @@ impl SupervisorCore {
         &mut self,
         command: &Command,
         now_ns: u64,
-        ready: Result<(), String>,
-    ) -> Result<String, String> {
+        ready: Result<(), NotReady>,
+    ) -> Result<String, CommandError> {
         match command {
             Command::Status => Ok("status".into()),
             Command::Set { force, rate_per_s } => {
@@ -294,14 +335,14 @@ impl SupervisorCore {
                     force: *force,
                     rate_per_s: *rate_per_s,
                 };
-                spec.validate(&self.limits).map_err(|e| e.to_string())?;
+                spec.validate(&self.limits)?;
                 self.require_armed()?;
                 let rate = rate_per_s.unwrap_or(self.limits.default_rate_per_s);
                 self.start_profile(spec, now_ns);
                 Ok(format!("reference {force} at {rate} /s"))
             }
             Command::Profile { profile } => {
-                profile.validate(&self.limits).map_err(|e| e.to_string())?;
+                profile.validate(&self.limits)?;
                 self.require_armed()?;
                 if let ProfileSpec::Cardiac(c) = profile {
                     if let Some(on) = c.outer_loop {
@@ -337,7 +378,7 @@ impl SupervisorCore {
                 if self.state == ArmState::Armed {
                     return Ok("already armed".into());
                 }
-                ready.map_err(|e| format!("cannot arm: {e}"))?;
+                ready?;
                 self.state = ArmState::Armed;
                 self.clear_profile();
                 self.outer.reset();
@@ -471,6 +512,7 @@ impl SupervisorCore {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::health::Unready;
     use crate::profile::CardiacSpec;
 
     const MS: u64 = 1_000_000;
@@ -492,6 +534,13 @@ mod tests {
                 edge_rate_per_s: None,
                 outer_loop: None,
             }),
+        }
+    }
+
+    /// The health monitor's verdict with the one `problem`.
+    fn not_ready(problem: Unready) -> NotReady {
+        NotReady {
+            problems: vec![problem],
         }
     }
 
@@ -549,9 +598,15 @@ mod tests {
                 Ok(()),
             )
             .unwrap_err();
-        assert!(e.contains("not armed"), "{e}");
-        let e = c.command(&Command::Arm, MS, Err("rt-core: not heard from yet".into()));
-        assert_eq!(e.unwrap_err(), "cannot arm: rt-core: not heard from yet");
+        assert!(e.to_string().contains("not armed"), "{e}");
+        let waiting = Unready::Waiting {
+            process: Process::RtCore,
+        };
+        let e = c.command(&Command::Arm, MS, Err(not_ready(waiting)));
+        assert_eq!(
+            e.unwrap_err().to_string(),
+            "cannot arm: rt-core: not heard from yet"
+        );
         assert_eq!(c.state(), &ArmState::Disarmed);
         assert!(c.take_orders().is_empty());
     }
@@ -624,9 +679,13 @@ mod tests {
         assert!(r.is_stop());
         assert_eq!(c.take_orders(), vec![DriverOrder::SafeStop]);
         let e = c.command(&cardiac(0.3), 3 * MS, Ok(())).unwrap_err();
-        assert!(e.contains("rt-core (pid 7) died"), "{e}");
+        assert!(e.to_string().contains("rt-core (pid 7) died"), "{e}");
+        let dead = Unready::Faulted {
+            process: Process::RtCore,
+            reason: "rt-core (pid 7) died".into(),
+        };
         assert!(
-            c.command(&Command::Arm, 4 * MS, Err("rt-core (pid 7) died".into()))
+            c.command(&Command::Arm, 4 * MS, Err(not_ready(dead)))
                 .is_err()
         );
         c.command(&Command::Arm, 5 * MS, Ok(())).unwrap();

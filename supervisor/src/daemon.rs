@@ -28,7 +28,7 @@ use crate::core::{ArmState, DriverOrder, Fault, FaultCause, SupervisorCore};
 use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
 use crate::pass;
 use crate::protocol::{Command, Response, Status};
-use crate::recording::{Recorder, RecorderSettings, utc_stamp};
+use crate::recording::{RecorderSettings, utc_stamp};
 use crate::recording_thread::{Item, RecorderThread};
 
 /// Longest sleep of the loop, ms (StimTick buffers hold about 1 s).
@@ -265,12 +265,8 @@ pub fn run(
             if state == ArmState::Armed && cfg.recording.enabled && run.recorder.is_none() {
                 run.index += 1;
                 let name = format!("run-{}-{}-{}", utc_stamp(), std::process::id(), run.index);
-                let started = Recorder::create(&cfg.recording.dir, &name, settings.clone(), now)
-                    .map_err(|e| e.to_string())
-                    .and_then(|r| {
-                        RecorderThread::spawn(r)
-                            .map_err(|e| format!("recording: cannot start the writer thread: {e}"))
-                    });
+                let started =
+                    RecorderThread::start(&cfg.recording.dir, &name, settings.clone(), now);
                 match started {
                     Ok(r) => {
                         core.note(format!("recording to {}", r.dir().display()));
@@ -425,7 +421,7 @@ fn serve(
     match result {
         Ok(m) => Response::ok(id, m, Some(status)),
         Err(e) => {
-            let mut r = Response::error(id, e);
+            let mut r = Response::error(id, e.to_string());
             r.status = Some(status);
             r
         }

@@ -280,6 +280,45 @@ impl Cause {
     }
 }
 
+/// Why stimulation may not be armed yet ([`HealthMonitor::ready`]): every watched process
+/// that is not ready, upstream first. Reads as their reasons joined by `; `.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub struct NotReady {
+    /// The processes that are not ready, upstream first (never empty).
+    pub problems: Vec<Unready>,
+}
+
+impl std::fmt::Display for NotReady {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, problem) in self.problems.iter().enumerate() {
+            if i > 0 {
+                f.write_str("; ")?;
+            }
+            write!(f, "{problem}")?;
+        }
+        Ok(())
+    }
+}
+
+/// One watched process that is not ready to arm.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Unready {
+    /// Not heard from since the supervisor started.
+    #[error("{}: not heard from yet", .process.name())]
+    Waiting {
+        /// The process.
+        process: Process,
+    },
+    /// Its fault is in force.
+    #[error("{reason}")]
+    Faulted {
+        /// The process.
+        process: Process,
+        /// The fault's message (starts with the process's name).
+        reason: String,
+    },
+}
+
 /// What a stream of messages says about a process.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Condition {
@@ -878,23 +917,26 @@ impl HealthMonitor {
 
     /// Whether stimulation may be armed: every watched process heard from and not
     /// faulted. The error lists what is missing.
-    pub fn ready(&self) -> Result<(), String> {
+    pub fn ready(&self) -> Result<(), NotReady> {
         let mut problems = Vec::new();
-        for p in Process::ALL {
-            if !self.settings.watched(p) {
+        for process in Process::ALL {
+            if !self.settings.watched(process) {
                 continue;
             }
-            let w = &self.watch[p.index()];
+            let w = &self.watch[process.index()];
             match w.condition {
-                Condition::Waiting => problems.push(format!("{}: not heard from yet", p.name())),
-                Condition::Faulted => problems.push(w.reason.clone()),
+                Condition::Waiting => problems.push(Unready::Waiting { process }),
+                Condition::Faulted => problems.push(Unready::Faulted {
+                    process,
+                    reason: w.reason.clone(),
+                }),
                 Condition::Ok => {}
             }
         }
         if problems.is_empty() {
             Ok(())
         } else {
-            Err(problems.join("; "))
+            Err(NotReady { problems })
         }
     }
 
@@ -1044,7 +1086,7 @@ mod tests {
     #[test]
     fn waiting_until_heard_then_ok() {
         let mut h = HealthMonitor::new(HealthSettings::default());
-        let e = h.ready().unwrap_err();
+        let e = h.ready().unwrap_err().to_string();
         assert!(e.contains("rt-core: not heard from yet"), "{e}");
         live(&mut h, 10 * MS);
         h.check(20 * MS, &running);
@@ -1245,7 +1287,7 @@ mod tests {
         live(&mut h, 10 * MS);
         let driver_gone = only(200, ProcState::Gone);
         h.check(11 * MS, &driver_gone);
-        assert!(h.ready().unwrap_err().contains("stim-driver"));
+        assert!(h.ready().unwrap_err().to_string().contains("stim-driver"));
         h.clear_recovered(12 * MS, &running);
         assert!(
             h.ready().is_err(),
@@ -1254,7 +1296,7 @@ mod tests {
         // rt-core and the stimulator keep talking; the driver stays faulted.
         h.on_stim_tick(&tick(20, 20 * MS), 20 * MS);
         h.clear_recovered(21 * MS, &running);
-        assert!(h.ready().unwrap_err().contains("stim-driver"));
+        assert!(h.ready().unwrap_err().to_string().contains("stim-driver"));
         // A node seen dead is not cleared even by a late message.
         let mut dead = nodes();
         dead[1].dead = true;
@@ -1299,11 +1341,11 @@ mod tests {
         h.on_nodes(&nodes(), &owners());
         live(&mut h, 10 * MS);
         h.check(11 * MS, &only(300, ProcState::Zombie));
-        assert!(h.ready().unwrap_err().contains("sim-muscle"));
+        assert!(h.ready().unwrap_err().to_string().contains("sim-muscle"));
         // The frame sent before the death, forwarded a millisecond later.
         h.on_force_sample(&force(12), 12 * MS);
         h.clear_recovered(13 * MS, &only(300, ProcState::Zombie));
-        assert!(h.ready().unwrap_err().contains("died"));
+        assert!(h.ready().unwrap_err().to_string().contains("died"));
         // Reaped (gone), and even a probe that misses it (pid reused): still refused.
         h.on_force_sample(&force(14), 14 * MS);
         h.clear_recovered(15 * MS, &only(300, ProcState::Gone));

@@ -4,7 +4,7 @@
 //! check (a fault stops stimulation at once: the first names the stop, later ones are
 //! noted).
 
-use crate::core::{Fault, SupervisorCore};
+use crate::core::{CommandError, Fault, SupervisorCore};
 use crate::health::{HealthEvent, HealthMonitor, ProcState, Severity};
 use crate::protocol::Command;
 
@@ -18,7 +18,7 @@ pub fn serve_command(
     command: &Command,
     now_ns: u64,
     probe: &dyn Fn(u32) -> ProcState,
-) -> Result<String, String> {
+) -> Result<String, CommandError> {
     if matches!(command, Command::Arm) {
         health.clear_recovered(now_ns, probe);
     }

@@ -14,19 +14,97 @@
 //! blocking the loop; [`RecorderThread::join`] waits for it.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use crossbeam::channel::{Sender, TrySendError, bounded};
 use rt_core::msg::{DriverStatus, ForceSample, Reference, StimTick, TimingReport};
 
 use crate::core::BeatRecord;
-use crate::recording::{Recorder, RecordingError, RecordingSummary};
+use crate::recording::{Recorder, RecorderSettings, RecordingError, RecordingSummary};
 
 /// Entries the queue holds: about 7 s of the stack's traffic (1000 StimTicks and 1000
 /// ForceSamples per second, plus references, statuses and reports).
 pub const QUEUE_CAPACITY: usize = 16_384;
+
+/// Why a run's recording could not start ([`RecorderThread::start`]).
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// The run directory or one of its files could not be created.
+    #[error(transparent)]
+    Create {
+        /// The failure, naming the path.
+        #[from]
+        source: RecordingError,
+    },
+    /// The writer thread could not be started.
+    #[error("recording: cannot start the writer thread: {source}")]
+    Spawn {
+        /// The operating system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Why a message could not be queued for the recording ([`RecorderThread::send`]): the
+/// recording cannot go on.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum SendError {
+    /// The writer failed (disk full, I/O error).
+    #[error(transparent)]
+    WriterFailed {
+        /// Its failure, naming the file.
+        #[from]
+        source: Arc<RecordingError>,
+    },
+    /// The run was closed already.
+    #[error("recording {}: already closed", .dir.display())]
+    Closed {
+        /// The run directory.
+        dir: PathBuf,
+    },
+    /// The queue is full: the writer fell [`QUEUE_CAPACITY`] entries behind.
+    #[error(
+        "recording {}: the writer fell {} entries behind (the disk is too slow)",
+        .dir.display(),
+        QUEUE_CAPACITY
+    )]
+    FellBehind {
+        /// The run directory.
+        dir: PathBuf,
+    },
+    /// The writer stopped without a failure of its own.
+    #[error("recording {}: the writer stopped", .dir.display())]
+    WriterStopped {
+        /// The run directory.
+        dir: PathBuf,
+    },
+}
+
+/// Why a run did not end cleanly ([`RecorderThread::join`]).
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum JoinError {
+    /// The writer failed (disk full, I/O error), before or while finishing the run.
+    #[error(transparent)]
+    WriterFailed {
+        /// Its failure, naming the file.
+        #[from]
+        source: Arc<RecordingError>,
+    },
+    /// The writer thread panicked.
+    #[error("recording {}: the writer panicked", .dir.display())]
+    WriterPanicked {
+        /// The run directory.
+        dir: PathBuf,
+    },
+    /// The writer was joined already.
+    #[error("recording {}: already joined", .dir.display())]
+    AlreadyJoined {
+        /// The run directory.
+        dir: PathBuf,
+    },
+}
 
 /// One thing to record, with the time the loop received it where that matters.
 #[derive(Debug, Clone)]
@@ -61,23 +139,35 @@ enum Message {
 
 struct Shared {
     failed: AtomicBool,
-    error: Mutex<Option<String>>,
+    error: Mutex<Option<Arc<RecordingError>>>,
 }
 
 /// The writer thread of one run.
 pub struct RecorderThread {
     dir: PathBuf,
     tx: Option<Sender<Message>>,
-    shared: std::sync::Arc<Shared>,
-    handle: Option<JoinHandle<Result<RecordingSummary, RecordingError>>>,
+    shared: Arc<Shared>,
+    handle: Option<JoinHandle<Result<RecordingSummary, Arc<RecordingError>>>>,
 }
 
 impl RecorderThread {
+    /// Creates the run directory `root/name` ([`Recorder::create`]) and moves its recorder
+    /// to a new writer thread.
+    pub fn start(
+        root: &Path,
+        name: &str,
+        settings: RecorderSettings,
+        now_ns: u64,
+    ) -> Result<Self, StartError> {
+        let recorder = Recorder::create(root, name, settings, now_ns)?;
+        Self::spawn(recorder).map_err(|source| StartError::Spawn { source })
+    }
+
     /// Moves `recorder` to a new writer thread.
     pub fn spawn(recorder: Recorder) -> std::io::Result<Self> {
         let dir = recorder.dir().to_path_buf();
         let (tx, rx) = bounded::<Message>(QUEUE_CAPACITY);
-        let shared = std::sync::Arc::new(Shared {
+        let shared = Arc::new(Shared {
             failed: AtomicBool::new(false),
             error: Mutex::new(None),
         });
@@ -87,7 +177,8 @@ impl RecorderThread {
             .spawn(move || {
                 let mut rec = recorder;
                 let fail = |e: RecordingError| {
-                    *s.error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e.to_string());
+                    let e = Arc::new(e);
+                    *s.error.lock().unwrap_or_else(|p| p.into_inner()) = Some(Arc::clone(&e));
                     s.failed.store(true, Ordering::Release);
                     e
                 };
@@ -119,27 +210,31 @@ impl RecorderThread {
 
     /// Queues `item`; never blocks. An error when the writer has failed or the queue is
     /// full (the disk is too slow for the run).
-    pub fn send(&self, item: Item) -> Result<(), String> {
+    pub fn send(&self, item: Item) -> Result<(), SendError> {
         if let Some(e) = self.failure() {
-            return Err(e);
+            return Err(e.into());
         }
         let Some(tx) = &self.tx else {
-            return Err(format!("recording {}: already closed", self.dir.display()));
+            return Err(SendError::Closed {
+                dir: self.dir.clone(),
+            });
         };
         match tx.try_send(Message::Item(item)) {
             Ok(()) => Ok(()),
-            Err(TrySendError::Full(_)) => Err(format!(
-                "recording {}: the writer fell {QUEUE_CAPACITY} entries behind (the disk is too slow)",
-                self.dir.display()
+            Err(TrySendError::Full(_)) => Err(SendError::FellBehind {
+                dir: self.dir.clone(),
+            }),
+            Err(TrySendError::Disconnected(_)) => Err(self.failure().map_or_else(
+                || SendError::WriterStopped {
+                    dir: self.dir.clone(),
+                },
+                SendError::from,
             )),
-            Err(TrySendError::Disconnected(_)) => Err(self.failure().unwrap_or_else(|| {
-                format!("recording {}: the writer stopped", self.dir.display())
-            })),
         }
     }
 
     /// The writer's failure, if it failed.
-    pub fn failure(&self) -> Option<String> {
+    pub fn failure(&self) -> Option<Arc<RecordingError>> {
         self.shared
             .failed
             .load(Ordering::Acquire)
@@ -168,16 +263,17 @@ impl RecorderThread {
     }
 
     /// Waits for the writer (closing the run first if needed) and returns its summary.
-    pub fn join(mut self) -> Result<RecordingSummary, String> {
+    pub fn join(mut self) -> Result<RecordingSummary, JoinError> {
         self.close(rt_core::rt::clock::monotonic_ns());
         match self.handle.take().map(JoinHandle::join) {
             Some(Ok(Ok(s))) => Ok(s),
-            Some(Ok(Err(e))) => Err(e.to_string()),
-            Some(Err(_)) => Err(format!(
-                "recording {}: the writer panicked",
-                self.dir.display()
-            )),
-            None => Err(format!("recording {}: already joined", self.dir.display())),
+            Some(Ok(Err(e))) => Err(e.into()),
+            Some(Err(_)) => Err(JoinError::WriterPanicked {
+                dir: self.dir.clone(),
+            }),
+            None => Err(JoinError::AlreadyJoined {
+                dir: self.dir.clone(),
+            }),
         }
     }
 }

@@ -16,7 +16,7 @@ use sim_muscle::sensor::{ForceSensor, SensorConfig};
 
 use crate::summary::{BeatRow, Series};
 use supervisor::contraction::ContractionSettings;
-use supervisor::core::{BeatRecord, SupervisorCore};
+use supervisor::core::{BeatRecord, CommandError, SupervisorCore};
 use supervisor::limits::ReferenceLimits;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::ProfileSpec;
@@ -113,7 +113,7 @@ pub enum SimError {
     Muscle(#[from] sim_muscle::ding::ParamError),
     /// The profile or a command was refused.
     #[error("supervisor refused: {0}")]
-    Refused(String),
+    Refused(#[source] CommandError),
 }
 
 /// Time series of a simulation (one entry per 1 ms sample).
