@@ -1,18 +1,21 @@
 //! `supervisor run`: the daemon's loop. It wires the pure parts ([`crate::core`],
 //! [`crate::health`]) to iceoryx2, the control socket and the recorder.
 //!
-//! Every iteration (at most every [`POLL_MS`] ms, and at each profile edge): check its own
-//! stall (passes further apart than `[health] self_stall_ms` while armed are a fault); drain
-//! StimTick, ForceSample, DriverStatus and TimingReport; list the iceoryx2 nodes when due;
-//! check health (a fault stops stimulation at once); serve operator requests; send driver
-//! orders; publish the Reference when its period is up or it changed; record; flush.
-//! Arming starts a recording run; stop or fault ends it (fsync).
+//! Every iteration (at most every [`POLL_MS`] ms, and at each profile edge), one method per
+//! phase, in this order: check its own stall (passes further apart than `[health]
+//! self_stall_ms` while armed are a fault); drain StimTick, ForceSample, DriverStatus and
+//! TimingReport; serve operator requests; list the iceoryx2 nodes when due and check health
+//! (a fault stops stimulation at once); send driver orders; publish the Reference when its
+//! period is up or it changed; record; flush. Arming starts a recording run; stop or fault
+//! ends it (fsync).
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
 use iceoryx2::node::NodeView;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use rt_core::msg::service::{ServiceError, open_pubsub};
 use rt_core::msg::{
@@ -22,7 +25,7 @@ use rt_core::msg::{
 use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
 
-use crate::config::SupervisorConfig;
+use crate::config::{RecordingConfig, SupervisorConfig};
 use crate::control::{ControlServer, Pending};
 use crate::core::{ArmState, DriverOrder, Fault, FaultCause, SupervisorCore};
 use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
@@ -88,9 +91,7 @@ pub fn list_nodes() -> Vec<NodeObservation> {
 }
 
 /// The node ids of a service's publishers.
-fn publisher_nodes<T: Contract>(
-    service: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
-) -> Vec<u128> {
+fn publisher_nodes<T: Contract>(service: &PubSubService<T>) -> Vec<u128> {
     use iceoryx2::service::port_factory::PortFactory as _;
     let mut ids = Vec::new();
     service.dynamic_config().list_publishers(|p| {
@@ -100,12 +101,102 @@ fn publisher_nodes<T: Contract>(
     ids
 }
 
+/// The iceoryx2 ports of the daemon, opened under the configured prefix.
+struct Ports {
+    /// Reference to rt-core.
+    reference: Publisher<ipc::Service, Reference, ()>,
+    /// Orders to stim-driver.
+    command: Publisher<ipc::Service, DriverCommand, ()>,
+    ticks: Subscriber<ipc::Service, StimTick, ()>,
+    forces: Subscriber<ipc::Service, ForceSample, ()>,
+    statuses: Subscriber<ipc::Service, DriverStatus, ()>,
+    /// The StimTick service, whose publishers are this stack's rt-core.
+    tick_service: PubSubService<StimTick>,
+    /// The DriverStatus service, whose publishers are this stack's stim-driver.
+    status_service: PubSubService<DriverStatus>,
+    timings: Subscriber<ipc::Service, TimingReport, ()>,
+}
+
+/// A publish-subscribe service of the stack.
+type PubSubService<T> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+
+impl Ports {
+    /// Opens every port on `node` under `prefix`.
+    fn open(node: &Node<ipc::Service>, prefix: &str) -> Result<Self, DaemonError> {
+        Ok(Self {
+            reference: port::publisher::<Reference>(node, prefix)?,
+            command: port::publisher::<DriverCommand>(node, prefix)?,
+            ticks: port::subscriber::<StimTick>(node, prefix)?,
+            forces: port::subscriber::<ForceSample>(node, prefix)?,
+            statuses: port::subscriber::<DriverStatus>(node, prefix)?,
+            tick_service: open_pubsub::<StimTick>(node, prefix)?,
+            status_service: open_pubsub::<DriverStatus>(node, prefix)?,
+            timings: port::subscriber::<TimingReport>(node, prefix)?,
+        })
+    }
+}
+
+/// The recording runs of the daemon's life.
 struct Run {
     recorder: Option<RecorderThread>,
     /// Runs ended and being finished by their writer threads.
     closing: Vec<RecorderThread>,
     dirs: Vec<PathBuf>,
     index: u32,
+}
+
+impl Run {
+    /// Queues `item` for the recording of the current run; a failure (the writer failed or
+    /// fell behind) ends the recording and stops stimulation.
+    fn record(&mut self, core: &mut SupervisorCore, item: Item) {
+        if let Some(r) = &self.recorder
+            && let Err(e) = r.send(item)
+        {
+            self.recorder = None;
+            core.fault(recording_fault(&e));
+        }
+    }
+}
+
+/// The fault that a failed recording raises: no recording means no evidence.
+fn recording_fault(e: &dyn std::fmt::Display) -> Fault {
+    Fault::new(
+        FaultCause::Recording,
+        format!("{e}; no recording means no evidence"),
+    )
+}
+
+/// The daemon between two passes of its loop: its ports and control socket, the pure
+/// parts (core, health), the recording runs, and when what is next due.
+struct Daemon<'a> {
+    cfg: &'a SupervisorConfig,
+    ports: Ports,
+    /// The iceoryx2 node of the ports (declared after them: dropped after them).
+    _node: Node<ipc::Service>,
+    /// Operator requests from the control socket's threads.
+    requests: mpsc::Receiver<Pending>,
+    server: ControlServer,
+    core: SupervisorCore,
+    health: HealthMonitor,
+    run: Run,
+    settings: RecorderSettings,
+    /// systemd's watchdog period, when it watches us.
+    watchdog: Option<std::time::Duration>,
+    start_ns: u64,
+    period_ns: u64,
+    scan_ns: u64,
+    next_publish: u64,
+    next_scan: u64,
+    next_watchdog: u64,
+    /// The arming state at the last pass (a change starts a recording run).
+    last_state: ArmState,
+    /// When the last pass began (for the self-stall check).
+    last_pass: u64,
+    /// Sequence number of the last DriverCommand.
+    cmd_seq: u64,
+    /// The DriverStatuses of this pass, taken off their queue before the StimTicks.
+    statuses_in: Vec<DriverStatus>,
 }
 
 /// Runs the daemon until `stop` is set. `on_ready` is called once the ports and the
@@ -115,269 +206,435 @@ pub fn run(
     stop: &AtomicBool,
     on_ready: impl FnOnce(&std::path::Path),
 ) -> Result<Outcome, DaemonError> {
-    let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name)?;
-    let prefix = cfg.ipc.prefix.as_str();
-    let ref_pub = port::publisher::<Reference>(&node, prefix)?;
-    let cmd_pub = port::publisher::<DriverCommand>(&node, prefix)?;
-    let mut cmd_seq = 0u64;
-    let ticks = port::subscriber::<StimTick>(&node, prefix)?;
-    let forces = port::subscriber::<ForceSample>(&node, prefix)?;
-    let statuses = port::subscriber::<DriverStatus>(&node, prefix)?;
-    // The services whose publishers are this stack's rt-core and stim-driver.
-    let tick_service = open_pubsub::<StimTick>(&node, prefix)?;
-    let status_service = open_pubsub::<DriverStatus>(&node, prefix)?;
-    let timings = port::subscriber::<TimingReport>(&node, prefix)?;
-
-    let (tx, rx) = mpsc::channel::<Pending>();
-    let server = ControlServer::start(&cfg.control, tx)?;
-    on_ready(server.path());
-    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
-    let watchdog = sd_notify::watchdog_enabled();
-
-    let limits = cfg.reference.limits();
-    let mut core = SupervisorCore::new(limits, cfg.outer_loop, cfg.contraction);
-    let mut health = HealthMonitor::new(cfg.health.clone());
-    let start_ns = monotonic_ns();
-    let period_ns = cfg.reference.period_ms * 1_000_000;
-    let scan_ns = cfg.health.node_scan_period_ms * 1_000_000;
-    let mut next_publish = start_ns;
-    let mut next_scan = start_ns;
-    let mut next_watchdog = start_ns;
-    let mut last_state = core.state().clone();
-    let mut run = Run {
-        recorder: None,
-        closing: Vec::new(),
-        dirs: Vec::new(),
-        index: 0,
-    };
-    let settings = RecorderSettings {
-        flush_period_ns: cfg.recording.flush_period_ms * 1_000_000,
-        max_record_ticks: cfg.recording.max_record_ms as usize,
-        scale_n: cfg.recording.scale_n,
-        offset_n: cfg.recording.offset_n,
-        source: cfg.recording.source.clone(),
-        protocol: serde_json::Value::Null,
-    };
-
-    let mut last_pass = monotonic_ns();
-    let mut statuses_in: Vec<DriverStatus> = Vec::with_capacity(64);
+    let mut daemon = Daemon::open(cfg, on_ready)?;
     loop {
         let now = monotonic_ns();
         let stopping = stop.load(Ordering::Relaxed);
+        daemon.pass(now, stopping);
+        if stopping {
+            daemon.leave();
+            break;
+        }
+        sleep_until(daemon.wake_at(now));
+    }
+    Ok(daemon.finish())
+}
 
-        // 0. Our own stall (SIGSTOP, starvation): while armed, a fault before anything
-        //    else, so the references that follow are the stop reference.
-        let gap = now.saturating_sub(last_pass);
-        last_pass = now;
-        if *core.state() == ArmState::Armed
-            && let Some(reason) = cfg.health.self_stall(gap)
+/// The recorder's settings from the `[recording]` section.
+fn recorder_settings(cfg: &RecordingConfig) -> RecorderSettings {
+    RecorderSettings {
+        flush_period_ns: cfg.flush_period_ms * 1_000_000,
+        max_record_ticks: cfg.max_record_ms as usize,
+        scale_n: cfg.scale_n,
+        offset_n: cfg.offset_n,
+        source: cfg.source.clone(),
+        protocol: serde_json::Value::Null,
+    }
+}
+
+impl<'a> Daemon<'a> {
+    /// Opens the iceoryx2 ports and the control socket, calls `on_ready` with the socket's
+    /// path, tells systemd it is ready, and starts disarmed with nothing recorded.
+    fn open(
+        cfg: &'a SupervisorConfig,
+        on_ready: impl FnOnce(&std::path::Path),
+    ) -> Result<Self, DaemonError> {
+        let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name)?;
+        let ports = Ports::open(&node, cfg.ipc.prefix.as_str())?;
+        let (tx, requests) = mpsc::channel::<Pending>();
+        let server = ControlServer::start(&cfg.control, tx)?;
+        on_ready(server.path());
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+        let watchdog = sd_notify::watchdog_enabled();
+        let core = SupervisorCore::new(cfg.reference.limits(), cfg.outer_loop, cfg.contraction);
+        let health = HealthMonitor::new(cfg.health.clone());
+        let start_ns = monotonic_ns();
+        let last_state = core.state().clone();
+        Ok(Self {
+            cfg,
+            ports,
+            _node: node,
+            requests,
+            server,
+            core,
+            health,
+            run: Run {
+                recorder: None,
+                closing: Vec::new(),
+                dirs: Vec::new(),
+                index: 0,
+            },
+            settings: recorder_settings(&cfg.recording),
+            watchdog,
+            start_ns,
+            period_ns: cfg.reference.period_ms * 1_000_000,
+            scan_ns: cfg.health.node_scan_period_ms * 1_000_000,
+            next_publish: start_ns,
+            next_scan: start_ns,
+            next_watchdog: start_ns,
+            last_state,
+            last_pass: monotonic_ns(),
+            cmd_seq: 0,
+            statuses_in: Vec::with_capacity(64),
+        })
+    }
+
+    /// One pass of the loop at `now` (`stopping`: the process was asked to stop), in this
+    /// order: own stall, inputs, operator requests, health, driver orders, recording life
+    /// cycle, Reference, events and recorder, systemd's watchdog.
+    fn pass(&mut self, now: u64, stopping: bool) {
+        self.check_own_stall(now);
+        self.read_inputs(now);
+        self.serve_requests(now, stopping);
+        self.check_health(now);
+        self.send_orders(now);
+        self.follow_arming(now);
+        self.record_beats();
+        self.publish_reference(now);
+        self.record_events(now);
+        self.follow_recorders(now);
+        self.notify_watchdog(now);
+    }
+
+    /// Our own stall (SIGSTOP, starvation): while armed, a fault before anything else,
+    /// so the references that follow are the stop reference.
+    fn check_own_stall(&mut self, now: u64) {
+        let gap = now.saturating_sub(self.last_pass);
+        self.last_pass = now;
+        if *self.core.state() == ArmState::Armed
+            && let Some(reason) = self.cfg.health.self_stall(gap)
         {
-            core.fault(Fault::new(FaultCause::SelfStall, reason));
+            self.core.fault(Fault::new(FaultCause::SelfStall, reason));
         }
+    }
 
-        // 1. Inputs. The DriverStatuses are taken off their queue first and judged after
-        //    the StimTicks: every tick rt-core published before a status is then known
-        //    when the status is, so a driver watchdog trip is blamed by the tick stream
-        //    around it (health.rs, TickGaps), however late this pass runs.
-        statuses_in.clear();
-        while let Ok(Some(s)) = statuses.receive() {
-            statuses_in.push(*s.payload());
+    /// Inputs, to the health monitor, the core and the recording. The DriverStatuses
+    /// are taken off their queue first and judged after the StimTicks: every tick rt-core
+    /// published before a status is then known when the status is, so a driver watchdog
+    /// trip is blamed by the tick stream around it (health.rs, TickGaps), however late
+    /// this pass runs.
+    fn read_inputs(&mut self, now: u64) {
+        self.statuses_in.clear();
+        while let Ok(Some(s)) = self.ports.statuses.receive() {
+            self.statuses_in.push(*s.payload());
         }
-        while let Ok(Some(s)) = ticks.receive() {
+        self.read_ticks(now);
+        self.read_forces(now);
+        self.judge_statuses(now);
+        self.read_timings();
+    }
+
+    /// The StimTicks received: health, pulses for the contraction estimate, recording.
+    fn read_ticks(&mut self, now: u64) {
+        while let Ok(Some(s)) = self.ports.ticks.receive() {
             let t = *s.payload();
             drop(s);
-            health.on_stim_tick(&t, now);
+            self.health.on_stim_tick(&t, now);
             if t.validate().is_ok() {
                 if t.fires() {
-                    core.on_pulse(t.t_ns);
+                    self.core.on_pulse(t.t_ns);
                 }
-                record(&mut run, &mut core, Item::Tick(t, now));
+                self.run.record(&mut self.core, Item::Tick(t, now));
             }
         }
-        while let Ok(Some(s)) = forces.receive() {
+    }
+
+    /// The ForceSamples received: health, the measured force, recording.
+    fn read_forces(&mut self, now: u64) {
+        while let Ok(Some(s)) = self.ports.forces.receive() {
             let f = *s.payload();
             drop(s);
-            health.on_force_sample(&f, now);
+            self.health.on_force_sample(&f, now);
             if f.validate().is_ok() {
-                core.on_force(f.t_ns, f.force);
-                record(&mut run, &mut core, Item::Force(f, now));
+                self.core.on_force(f.t_ns, f.force);
+                self.run.record(&mut self.core, Item::Force(f, now));
             }
         }
-        for st in statuses_in.drain(..) {
-            health.on_driver_status(&st, now);
+    }
+
+    /// The DriverStatuses taken off their queue at the start of [`Self::read_inputs`]:
+    /// health, refused pulses, recording.
+    fn judge_statuses(&mut self, now: u64) {
+        for st in self.statuses_in.drain(..) {
+            self.health.on_driver_status(&st, now);
             if st.validate().is_ok() {
-                core.on_driver_status(&st);
+                self.core.on_driver_status(&st);
             }
-            record(&mut run, &mut core, Item::Status(st));
+            self.run.record(&mut self.core, Item::Status(st));
         }
-        while let Ok(Some(s)) = timings.receive() {
+    }
+
+    /// The TimingReports received: health, recording.
+    fn read_timings(&mut self) {
+        while let Ok(Some(s)) = self.ports.timings.receive() {
             let tr = *s.payload();
             drop(s);
-            health.on_timing(&tr);
-            record(&mut run, &mut core, Item::Timing(tr));
+            self.health.on_timing(&tr);
+            self.run.record(&mut self.core, Item::Timing(tr));
         }
+    }
 
-        // 2. Operator requests, served before the health check so that a fault found
-        //    below reaches the driver (SafeStop) and rt-core (the zero Reference) in this
-        //    same pass, before any status shows it.
-        while let Ok(p) = rx.try_recv() {
-            let response = serve(&mut core, &mut health, &run, &p, now, start_ns);
+    /// Operator requests, served before the health check so that a fault found there
+    /// reaches the driver (SafeStop) and rt-core (the zero Reference) in this same pass,
+    /// before any status shows it. When `stopping`, stimulation is stopped.
+    fn serve_requests(&mut self, now: u64, stopping: bool) {
+        while let Ok(p) = self.requests.try_recv() {
+            let response = self.answer(&p, now);
             let _ = p.reply.try_send(response);
         }
-        if stopping && *core.state() == ArmState::Armed {
-            let _ = core.command(&Command::Stop, now, Ok(()));
+        if stopping && *self.core.state() == ArmState::Armed {
+            let _ = self.core.command(&Command::Stop, now, Ok(()));
         }
+    }
 
-        // 3. Health.
-        if now >= next_scan {
-            next_scan = now + scan_ns;
+    /// Serves one request; the response carries the status after it.
+    fn answer(&mut self, p: &Pending, now: u64) -> Response {
+        let id = p.request.id;
+        let result = pass::serve_command(
+            &mut self.core,
+            &mut self.health,
+            &p.request.command,
+            now,
+            &proc_state,
+        );
+        let status = self.status(now);
+        match result {
+            Ok(m) => Response::ok(id, m, Some(status)),
+            Err(e) => {
+                let mut r = Response::error(id, e.to_string());
+                r.status = Some(status);
+                r
+            }
+        }
+    }
+
+    /// Health: the node listing when due, then the check (a fault stops stimulation
+    /// at once); what it found goes to the log.
+    fn check_health(&mut self, now: u64) {
+        if now >= self.next_scan {
+            self.next_scan = now + self.scan_ns;
             let owners = ServiceOwners {
-                stim_tick: publisher_nodes(&tick_service),
-                driver_status: publisher_nodes(&status_service),
+                stim_tick: publisher_nodes(&self.ports.tick_service),
+                driver_status: publisher_nodes(&self.ports.status_service),
             };
             let listed = list_nodes();
-            health.on_nodes(&listed, &owners);
+            self.health.on_nodes(&listed, &owners);
         }
-        for e in pass::check_health(&mut core, &mut health, now, &proc_state) {
+        for e in pass::check_health(&mut self.core, &mut self.health, now, &proc_state) {
             match e.severity {
                 Severity::Fault => tracing::error!("{}", e.message),
                 Severity::Warning => tracing::warn!("{}", e.message),
             }
         }
+    }
 
-        // 4. Driver orders.
-        for order in core.take_orders() {
-            cmd_seq += 1;
+    /// The core's orders to the driver.
+    fn send_orders(&mut self, now: u64) {
+        for order in self.core.take_orders() {
+            self.cmd_seq += 1;
             let kind = match order {
                 DriverOrder::Arm => DriverCommandKind::Arm,
                 DriverOrder::Disarm => DriverCommandKind::Disarm,
                 DriverOrder::SafeStop => DriverCommandKind::SafeStop,
             };
-            if let Err(e) = cmd_pub.send_copy(DriverCommand::new(cmd_seq, now, kind)) {
-                core.note(format!("driver order {order:?} not sent: {e}"));
+            let command = DriverCommand::new(self.cmd_seq, now, kind);
+            if let Err(e) = self.ports.command.send_copy(command) {
+                self.core
+                    .note(format!("driver order {order:?} not sent: {e}"));
                 tracing::error!("driver order {order:?} not sent: {e}");
             }
         }
+    }
 
-        // 5. Recording life cycle.
-        let state = core.state().clone();
-        if state != last_state {
-            if state == ArmState::Armed && cfg.recording.enabled && run.recorder.is_none() {
-                run.index += 1;
-                let name = format!("run-{}-{}-{}", utc_stamp(), std::process::id(), run.index);
-                let started =
-                    RecorderThread::start(&cfg.recording.dir, &name, settings.clone(), now);
-                match started {
-                    Ok(r) => {
-                        core.note(format!("recording to {}", r.dir().display()));
-                        run.dirs.push(r.dir().to_path_buf());
-                        run.recorder = Some(r);
-                    }
-                    Err(e) => {
-                        core.fault(Fault::new(
-                            FaultCause::Recording,
-                            format!("{e}; no recording means no evidence"),
-                        ));
-                    }
-                }
+    /// Recording life cycle: arming starts a run (when recording is enabled and none
+    /// is open).
+    fn follow_arming(&mut self, now: u64) {
+        let state = self.core.state().clone();
+        if state != self.last_state {
+            if state == ArmState::Armed && self.cfg.recording.enabled && self.run.recorder.is_none()
+            {
+                self.start_recording(now);
             }
-            last_state = core.state().clone();
+            self.last_state = self.core.state().clone();
         }
-        for b in core.take_beat_starts() {
+    }
+
+    /// Starts a recording run at `now`; a run that cannot start is a fault.
+    fn start_recording(&mut self, now: u64) {
+        self.run.index += 1;
+        let name = format!(
+            "run-{}-{}-{}",
+            utc_stamp(),
+            std::process::id(),
+            self.run.index
+        );
+        let started =
+            RecorderThread::start(&self.cfg.recording.dir, &name, self.settings.clone(), now);
+        match started {
+            Ok(r) => {
+                self.core
+                    .note(format!("recording to {}", r.dir().display()));
+                self.run.dirs.push(r.dir().to_path_buf());
+                self.run.recorder = Some(r);
+            }
+            Err(e) => {
+                self.core.fault(recording_fault(&e));
+            }
+        }
+    }
+
+    /// The beats started and completed since the last pass, to the recording.
+    fn record_beats(&mut self) {
+        for b in self.core.take_beat_starts() {
             let kind = format!("beat {} ({} beats/min)", b.index, b.bpm);
-            record(&mut run, &mut core, Item::Boundary(b.start_ns, kind));
+            self.run
+                .record(&mut self.core, Item::Boundary(b.start_ns, kind));
         }
-        for b in core.take_beats() {
-            record(&mut run, &mut core, Item::Beat(b));
+        for b in self.core.take_beats() {
+            self.run.record(&mut self.core, Item::Beat(b));
         }
+    }
 
-        // 6. Reference.
-        let edge = core.next_change_ns(now).is_some_and(|t| t <= now);
-        let changed = core
+    /// The Reference, published when its period is up, at a profile edge, or when
+    /// arming or a stop changed it.
+    fn publish_reference(&mut self, now: u64) {
+        let edge = self.core.next_change_ns(now).is_some_and(|t| t <= now);
+        let changed = self
+            .core
             .last_reference()
-            .is_none_or(|r| r.is_stop() != (*core.state() != ArmState::Armed));
-        if now >= next_publish || edge || changed {
-            let r = core.reference(now);
-            match ref_pub.send_copy(r) {
-                Ok(_) => {}
-                Err(e) => tracing::warn!("Reference not published: {e:?}"),
+            .is_none_or(|r| r.is_stop() != (*self.core.state() != ArmState::Armed));
+        if now >= self.next_publish || edge || changed {
+            let r = self.core.reference(now);
+            if let Err(e) = self.ports.reference.send_copy(r) {
+                tracing::warn!("Reference not published: {e:?}");
             }
-            record(&mut run, &mut core, Item::Reference(r));
-            next_publish = now + period_ns;
+            self.run.record(&mut self.core, Item::Reference(r));
+            self.next_publish = now + self.period_ns;
         }
+    }
 
-        // 7. Events to the recording, flush, end of a run.
-        let events = core.take_new_events();
+    /// The events of this pass to the log and the recording, then a flush when due.
+    fn record_events(&mut self, now: u64) {
+        let events = self.core.take_new_events();
         for e in &events {
             tracing::info!("{e}");
         }
         for e in &events {
-            record(&mut run, &mut core, Item::Event(now, e.clone()));
+            self.run.record(&mut self.core, Item::Event(now, e.clone()));
         }
-        record(&mut run, &mut core, Item::Flush(now));
-        if let Some(e) = run.recorder.as_ref().and_then(RecorderThread::failure) {
-            run.recorder = None;
-            core.fault(Fault::new(
-                FaultCause::Recording,
-                format!("{e}; no recording means no evidence"),
-            ));
+        self.run.record(&mut self.core, Item::Flush(now));
+    }
+
+    /// The writers: a failed one ends the recording and stops stimulation; the run is
+    /// closed once no longer armed; runs whose writer has finished (flushed, fsynced) are
+    /// reported.
+    fn follow_recorders(&mut self, now: u64) {
+        if let Some(e) = self.run.recorder.as_ref().and_then(RecorderThread::failure) {
+            self.run.recorder = None;
+            self.core.fault(recording_fault(&e));
         }
-        if *core.state() != ArmState::Armed
-            && let Some(mut rec) = run.recorder.take()
+        if *self.core.state() != ArmState::Armed
+            && let Some(mut rec) = self.run.recorder.take()
         {
             rec.close(now);
-            run.closing.push(rec);
+            self.run.closing.push(rec);
         }
-        // Runs whose writer has finished (flushed, fsynced): say so.
-        while let Some(i) = run.closing.iter().position(RecorderThread::is_closed) {
-            let rec = run.closing.swap_remove(i);
-            note_closed(&mut core, rec);
+        while let Some(i) = self.run.closing.iter().position(RecorderThread::is_closed) {
+            let rec = self.run.closing.swap_remove(i);
+            note_closed(&mut self.core, rec);
         }
+    }
 
-        if let Some(wd) = watchdog
-            && now >= next_watchdog
+    /// Tells systemd we are alive, three times per watchdog period, when it watches.
+    fn notify_watchdog(&mut self, now: u64) {
+        if let Some(wd) = self.watchdog
+            && now >= self.next_watchdog
         {
             let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
-            next_watchdog = now + wd.as_nanos() as u64 / 3;
+            self.next_watchdog = now + wd.as_nanos() as u64 / 3;
         }
+    }
 
-        if stopping {
-            // Leave the reference stopped for rt-core and the driver disarmed, then go.
-            let t = monotonic_ns();
-            let r = core.reference(t);
-            let _ = ref_pub.send_copy(r);
-            cmd_seq += 1;
-            let _ = cmd_pub.send_copy(DriverCommand::new(cmd_seq, t, DriverCommandKind::Disarm));
-            break;
-        }
+    /// On the way out: leaves the reference stopped for rt-core and the driver disarmed.
+    fn leave(&mut self) {
+        let t = monotonic_ns();
+        let r = self.core.reference(t);
+        let _ = self.ports.reference.send_copy(r);
+        self.cmd_seq += 1;
+        let disarm = DriverCommand::new(self.cmd_seq, t, DriverCommandKind::Disarm);
+        let _ = self.ports.command.send_copy(disarm);
+    }
 
-        // 8. Sleep to the next event.
-        let mut wake = (now + POLL_MS * 1_000_000).min(next_publish);
-        if let Some(t) = core.next_change_ns(now) {
+    /// When the next pass is due after the one at `now`: at most [`POLL_MS`] later, at
+    /// the next publication, at the next profile edge.
+    fn wake_at(&self, now: u64) -> u64 {
+        let mut wake = (now + POLL_MS * 1_000_000).min(self.next_publish);
+        if let Some(t) = self.core.next_change_ns(now) {
             wake = wake.min(t.max(now));
         }
-        sleep_until(wake);
+        wake
     }
-    let fault = match core.state() {
-        ArmState::Fault(f) => Some(f.clone()),
-        _ => None,
-    };
-    // Wait for the writers: every run on disk, fsynced, before the process exits.
-    if let Some(mut rec) = run.recorder.take() {
-        rec.close(monotonic_ns());
-        run.closing.push(rec);
+
+    /// Ends the daemon: waits for the writers (every run on disk, fsynced, before the
+    /// process exits), logs the last events, closes the control socket.
+    fn finish(mut self) -> Outcome {
+        let fault = match self.core.state() {
+            ArmState::Fault(f) => Some(f.clone()),
+            _ => None,
+        };
+        if let Some(mut rec) = self.run.recorder.take() {
+            rec.close(monotonic_ns());
+            self.run.closing.push(rec);
+        }
+        for rec in self.run.closing.drain(..) {
+            note_closed(&mut self.core, rec);
+        }
+        for e in self.core.take_new_events() {
+            tracing::info!("{e}");
+        }
+        drop(self.server);
+        Outcome {
+            recordings: self.run.dirs,
+            fault,
+        }
     }
-    for rec in run.closing.drain(..) {
-        note_closed(&mut core, rec);
+
+    /// The daemon's state for `status` at `now`.
+    fn status(&self, now: u64) -> Status {
+        let last = self.core.last_reference();
+        let (driver_state, stimulator_state) = self.health.device_states();
+        Status {
+            state: self.core.state().name().into(),
+            fault: match self.core.state() {
+                ArmState::Fault(f) => Some(f.message.clone()),
+                _ => None,
+            },
+            fault_cause: match self.core.state() {
+                ArmState::Fault(f) => Some(f.cause),
+                _ => None,
+            },
+            uptime_s: (now - self.start_ns) as f64 * 1e-9,
+            reference: last.map_or(0.0, |r| r.force),
+            reference_rate_per_s: last.map_or(0.0, |r| r.max_rate_per_s),
+            reference_stop: last.is_none_or(|r| r.is_stop()),
+            references_published: last.map_or(0, |r| r.seq),
+            profile: self.core.profile().map(|p| p.spec().describe()),
+            beat: self.core.profile().and_then(|p| p.beat()).map(|b| b.index),
+            outer_loop: self.core.outer_loop().enabled(),
+            outer_loop_correction: self.core.outer_loop().correction(),
+            last_contraction: self.core.last_contraction(),
+            processes: self.health.statuses(now),
+            driver_state,
+            stimulator_state,
+            recording: self
+                .run
+                .recorder
+                .as_ref()
+                .map(|r| r.dir().display().to_string())
+                .or_else(|| self.run.dirs.last().map(|d| d.display().to_string())),
+            events: self.core.events().cloned().collect(),
+        }
     }
-    for e in core.take_new_events() {
-        tracing::info!("{e}");
-    }
-    drop(server);
-    Ok(Outcome {
-        recordings: run.dirs,
-        fault,
-    })
 }
 
 /// Waits for a closing run's writer and notes the outcome.
@@ -390,82 +647,5 @@ fn note_closed(core: &mut SupervisorCore, rec: RecorderThread) {
             s.ticks
         )),
         Err(e) => core.note(format!("recording could not be closed cleanly: {e}")),
-    }
-}
-
-/// Queues `item` for the recording of the current run; a failure (the writer failed or
-/// fell behind) ends the recording and stops stimulation.
-fn record(run: &mut Run, core: &mut SupervisorCore, item: Item) {
-    if let Some(r) = &run.recorder
-        && let Err(e) = r.send(item)
-    {
-        run.recorder = None;
-        core.fault(Fault::new(
-            FaultCause::Recording,
-            format!("{e}; no recording means no evidence"),
-        ));
-    }
-}
-
-fn serve(
-    core: &mut SupervisorCore,
-    health: &mut HealthMonitor,
-    run: &Run,
-    p: &Pending,
-    now: u64,
-    start_ns: u64,
-) -> Response {
-    let id = p.request.id;
-    let result = pass::serve_command(core, health, &p.request.command, now, &proc_state);
-    let status = status(core, health, run, now, start_ns);
-    match result {
-        Ok(m) => Response::ok(id, m, Some(status)),
-        Err(e) => {
-            let mut r = Response::error(id, e.to_string());
-            r.status = Some(status);
-            r
-        }
-    }
-}
-
-// The daemon's state for `status`.
-fn status(
-    core: &SupervisorCore,
-    health: &HealthMonitor,
-    run: &Run,
-    now: u64,
-    start_ns: u64,
-) -> Status {
-    let last = core.last_reference();
-    let (driver_state, stimulator_state) = health.device_states();
-    Status {
-        state: core.state().name().into(),
-        fault: match core.state() {
-            ArmState::Fault(f) => Some(f.message.clone()),
-            _ => None,
-        },
-        fault_cause: match core.state() {
-            ArmState::Fault(f) => Some(f.cause),
-            _ => None,
-        },
-        uptime_s: (now - start_ns) as f64 * 1e-9,
-        reference: last.map_or(0.0, |r| r.force),
-        reference_rate_per_s: last.map_or(0.0, |r| r.max_rate_per_s),
-        reference_stop: last.is_none_or(|r| r.is_stop()),
-        references_published: last.map_or(0, |r| r.seq),
-        profile: core.profile().map(|p| p.spec().describe()),
-        beat: core.profile().and_then(|p| p.beat()).map(|b| b.index),
-        outer_loop: core.outer_loop().enabled(),
-        outer_loop_correction: core.outer_loop().correction(),
-        last_contraction: core.last_contraction(),
-        processes: health.statuses(now),
-        driver_state,
-        stimulator_state,
-        recording: run
-            .recorder
-            .as_ref()
-            .map(|r| r.dir().display().to_string())
-            .or_else(|| run.dirs.last().map(|d| d.display().to_string())),
-        events: core.events().cloned().collect(),
     }
 }
