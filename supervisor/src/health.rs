@@ -418,6 +418,79 @@ impl TickGaps {
     }
 }
 
+/// A watched process found silent beyond its timeout, or dead ([`HealthMonitor::check`]).
+struct Silence {
+    process: Process,
+    pid: Option<u32>,
+    /// What the probe says about `pid`.
+    pstate: Option<ProcState>,
+    /// Its process is gone or a zombie, or its node is dead.
+    dead_now: bool,
+    /// Its node is gone, or it sent its final message.
+    ended: bool,
+    /// Since its last message, ns.
+    age: u64,
+    /// Its timeout, ns.
+    limit: u64,
+}
+
+impl Silence {
+    /// The cause, and the message that names the process and says why.
+    fn verdict(&self) -> (Cause, String) {
+        let p = self.process;
+        let name = p.name();
+        let what = match p {
+            Process::RtCore => "StimTick",
+            Process::StimDriver => "DriverStatus",
+            Process::SimMuscle => "FORCE sample",
+        };
+        let pid_txt = self
+            .pid
+            .map_or(String::new(), |pid| format!(" (pid {pid})"));
+        let (age, limit) = (ms(self.age), ms(self.limit));
+        match (self.pstate, self.dead_now) {
+            (Some(ProcState::Gone), _) => (
+                Cause::Died,
+                format!("{name}{pid_txt} died: the process is gone; last {what} {age:.0} ms ago"),
+            ),
+            (Some(ProcState::Zombie), _) => (
+                Cause::Died,
+                format!(
+                    "{name}{pid_txt} died: the process has exited (zombie); last {what} {age:.0} ms ago"
+                ),
+            ),
+            (_, true) => (
+                Cause::Died,
+                format!(
+                    "{name}{pid_txt} died: its iceoryx2 node is dead; last {what} {age:.0} ms ago"
+                ),
+            ),
+            (Some(ProcState::Stopped), _) => (
+                Cause::Stalled,
+                format!(
+                    "{name}{pid_txt} stalled: stopped by a signal; no {what} for {age:.0} ms (limit {limit:.0} ms)"
+                ),
+            ),
+            _ if self.ended => (
+                Cause::Exited,
+                format!("{name}{pid_txt} exited: its node is gone; no {what} for {age:.0} ms"),
+            ),
+            _ if p == Process::SimMuscle => (
+                Cause::Silent,
+                format!(
+                    "sim-muscle (stimulator){pid_txt} silent: no {what} forwarded for {age:.0} ms (limit {limit:.0} ms) while stim-driver is alive"
+                ),
+            ),
+            _ => (
+                Cause::Stalled,
+                format!(
+                    "{name}{pid_txt} stalled: process alive but no {what} for {age:.0} ms (limit {limit:.0} ms)"
+                ),
+            ),
+        }
+    }
+}
+
 fn ms(ns: u64) -> f64 {
     ns as f64 * 1e-6
 }
@@ -593,55 +666,61 @@ impl HealthMonitor {
         }
         self.heard(Process::StimDriver, now_ns);
         let prev = self.driver.replace(*s);
-        let prev_trips = prev.map_or(0, |p| p.watchdog_trips);
-        let prev_code = prev.map_or(0, |p| p.fault_code);
-        let prev_rejected = prev.map_or(0, |p| p.pulses_rejected);
-        let prev_tx = prev.map_or(0, |p| p.can_tx_errors);
-        if s.watchdog_trips > prev_trips {
-            // The driver's StimTick watchdog (no tick in time, a tick too old) fires when
-            // rt-core stops: blame rt-core when it had gone quiet itself between the
-            // driver's previous status and this one, judged by the ticks' and the statuses'
-            // own CLOCK_MONOTONIC stamps (not by when this loop read them).
-            let since_ns = prev.map_or(0, |p| p.t_ns);
-            let rt_silence = self.ticks.silence_within(since_ns, s.t_ns).filter(|_| {
-                self.settings.watch_rt_core && DriverStatus::is_tick_loss(s.fault_code)
-            });
-            if let Some(silence_ns) = rt_silence {
-                let age = ms(silence_ns);
-                self.raise(
-                    Process::RtCore,
-                    Severity::Fault,
-                    Cause::WatchdogTripped,
-                    format!(
-                        "rt-core: no StimTick for {age:.0} ms (stim-driver's watchdog tripped)"
-                    ),
-                );
-            } else if DriverStatus::is_stimulator_loss(s.fault_code)
-                && self.settings.watch_stimulator
-            {
-                // The driver lost the stimulator: the stimulator is the cause.
-                self.raise(
-                    Process::SimMuscle,
-                    Severity::Fault,
-                    Cause::WatchdogTripped,
-                    format!(
-                        "sim-muscle (stimulator): {} (stim-driver's watchdog tripped)",
-                        emcy_name(s.fault_code)
-                    ),
-                );
-            } else {
-                self.raise(
-                    Process::StimDriver,
-                    Severity::Fault,
-                    Cause::WatchdogTripped,
-                    format!(
-                        "stim-driver: watchdog tripped: {} ({} in all)",
-                        emcy_name(s.fault_code),
-                        s.watchdog_trips
-                    ),
-                );
-            }
+        if s.watchdog_trips > prev.map_or(0, |p| p.watchdog_trips) {
+            self.blame_watchdog_trip(s, prev);
         }
+        self.on_device_faults(s, prev.map_or(0, |p| p.fault_code));
+        self.on_driver_counters(s, prev);
+    }
+
+    /// The driver's watchdog tripped between `prev` and `s`: a fault of the process it
+    /// lost (rt-core or the stimulator), else of the driver.
+    fn blame_watchdog_trip(&mut self, s: &DriverStatus, prev: Option<DriverStatus>) {
+        // The driver's StimTick watchdog (no tick in time, a tick too old) fires when
+        // rt-core stops: blame rt-core when it had gone quiet itself between the driver's
+        // previous status and this one, judged by the ticks' and the statuses' own
+        // CLOCK_MONOTONIC stamps (not by when this loop read them).
+        let since_ns = prev.map_or(0, |p| p.t_ns);
+        let rt_silence = self
+            .ticks
+            .silence_within(since_ns, s.t_ns)
+            .filter(|_| self.settings.watch_rt_core && DriverStatus::is_tick_loss(s.fault_code));
+        if let Some(silence_ns) = rt_silence {
+            let age = ms(silence_ns);
+            self.raise(
+                Process::RtCore,
+                Severity::Fault,
+                Cause::WatchdogTripped,
+                format!("rt-core: no StimTick for {age:.0} ms (stim-driver's watchdog tripped)"),
+            );
+        } else if DriverStatus::is_stimulator_loss(s.fault_code) && self.settings.watch_stimulator {
+            // The driver lost the stimulator: the stimulator is the cause.
+            self.raise(
+                Process::SimMuscle,
+                Severity::Fault,
+                Cause::WatchdogTripped,
+                format!(
+                    "sim-muscle (stimulator): {} (stim-driver's watchdog tripped)",
+                    emcy_name(s.fault_code)
+                ),
+            );
+        } else {
+            self.raise(
+                Process::StimDriver,
+                Severity::Fault,
+                Cause::WatchdogTripped,
+                format!(
+                    "stim-driver: watchdog tripped: {} ({} in all)",
+                    emcy_name(s.fault_code),
+                    s.watchdog_trips
+                ),
+            );
+        }
+    }
+
+    /// The fault code and the device states of `s` (`prev_code`: the previous status's
+    /// fault code): a new EMCY, the stimulator or the driver in FAULT.
+    fn on_device_faults(&mut self, s: &DriverStatus, prev_code: u16) {
         // A safe state the supervisor itself ordered (SafeStop) is the answer to a fault
         // already raised, not a new one.
         let ordered_stop = s.fault_code == DriverStatus::FAULT_CODE_SAFE_STOP_ORDERED;
@@ -687,6 +766,13 @@ impl HealthMonitor {
                 ),
             );
         }
+    }
+
+    /// The driver's counters since `prev`: pulses it refused, CAN transmit errors
+    /// (warnings).
+    fn on_driver_counters(&mut self, s: &DriverStatus, prev: Option<DriverStatus>) {
+        let prev_rejected = prev.map_or(0, |p| p.pulses_rejected);
+        let prev_tx = prev.map_or(0, |p| p.can_tx_errors);
         if s.pulses_rejected > prev_rejected {
             self.raise(
                 Process::StimDriver,
@@ -801,118 +887,88 @@ impl HealthMonitor {
     /// Checks freshness at `now_ns`, asking `probe` about process ids.
     pub fn check(&mut self, now_ns: u64, probe: &dyn Fn(u32) -> ProcState) {
         for p in Process::ALL {
-            if !self.settings.watched(p) {
-                continue;
+            if self.settings.watched(p) {
+                self.check_process(p, now_ns, probe);
             }
-            let w = &self.watch[p.index()];
-            if w.condition != Condition::Ok {
-                continue;
-            }
-            let Some(last) = w.last_ns else { continue };
-            let age = now_ns.saturating_sub(last);
-            let limit = self.settings.timeout_ns(p);
-            // The process's own state, when we know its pid.
-            let pid = match p {
-                Process::SimMuscle => self.settings.stimulator_pid,
-                _ => w.node.as_ref().map(|n| n.pid),
-            };
-            let pstate = pid.map(probe);
-            let dead_now = matches!(pstate, Some(ProcState::Gone | ProcState::Zombie))
-                || w.node.as_ref().is_some_and(|n| n.dead);
-            if age <= limit && !dead_now {
-                continue;
-            }
-            // Upstream causes first: the force reaches us through the driver, so a
-            // silent stimulator behind a dead, stopped or faulted driver is the driver's
-            // fault.
-            if p == Process::SimMuscle && !dead_now && self.settings.watch_stim_driver {
-                let drv = &self.watch[Process::StimDriver.index()];
-                if drv.condition == Condition::Faulted {
-                    continue;
-                }
-                let drv_pid = drv.node.as_ref().map(|n| n.pid);
-                let drv_dead = drv.node.as_ref().is_some_and(|n| n.dead);
-                let drv_state = drv_pid.map(probe);
-                let pid_txt = drv_pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
-                let reason = match drv_state {
-                    Some(ProcState::Gone | ProcState::Zombie) => {
-                        Some((Cause::Died, "died: the process is gone"))
-                    }
-                    _ if drv_dead => Some((Cause::Died, "died: its iceoryx2 node is dead")),
-                    Some(ProcState::Stopped) => {
-                        Some((Cause::Stalled, "stalled: stopped by a signal"))
-                    }
-                    _ => None,
-                };
-                if let Some((cause, reason)) = reason {
-                    if cause == Cause::Died {
-                        self.watch[Process::StimDriver.index()].died_pid = drv_pid;
-                    }
-                    let message = format!(
-                        "stim-driver{pid_txt} {reason}; no force sample forwarded for {:.0} ms",
-                        ms(age)
-                    );
-                    self.raise(Process::StimDriver, Severity::Fault, cause, message);
-                    continue;
-                }
-            }
-            let what = match p {
-                Process::RtCore => "StimTick",
-                Process::StimDriver => "DriverStatus",
-                Process::SimMuscle => "FORCE sample",
-            };
-            let pid_txt = pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
-            let cause = match (pstate, dead_now) {
-                (Some(ProcState::Gone | ProcState::Zombie), _) | (_, true) => Cause::Died,
-                (Some(ProcState::Stopped), _) => Cause::Stalled,
-                _ if w.node_gone || w.finished => Cause::Exited,
-                _ if p == Process::SimMuscle => Cause::Silent,
-                _ => Cause::Stalled,
-            };
-            let message = match (pstate, dead_now) {
-                (Some(ProcState::Gone), _) => format!(
-                    "{}{pid_txt} died: the process is gone; last {what} {:.0} ms ago",
-                    p.name(),
-                    ms(age)
-                ),
-                (Some(ProcState::Zombie), _) => format!(
-                    "{}{pid_txt} died: the process has exited (zombie); last {what} {:.0} ms ago",
-                    p.name(),
-                    ms(age)
-                ),
-                (_, true) => format!(
-                    "{}{pid_txt} died: its iceoryx2 node is dead; last {what} {:.0} ms ago",
-                    p.name(),
-                    ms(age)
-                ),
-                (Some(ProcState::Stopped), _) => format!(
-                    "{}{pid_txt} stalled: stopped by a signal; no {what} for {:.0} ms (limit {:.0} ms)",
-                    p.name(),
-                    ms(age),
-                    ms(limit)
-                ),
-                _ if w.node_gone || w.finished => format!(
-                    "{}{pid_txt} exited: its node is gone; no {what} for {:.0} ms",
-                    p.name(),
-                    ms(age)
-                ),
-                _ if p == Process::SimMuscle => format!(
-                    "sim-muscle (stimulator){pid_txt} silent: no {what} forwarded for {:.0} ms (limit {:.0} ms) while stim-driver is alive",
-                    ms(age),
-                    ms(limit)
-                ),
-                _ => format!(
-                    "{}{pid_txt} stalled: process alive but no {what} for {:.0} ms (limit {:.0} ms)",
-                    p.name(),
-                    ms(age),
-                    ms(limit)
-                ),
-            };
-            if dead_now {
-                self.watch[p.index()].died_pid = pid;
-            }
-            self.raise(p, Severity::Fault, cause, message);
         }
+    }
+
+    /// Checks the freshness of `p` at `now_ns`: a process that is silent beyond its
+    /// timeout, or dead, is a fault (of its upstream process when that explains it).
+    fn check_process(&mut self, p: Process, now_ns: u64, probe: &dyn Fn(u32) -> ProcState) {
+        let w = &self.watch[p.index()];
+        if w.condition != Condition::Ok {
+            return;
+        }
+        let Some(last) = w.last_ns else { return };
+        let age = now_ns.saturating_sub(last);
+        let limit = self.settings.timeout_ns(p);
+        // The process's own state, when we know its pid.
+        let pid = self.pid_of(p);
+        let pstate = pid.map(probe);
+        let dead_now = matches!(pstate, Some(ProcState::Gone | ProcState::Zombie))
+            || w.node.as_ref().is_some_and(|n| n.dead);
+        if age <= limit && !dead_now {
+            return;
+        }
+        let ended = w.node_gone || w.finished;
+        // Upstream causes first: the force reaches us through the driver, so a silent
+        // stimulator behind a dead, stopped or faulted driver is the driver's fault.
+        if p == Process::SimMuscle
+            && !dead_now
+            && self.settings.watch_stim_driver
+            && self.blame_driver_for_silence(age, probe)
+        {
+            return;
+        }
+        let silence = Silence {
+            process: p,
+            pid,
+            pstate,
+            dead_now,
+            ended,
+            age,
+            limit,
+        };
+        let (cause, message) = silence.verdict();
+        if dead_now {
+            self.watch[p.index()].died_pid = pid;
+        }
+        self.raise(p, Severity::Fault, cause, message);
+    }
+
+    /// The stimulator has been silent for `age`: when the driver, through which its force
+    /// reaches us, is dead or stopped, that is the driver's fault, raised here. True when
+    /// the driver accounts for the silence (its fault raised now or before).
+    fn blame_driver_for_silence(&mut self, age: u64, probe: &dyn Fn(u32) -> ProcState) -> bool {
+        let drv = &self.watch[Process::StimDriver.index()];
+        if drv.condition == Condition::Faulted {
+            return true;
+        }
+        let drv_pid = drv.node.as_ref().map(|n| n.pid);
+        let drv_dead = drv.node.as_ref().is_some_and(|n| n.dead);
+        let drv_state = drv_pid.map(probe);
+        let pid_txt = drv_pid.map_or(String::new(), |pid| format!(" (pid {pid})"));
+        let reason = match drv_state {
+            Some(ProcState::Gone | ProcState::Zombie) => {
+                Some((Cause::Died, "died: the process is gone"))
+            }
+            _ if drv_dead => Some((Cause::Died, "died: its iceoryx2 node is dead")),
+            Some(ProcState::Stopped) => Some((Cause::Stalled, "stalled: stopped by a signal")),
+            _ => None,
+        };
+        let Some((cause, reason)) = reason else {
+            return false;
+        };
+        if cause == Cause::Died {
+            self.watch[Process::StimDriver.index()].died_pid = drv_pid;
+        }
+        let message = format!(
+            "stim-driver{pid_txt} {reason}; no force sample forwarded for {:.0} ms",
+            ms(age)
+        );
+        self.raise(Process::StimDriver, Severity::Fault, cause, message);
+        true
     }
 
     /// Whether stimulation may be armed: every watched process heard from and not

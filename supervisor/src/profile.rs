@@ -306,6 +306,104 @@ struct CardiacRun {
     next_amplitude: f64,
 }
 
+impl CardiacRun {
+    /// Advances to `now_ns`, starting the beats due on the way (with the pending
+    /// parameters and the next amplitude) and appending their boundaries to `events`;
+    /// returns the setpoint at `now_ns`: the beat's amplitude while it contracts, else 0.
+    fn advance(
+        &mut self,
+        now_ns: u64,
+        limits: &ReferenceLimits,
+        events: &mut Vec<ProfileEvent>,
+    ) -> Setpoint {
+        while now_ns >= self.beat.end_ns() {
+            events.push(ProfileEvent::BeatEnded(self.beat));
+            if let Some(p) = self.pending.take() {
+                self.current = p;
+            }
+            let c = self.current;
+            self.beat = Beat {
+                index: self.beat.index + 1,
+                start_ns: self.beat.end_ns(),
+                period_ns: c.period_ns(),
+                on_ns: c.on_ns(),
+                bpm: c.bpm,
+                target: c.amplitude,
+                amplitude: self.next_amplitude,
+            };
+            events.push(ProfileEvent::BeatStarted(self.beat));
+        }
+        let in_beat = now_ns.saturating_sub(self.beat.start_ns);
+        let rate = self.current.edge_rate(limits);
+        if in_beat < self.beat.on_ns {
+            Setpoint {
+                force: self.beat.amplitude,
+                rate_per_s: rate,
+            }
+        } else {
+            Setpoint {
+                force: 0.0,
+                rate_per_s: rate,
+            }
+        }
+    }
+}
+
+/// The setpoint of a steps profile `t_s` s after its start (`repeat`: over again after the
+/// last step), every change at `rate_per_s`.
+fn steps_setpoint(steps: &[Step], repeat: bool, rate_per_s: f64, t_s: f64) -> Setpoint {
+    let total: f64 = steps.iter().map(|s| s.hold_s).sum();
+    let mut t = t_s;
+    if repeat {
+        t %= total;
+    }
+    let mut force = steps[steps.len() - 1].force;
+    let mut edge = 0.0;
+    for s in steps {
+        edge += s.hold_s;
+        if t < edge {
+            force = s.force;
+            break;
+        }
+    }
+    Setpoint { force, rate_per_s }
+}
+
+/// The setpoint of a ramps profile `t_s` s after its start (`repeat`: over again after the
+/// last point): the end of the running segment at its slope (`default_rate_per_s` for a
+/// flat one).
+fn ramps_setpoint(
+    points: &[RampPoint],
+    repeat: bool,
+    default_rate_per_s: f64,
+    t_s: f64,
+) -> Setpoint {
+    let total = points[points.len() - 1].t_s;
+    let mut t = t_s;
+    if repeat {
+        t %= total;
+    }
+    let mut setpoint = Setpoint {
+        force: points[points.len() - 1].force,
+        rate_per_s: default_rate_per_s,
+    };
+    for w in points.windows(2) {
+        if t < w[1].t_s {
+            let slope = (w[1].force - w[0].force).abs() / (w[1].t_s - w[0].t_s);
+            setpoint = Setpoint {
+                force: w[1].force,
+                rate_per_s: if slope > 0.0 {
+                    slope
+                } else {
+                    default_rate_per_s
+                },
+            };
+            break;
+        }
+    }
+    setpoint
+}
+
 /// What happened while the profile advanced.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ProfileEvent {
@@ -388,7 +486,7 @@ impl ProfileRunner {
     /// Advances to `now_ns`, appending beat boundaries passed on the way to `events`, and
     /// returns the setpoint at `now_ns`.
     pub fn advance(&mut self, now_ns: u64, events: &mut Vec<ProfileEvent>) -> Setpoint {
-        let t_ns = now_ns.saturating_sub(self.start_ns);
+        let t_s = now_ns.saturating_sub(self.start_ns) as f64 * 1e-9;
         let limits = self.limits;
         match &self.spec {
             ProfileSpec::Constant { force, rate_per_s } => Setpoint {
@@ -401,90 +499,19 @@ impl ProfileRunner {
                 rate_per_s,
             } => {
                 let rate = rate_per_s.unwrap_or(limits.default_rate_per_s);
-                let total: f64 = steps.iter().map(|s| s.hold_s).sum();
-                let mut t = t_ns as f64 * 1e-9;
-                if *repeat {
-                    t %= total;
-                }
-                let mut force = steps[steps.len() - 1].force;
-                let mut edge = 0.0;
-                for s in steps {
-                    edge += s.hold_s;
-                    if t < edge {
-                        force = s.force;
-                        break;
-                    }
-                }
-                Setpoint {
-                    force,
-                    rate_per_s: rate,
-                }
+                steps_setpoint(steps, *repeat, rate, t_s)
             }
             ProfileSpec::Ramps { points, repeat } => {
-                let total = points[points.len() - 1].t_s;
-                let mut t = t_ns as f64 * 1e-9;
-                if *repeat {
-                    t %= total;
-                }
-                let mut setpoint = Setpoint {
-                    force: points[points.len() - 1].force,
-                    rate_per_s: limits.default_rate_per_s,
-                };
-                for w in points.windows(2) {
-                    if t < w[1].t_s {
-                        let slope = (w[1].force - w[0].force).abs() / (w[1].t_s - w[0].t_s);
-                        setpoint = Setpoint {
-                            force: w[1].force,
-                            rate_per_s: if slope > 0.0 {
-                                slope
-                            } else {
-                                limits.default_rate_per_s
-                            },
-                        };
-                        break;
-                    }
-                }
-                setpoint
+                ramps_setpoint(points, *repeat, limits.default_rate_per_s, t_s)
             }
-            ProfileSpec::Cardiac(_) => {
+            ProfileSpec::Cardiac(_) => match self.cardiac.as_mut() {
+                Some(run) => run.advance(now_ns, &limits, events),
                 // A cardiac profile always has its run state; without one, rest.
-                let Some(run) = self.cardiac.as_mut() else {
-                    return Setpoint {
-                        force: 0.0,
-                        rate_per_s: limits.max_rate_per_s,
-                    };
-                };
-                while now_ns >= run.beat.end_ns() {
-                    events.push(ProfileEvent::BeatEnded(run.beat));
-                    if let Some(p) = run.pending.take() {
-                        run.current = p;
-                    }
-                    let c = run.current;
-                    run.beat = Beat {
-                        index: run.beat.index + 1,
-                        start_ns: run.beat.end_ns(),
-                        period_ns: c.period_ns(),
-                        on_ns: c.on_ns(),
-                        bpm: c.bpm,
-                        target: c.amplitude,
-                        amplitude: run.next_amplitude,
-                    };
-                    events.push(ProfileEvent::BeatStarted(run.beat));
-                }
-                let in_beat = now_ns.saturating_sub(run.beat.start_ns);
-                let rate = run.current.edge_rate(&limits);
-                if in_beat < run.beat.on_ns {
-                    Setpoint {
-                        force: run.beat.amplitude,
-                        rate_per_s: rate,
-                    }
-                } else {
-                    Setpoint {
-                        force: 0.0,
-                        rate_per_s: rate,
-                    }
-                }
-            }
+                None => Setpoint {
+                    force: 0.0,
+                    rate_per_s: limits.max_rate_per_s,
+                },
+            },
         }
     }
 
