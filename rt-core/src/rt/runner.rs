@@ -13,6 +13,9 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 
@@ -21,8 +24,8 @@ use fes_rt::rt::node::connect_err;
 pub use fes_rt::rt::node::{RunError, create_node};
 
 use super::alloc;
-use super::clock::{PeriodicClock, monotonic_ns};
-use super::generator::PatternLoop;
+use super::clock::{PeriodicClock, Wakeup, monotonic_ns};
+use super::generator::{PatternLoop, StepEvents};
 use super::hlog::HlogWriter;
 use super::process_config::RtCoreConfig;
 use super::realtime::{RtStatus, enter_realtime};
@@ -53,118 +56,213 @@ pub fn run_pattern_loop<S: TickSource>(
     on_ready: impl FnOnce(&RtStatus),
 ) -> Result<LoopOutcome, RunError> {
     let status = enter_realtime(&config.rt)?;
-    let prefix = config.ipc.prefix.as_str();
-
-    let publisher = port::publisher::<StimTick>(node, prefix)?;
-    let references = port::subscriber::<Reference>(node, prefix)?;
-    let force_subscriber = if config.feedback.enabled {
-        Some(port::subscriber::<ForceSample>(node, prefix)?)
-    } else {
-        None
-    };
-    let notifier = if config.ipc.notify {
-        Some(port::stim_tick_notifier(node, prefix)?)
-    } else {
-        None
-    };
-    publisher
-        .update_connections()
-        .map_err(|e| connect_err("StimTick publisher")(&e))?;
-    references
-        .update_connections()
-        .map_err(|e| connect_err("Reference subscriber")(&e))?;
-    if let Some(n) = &notifier {
-        n.update_connections()
-            .map_err(|e| connect_err("stim-tick notifier")(&e))?;
-    }
-    if let Some(f) = &force_subscriber {
-        f.update_connections()
-            .map_err(|e| connect_err("ForceSample subscriber")(&e))?;
-    }
-
-    let mut generator = PatternLoop::new(
-        source,
-        config.reference_policy(),
-        config.feedback_max_age_ns(),
-        config.pulse_settings(),
-        status.is_degraded(),
-    );
-    let allocations_counted = alloc::counting_allocator_installed();
-    let mut report_flags = 0;
-    if status.is_degraded() {
-        report_flags |= TimingReport::FLAG_DEGRADED;
-    }
-    if !allocations_counted {
-        report_flags |= TimingReport::FLAG_ALLOCATIONS_UNCOUNTED;
-    }
-    telemetry.set_report_flags(report_flags);
-    let mut clock = PeriodicClock::start(config.period())?;
+    let ports = LoopPorts::open(node, config)?;
+    let mut rt_loop = RtLoop::new(ports, config, source, telemetry, &status)?;
     on_ready(&status);
+    rt_loop.run(config.telemetry.trace_allocations, stop);
+    let allocations_counted = rt_loop.allocations_counted;
+    let final_seq = rt_loop.finish();
+    Ok(LoopOutcome {
+        status,
+        final_seq,
+        allocations_counted,
+    })
+}
 
-    // ---- hot path from here on: no allocation, lock, log or blocking call ----
-    alloc::trace_first_heap_allocation(config.telemetry.trace_allocations);
-    alloc::track_current_thread(true);
-    let alloc_baseline = alloc::current_thread_allocations();
-    let counters = &telemetry.counters;
-    let max_references = Reference::QOS.subscriber_buffer;
-    let max_forces = ForceSample::QOS.subscriber_buffer;
-    let mut connection_allocs = 0u64;
-    while !stop.load(Ordering::Relaxed) {
-        let wake = clock.wait();
-        if stop.load(Ordering::Relaxed) {
-            break;
+/// The loop's iceoryx2 ports, created on the real-time thread (they are not `Send`).
+/// Fields are declared in the reverse of their creation order, so they are dropped in it.
+struct LoopPorts {
+    /// The stim-tick event, notified after each StimTick (`ipc.notify`).
+    notifier: Option<Notifier<ipc::Service>>,
+    /// Measured force (feedback mode only).
+    forces: Option<Subscriber<ipc::Service, ForceSample, ()>>,
+    /// The supervisor's references.
+    references: Subscriber<ipc::Service, Reference, ()>,
+    /// One StimTick per tick.
+    publisher: Publisher<ipc::Service, StimTick, ()>,
+}
+
+impl LoopPorts {
+    /// Creates the ports `config` asks for and connects each to the peers already there.
+    fn open(node: &Node<ipc::Service>, config: &RtCoreConfig) -> Result<Self, RunError> {
+        let prefix = config.ipc.prefix.as_str();
+        let ports = Self {
+            publisher: port::publisher::<StimTick>(node, prefix)?,
+            references: port::subscriber::<Reference>(node, prefix)?,
+            forces: if config.feedback.enabled {
+                Some(port::subscriber::<ForceSample>(node, prefix)?)
+            } else {
+                None
+            },
+            notifier: if config.ipc.notify {
+                Some(port::stim_tick_notifier(node, prefix)?)
+            } else {
+                None
+            },
+        };
+        ports.connect()?;
+        Ok(ports)
+    }
+
+    /// Connects every port to the peers already there, before the first tick.
+    fn connect(&self) -> Result<(), RunError> {
+        self.publisher
+            .update_connections()
+            .map_err(|e| connect_err("StimTick publisher")(&e))?;
+        self.references
+            .update_connections()
+            .map_err(|e| connect_err("Reference subscriber")(&e))?;
+        if let Some(n) = &self.notifier {
+            n.update_connections()
+                .map_err(|e| connect_err("stim-tick notifier")(&e))?;
         }
-        // Peers that appeared since the last tick (a supervisor, a driver, a probe
-        // started later): iceoryx2 allocates a connection's state once, when it connects;
-        // that happens explicitly, right before each port is used, and is counted apart
-        // from the hot path (it would otherwise happen inside the receive or send).
-        // Without new peers this only compares a change counter.
-        connecting(&mut connection_allocs, || {
-            let _ = references.update_connections();
-            if let Some(f) = &force_subscriber {
+        if let Some(f) = &self.forces {
+            f.update_connections()
+                .map_err(|e| connect_err("ForceSample subscriber")(&e))?;
+        }
+        Ok(())
+    }
+}
+
+/// The real-time loop's state: made at start-up ([`RtLoop::new`]), then one
+/// [`RtLoop::tick`] per wake-up on the hot path ([`RtLoop::run`]), then the final tick
+/// ([`RtLoop::finish`]). Nothing in `run` takes from the heap, locks, logs or blocks.
+struct RtLoop<'a, S> {
+    /// The absolute-time periodic clock.
+    clock: PeriodicClock,
+    /// The tick logic around the source.
+    generator: PatternLoop<S>,
+    /// The iceoryx2 ports.
+    ports: LoopPorts,
+    /// Timing records and counters for the telemetry thread.
+    telemetry: &'a TelemetryChannel,
+    /// Whether the counting allocator is installed.
+    allocations_counted: bool,
+    /// The thread's allocation counts when the hot path began.
+    alloc_baseline: alloc::AllocCount,
+    /// Heap allocations made by iceoryx2 connecting late peers, counted apart.
+    connection_allocs: u64,
+}
+
+impl<'a, S: TickSource> RtLoop<'a, S> {
+    /// Start-up (may allocate): the generator, the report flags and the first deadline.
+    fn new(
+        ports: LoopPorts,
+        config: &RtCoreConfig,
+        source: S,
+        telemetry: &'a TelemetryChannel,
+        status: &RtStatus,
+    ) -> Result<Self, RunError> {
+        let generator = PatternLoop::new(
+            source,
+            config.reference_policy(),
+            config.feedback_max_age_ns(),
+            config.pulse_settings(),
+            status.is_degraded(),
+        );
+        let allocations_counted = alloc::counting_allocator_installed();
+        telemetry.set_report_flags(report_flags(status.is_degraded(), allocations_counted));
+        let clock = PeriodicClock::start(config.period())?;
+        Ok(Self {
+            clock,
+            generator,
+            ports,
+            telemetry,
+            allocations_counted,
+            alloc_baseline: alloc::AllocCount::default(),
+            connection_allocs: 0,
+        })
+    }
+
+    /// The hot path: sleeps to each deadline and runs one tick per wake-up until `stop`
+    /// is set, with the thread's allocations tracked (and the first one traced when
+    /// `trace_allocations`).
+    fn run(&mut self, trace_allocations: bool, stop: &AtomicBool) {
+        // ---- hot path from here on: no allocation, lock, log or blocking call ----
+        alloc::trace_first_heap_allocation(trace_allocations);
+        alloc::track_current_thread(true);
+        self.alloc_baseline = alloc::current_thread_allocations();
+        while !stop.load(Ordering::Relaxed) {
+            let wake = self.clock.wait();
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+            self.tick(&wake);
+        }
+        // ---- end of the hot path ----
+        alloc::track_current_thread(false);
+    }
+
+    /// One tick: connect late peers, take the inputs, run the source once, publish and
+    /// notify, then count and push the tick's timing.
+    #[inline]
+    fn tick(&mut self, wake: &Wakeup) {
+        self.connect_inputs();
+        self.receive_references(wake.wake_ns);
+        self.receive_forces();
+        let t_inputs = monotonic_ns();
+        let (tick, events) = self.generator.step(wake);
+        let t_decided = monotonic_ns();
+        self.publish_and_notify(tick);
+        let t_done = monotonic_ns();
+        self.count(wake, events);
+        self.telemetry.push(TickTiming {
+            grid_ns: wake.grid_ns,
+            lateness_ns: wake.lateness_ns,
+            input_ns: t_inputs.saturating_sub(wake.wake_ns),
+            compute_ns: t_decided.saturating_sub(t_inputs),
+            publish_ns: t_done.saturating_sub(t_decided),
+        });
+    }
+
+    /// Peers that appeared since the last tick (a supervisor, a driver, a probe started
+    /// later): iceoryx2 allocates a connection's state once, when it connects; that
+    /// happens explicitly, right before each port is used, and is counted apart from the
+    /// hot path (it would otherwise happen inside the receive or send). Without new peers
+    /// this only compares a change counter.
+    #[inline]
+    fn connect_inputs(&mut self) {
+        let ports = &self.ports;
+        connecting(&mut self.connection_allocs, || {
+            let _ = ports.references.update_connections();
+            if let Some(f) = &ports.forces {
                 let _ = f.update_connections();
             }
         });
-        for _ in 0..max_references {
-            match references.receive() {
-                Ok(Some(sample)) => {
-                    let reference = *sample.payload();
-                    drop(sample);
-                    if generator.offer_reference(&reference, wake.wake_ns).is_err() {
-                        LoopCounters::bump(&counters.rejected_inputs, 1);
-                    }
-                }
-                Ok(None) => break,
-                Err(_) => {
-                    LoopCounters::bump(&counters.receive_errors, 1);
-                    break;
-                }
-            }
-        }
-        if let Some(forces) = &force_subscriber {
-            for _ in 0..max_forces {
-                match forces.receive() {
-                    Ok(Some(sample)) => {
-                        let force = *sample.payload();
-                        drop(sample);
-                        if generator.offer_force(&force).is_err() {
-                            LoopCounters::bump(&counters.rejected_inputs, 1);
-                        }
-                    }
-                    Ok(None) => break,
-                    Err(_) => {
-                        LoopCounters::bump(&counters.receive_errors, 1);
-                        break;
-                    }
-                }
-            }
-        }
+    }
 
-        let t_inputs = monotonic_ns();
-        let (tick, events) = generator.step(&wake);
-        let t_decided = monotonic_ns();
-        let _ = connecting(&mut connection_allocs, || publisher.update_connections());
-        if !publish(&publisher, tick) {
+    /// Takes every waiting Reference (at most the subscriber buffer) without blocking.
+    #[inline]
+    fn receive_references(&mut self, wake_ns: u64) {
+        let generator = &mut self.generator;
+        receive_each(
+            &self.ports.references,
+            &self.telemetry.counters,
+            |reference| generator.offer_reference(reference, wake_ns).is_ok(),
+        );
+    }
+
+    /// In feedback mode, takes every waiting ForceSample (at most the subscriber buffer).
+    #[inline]
+    fn receive_forces(&mut self) {
+        if let Some(forces) = &self.ports.forces {
+            let generator = &mut self.generator;
+            receive_each(forces, &self.telemetry.counters, |force| {
+                generator.offer_force(force).is_ok()
+            });
+        }
+    }
+
+    /// Publishes the tick, then notifies the stim-tick event; connection work is counted
+    /// apart.
+    #[inline]
+    fn publish_and_notify(&mut self, tick: StimTick) {
+        let ports = &self.ports;
+        let counters = &self.telemetry.counters;
+        let _ = connecting(&mut self.connection_allocs, || {
+            ports.publisher.update_connections()
+        });
+        if !publish(&ports.publisher, tick) {
             LoopCounters::bump(&counters.publish_errors, 1);
         }
         // iceoryx2 0.10's `Notifier::notify` updates its listener connections itself
@@ -175,8 +273,8 @@ pub fn run_pattern_loop<S: TickSource>(
         // notify (found by the allocation trace: 1 heap allocation in about 30 stack
         // runs). The whole notify is therefore connection work, counted apart; the tick
         // has been published before it.
-        if let Some(n) = &notifier
-            && connecting(&mut connection_allocs, || {
+        if let Some(n) = &ports.notifier
+            && connecting(&mut self.connection_allocs, || {
                 let _ = n.update_connections();
                 n.notify()
             })
@@ -184,13 +282,18 @@ pub fn run_pattern_loop<S: TickSource>(
         {
             LoopCounters::bump(&counters.publish_errors, 1);
         }
-        if connection_allocs != counters.connection_allocations.load(Ordering::Relaxed) {
+        if self.connection_allocs != counters.connection_allocations.load(Ordering::Relaxed) {
             counters
                 .connection_allocations
-                .store(connection_allocs, Ordering::Relaxed);
+                .store(self.connection_allocs, Ordering::Relaxed);
         }
-        let t_done = monotonic_ns();
+    }
 
+    /// Counts the tick, its skipped periods, a source fault and the thread's allocations
+    /// since the hot path began (connection work apart).
+    #[inline]
+    fn count(&self, wake: &Wakeup, events: StepEvents) {
+        let counters = &self.telemetry.counters;
         LoopCounters::bump(&counters.ticks, 1);
         if wake.missed_periods > 0 {
             LoopCounters::bump(&counters.misses, u64::from(wake.missed_periods));
@@ -200,37 +303,68 @@ pub fn run_pattern_loop<S: TickSource>(
             LoopCounters::bump(&counters.source_faults, 1);
         }
         let allocs = alloc::current_thread_allocations();
+        let baseline = &self.alloc_baseline;
         counters.hot_path_allocations.store(
-            allocs.allocations - alloc_baseline.allocations - connection_allocs,
+            allocs.allocations - baseline.allocations - self.connection_allocs,
             Ordering::Relaxed,
         );
         counters.pool_allocations.store(
-            allocs.pool_allocations - alloc_baseline.pool_allocations,
+            allocs.pool_allocations - baseline.pool_allocations,
             Ordering::Relaxed,
         );
-        telemetry.push(TickTiming {
-            grid_ns: wake.grid_ns,
-            lateness_ns: wake.lateness_ns,
-            input_ns: t_inputs.saturating_sub(wake.wake_ns),
-            compute_ns: t_decided.saturating_sub(t_inputs),
-            publish_ns: t_done.saturating_sub(t_decided),
-        });
     }
-    // ---- end of the hot path ----
-    alloc::track_current_thread(false);
 
-    let final_tick = generator.final_tick(monotonic_ns());
-    if !publish(&publisher, final_tick) {
-        LoopCounters::bump(&counters.publish_errors, 1);
+    /// Shutdown: publishes the final tick (pulse 0, [`StimTick::FLAG_FINAL`]) and
+    /// notifies; returns its `seq`. The ports are dropped afterwards.
+    fn finish(mut self) -> u64 {
+        let final_tick = self.generator.final_tick(monotonic_ns());
+        if !publish(&self.ports.publisher, final_tick) {
+            LoopCounters::bump(&self.telemetry.counters.publish_errors, 1);
+        }
+        if let Some(n) = &self.ports.notifier {
+            let _ = n.notify();
+        }
+        final_tick.seq
     }
-    if let Some(n) = &notifier {
-        let _ = n.notify();
+}
+
+/// The TimingReport flags of a loop: degraded real time, allocations not counted.
+fn report_flags(degraded: bool, allocations_counted: bool) -> u8 {
+    let mut flags = 0;
+    if degraded {
+        flags |= TimingReport::FLAG_DEGRADED;
     }
-    Ok(LoopOutcome {
-        status,
-        final_seq: final_tick.seq,
-        allocations_counted,
-    })
+    if !allocations_counted {
+        flags |= TimingReport::FLAG_ALLOCATIONS_UNCOUNTED;
+    }
+    flags
+}
+
+/// Takes up to the topic's subscriber buffer of waiting samples from `subscriber` without
+/// blocking and gives each to `accept` (copied out, the sample released first); counts
+/// the samples it rejects and stops at the first receive error, counted too.
+#[inline]
+fn receive_each<M: Contract>(
+    subscriber: &Subscriber<ipc::Service, M, ()>,
+    counters: &LoopCounters,
+    mut accept: impl FnMut(&M) -> bool,
+) {
+    for _ in 0..M::QOS.subscriber_buffer {
+        match subscriber.receive() {
+            Ok(Some(sample)) => {
+                let value = *sample.payload();
+                drop(sample);
+                if !accept(&value) {
+                    LoopCounters::bump(&counters.rejected_inputs, 1);
+                }
+            }
+            Ok(None) => break,
+            Err(_) => {
+                LoopCounters::bump(&counters.receive_errors, 1);
+                break;
+            }
+        }
+    }
 }
 
 /// Runs `f`, iceoryx2's connection work (a late peer connecting), untraced, and adds the
@@ -245,10 +379,7 @@ fn connecting<R>(connection_allocs: &mut u64, f: impl FnOnce() -> R) -> R {
 
 /// Loans a sample, writes `tick`, stamps `t_publish_ns` and sends it. False on failure.
 #[inline]
-fn publish(
-    publisher: &iceoryx2::port::publisher::Publisher<ipc::Service, StimTick, ()>,
-    tick: StimTick,
-) -> bool {
+fn publish(publisher: &Publisher<ipc::Service, StimTick, ()>, tick: StimTick) -> bool {
     match publisher.loan_uninit() {
         Ok(sample) => {
             let mut sample = sample.write_payload(tick);
