@@ -9,23 +9,28 @@
 mod slowdown;
 mod source;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-
-use rt_core::rt::exit::Exit;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{OnceLock, mpsc};
+use std::thread::{Scope, ScopedJoinHandle};
 use std::time::SystemTime;
 
 use anyhow::{Context, anyhow};
 use clap::Parser;
+use iceoryx2::prelude::{Node, ipc};
+use rt_core::msg::{LatencySummary, TimingReport};
+use rt_core::rt::RtStatus;
 use rt_core::rt::alloc::CountingAllocator;
+use rt_core::rt::exit::Exit;
 use rt_core::rt::hlog::HlogWriter;
-use rt_core::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier};
+use rt_core::rt::notify::{
+    NotifierOutcome, NotifierSettings, ServiceManager, run_progress_notifier,
+};
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
 use rt_core::rt::realtime::RtError;
 use rt_core::rt::runner::{
-    RunError, TelemetrySettings, create_node, run_pattern_loop, run_telemetry,
+    LoopOutcome, RunError, TelemetrySettings, create_node, run_pattern_loop, run_telemetry,
 };
 use rt_core::rt::signals::install_stop_handler;
 use rt_core::rt::telemetry::TelemetryChannel;
@@ -133,17 +138,36 @@ fn main() -> ExitCode {
     }
 }
 
+/// Runs the process: configuration, outputs, threads; the final report is logged when the
+/// threads end.
 fn run(cli: &Cli) -> Result<(), Failure> {
     if cli.print_example_config {
-        let mut example = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 20 });
-        example.telemetry.hlog = Some(PathBuf::from("rt-core.hlog"));
-        print!("{}", example.to_toml());
+        print_example_config();
         return Ok(());
     }
     let path = cli
         .config
         .as_deref()
         .ok_or_else(|| anyhow!("--config is required"))?;
+    let (config, source) = load_configuration(path)?;
+    if cli.check {
+        println!("{}: ok", path.display());
+        return Ok(());
+    }
+    let outputs = Outputs::open(&config)?;
+    run_threads(&config, source, outputs)
+}
+
+/// Prints an example configuration: every default, a test-pattern source, an hlog file.
+fn print_example_config() {
+    let mut example = RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 20 });
+    example.telemetry.hlog = Some(PathBuf::from("rt-core.hlog"));
+    print!("{}", example.to_toml());
+}
+
+/// Configuration phase: reads and validates the configuration file and the source it
+/// names (a controller file is read and checked here), and logs what will run.
+fn load_configuration(path: &Path) -> anyhow::Result<(RtCoreConfig, Source)> {
     let config = RtCoreConfig::load(path).context("configuration")?;
     let source = Source::load(&config.source, config.period(), config.feedback.enabled)?;
     info!(
@@ -153,156 +177,99 @@ fn run(cli: &Cli) -> Result<(), Failure> {
         source.describe(),
         config.ipc.prefix
     );
-    if cli.check {
-        println!("{}: ok", path.display());
-        return Ok(());
-    }
-    let manager = ServiceManager::from_env().context("systemd notification")?;
-    let slowdown = slowdown::from_env()?;
-    if let Some(us) = slowdown {
-        warn!(
-            "TEST HOOK {}={us}: every tick busy-waits {us} us (never on a rig)",
-            slowdown::ENV_TICK_BUSY_US
-        );
-    }
+    Ok((config, source))
+}
 
-    let stop = install_stop_handler().context("installing SIGINT/SIGTERM handlers")?;
-    let hlog = match &config.telemetry.hlog {
-        Some(p) => Some(
-            HlogWriter::create(p, "rt-core timing", SystemTime::now()).context("telemetry.hlog")?,
-        ),
-        None => None,
-    };
-    let node = create_node("rt-core").map_err(anyhow::Error::from)?;
-    let telemetry = TelemetryChannel::new(config.telemetry.queue_capacity);
-    let telemetry_stop = AtomicBool::new(false);
-    let telemetry_settings = TelemetrySettings::for_rt_core(&config);
-    let rt_status = OnceLock::new();
-    let loop_ended = AtomicBool::new(false);
+/// What the process opens before any thread starts (may allocate, may fail).
+struct Outputs {
+    /// systemd's notification socket (none outside systemd).
+    manager: ServiceManager,
+    /// The test hook's busy-wait per tick, µs (never on a rig).
+    slowdown: Option<u64>,
+    /// Set by SIGINT/SIGTERM.
+    stop: &'static AtomicBool,
+    /// The HdrHistogram interval log, if configured.
+    hlog: Option<HlogWriter>,
+    /// The real-time thread's iceoryx2 node.
+    node: Node<ipc::Service>,
+}
 
-    std::thread::scope(|scope| -> Result<(), Failure> {
-        let (telemetry_ready_tx, telemetry_ready_rx) = mpsc::channel();
-        let telemetry_thread = std::thread::Builder::new()
-            .name("rt-core-telemetry".to_owned())
-            .spawn_scoped(scope, || {
-                run_telemetry(
-                    &telemetry_settings,
-                    hlog,
-                    &telemetry,
-                    &telemetry_stop,
-                    move || {
-                        let _ = telemetry_ready_tx.send(());
-                    },
-                )
-            })
-            .context("spawning the telemetry thread")?;
-        let stop_telemetry = || -> anyhow::Result<()> {
-            telemetry_stop.store(true, Ordering::Relaxed);
-            let report = telemetry_thread
-                .join()
-                .map_err(|_| anyhow!("the telemetry thread panicked"))??;
-            let us = |ns: u64| ns as f64 / 1000.0;
-            info!(
-                "final timing: {} ticks, {} missed periods, {} hot-path heap allocations \
-                 ({} while connecting late peers), {} queue overflows; p50/p99/p99.9/max us: wake-up {:.1}/{:.1}/{:.1}/{:.1}, \
-                 input {:.1}/{:.1}/{:.1}/{:.1}, compute {:.1}/{:.1}/{:.1}/{:.1}, publish {:.1}/{:.1}/{:.1}/{:.1}",
-                report.ticks,
-                report.misses,
-                report.hot_path_allocations,
-                telemetry.counters.snapshot().connection_allocations,
-                report.queue_overflows,
-                us(report.wake.p50_ns),
-                us(report.wake.p99_ns),
-                us(report.wake.p999_ns),
-                us(report.wake.max_ns),
-                us(report.input.p50_ns),
-                us(report.input.p99_ns),
-                us(report.input.p999_ns),
-                us(report.input.max_ns),
-                us(report.compute.p50_ns),
-                us(report.compute.p99_ns),
-                us(report.compute.p999_ns),
-                us(report.compute.max_ns),
-                us(report.publish.p50_ns),
-                us(report.publish.p99_ns),
-                us(report.publish.p999_ns),
-                us(report.publish.max_ns),
+impl Outputs {
+    /// Outputs phase, in this order: the systemd notification socket, the test slowdown
+    /// hook (warned about), the SIGINT/SIGTERM handlers, the hlog file, the iceoryx2 node.
+    fn open(config: &RtCoreConfig) -> anyhow::Result<Self> {
+        let manager = ServiceManager::from_env().context("systemd notification")?;
+        let slowdown = slowdown::from_env()?;
+        if let Some(us) = slowdown {
+            warn!(
+                "TEST HOOK {}={us}: every tick busy-waits {us} us (never on a rig)",
+                slowdown::ENV_TICK_BUSY_US
             );
-            if let Some(trace) = rt_core::rt::alloc::take_first_heap_allocation() {
-                warn!("{trace}");
-            }
-            Ok(())
-        };
-        if telemetry_ready_rx.recv().is_err() {
-            // The sender was dropped without signalling: the thread failed; report why.
-            return Err(stop_telemetry()
-                .err()
-                .unwrap_or_else(|| anyhow!("the telemetry thread stopped early"))
-                .into());
         }
+        let stop = install_stop_handler().context("installing SIGINT/SIGTERM handlers")?;
+        let hlog = match &config.telemetry.hlog {
+            Some(p) => Some(
+                HlogWriter::create(p, "rt-core timing", SystemTime::now())
+                    .context("telemetry.hlog")?,
+            ),
+            None => None,
+        };
+        let node = create_node("rt-core")?;
+        Ok(Self {
+            manager,
+            slowdown,
+            stop,
+            hlog,
+            node,
+        })
+    }
+}
 
-        // systemd: READY=1 and WATCHDOG=1 while the tick count advances (normal thread).
-        let notifier = std::thread::Builder::new()
-            .name("rt-core-notify".to_owned())
-            .spawn_scoped(scope, || {
-                let settings = NotifierSettings::for_watchdog(manager.watchdog());
-                let counters = &telemetry.counters;
-                run_progress_notifier(
-                    &manager,
-                    &settings,
-                    &counters.ticks,
-                    &[stop, &loop_ended],
-                    |ticks| {
-                        format!(
-                            "{}{}; {ticks} ticks, {} missed periods",
-                            if slowdown.is_some() {
-                                "TEST SLOWDOWN; "
-                            } else {
-                                ""
-                            },
-                            rt_status.get().map_or("starting", String::as_str),
-                            counters.misses.load(Ordering::Relaxed)
-                        )
-                    },
-                )
-            })
-            .context("spawning the systemd notification thread")?;
-        let rt_thread = std::thread::Builder::new()
-            .name("rt-core-loop".to_owned())
-            .stack_size(config.rt.thread_stack_bytes())
-            .spawn_scoped(scope, || {
-                let node = node;
-                let on_ready = |status: &rt_core::rt::RtStatus| {
-                    if status.is_degraded() {
-                        warn!("{status}");
-                    } else {
-                        info!("{status}");
-                    }
-                    let _ = rt_status.set(status.to_string());
-                    info!("running; SIGINT or SIGTERM stops");
-                };
-                match slowdown {
-                    None => run_pattern_loop(&node, &config, source, &telemetry, stop, on_ready),
-                    Some(us) => run_pattern_loop(
-                        &node,
-                        &config,
-                        slowdown::Slowed::new(source, us),
-                        &telemetry,
-                        stop,
-                        on_ready,
-                    ),
-                }
-            })
-            .context("spawning the real-time thread");
-        let rt_thread = match rt_thread {
+/// What the threads share (made before they start).
+struct Shared {
+    /// The loop's timing records and counters, drained by the telemetry thread.
+    telemetry: TelemetryChannel,
+    /// Stops the telemetry thread (once the loop has ended).
+    telemetry_stop: AtomicBool,
+    /// The real-time status line, once the loop thread has entered real time.
+    rt_status: OnceLock<String>,
+    /// Set when the real-time thread has ended (stops the notification thread).
+    loop_ended: AtomicBool,
+}
+
+/// The telemetry thread's handle: its final TimingReport, or why it failed.
+type TelemetryThread<'scope> = ScopedJoinHandle<'scope, Result<TimingReport, RunError>>;
+
+/// Threads phase: the telemetry thread (waited for until its port exists), the systemd
+/// notification thread and ONE real-time thread; when the loop ends, the notification
+/// thread and then the telemetry thread are stopped, and the outcome reported.
+fn run_threads(config: &RtCoreConfig, source: Source, outputs: Outputs) -> Result<(), Failure> {
+    let Outputs {
+        manager,
+        slowdown,
+        stop,
+        hlog,
+        node,
+    } = outputs;
+    let shared = Shared {
+        telemetry: TelemetryChannel::new(config.telemetry.queue_capacity),
+        telemetry_stop: AtomicBool::new(false),
+        rt_status: OnceLock::new(),
+        loop_ended: AtomicBool::new(false),
+    };
+    let telemetry_settings = TelemetrySettings::for_rt_core(config);
+    std::thread::scope(|scope| -> Result<(), Failure> {
+        let telemetry_thread = start_telemetry(scope, &shared, &telemetry_settings, hlog)?;
+        let notifier = spawn_notifier(scope, &shared, &manager, stop, slowdown.is_some())?;
+        let rt_thread = match spawn_loop(scope, &shared, config, source, node, stop, slowdown) {
             Ok(t) => t,
             Err(e) => {
-                loop_ended.store(true, Ordering::Relaxed);
+                shared.loop_ended.store(true, Ordering::Relaxed);
                 return Err(e.into());
             }
         };
         let outcome = rt_thread.join();
-        loop_ended.store(true, Ordering::Relaxed);
+        shared.loop_ended.store(true, Ordering::Relaxed);
         let notified = notifier
             .join()
             .map_err(|_| anyhow!("the systemd notification thread panicked"))?;
@@ -313,24 +280,189 @@ fn run(cli: &Cli) -> Result<(), Failure> {
             );
         }
         let outcome = outcome.map_err(|_| anyhow!("the real-time thread panicked"))?;
-        let telemetry_result = stop_telemetry();
-        match outcome {
-            Ok(outcome) => {
-                info!(
-                    "stopped: final tick seq {} published{}",
-                    outcome.final_seq,
-                    if outcome.allocations_counted {
-                        ""
-                    } else {
-                        " (allocations not counted)"
-                    }
-                );
-                telemetry_result.map_err(Failure::Other)
-            }
-            Err(RunError::Realtime(RtError::Refused(status))) => {
-                Err(Failure::Refused(format!("refused to start: {status}")))
-            }
-            Err(e) => Err(Failure::Other(e.into())),
-        }
+        let telemetry_result = stop_telemetry(telemetry_thread, &shared);
+        report_outcome(outcome, telemetry_result)
     })
+}
+
+/// Spawns the telemetry thread (normal priority) and waits until its port exists; if it
+/// fails before that, stops it and returns why.
+fn start_telemetry<'scope>(
+    scope: &'scope Scope<'scope, '_>,
+    shared: &'scope Shared,
+    settings: &'scope TelemetrySettings,
+    hlog: Option<HlogWriter>,
+) -> Result<TelemetryThread<'scope>, Failure> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let thread = std::thread::Builder::new()
+        .name("rt-core-telemetry".to_owned())
+        .spawn_scoped(scope, move || {
+            run_telemetry(
+                settings,
+                hlog,
+                &shared.telemetry,
+                &shared.telemetry_stop,
+                move || {
+                    let _ = ready_tx.send(());
+                },
+            )
+        })
+        .context("spawning the telemetry thread")?;
+    if ready_rx.recv().is_err() {
+        // The sender was dropped without signalling: the thread failed; report why.
+        return Err(stop_telemetry(thread, shared)
+            .err()
+            .unwrap_or_else(|| anyhow!("the telemetry thread stopped early"))
+            .into());
+    }
+    Ok(thread)
+}
+
+/// Spawns the systemd notification thread (normal priority): READY=1 and WATCHDOG=1
+/// while the tick count advances, until `stop` or the loop's end.
+fn spawn_notifier<'scope>(
+    scope: &'scope Scope<'scope, '_>,
+    shared: &'scope Shared,
+    manager: &'scope ServiceManager,
+    stop: &'static AtomicBool,
+    slowed: bool,
+) -> anyhow::Result<ScopedJoinHandle<'scope, NotifierOutcome>> {
+    std::thread::Builder::new()
+        .name("rt-core-notify".to_owned())
+        .spawn_scoped(scope, move || {
+            let settings = NotifierSettings::for_watchdog(manager.watchdog());
+            let counters = &shared.telemetry.counters;
+            run_progress_notifier(
+                manager,
+                &settings,
+                &counters.ticks,
+                &[stop, &shared.loop_ended],
+                |ticks| {
+                    format!(
+                        "{}{}; {ticks} ticks, {} missed periods",
+                        if slowed { "TEST SLOWDOWN; " } else { "" },
+                        shared.rt_status.get().map_or("starting", String::as_str),
+                        counters.misses.load(Ordering::Relaxed)
+                    )
+                },
+            )
+        })
+        .context("spawning the systemd notification thread")
+}
+
+/// Spawns the ONE real-time thread running the pattern loop on `node` (the source slowed
+/// down by the test hook when `slowdown` is set).
+fn spawn_loop<'scope>(
+    scope: &'scope Scope<'scope, '_>,
+    shared: &'scope Shared,
+    config: &'scope RtCoreConfig,
+    source: Source,
+    node: Node<ipc::Service>,
+    stop: &'static AtomicBool,
+    slowdown: Option<u64>,
+) -> anyhow::Result<ScopedJoinHandle<'scope, Result<LoopOutcome, RunError>>> {
+    std::thread::Builder::new()
+        .name("rt-core-loop".to_owned())
+        .stack_size(config.rt.thread_stack_bytes())
+        .spawn_scoped(scope, move || {
+            let telemetry = &shared.telemetry;
+            let on_ready = |status: &RtStatus| announce_realtime(status, &shared.rt_status);
+            match slowdown {
+                None => run_pattern_loop(&node, config, source, telemetry, stop, on_ready),
+                Some(us) => run_pattern_loop(
+                    &node,
+                    config,
+                    slowdown::Slowed::new(source, us),
+                    telemetry,
+                    stop,
+                    on_ready,
+                ),
+            }
+        })
+        .context("spawning the real-time thread")
+}
+
+/// Logs what real time the loop achieved (a warning when degraded), keeps it for the
+/// systemd status, and says the loop is running.
+fn announce_realtime(status: &RtStatus, rt_status: &OnceLock<String>) {
+    if status.is_degraded() {
+        warn!("{status}");
+    } else {
+        info!("{status}");
+    }
+    let _ = rt_status.set(status.to_string());
+    info!("running; SIGINT or SIGTERM stops");
+}
+
+/// Stops the telemetry thread, waits for its final report and logs it, with the trace of
+/// the loop's first heap allocation if there was one.
+fn stop_telemetry(thread: TelemetryThread<'_>, shared: &Shared) -> anyhow::Result<()> {
+    shared.telemetry_stop.store(true, Ordering::Relaxed);
+    let report = thread
+        .join()
+        .map_err(|_| anyhow!("the telemetry thread panicked"))??;
+    log_final_timing(
+        &report,
+        shared.telemetry.counters.snapshot().connection_allocations,
+    );
+    if let Some(trace) = rt_core::rt::alloc::take_first_heap_allocation() {
+        warn!("{trace}");
+    }
+    Ok(())
+}
+
+/// Final report: the loop's counts and its latency percentiles in one line.
+fn log_final_timing(report: &TimingReport, connection_allocations: u64) {
+    info!(
+        "final timing: {} ticks, {} missed periods, {} hot-path heap allocations \
+         ({} while connecting late peers), {} queue overflows; p50/p99/p99.9/max us: wake-up {}, \
+         input {}, compute {}, publish {}",
+        report.ticks,
+        report.misses,
+        report.hot_path_allocations,
+        connection_allocations,
+        report.queue_overflows,
+        percentiles_us(&report.wake),
+        percentiles_us(&report.input),
+        percentiles_us(&report.compute),
+        percentiles_us(&report.publish),
+    );
+}
+
+/// `p50/p99/p99.9/max` in µs with one decimal.
+fn percentiles_us(s: &LatencySummary) -> String {
+    let us = |ns: u64| ns as f64 / 1000.0;
+    format!(
+        "{:.1}/{:.1}/{:.1}/{:.1}",
+        us(s.p50_ns),
+        us(s.p99_ns),
+        us(s.p999_ns),
+        us(s.max_ns)
+    )
+}
+
+/// How the run ended: the loop's outcome first (a refusal is its own failure), then the
+/// telemetry thread's.
+fn report_outcome(
+    outcome: Result<LoopOutcome, RunError>,
+    telemetry_result: anyhow::Result<()>,
+) -> Result<(), Failure> {
+    match outcome {
+        Ok(outcome) => {
+            info!(
+                "stopped: final tick seq {} published{}",
+                outcome.final_seq,
+                if outcome.allocations_counted {
+                    ""
+                } else {
+                    " (allocations not counted)"
+                }
+            );
+            telemetry_result.map_err(Failure::Other)
+        }
+        Err(RunError::Realtime(RtError::Refused(status))) => {
+            Err(Failure::Refused(format!("refused to start: {status}")))
+        }
+        Err(e) => Err(Failure::Other(e.into())),
+    }
 }
