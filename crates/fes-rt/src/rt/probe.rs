@@ -2,6 +2,8 @@
 //! tests: the JSON summary ([`ProbeSummary`]) and the per-tick CSV record ([`TickRecord`]).
 
 use std::io::{self, BufRead, Write};
+use std::num::{ParseFloatError, ParseIntError};
+use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
@@ -144,18 +146,13 @@ impl TickRecord {
     }
 
     /// Parses one CSV line (fields not in the file are zero).
-    pub fn parse_csv(line: &str) -> Result<Self, String> {
+    pub fn parse_csv(line: &str) -> Result<Self, RecordError> {
         let f: Vec<&str> = line.trim().split(',').collect();
-        if f.len() != 16 {
-            return Err(format!("expected 16 fields, found {}: {line:?}", f.len()));
-        }
-        fn int<T: std::str::FromStr>(s: &str, name: &str) -> Result<T, String> {
-            s.parse()
-                .map_err(|_| format!("{name}: not an integer: {s:?}"))
-        }
-        fn real(s: &str, name: &str) -> Result<f64, String> {
-            s.parse()
-                .map_err(|_| format!("{name}: not a number: {s:?}"))
+        if f.len() != RECORD_FIELDS {
+            return Err(RecordError::FieldCount {
+                found: f.len(),
+                line: line.to_owned(),
+            });
         }
         Ok(Self {
             tick: StimTick {
@@ -183,21 +180,155 @@ impl TickRecord {
     }
 }
 
+/// Fields of a [`TickRecord`] line ([`RECORD_HEADER`]).
+const RECORD_FIELDS: usize = 16;
+
+/// Why one line of a `rt-probe --record` file is not a [`TickRecord`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RecordError {
+    /// The line does not have [`RECORD_HEADER`]'s 16 fields.
+    #[error("expected 16 fields, found {found}: {line:?}")]
+    FieldCount {
+        /// Fields found.
+        found: usize,
+        /// The line.
+        line: String,
+    },
+    /// An integer field does not hold an integer of its type.
+    #[error("{field}: not an integer: {text:?}")]
+    NotInteger {
+        /// The field's name in [`RECORD_HEADER`].
+        field: &'static str,
+        /// Its text.
+        text: String,
+        /// The parser's reason.
+        source: ParseIntError,
+    },
+    /// A real field does not hold a number.
+    #[error("{field}: not a number: {text:?}")]
+    NotNumber {
+        /// The field's name in [`RECORD_HEADER`].
+        field: &'static str,
+        /// Its text.
+        text: String,
+        /// The parser's reason.
+        source: ParseFloatError,
+    },
+}
+
+/// The integer field `field` from its text `s`.
+fn int<T: FromStr<Err = ParseIntError>>(s: &str, field: &'static str) -> Result<T, RecordError> {
+    s.parse().map_err(|source| RecordError::NotInteger {
+        field,
+        text: s.to_owned(),
+        source,
+    })
+}
+
+/// The real field `field` from its text `s`.
+fn real(s: &str, field: &'static str) -> Result<f64, RecordError> {
+    s.parse().map_err(|source| RecordError::NotNumber {
+        field,
+        text: s.to_owned(),
+        source,
+    })
+}
+
+/// Why a `rt-probe --record` file could not be read; each names the 1-based line.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadRecordsError {
+    /// The line could not be read.
+    #[error("line {line}: {source}")]
+    Io {
+        /// 1-based line.
+        line: usize,
+        /// The reader's error.
+        source: io::Error,
+    },
+    /// The first line is not [`RECORD_HEADER`].
+    #[error("line 1: unexpected header {0:?}")]
+    Header(String),
+    /// A line is not a [`TickRecord`].
+    #[error("line {line}: {source}")]
+    Record {
+        /// 1-based line.
+        line: usize,
+        /// What is wrong with it.
+        source: RecordError,
+    },
+}
+
 /// Reads a `rt-probe --record` CSV file.
-pub fn read_records(reader: impl BufRead) -> Result<Vec<TickRecord>, String> {
+pub fn read_records(reader: impl BufRead) -> Result<Vec<TickRecord>, ReadRecordsError> {
     let mut out = Vec::new();
     for (i, line) in reader.lines().enumerate() {
-        let line = line.map_err(|e| format!("line {}: {e}", i + 1))?;
+        let line = line.map_err(|source| ReadRecordsError::Io {
+            line: i + 1,
+            source,
+        })?;
         if i == 0 {
             if line.trim() != RECORD_HEADER {
-                return Err(format!("line 1: unexpected header {line:?}"));
+                return Err(ReadRecordsError::Header(line));
             }
             continue;
         }
         if line.trim().is_empty() {
             continue;
         }
-        out.push(TickRecord::parse_csv(&line).map_err(|e| format!("line {}: {e}", i + 1))?);
+        let record = TickRecord::parse_csv(&line).map_err(|source| ReadRecordsError::Record {
+            line: i + 1,
+            source,
+        })?;
+        out.push(record);
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // test code: a failed assumption is a failed test
+
+    use super::*;
+
+    const LINE: &str = "7,1000,1010,1020,1050,1,0,0,0.5,0.25,0.125,0.75,20000,200,3,4";
+
+    #[test]
+    fn a_written_record_reads_back() {
+        let record = TickRecord::parse_csv(LINE).unwrap();
+        let mut text = Vec::new();
+        record.write_csv(&mut text).unwrap();
+        assert_eq!(String::from_utf8(text).unwrap().trim(), LINE);
+        let file = format!("{RECORD_HEADER}\n{LINE}\n\n{LINE}\n");
+        assert_eq!(read_records(file.as_bytes()).unwrap(), vec![record, record]);
+    }
+
+    #[test]
+    fn errors_name_the_line_the_field_and_why() {
+        let e = TickRecord::parse_csv("1,2").unwrap_err();
+        assert_eq!(e.to_string(), r#"expected 16 fields, found 2: "1,2""#);
+        let e = TickRecord::parse_csv(&LINE.replacen("7", "x", 1)).unwrap_err();
+        assert_eq!(e.to_string(), r#"seq: not an integer: "x""#);
+        assert!(std::error::Error::source(&e).is_some());
+        let e = TickRecord::parse_csv(&LINE.replace("0.125", "y")).unwrap_err();
+        assert_eq!(e.to_string(), r#"model_force: not a number: "y""#);
+
+        let e = read_records("seq,t_ns\n".as_bytes()).unwrap_err();
+        assert_eq!(e.to_string(), r#"line 1: unexpected header "seq,t_ns""#);
+        let file = format!("{RECORD_HEADER}\n{LINE}\n{}\n", LINE.replace("20000", "-1"));
+        let e = read_records(file.as_bytes()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            r#"line 3: amplitude_ua: not an integer: "-1""#
+        );
+        assert!(matches!(
+            e,
+            ReadRecordsError::Record {
+                line: 3,
+                source: RecordError::NotInteger {
+                    field: "amplitude_ua",
+                    ..
+                }
+            }
+        ));
+    }
 }
