@@ -81,8 +81,8 @@ impl From<&TimingReport> for RtCoreTiming {
     }
 }
 
-/// What `rt-probe` writes with `--summary` when it exits.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// What `rt-probe` writes with `--summary` when it exits (the default: nothing received).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct ProbeSummary {
     /// StimTicks received.
     pub received: u64,
