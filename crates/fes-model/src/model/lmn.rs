@@ -205,6 +205,34 @@ fn invalid(field: impl Into<String>, problem: impl Into<String>) -> LmnError {
     }
 }
 
+/// Every value of unit `i`'s parameter `name` is finite and at most
+/// [`MAX_PARAMETER_MAGNITUDE`] in magnitude. The field is `units[i].name[j]`, or
+/// `units[i].name` for a scalar.
+fn check_finite(i: usize, name: &str, vals: &[f64]) -> Result<(), LmnError> {
+    for (j, v) in vals.iter().enumerate() {
+        let field = || {
+            if vals.len() == 1 {
+                format!("units[{i}].{name}")
+            } else {
+                format!("units[{i}].{name}[{j}]")
+            }
+        };
+        if !v.is_finite() {
+            return Err(invalid(field(), format!("{v} is not a finite number")));
+        }
+        if v.abs() > MAX_PARAMETER_MAGNITUDE {
+            return Err(invalid(
+                field(),
+                format!(
+                    "|{v:e}| exceeds {MAX_PARAMETER_MAGNITUDE:e}: no muscle model of \
+                     normalised force has a parameter this large"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Stability of one local model (delta domain, Fig. D.4).
 #[derive(Debug, Clone, PartialEq)]
 pub struct UnitStability {
@@ -261,8 +289,34 @@ impl Lmn {
     }
 
     /// Checks every invariant (module docs); with [`Stability::Require`] also that every
-    /// local model is stable and every eigenvalue is in (-1/Ts, 0).
+    /// local model is stable and every eigenvalue is in (-1/Ts, 0). The parts are checked
+    /// in a fixed order and the first failure is returned.
     pub fn validate(&self, stability: Stability) -> Result<(), LmnError> {
+        self.check_structure()?;
+        self.check_scheduling()?;
+        self.check_force_scale()?;
+        self.check_validity_functions()?;
+        match &self.local {
+            LocalModelSet::SsDirect(units) => self.check_ss_direct(units)?,
+            LocalModelSet::SsEigLocal(units) => self.check_ss_eig_local(units, stability)?,
+            LocalModelSet::SsEigCommon {
+                units,
+                reference_unit,
+            } => self.check_ss_eig_common(units, *reference_unit, stability)?,
+            LocalModelSet::ArxShift { order, units } | LocalModelSet::ArxDelta { order, units } => {
+                self.check_arx(*order, units)?
+            }
+        }
+        if stability == Stability::Require {
+            self.check_unit_stability()?;
+            self.check_frozen_stability()?;
+            self.check_rest_state()?;
+        }
+        Ok(())
+    }
+
+    /// The sampling period is finite and > 0; the delay is at most [`MAX_DELAY`].
+    fn check_structure(&self) -> Result<(), LmnError> {
         if !(self.ts.is_finite() && self.ts > 0.0) {
             return Err(invalid(
                 "ts_s",
@@ -275,172 +329,203 @@ impl Lmn {
                 format!("{} exceeds the maximum {MAX_DELAY}", self.delay),
             ));
         }
+        Ok(())
+    }
+
+    /// The scheduling variable's specification makes a [`Scheduler`] at this Ts.
+    fn check_scheduling(&self) -> Result<(), LmnError> {
         Scheduler::new(&self.scheduling, self.ts)
-            .map_err(|e| invalid("scheduling", e.to_string()))?;
-        if !(self.force_scale_n.is_finite() && self.force_scale_n > 0.0) {
-            return Err(invalid(
-                "force_scale_n",
-                format!("{} must be finite and > 0", self.force_scale_n),
-            ));
+            .map(|_| ())
+            .map_err(|e| invalid("scheduling", e.to_string()))
+    }
+
+    /// The force scale is finite and > 0.
+    fn check_force_scale(&self) -> Result<(), LmnError> {
+        if self.force_scale_n.is_finite() && self.force_scale_n > 0.0 {
+            return Ok(());
         }
+        Err(invalid(
+            "force_scale_n",
+            format!("{} must be finite and > 0", self.force_scale_n),
+        ))
+    }
+
+    /// The validity functions (knots and order) define as many units as are given.
+    fn check_validity_functions(&self) -> Result<(), LmnError> {
         let m = self.validity.units();
-        if self.local.len() != m {
+        if self.local.len() == m {
+            return Ok(());
+        }
+        Err(invalid(
+            "units",
+            format!(
+                "{} units given but the knots ({}) and order ({}) define {m}",
+                self.local.len(),
+                self.validity.knots().len(),
+                self.validity.order()
+            ),
+        ))
+    }
+
+    /// `ss-direct`: every parameter finite and bounded, offsets as required.
+    fn check_ss_direct(&self, units: &[SsLocalModel<f64>]) -> Result<(), LmnError> {
+        for (i, u) in units.iter().enumerate() {
+            check_finite(i, "a", &[u.a[0][0], u.a[0][1], u.a[1][0], u.a[1][1]])?;
+            self.check_b_c_offsets(i, &u.b, &u.c, &u.dx, u.dy)?;
+        }
+        Ok(())
+    }
+
+    /// `ss-eig-local`: eigenvalues, eigenvector angles, b, c and offsets; the two
+    /// eigenvectors must not be parallel.
+    fn check_ss_eig_local(
+        &self,
+        units: &[EigLocalUnit<f64>],
+        stability: Stability,
+    ) -> Result<(), LmnError> {
+        for (i, u) in units.iter().enumerate() {
+            self.check_eigenvalues(i, &u.eigenvalues, stability)?;
+            check_finite(i, "eigenvector_angles_rad", &u.eigenvector_angles)?;
+            self.check_b_c_offsets(i, &u.b, &u.c, &u.dx, u.dy)?;
+            if u.to_local_model().is_none() {
+                return Err(invalid(
+                    format!("units[{i}].eigenvector_angles_rad"),
+                    "the two eigenvectors are parallel (V is singular)",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `ss-eig-common`: eigenvalues, b, c and offsets of every unit; the reference unit
+    /// exists and its b is (1, 1) (the gauge).
+    fn check_ss_eig_common(
+        &self,
+        units: &[EigCommonUnit<f64>],
+        reference_unit: usize,
+        stability: Stability,
+    ) -> Result<(), LmnError> {
+        for (i, u) in units.iter().enumerate() {
+            self.check_eigenvalues(i, &u.eigenvalues, stability)?;
+            self.check_b_c_offsets(i, &u.b, &u.c, &u.dx, u.dy)?;
+        }
+        let r = reference_unit;
+        let Some(ru) = units.get(r) else {
             return Err(invalid(
-                "units",
+                "reference_unit",
+                format!("unit {r} does not exist ({} units)", self.units()),
+            ));
+        };
+        if ru.b != [1.0, 1.0] {
+            return Err(invalid(
+                format!("units[{r}].b"),
                 format!(
-                    "{} units given but the knots ({}) and order ({}) define {m}",
-                    self.local.len(),
-                    self.validity.knots().len(),
-                    self.validity.order()
+                    "the reference unit's b must be (1, 1) in the gauge-fixed form, found ({}, {})",
+                    ru.b[0], ru.b[1]
                 ),
             ));
         }
-        let ts = self.ts;
-        let finite = |i: usize, name: &str, vals: &[f64]| -> Result<(), LmnError> {
-            for (j, v) in vals.iter().enumerate() {
-                let field = || {
-                    if vals.len() == 1 {
-                        format!("units[{i}].{name}")
-                    } else {
-                        format!("units[{i}].{name}[{j}]")
-                    }
-                };
-                if !v.is_finite() {
-                    return Err(invalid(field(), format!("{v} is not a finite number")));
-                }
-                if v.abs() > MAX_PARAMETER_MAGNITUDE {
-                    return Err(invalid(
-                        field(),
-                        format!(
-                            "|{v:e}| exceeds {MAX_PARAMETER_MAGNITUDE:e}: no muscle model of \
-                             normalised force has a parameter this large"
-                        ),
-                    ));
-                }
-            }
-            Ok(())
-        };
-        let zero = |i: usize, dx: &[f64], dy: f64| -> Result<(), LmnError> {
-            if self.zero_offsets {
-                if dx.iter().any(|v| *v != 0.0) {
-                    return Err(invalid(
-                        format!("units[{i}].dx"),
-                        "must be zero when zero_offsets is true",
-                    ));
-                }
-                if dy != 0.0 {
-                    return Err(invalid(
-                        format!("units[{i}].dy"),
-                        "must be zero when zero_offsets is true",
-                    ));
-                }
-            }
-            Ok(())
-        };
-        let eig_check = |i: usize, e: &[f64; 2]| -> Result<(), LmnError> {
-            finite(i, "eigenvalues", e)?;
-            if stability == Stability::Require {
-                for (j, v) in e.iter().enumerate() {
-                    if !eigenvalue_in_region(*v, ts) {
-                        return Err(invalid(
-                            format!("units[{i}].eigenvalues[{j}]"),
-                            format!(
-                                "eigenvalue {v} is outside the region (-1/Ts, 0) = ({}, 0)",
-                                -1.0 / ts
-                            ),
-                        ));
-                    }
-                }
-            }
-            Ok(())
-        };
-        let ss_common = |i: usize, b: &[f64; 2], c: &[f64; 2], dx: &[f64; 2], dy: f64| {
-            finite(i, "b", b)?;
-            finite(i, "c", c)?;
-            finite(i, "dx", dx)?;
-            finite(i, "dy", &[dy])?;
-            zero(i, dx, dy)
-        };
-        match &self.local {
-            LocalModelSet::SsDirect(units) => {
-                for (i, u) in units.iter().enumerate() {
-                    finite(i, "a", &[u.a[0][0], u.a[0][1], u.a[1][0], u.a[1][1]])?;
-                    ss_common(i, &u.b, &u.c, &u.dx, u.dy)?;
-                }
-            }
-            LocalModelSet::SsEigLocal(units) => {
-                for (i, u) in units.iter().enumerate() {
-                    eig_check(i, &u.eigenvalues)?;
-                    finite(i, "eigenvector_angles_rad", &u.eigenvector_angles)?;
-                    ss_common(i, &u.b, &u.c, &u.dx, u.dy)?;
-                    if u.to_local_model().is_none() {
-                        return Err(invalid(
-                            format!("units[{i}].eigenvector_angles_rad"),
-                            "the two eigenvectors are parallel (V is singular)",
-                        ));
-                    }
-                }
-            }
-            LocalModelSet::SsEigCommon {
-                units,
-                reference_unit,
-            } => {
-                for (i, u) in units.iter().enumerate() {
-                    eig_check(i, &u.eigenvalues)?;
-                    ss_common(i, &u.b, &u.c, &u.dx, u.dy)?;
-                }
-                let r = *reference_unit;
-                let Some(ru) = units.get(r) else {
-                    return Err(invalid(
-                        "reference_unit",
-                        format!("unit {r} does not exist ({m} units)"),
-                    ));
-                };
-                if ru.b != [1.0, 1.0] {
-                    return Err(invalid(
-                        format!("units[{r}].b"),
-                        format!(
-                            "the reference unit's b must be (1, 1) in the gauge-fixed form, found ({}, {})",
-                            ru.b[0], ru.b[1]
-                        ),
-                    ));
-                }
-            }
-            LocalModelSet::ArxShift { order, units } | LocalModelSet::ArxDelta { order, units } => {
-                if !(1..=MAX_ARX_ORDER).contains(order) {
-                    return Err(invalid(
-                        "units",
-                        format!("ARX order {order} is outside 1..={MAX_ARX_ORDER}"),
-                    ));
-                }
-                for (i, u) in units.iter().enumerate() {
-                    finite(i, "a", &u.a[..*order])?;
-                    finite(i, "b", &u.b[..*order])?;
-                    finite(i, "d", &[u.d])?;
-                    if self.zero_offsets && u.d != 0.0 {
-                        return Err(invalid(
-                            format!("units[{i}].d"),
-                            "must be zero when zero_offsets is true",
-                        ));
-                    }
-                }
-            }
+        Ok(())
+    }
+
+    /// `arx-shift` and `arx-delta`: the order is in 1..=[`MAX_ARX_ORDER`]; a, b (the first
+    /// `order` of each) and the offset d finite and bounded; d zero when offsets are.
+    fn check_arx(&self, order: usize, units: &[ArxUnit<f64>]) -> Result<(), LmnError> {
+        if !(1..=MAX_ARX_ORDER).contains(&order) {
+            return Err(invalid(
+                "units",
+                format!("ARX order {order} is outside 1..={MAX_ARX_ORDER}"),
+            ));
         }
-        if stability == Stability::Require {
-            for s in self.stability() {
-                if !s.stable {
-                    let poles: Vec<String> = s.poles.iter().map(|p| format!("{p:.4}")).collect();
-                    return Err(LmnError::Unstable {
-                        unit: s.unit,
-                        radius: s.radius,
-                        poles: poles.join(", "),
-                    });
-                }
+        for (i, u) in units.iter().enumerate() {
+            check_finite(i, "a", &u.a[..order])?;
+            check_finite(i, "b", &u.b[..order])?;
+            check_finite(i, "d", &[u.d])?;
+            if self.zero_offsets && u.d != 0.0 {
+                return Err(invalid(
+                    format!("units[{i}].d"),
+                    "must be zero when zero_offsets is true",
+                ));
             }
-            self.check_frozen_stability()?;
-            self.check_rest_state()?;
         }
         Ok(())
+    }
+
+    /// A state-space unit's b, c, dx and dy finite and bounded, then its offsets.
+    fn check_b_c_offsets(
+        &self,
+        i: usize,
+        b: &[f64; 2],
+        c: &[f64; 2],
+        dx: &[f64; 2],
+        dy: f64,
+    ) -> Result<(), LmnError> {
+        check_finite(i, "b", b)?;
+        check_finite(i, "c", c)?;
+        check_finite(i, "dx", dx)?;
+        check_finite(i, "dy", &[dy])?;
+        self.check_offsets(i, dx, dy)
+    }
+
+    /// Offsets: with `zero_offsets`, every dx and dy of unit `i` is 0.
+    fn check_offsets(&self, i: usize, dx: &[f64], dy: f64) -> Result<(), LmnError> {
+        if !self.zero_offsets {
+            return Ok(());
+        }
+        if dx.iter().any(|v| *v != 0.0) {
+            return Err(invalid(
+                format!("units[{i}].dx"),
+                "must be zero when zero_offsets is true",
+            ));
+        }
+        if dy != 0.0 {
+            return Err(invalid(
+                format!("units[{i}].dy"),
+                "must be zero when zero_offsets is true",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Unit `i`'s eigenvalues finite and bounded; with [`Stability::Require`] each in
+    /// (-1/Ts, 0).
+    fn check_eigenvalues(
+        &self,
+        i: usize,
+        e: &[f64; 2],
+        stability: Stability,
+    ) -> Result<(), LmnError> {
+        check_finite(i, "eigenvalues", e)?;
+        if stability != Stability::Require {
+            return Ok(());
+        }
+        let ts = self.ts;
+        match e.iter().position(|v| !eigenvalue_in_region(*v, ts)) {
+            None => Ok(()),
+            Some(j) => Err(invalid(
+                format!("units[{i}].eigenvalues[{j}]"),
+                format!(
+                    "eigenvalue {} is outside the region (-1/Ts, 0) = ({}, 0)",
+                    e[j],
+                    -1.0 / ts
+                ),
+            )),
+        }
+    }
+
+    /// Every local model is stable ([`Lmn::stability`]).
+    fn check_unit_stability(&self) -> Result<(), LmnError> {
+        match self.stability().into_iter().find(|s| !s.stable) {
+            None => Ok(()),
+            Some(s) => {
+                let poles: Vec<String> = s.poles.iter().map(|p| format!("{p:.4}")).collect();
+                Err(LmnError::Unstable {
+                    unit: s.unit,
+                    radius: s.radius,
+                    poles: poles.join(", "),
+                })
+            }
+        }
     }
 
     /// The network builds and has a rest state (the initial state of every simulation,
