@@ -21,7 +21,9 @@
 use super::arx::{ArxUnit, MAX_ARX_ORDER};
 #[cfg(feature = "std")]
 use super::lmn::UnitStability;
-use super::lmn::{Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure};
+use super::lmn::{
+    Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure, UnknownStructure,
+};
 use super::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 use super::scheduling::SchedulingSpec;
 use super::validity::ValidityFunctions;
@@ -161,7 +163,7 @@ pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError>
     let structure: Structure = head
         .structure
         .parse()
-        .map_err(|e: String| bad("structure", e))?;
+        .map_err(|e: UnknownStructure| bad("structure", e.to_string()))?;
     let lmn = match structure {
         Structure::SsDirect => typed::<ModelDoc<SsDirectDoc>>(&root)?.into_lmn(),
         Structure::SsEigLocal => typed::<ModelDoc<EigLocalDoc>>(&root)?.into_lmn(),

@@ -71,19 +71,29 @@ impl core::fmt::Display for Structure {
 }
 
 impl core::str::FromStr for Structure {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownStructure;
+    fn from_str(s: &str) -> Result<Self, UnknownStructure> {
         Self::ALL
             .into_iter()
             .find(|x| x.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = Self::ALL.iter().map(|x| x.name()).collect();
-                format!(
-                    "unknown structure {s:?} (expected one of {})",
-                    names.join(", ")
-                )
+            .ok_or_else(|| UnknownStructure {
+                name: s.to_string(),
             })
     }
+}
+
+/// A structure name that is none of [`Structure::ALL`]'s (from [`Structure`]'s `FromStr`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown structure {name:?} (expected one of {expected})", expected = structure_names())]
+pub struct UnknownStructure {
+    /// The name given.
+    pub name: String,
+}
+
+/// Every structure's name, comma-separated, in [`Structure::ALL`]'s order.
+fn structure_names() -> String {
+    let names: Vec<_> = Structure::ALL.iter().map(|x| x.name()).collect();
+    names.join(", ")
 }
 
 /// The per-unit parameters, in the structure's own parameterisation.

@@ -4,7 +4,7 @@
 
 use fes_model::model::arx::ArxUnit;
 use fes_model::model::file::{self, FileError, SCHEMA};
-use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance, Stability};
+use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance, Stability, Structure};
 use fes_model::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 use fes_model::model::scheduling::SchedulingSpec;
 use fes_model::model::simulate::simulate;
@@ -376,6 +376,22 @@ fn rejects_a_missing_field() {
 fn rejects_a_wrong_schema() {
     let msg = reject(|v| v["schema"] = Value::from("fes-lmn/2"));
     assert_names(&msg, &["schema", "fes-lmn/2", SCHEMA]);
+}
+
+#[test]
+fn rejects_an_unknown_structure() {
+    let msg = reject(|v| v["structure"] = Value::from("ss-free"));
+    assert_eq!(
+        msg,
+        "structure: unknown structure \"ss-free\" (expected one of ss-direct, ss-eig-local, \
+         ss-eig-common, arx-shift, arx-delta)"
+    );
+    let e = "ss-free".parse::<Structure>().unwrap_err();
+    assert_eq!(e.name, "ss-free");
+    assert_eq!(format!("structure: {e}"), msg);
+    for s in Structure::ALL {
+        assert_eq!(s.name().parse::<Structure>(), Ok(s));
+    }
 }
 
 #[test]
