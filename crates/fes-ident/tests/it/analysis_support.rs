@@ -1,7 +1,7 @@
 //! Fixtures of the analysis tests (shared with `workbench/tests/analysis_*.rs`): the thesis's
 //! Table 5.3 situation as a model built in code, records drawn in code, and a linear model
 //! with closed-form properties.
-#![allow(dead_code)]
+#![allow(dead_code)] // shared by path: every includer (tests, benches, examples) uses a part
 
 use fes_ident::model::lmn::{Lmn, LocalModelSet, Provenance};
 use fes_ident::model::local_model::{EigCommonUnit, EigLocalUnit, eigenvector_matrix, inverse2};

@@ -1,5 +1,5 @@
 //! Shared fixtures of the control tests: muscle-like Local Model Networks built in code.
-#![allow(dead_code)]
+#![allow(dead_code)] // shared by path: every includer (tests, benches, examples) uses a part
 
 use fes_model::control::lcn_design::UnitSpec;
 use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance};
