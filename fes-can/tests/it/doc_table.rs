@@ -3,14 +3,14 @@
 //! differs, so the document cannot drift from the DBC.
 //!
 //! Regenerate after changing the DBC:
-//! `FES_CAN_BLESS=1 cargo test -p fes-can --test it doc_table::`
+//! `FES_CAN_BLESS=1 cargo test -p fes-can --lib doc_table::`
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use can_dbc::{Dbc, MessageId, MultiplexIndicator, NumericValue, ValueType};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-const BEGIN: &str = "<!-- BEGIN GENERATED from fes-can/dbc/fes.dbc; regenerate: FES_CAN_BLESS=1 cargo test -p fes-can --test it doc_table:: -->";
+const BEGIN: &str = "<!-- BEGIN GENERATED from fes-can/dbc/fes.dbc; regenerate: FES_CAN_BLESS=1 cargo test -p fes-can --lib doc_table:: -->";
 const END: &str = "<!-- END GENERATED -->";
 
 fn doc_path() -> PathBuf {
@@ -151,7 +151,7 @@ fn protocol_table_in_docs_matches_the_dbc() {
         .unwrap_or(current.lines().count().min(generated.lines().count()));
     panic!(
         "{} is out of date with fes.dbc (first differing line {}):\n  doc: {:?}\n  dbc: {:?}\n\
-         regenerate with: FES_CAN_BLESS=1 cargo test -p fes-can --test it doc_table::",
+         regenerate with: FES_CAN_BLESS=1 cargo test -p fes-can --lib doc_table::",
         path.display(),
         first_diff + 1,
         current.lines().nth(first_diff),
