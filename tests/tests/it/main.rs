@@ -12,6 +12,7 @@ mod harness;
 mod hostbus;
 mod interop;
 mod latency_regression;
+mod safety_traceability;
 mod stimulator_no_alloc;
 mod stimulator_vcan;
 mod systemd_units;
