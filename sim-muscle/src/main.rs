@@ -620,6 +620,9 @@ struct StimulatorCmd {
 }
 
 fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
+    // A panicking thread aborts the virtual stimulator (its output ends with it), as a
+    // real stimulator's firmware would reset.
+    rt_core::rt::panic::install("sim-muscle stimulator");
     let ts_s = 1e-3;
     let s = &args.sensor;
     if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)

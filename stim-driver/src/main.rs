@@ -129,6 +129,7 @@ enum Failure {
 
 fn main() -> ExitCode {
     fes_rt::rt::logging::init("stim-driver");
+    fes_rt::rt::panic::install("stim-driver");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     let cli = Cli::parse();
     let result = match cli.command {
@@ -179,6 +180,15 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
     if check {
         println!("{}: ok", path.display());
         return Ok(());
+    }
+    // A panicking thread: NMT stop on the bus before the process aborts (the stimulator's
+    // own watchdog would stop it too, later).
+    if let Ok(nodes) = config.nodes() {
+        let iface = config.can.iface.clone();
+        fes_rt::rt::panic::set_safe_move(move || match safe_stop(&iface, &nodes) {
+            Ok(n) => eprintln!("stim-driver: NMT stop written on {iface} ({n} of 2 frames)"),
+            Err(e) => eprintln!("stim-driver: NMT stop on {iface} failed: {e}"),
+        });
     }
     let manager = ServiceManager::from_env()
         .context("systemd notification")

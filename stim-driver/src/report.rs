@@ -182,11 +182,27 @@ pub fn run_report(
         .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
     on_ready();
     let mut reporter = Reporter::new(config, shared, ports, nodes, hlog, tx_stamps);
+    let panic_at = test_panic_after().map(|after| Instant::now() + after);
     while !shared.forward_ended.load(Ordering::Relaxed) {
         std::thread::sleep(REPORT_WAKE);
-        reporter.pass(Instant::now())?;
+        let now = Instant::now();
+        if panic_at.is_some_and(|t| now >= t) {
+            panic!("test-only panic of the report thread ({ENV_TEST_PANIC_REPORT})");
+        }
+        reporter.pass(now)?;
     }
     reporter.finish()
+}
+
+/// Test-only switch: the report thread panics this many ms after it starts (the fault
+/// suite's proof that a panicking thread stops the stimulator, issue 19 item 6). Logged
+/// loudly when set; never set by the units or the installer.
+pub const ENV_TEST_PANIC_REPORT: &str = "FES_TEST_PANIC_REPORT_AFTER_MS";
+
+fn test_panic_after() -> Option<Duration> {
+    let ms: u64 = std::env::var(ENV_TEST_PANIC_REPORT).ok()?.parse().ok()?;
+    error!("TEST SWITCH ON: {ENV_TEST_PANIC_REPORT}={ms}: the report thread will panic");
+    Some(Duration::from_millis(ms))
 }
 
 /// The report thread's iceoryx2 ports.

@@ -86,6 +86,9 @@ pub struct StackOptions {
     pub outer_gain: Option<f64>,
     /// iceoryx2 prefix (unique per bench).
     pub prefix: String,
+    /// Extra environment of each process, by process name (the fault suite's test-only
+    /// switches, e.g. stim-driver's `FES_TEST_PANIC_REPORT_AFTER_MS`); empty for a bench.
+    pub env: Vec<(&'static str, String, String)>,
 }
 
 struct Proc1 {
@@ -520,6 +523,12 @@ fn spawn(opts: &StackOptions, name: &'static str, args: Vec<String>) -> Result<P
     let err = out.try_clone().map_err(io("log"))?;
     let child = Proc::new(opts.bin_dir.join(name))
         .args(&args)
+        .envs(
+            opts.env
+                .iter()
+                .filter(|(process, _, _)| *process == name)
+                .map(|(_, k, v)| (k, v)),
+        )
         .stdin(Stdio::null())
         .stdout(out)
         .stderr(err)

@@ -15,13 +15,14 @@
 //!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM); [`config_file`]: the
 //!   reading, schema and range checks of the real-time processes' configuration files.
 //! - [`probe`]: file formats of the `rt-probe` measurement process.
+//! - [`panic`]: a panicking thread aborts the process after its safe move.
 //! - [`notify`], [`logging`]: running under systemd: READY/WATCHDOG notification fed only
 //!   while the real-time loop makes progress, and logs to the journal.
 
 pub use fes_rt::rt::{
     MissingRightsPolicy, PeriodicClock, PeriodicSchedule, RtConfig, RtError, RtShortfall, RtStatus,
     Wakeup, alloc, clock, config, config_file, enter_realtime, error_text, exit, histogram, hlog,
-    logging, monotonic_ns, node, notify, probe, realtime, signals, telemetry,
+    logging, monotonic_ns, node, notify, panic, probe, realtime, signals, telemetry,
 };
 
 pub mod feedback;

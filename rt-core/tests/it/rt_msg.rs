@@ -550,3 +550,27 @@ fn quiet_and_firing_ticks_are_valid_and_say_what_they_are() {
         "amplitude without a pulse"
     );
 }
+
+/// The commanding services have one publisher: a second one, from any process of the same
+/// user, is refused when it is made (issue 19, item 6), so only the supervisor sends
+/// References and DriverCommands and only rt-core sends StimTicks.
+#[test]
+fn a_second_publisher_of_a_commanding_service_is_refused() {
+    use rt_core::msg::{DriverCommand, port};
+    use rt_core::rt::runner::create_node;
+    fn second_is_refused<M: Contract + std::fmt::Debug>(prefix: &str) {
+        let node = create_node("test-publishers").unwrap();
+        let first = port::publisher::<M>(&node, prefix);
+        assert!(first.is_ok(), "{}: {:?}", M::TOPIC, first.err());
+        let second = port::publisher::<M>(&node, prefix);
+        assert!(
+            matches!(second, Err(rt_core::msg::PortError::Publisher { .. })),
+            "{}: a second publisher was made",
+            M::TOPIC
+        );
+    }
+    let prefix = format!("t{}pubs", std::process::id());
+    second_is_refused::<Reference>(&prefix);
+    second_is_refused::<DriverCommand>(&prefix);
+    second_is_refused::<StimTick>(&prefix);
+}

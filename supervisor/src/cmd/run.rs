@@ -30,6 +30,9 @@ pub struct Args {
 
 /// Runs the daemon until SIGINT/SIGTERM.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // A panicking thread aborts the daemon: the driver's supervisor watch sees its node
+    // dead and stops the stimulator.
+    rt_core::rt::panic::install("supervisor");
     if args.print_example_config {
         print!("{EXAMPLE}");
         return Ok(());

@@ -285,6 +285,7 @@ fn start_healthy(
         outer_loop: a.outer_loop == OnOff::On,
         outer_gain: a.outer_gain,
         prefix: format!("bench{}", std::process::id()),
+        env: Vec::new(),
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
     if let Err(e) = healthy {

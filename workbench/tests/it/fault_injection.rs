@@ -51,6 +51,15 @@ impl Bench {
 
     /// As [`Self::start`], with `prepare` run on the (new, empty) stack directory first.
     fn start_with(tag: &str, prepare: impl FnOnce(&Path)) -> Self {
+        Self::start_env(tag, prepare, Vec::new())
+    }
+
+    /// As [`Self::start_with`], with extra environment per process (test-only switches).
+    fn start_env(
+        tag: &str,
+        prepare: impl FnOnce(&Path),
+        env: Vec<(&'static str, String, String)>,
+    ) -> Self {
         let serial = stack_support::one_stack_at_a_time();
         let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -63,6 +72,7 @@ impl Bench {
             format!("hostbus:{}", dir.join("bus").display()),
             TIMING,
             format!("fi{}{tag}", std::process::id()),
+            env,
         );
         Self {
             stack,
@@ -492,6 +502,72 @@ fn an_injected_bus_off_stops_stimulation() {
     injection_case("bus-off", true, |tap, _| {
         // CAN_ERR_BUSOFF (linux/can/error.h).
         tap.send(&RawFrame::error(0x40, &[])).expect("inject");
+    });
+}
+
+/// A thread of the driver panics while it stimulates (its report thread, by the test-only
+/// switch `FES_TEST_PANIC_REPORT_AFTER_MS`): the panic hook sends NMT stop and aborts the
+/// process (issue 19, item 6), so the stimulator leaves operation at once, well within its
+/// own watchdog, and the supervisor names the driver dead. Before the hook, the forward
+/// thread went on sending pulses with the report thread (DriverStatus, liveness checks)
+/// dead, until the supervisor's 1 s DriverStatus timeout stopped it.
+#[test]
+fn a_panicking_driver_thread_stops_the_stimulator_within_its_watchdog() {
+    repeat_void("driver panic", |attempt| {
+        let bench = Bench::start_env(
+            &format!("panic{attempt}"),
+            |_| {},
+            vec![(
+                "stim-driver",
+                "FES_TEST_PANIC_REPORT_AFTER_MS".to_owned(),
+                "4000".to_owned(),
+            )],
+        );
+        std::thread::sleep(Duration::from_millis(1000));
+        let bench = bench.ready_for_injection("driver panic")?;
+        let from_ns = monotonic_ns();
+        let status = bench.wait_fault(Duration::from_secs(8));
+        std::thread::sleep(Duration::from_millis(500));
+        let log = std::fs::read_to_string(bench.dir.join("stim-driver.log")).unwrap_or_default();
+        let done = bench.finish();
+        let panicked_ns: u64 = log
+            .lines()
+            .find_map(|l| {
+                let rest = l.split_once("panicked at CLOCK_MONOTONIC ")?.1;
+                rest.split_whitespace().next()?.parse().ok()
+            })
+            .unwrap_or_else(|| panic!("no panic in the driver's log\n{}", done.logs));
+        assert!(
+            panicked_ns > from_ns,
+            "the switch fired before the stack was stimulating: raise it"
+        );
+        let left = done.check("driver panic", from_ns);
+        let left =
+            left.unwrap_or_else(|| panic!("the stimulator never left operation\n{}", done.logs));
+        let ms = left.saturating_sub(panicked_ns) as f64 / 1e6;
+        let watchdog = f64::from(TIMING.timeouts().stimulator_watchdog_ms);
+        eprintln!(
+            "driver panic: the stimulator left operation {ms:.1} ms after it (watchdog {watchdog} ms)"
+        );
+        assert!(
+            ms <= watchdog,
+            "the stimulator left operation {ms:.1} ms after the driver's panic, later than its own watchdog ({watchdog} ms)\n{}",
+            done.logs
+        );
+        assert!(
+            log.contains("NMT stop written"),
+            "the panic hook's NMT stop is not in the driver's log\n{log}"
+        );
+        assert_eq!(status.state, "fault", "{status:?}");
+        assert!(
+            status
+                .fault
+                .as_deref()
+                .is_some_and(|f| f.starts_with("stim-driver")),
+            "the supervisor blames another process: {status:?}"
+        );
+        done.clean_exits_except("driver panic", Some("stim-driver"));
+        Ok(())
     });
 }
 

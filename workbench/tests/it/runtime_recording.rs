@@ -298,6 +298,7 @@ fn kill_one(
         iface,
         timing,
         format!("kill{}{}", std::process::id(), &victim[..3]),
+        Vec::new(),
     );
     std::thread::sleep(Duration::from_millis(after_ms));
     let before = stack.status().expect("status");

@@ -22,7 +22,8 @@ pub fn one_stack_at_a_time() -> std::sync::MutexGuard<'static, ()> {
 /// Starts the four processes in `dir` from `bins` on `iface` with the default controller
 /// and `timing`'s timeouts, waits until the supervisor has heard from every
 /// process, arms, and starts a 120 beats/min cardiac profile (duty 0.4, amplitude 0.3).
-/// Panics naming `what`, with the processes' logs.
+/// `env`: extra environment per process (test-only switches). Panics naming `what`, with
+/// the processes' logs.
 pub fn start_armed(
     what: &str,
     dir: &Path,
@@ -30,6 +31,7 @@ pub fn start_armed(
     iface: String,
     timing: ChainTiming,
     prefix: String,
+    env: Vec<(&'static str, String, String)>,
 ) -> Stack {
     let stack = Stack::start(StackOptions {
         dir: dir.to_path_buf(),
@@ -41,6 +43,7 @@ pub fn start_armed(
         outer_loop: true,
         outer_gain: None,
         prefix,
+        env,
     })
     .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
     let healthy_s = if timing == ChainTiming::Uml { 90 } else { 20 };

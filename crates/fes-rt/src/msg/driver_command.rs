@@ -78,7 +78,9 @@ impl DriverCommand {
 impl Contract for DriverCommand {
     const TOPIC: &'static str = TOPIC_DRIVER_COMMAND;
     const QOS: PubSubQos = PubSubQos {
-        max_publishers: 4,
+        // One commander: a second publisher (another process of the same user) is refused
+        // at creation (issue 19, item 6).
+        max_publishers: 1,
         max_subscribers: 4,
         subscriber_buffer: 8,
         history: 0,

@@ -58,7 +58,9 @@ impl Reference {
 impl Contract for Reference {
     const TOPIC: &'static str = TOPIC_REFERENCE;
     const QOS: PubSubQos = PubSubQos {
-        max_publishers: 2,
+        // One commander: a second publisher (another process of the same user) is refused
+        // at creation (issue 19, item 6).
+        max_publishers: 1,
         max_subscribers: 8,
         subscriber_buffer: 8,
         history: 1,

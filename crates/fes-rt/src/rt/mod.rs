@@ -14,6 +14,7 @@ pub mod hlog;
 pub mod logging;
 pub mod node;
 pub mod notify;
+pub mod panic;
 pub mod probe;
 pub mod realtime;
 pub mod signals;

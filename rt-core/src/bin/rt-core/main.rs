@@ -123,6 +123,10 @@ impl From<anyhow::Error> for Failure {
 
 fn main() -> ExitCode {
     rt_core::rt::logging::init("rt-core");
+    // A panicking thread aborts the process: the driver's StimTick watchdog and its
+    // liveness check of this node stop the stimulator (a final tick cannot be sent from
+    // another thread: the StimTick service has one publisher, the loop's).
+    rt_core::rt::panic::install("rt-core");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     let cli = Cli::parse();
     match run(&cli) {
