@@ -15,7 +15,7 @@
 //!   real-time and telemetry threads over iceoryx2, SIGINT/SIGTERM); [`config_file`]: the
 //!   reading, schema and range checks of the real-time processes' configuration files.
 //! - [`probe`]: file formats of the `rt-probe` measurement process.
-//! - [`panic`]: a panicking thread aborts the process after its safe move.
+//! - [`mod@panic`]: a panicking thread aborts the process after its safe move.
 //! - [`notify`], [`logging`]: running under systemd: READY/WATCHDOG notification fed only
 //!   while the real-time loop makes progress, and logs to the journal.
 
