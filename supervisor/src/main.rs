@@ -33,6 +33,10 @@ enum Command {
     Arm(cmd::client::SocketArgs),
     /// Show the daemon's state (operator client).
     Status(cmd::client::StatusArgs),
+    /// Wait while stimulation runs; the exit status says how it ended: 0 stopped by the
+    /// operator (or --for-s passed), 4 stopped by a fault (an unplanned stop: the alarm is
+    /// printed on stderr), 3 the daemon stopped answering (operator client).
+    Watch(cmd::client::WatchArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +48,7 @@ fn main() -> ExitCode {
         Command::Stop(args) => cmd::client::stop(args),
         Command::Arm(args) => cmd::client::arm(args),
         Command::Status(args) => cmd::client::status(args),
+        Command::Watch(args) => return watch(&args),
     };
     match result {
         Ok(()) => Exit::Done.into(),
@@ -51,6 +56,27 @@ fn main() -> ExitCode {
             // The format of anyhow's own `main` report: the error and its causes.
             eprintln!("Error: {e:?}");
             exit_for(&e).into()
+        }
+    }
+}
+
+/// `supervisor watch`: 0 planned end, 4 unplanned stop (the alarm on stderr), 3 the
+/// daemon gone, 2 bad options.
+fn watch(args: &cmd::client::WatchArgs) -> ExitCode {
+    use cmd::client::{WatchEnd, WatchError};
+    match cmd::client::watch(args) {
+        Ok(WatchEnd::Planned) => Exit::Done.into(),
+        Ok(WatchEnd::Unplanned(fault)) => {
+            eprintln!("ALARM: unplanned stop: {fault}");
+            Exit::Fault.into()
+        }
+        Err(e @ (WatchError::Gone(_) | WatchError::Unreachable(_))) => {
+            eprintln!("{e}");
+            Exit::Unreachable.into()
+        }
+        Err(e @ WatchError::Usage(_)) => {
+            eprintln!("Error: {e}");
+            Exit::Usage.into()
         }
     }
 }

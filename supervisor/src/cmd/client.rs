@@ -45,6 +45,91 @@ pub struct StatusArgs {
     socket: SocketArgs,
 }
 
+/// `supervisor watch`.
+#[derive(Debug, clap::Args)]
+pub struct WatchArgs {
+    /// Stop watching after this many seconds of stimulation without an unplanned stop
+    /// (exit 0); default: watch until stimulation ends.
+    #[arg(long)]
+    pub for_s: Option<f64>,
+    /// Status poll period, ms.
+    #[arg(long, default_value_t = 100)]
+    pub poll_ms: u64,
+    #[command(flatten)]
+    socket: SocketArgs,
+}
+
+/// How a watch ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum WatchEnd {
+    /// The operator stopped stimulation (disarmed), or `--for-s` passed: exit 0.
+    Planned,
+    /// A fault stopped stimulation: the alarm, exit 4.
+    Unplanned(String),
+}
+
+/// Why a watch could not go on.
+#[derive(Debug, thiserror::Error)]
+pub enum WatchError {
+    /// `--for-s` or `--poll-ms` out of range.
+    #[error("{0}")]
+    Usage(String),
+    /// No daemon answered the first request.
+    #[error(transparent)]
+    Unreachable(control::ClientError),
+    /// The daemon stopped answering while stimulation ran: an unplanned stop of the
+    /// supervisor itself (the driver's supervisor watch stops the stimulator).
+    #[error("ALARM: the supervisor stopped answering while stimulation ran: {0}")]
+    Gone(#[source] control::ClientError),
+}
+
+/// Follows the daemon's state: waits while it is disarmed, then while it is armed, and
+/// ends when stimulation ends (issue 19, item 2: every unplanned stop raises an alarm a
+/// waiting command can act on). Prints each change of state.
+pub fn watch(a: &WatchArgs) -> Result<WatchEnd, WatchError> {
+    let usage = |m: String| WatchError::Usage(m);
+    check_timeout(&a.socket).map_err(|e| usage(e.to_string()))?;
+    if !(1..=10_000).contains(&a.poll_ms) {
+        return Err(usage(format!("--poll-ms {} must be in 1..=10000", a.poll_ms)));
+    }
+    if a.for_s.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
+        return Err(usage("--for-s must be a positive number".into()));
+    }
+    let timeout = Duration::from_secs_f64(a.socket.timeout_s);
+    let mut last = String::new();
+    let mut armed_since: Option<std::time::Instant> = None;
+    loop {
+        let status = control::request(&a.socket.socket, Command::Status, timeout)
+            .map_err(|e| {
+                if last.is_empty() {
+                    WatchError::Unreachable(e)
+                } else {
+                    WatchError::Gone(e)
+                }
+            })?
+            .status;
+        let (state, fault) = status.map_or(("unknown".to_owned(), None), |s| (s.state, s.fault));
+        if state != last {
+            println!("{state}{}", fault.as_deref().map(|f| format!(": {f}")).unwrap_or_default());
+            last.clone_from(&state);
+        }
+        match state.as_str() {
+            "fault" => {
+                return Ok(WatchEnd::Unplanned(fault.unwrap_or_else(|| "fault".into())));
+            }
+            "armed" => {
+                let since = *armed_since.get_or_insert_with(std::time::Instant::now);
+                if a.for_s.is_some_and(|s| since.elapsed().as_secs_f64() >= s) {
+                    return Ok(WatchEnd::Planned);
+                }
+            }
+            _ if armed_since.is_some() => return Ok(WatchEnd::Planned),
+            _ => {}
+        }
+        std::thread::sleep(Duration::from_millis(a.poll_ms));
+    }
+}
+
 /// `supervisor profile <kind>`.
 #[derive(Debug, clap::Args)]
 pub struct ProfileArgs {

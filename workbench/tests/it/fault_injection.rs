@@ -25,6 +25,7 @@ use nix::sys::signal::Signal;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rt_core::rt::clock::monotonic_ns;
+use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Status;
 use workbench::bench::{ChainTiming, PROCESSES, Stack, process_logs};
 
@@ -502,6 +503,85 @@ fn an_injected_bus_off_stops_stimulation() {
     injection_case("bus-off", true, |tap, _| {
         // CAN_ERR_BUSOFF (linux/can/error.h).
         tap.send(&RawFrame::error(0x40, &[])).expect("inject");
+    });
+}
+
+/// `supervisor watch`, waiting while stimulation runs, tells a planned stop from an
+/// unplanned one by its exit status (issue 19, item 2): the operator's stop ends it with 0;
+/// a fault (an injected bus-off) with 4 and the alarm, naming the fault, on stderr.
+#[test]
+fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
+    use std::process::{Command, Stdio};
+    use supervisor::protocol::Command as Cmd;
+    repeat_void("watch", |attempt| {
+        let bench = Bench::start(&format!("watch{attempt}"));
+        let tap = tap(&bench);
+        std::thread::sleep(Duration::from_millis(1000));
+        let bench = bench.ready_for_injection("watch")?;
+        let socket = bench.dir.join("supervisor.sock");
+        let watch = || {
+            Command::new(stack_binaries().join("supervisor"))
+                .args(["watch", "--socket"])
+                .arg(&socket)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("supervisor watch")
+        };
+        let finish = |child: std::process::Child| {
+            let deadline = Instant::now() + Duration::from_secs(5);
+            let mut child = child;
+            while child.try_wait().expect("wait").is_none() {
+                if Instant::now() > deadline {
+                    let _ = child.kill();
+                    panic!("supervisor watch did not end within 5 s of the stop");
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            child.wait_with_output().expect("output")
+        };
+        // Planned: the operator's stop.
+        let planned = watch();
+        std::thread::sleep(Duration::from_millis(500));
+        bench.stack.must(Cmd::Stop).expect("stop");
+        let out = finish(planned);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert_eq!(out.status.code(), Some(0), "after the operator's stop: {stderr}");
+        assert!(!stderr.contains("ALARM"), "{stderr}");
+        // Unplanned: re-armed, then a bus-off.
+        bench
+            .stack
+            .arm_with(ProfileSpec::Cardiac(CardiacSpec {
+                bpm: 120.0,
+                duty: 0.4,
+                amplitude: 0.3,
+                edge_rate_per_s: None,
+                outer_loop: None,
+            }))
+            .expect("re-arm");
+        std::thread::sleep(Duration::from_millis(500));
+        let unplanned = watch();
+        std::thread::sleep(Duration::from_millis(500));
+        let before = bench.status();
+        if stack_support::is_timing_trip(&before) {
+            let _ = finish(unplanned);
+            let done = bench.finish();
+            done.check_safety("watch (void attempt)", 0);
+            return Err(format!("before the bus-off: {}", before.fault.unwrap_or_default()));
+        }
+        tap.send(&RawFrame::error(0x40, &[])).expect("inject");
+        let out = finish(unplanned);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        let status = bench.status();
+        drop(tap);
+        let done = bench.finish();
+        assert_eq!(out.status.code(), Some(4), "after a bus-off: {stderr}\n{}", done.logs);
+        let fault = status.fault.unwrap_or_default();
+        assert!(
+            stderr.contains("ALARM: unplanned stop") && !fault.is_empty() && stderr.contains(&fault),
+            "the alarm names the fault ({fault}): {stderr}"
+        );
+        Ok(())
     });
 }
 
