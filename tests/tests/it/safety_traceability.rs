@@ -117,7 +117,10 @@ fn every_test_the_safety_case_names_exists() {
     let text = std::fs::read_to_string(root.join("docs/safety.md")).expect("docs/safety.md");
     let cells = test_cells(&text);
     let hazards = cells.iter().filter(|(r, _)| r.starts_with('H')).count();
-    assert!(hazards >= 5, "only {hazards} hazard rows found: the table's layout changed?");
+    assert!(
+        hazards >= 5,
+        "only {hazards} hazard rows found: the table's layout changed?"
+    );
     let mut problems = Vec::new();
     let mut checked = 0;
     for (row, cell) in &cells {
@@ -126,7 +129,11 @@ fn every_test_the_safety_case_names_exists() {
             problems.push(format!("{row}: names no test"));
         }
         checked += refs.len();
-        problems.extend(missing(&root, &refs).into_iter().map(|m| format!("{row}: {m}")));
+        problems.extend(
+            missing(&root, &refs)
+                .into_iter()
+                .map(|m| format!("{row}: {m}")),
+        );
     }
     eprintln!("{checked} references in {} rows checked", cells.len());
     assert!(
