@@ -90,7 +90,10 @@ pub fn watch(a: &WatchArgs) -> Result<WatchEnd, WatchError> {
     let usage = |m: String| WatchError::Usage(m);
     check_timeout(&a.socket).map_err(|e| usage(e.to_string()))?;
     if !(1..=10_000).contains(&a.poll_ms) {
-        return Err(usage(format!("--poll-ms {} must be in 1..=10000", a.poll_ms)));
+        return Err(usage(format!(
+            "--poll-ms {} must be in 1..=10000",
+            a.poll_ms
+        )));
     }
     if a.for_s.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
         return Err(usage("--for-s must be a positive number".into()));
@@ -110,7 +113,13 @@ pub fn watch(a: &WatchArgs) -> Result<WatchEnd, WatchError> {
             .status;
         let (state, fault) = status.map_or(("unknown".to_owned(), None), |s| (s.state, s.fault));
         if state != last {
-            println!("{state}{}", fault.as_deref().map(|f| format!(": {f}")).unwrap_or_default());
+            println!(
+                "{state}{}",
+                fault
+                    .as_deref()
+                    .map(|f| format!(": {f}"))
+                    .unwrap_or_default()
+            );
             last.clone_from(&state);
         }
         match state.as_str() {

@@ -546,7 +546,11 @@ fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
         bench.stack.must(Cmd::Stop).expect("stop");
         let out = finish(planned);
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        assert_eq!(out.status.code(), Some(0), "after the operator's stop: {stderr}");
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "after the operator's stop: {stderr}"
+        );
         assert!(!stderr.contains("ALARM"), "{stderr}");
         // Unplanned: re-armed, then a bus-off.
         bench
@@ -567,7 +571,10 @@ fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
             let _ = finish(unplanned);
             let done = bench.finish();
             done.check_safety("watch (void attempt)", 0);
-            return Err(format!("before the bus-off: {}", before.fault.unwrap_or_default()));
+            return Err(format!(
+                "before the bus-off: {}",
+                before.fault.unwrap_or_default()
+            ));
         }
         tap.send(&RawFrame::error(0x40, &[])).expect("inject");
         let out = finish(unplanned);
@@ -575,10 +582,17 @@ fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
         let status = bench.status();
         drop(tap);
         let done = bench.finish();
-        assert_eq!(out.status.code(), Some(4), "after a bus-off: {stderr}\n{}", done.logs);
+        assert_eq!(
+            out.status.code(),
+            Some(4),
+            "after a bus-off: {stderr}\n{}",
+            done.logs
+        );
         let fault = status.fault.unwrap_or_default();
         assert!(
-            stderr.contains("ALARM: unplanned stop") && !fault.is_empty() && stderr.contains(&fault),
+            stderr.contains("ALARM: unplanned stop")
+                && !fault.is_empty()
+                && stderr.contains(&fault),
             "the alarm names the fault ({fault}): {stderr}"
         );
         Ok(())
