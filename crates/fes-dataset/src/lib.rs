@@ -5,7 +5,11 @@
 //! period, train/test split and the record list) and one CSV file per record with the
 //! header `t_ms,pulse,force`: time in ms (uniform steps of `ts_s`), pulse 0/1 (a pulse
 //! fires at the start of that sample), force normalised (offset removed, divided by
-//! `scale_n`). `docs/sim-muscle.md` documents every field. Simulated and rig recordings
+//! `scale_n`). A recording of the stimulation chain adds a fourth column, `decided`: the
+//! pattern generator's decision, while `pulse` is what the driver delivered to the
+//! stimulator (the two differ where the driver refused a pulse or was not armed; a reader
+//! without the column takes the pulses as the decisions). `docs/sim-muscle.md` documents
+//! every field. Simulated and rig recordings
 //! use the same format and the same validating reader, [`DataSet::read`]; every
 //! violation is reported with the file, line and field.
 
@@ -25,6 +29,10 @@ pub const META_FILE: &str = "dataset.json";
 pub const CSV_HEADER: &str = "t_ms,pulse,force";
 /// Column names of a record file, in order.
 pub const COLUMNS: [&str; 3] = ["t_ms", "pulse", "force"];
+/// The header of a record file with the decisions beside the delivered pulses.
+pub const CSV_HEADER_DECIDED: &str = "t_ms,pulse,force,decided";
+/// Column names of a record file with the decisions, in order.
+pub const COLUMNS_DECIDED: [&str; 4] = ["t_ms", "pulse", "force", "decided"];
 /// Normalised force must lie in `[-FORCE_SLACK, 1 + FORCE_SLACK]`: room for the noise
 /// floor around the removed offset, while raw newtons are caught.
 pub const FORCE_SLACK: f64 = 0.1;
@@ -89,8 +97,8 @@ pub enum FormatError {
         /// `train` or `test`.
         which: &'static str,
     },
-    /// The header line is not `t_ms,pulse,force`.
-    #[error("{}:1: header `{found}`: {problem}; expected `{CSV_HEADER}`", path.display())]
+    /// The header line is not `t_ms,pulse,force` (or `t_ms,pulse,force,decided`).
+    #[error("{}:1: header `{found}`: {problem}; expected `{CSV_HEADER}` (or `{CSV_HEADER_DECIDED}`)", path.display())]
     Header {
         /// The record file.
         path: PathBuf,
@@ -100,7 +108,7 @@ pub enum FormatError {
         problem: String,
     },
     /// A data line has the wrong number of fields.
-    #[error("{}:{line}: {found} field(s), expected 3 ({CSV_HEADER})", path.display())]
+    #[error("{}:{line}: {found} field(s), expected {expected} (as the header)", path.display())]
     Columns {
         /// The record file.
         path: PathBuf,
@@ -108,6 +116,8 @@ pub enum FormatError {
         line: usize,
         /// Fields found.
         found: usize,
+        /// Fields the header names.
+        expected: usize,
     },
     /// A value is not a number, not finite, or out of its range.
     #[error("{}:{line}: field `{field}`: {problem}", path.display())]
@@ -256,6 +266,10 @@ pub struct Record {
     pub pulse: Vec<bool>,
     /// Normalised force at each sample time.
     pub force: Vec<f64>,
+    /// The pattern generator's decision at each sample, when the record tells it apart
+    /// from the delivered `pulse` (a recording of the stimulation chain); `None`: the
+    /// pulses are the decisions (simulated data, imported data).
+    pub decided: Option<Vec<bool>>,
 }
 
 impl Record {
@@ -275,7 +289,22 @@ impl Record {
             t_ms,
             pulse,
             force,
+            decided: None,
         }
+    }
+
+    /// Samples where the decision and the delivery differ: (decided but not delivered,
+    /// delivered but not decided). Both 0 without a `decided` column.
+    pub fn undelivered(&self) -> (usize, usize) {
+        let Some(decided) = &self.decided else {
+            return (0, 0);
+        };
+        decided
+            .iter()
+            .zip(&self.pulse)
+            .fold((0, 0), |(missed, extra), (&d, &p)| {
+                (missed + usize::from(d && !p), extra + usize::from(p && !d))
+            })
     }
 
     /// Number of samples.
@@ -335,6 +364,18 @@ struct RecordEntry {
 }
 
 impl DataSet {
+    /// Samples of the whole data set where the decision and the delivery differ: (decided
+    /// but not delivered, delivered but not decided). Identification from such data would
+    /// fit the model to pulses the muscle never received (docs/identification.md).
+    pub fn undelivered(&self) -> (usize, usize) {
+        self.records.iter().fold((0, 0), |(a, b), r| {
+            let (x, y) = r.undelivered();
+            (a + x, b + y)
+        })
+    }
+}
+
+impl DataSet {
     /// The training records, in split order.
     pub fn train(&self) -> impl Iterator<Item = &Record> {
         self.header
@@ -388,13 +429,14 @@ impl DataSet {
                 path: path.clone(),
                 source,
             })?;
-            let (t_ms, pulse, force) = parse_record_csv(&path, &bytes, header.ts_s)?;
+            let cols = parse_record_csv(&path, &bytes, header.ts_s)?;
             let record = Record {
                 file: entry.file,
                 kind: entry.kind,
-                t_ms,
-                pulse,
-                force,
+                t_ms: cols.t_ms,
+                pulse: cols.pulse,
+                force: cols.force,
+                decided: cols.decided,
             };
             if record.len() != entry.samples {
                 return Err(FormatError::Mismatch {
@@ -428,15 +470,20 @@ impl DataSet {
         check_files(&meta_path, self.records.iter().map(|r| r.file.as_str()))?;
         for r in &self.records {
             let path = dir.join(&r.file);
-            if r.pulse.len() != r.force.len() || r.t_ms.len() != r.force.len() {
+            let decided_len = r.decided.as_ref().map_or(r.force.len(), Vec::len);
+            if r.pulse.len() != r.force.len()
+                || r.t_ms.len() != r.force.len()
+                || decided_len != r.force.len()
+            {
                 return Err(FormatError::Field {
                     path: meta_path.clone(),
                     field: format!("records[{}]", r.file),
                     problem: format!(
-                        "columns differ in length: t_ms {}, pulse {}, force {}",
+                        "columns differ in length: t_ms {}, pulse {}, force {}, decided {}",
                         r.t_ms.len(),
                         r.pulse.len(),
-                        r.force.len()
+                        r.force.len(),
+                        decided_len
                     ),
                 });
             }
@@ -547,11 +594,29 @@ fn remove_previous(dir: &Path) -> Result<(), WriteError> {
 /// The CSV text of a record. Numbers use Rust's shortest round-trip form, so reading
 /// gives back exactly the values written.
 fn record_csv(r: &Record) -> String {
-    let mut s = String::with_capacity(24 * r.len() + 20);
-    s.push_str(CSV_HEADER);
-    s.push('\n');
-    for k in 0..r.len() {
-        let _ = writeln!(s, "{},{},{}", r.t_ms[k], u8::from(r.pulse[k]), r.force[k]);
+    let mut s = String::with_capacity(26 * r.len() + 26);
+    match &r.decided {
+        None => {
+            s.push_str(CSV_HEADER);
+            s.push('\n');
+            for k in 0..r.len() {
+                let _ = writeln!(s, "{},{},{}", r.t_ms[k], u8::from(r.pulse[k]), r.force[k]);
+            }
+        }
+        Some(decided) => {
+            s.push_str(CSV_HEADER_DECIDED);
+            s.push('\n');
+            for (k, &d) in decided.iter().enumerate().take(r.len()) {
+                let _ = writeln!(
+                    s,
+                    "{},{},{},{}",
+                    r.t_ms[k],
+                    u8::from(r.pulse[k]),
+                    r.force[k],
+                    u8::from(d)
+                );
+            }
+        }
     }
     s
 }
@@ -779,8 +844,18 @@ impl<'a> RowChecker<'a> {
     }
 }
 
-/// Columns of a parsed record file: `t_ms`, `pulse`, `force`.
-pub type Columns = (Vec<f64>, Vec<bool>, Vec<f64>);
+/// Columns of a parsed record file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Columns {
+    /// `t_ms`.
+    pub t_ms: Vec<f64>,
+    /// `pulse`: what was delivered.
+    pub pulse: Vec<bool>,
+    /// `force`.
+    pub force: Vec<f64>,
+    /// `decided`, when the file has the column.
+    pub decided: Option<Vec<bool>>,
+}
 
 /// Parses and checks the content of one record file (`path` names it in errors; the
 /// file is not opened). [`DataSet::read`] uses it for every record.
@@ -801,7 +876,8 @@ pub fn parse_record_csv(path: &Path, bytes: &[u8], ts_s: f64) -> Result<Columns,
             problem: "the file is empty".into(),
         });
     };
-    check_csv_header(path, header)?;
+    let with_decided = check_csv_header(path, header)?;
+    let width = if with_decided { 4 } else { 3 };
     let mut rows = RowChecker::new(path, ts_s);
     let n = lines.len() - 1;
     let (mut t_ms, mut pulse, mut force) = (
@@ -809,14 +885,16 @@ pub fn parse_record_csv(path: &Path, bytes: &[u8], ts_s: f64) -> Result<Columns,
         Vec::with_capacity(n),
         Vec::with_capacity(n),
     );
+    let mut decided = with_decided.then(|| Vec::with_capacity(n));
     for (i, l) in lines.iter().enumerate().skip(1) {
         let line = i + 1;
         let fields: Vec<&str> = l.split(',').map(str::trim).collect();
-        if fields.len() != 3 {
+        if fields.len() != width {
             return Err(FormatError::Columns {
                 path: path.to_path_buf(),
                 line,
                 found: if l.trim().is_empty() { 0 } else { fields.len() },
+                expected: width,
             });
         }
         let number = |k: usize| -> Result<f64, FormatError> {
@@ -827,30 +905,46 @@ pub fn parse_record_csv(path: &Path, bytes: &[u8], ts_s: f64) -> Result<Columns,
                 problem: format!("`{}` is not a number", fields[k]),
             })
         };
-        let t = number(0)?;
-        let p = number(1)?;
-        let f = number(2)?;
-        let fired = if p == 1.0 {
-            true
-        } else if p == 0.0 {
-            false
-        } else {
-            return Err(rows.value(line, "pulse", format!("`{}` is not 0 or 1", fields[1])));
+        let bit = |k: usize, field: &'static str| -> Result<bool, FormatError> {
+            match fields[k] {
+                "1" => Ok(true),
+                "0" => Ok(false),
+                _ => match number(k)? {
+                    1.0 => Ok(true),
+                    0.0 => Ok(false),
+                    _ => Err(rows.value(line, field, format!("`{}` is not 0 or 1", fields[k]))),
+                },
+            }
         };
+        let t = number(0)?;
+        let fired = bit(1, "pulse")?;
+        let f = number(2)?;
+        if let Some(decided) = decided.as_mut() {
+            decided.push(bit(3, "decided")?);
+        }
         rows.check(line, t, f)?;
         t_ms.push(t);
         pulse.push(fired);
         force.push(f);
     }
     rows.finish()?;
-    Ok((t_ms, pulse, force))
+    Ok(Columns {
+        t_ms,
+        pulse,
+        force,
+        decided,
+    })
 }
 
-/// Checks the header line, naming missing, extra or misordered columns.
-fn check_csv_header(path: &Path, header: &str) -> Result<(), FormatError> {
+/// Checks the header line, naming missing, extra or misordered columns. Returns whether
+/// the file has the `decided` column.
+fn check_csv_header(path: &Path, header: &str) -> Result<bool, FormatError> {
     let found: Vec<&str> = header.split(',').map(str::trim).collect();
     if found == COLUMNS {
-        return Ok(());
+        return Ok(false);
+    }
+    if found == COLUMNS_DECIDED {
+        return Ok(true);
     }
     let missing: Vec<&str> = COLUMNS
         .iter()
@@ -860,7 +954,7 @@ fn check_csv_header(path: &Path, header: &str) -> Result<(), FormatError> {
     let extra: Vec<&str> = found
         .iter()
         .copied()
-        .filter(|c| !COLUMNS.contains(c))
+        .filter(|c| !COLUMNS_DECIDED.contains(c))
         .collect();
     let mut problems = Vec::new();
     if !missing.is_empty() {

@@ -38,6 +38,10 @@ pub struct Args {
     /// Print every stage and accepted step on stderr.
     #[arg(long, short)]
     pub verbose: bool,
+    /// Compare on a recording whose delivered pulses differ from the decided ones
+    /// (refused by default, as `fes identify`).
+    #[arg(long)]
+    pub allow_undelivered: bool,
 }
 
 fn e3(v: Option<f64>) -> String {
@@ -80,6 +84,9 @@ pub fn table(rows: &[CompareRow]) -> String {
 /// Runs `fes compare`.
 pub fn run(args: Args) -> Result<()> {
     let records = load_records(&args.data)?;
+    records
+        .check_deliveries(args.allow_undelivered)
+        .with_context(|| format!("cannot use data set {}", args.data.display()))?;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }

@@ -2,7 +2,7 @@
 
 use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
-use fes_ident::ident::{IdentOptions, Identified, Learning, RecordSet, identify};
+use fes_ident::ident::{IdentOptions, Identified, Learning, RecordSet, Undelivered, identify};
 use rt_core::model::{KnotLayout, file};
 use std::path::{Path, PathBuf};
 
@@ -103,6 +103,11 @@ pub struct FitArgs {
     /// Print every stage and accepted step on stderr.
     #[arg(long, short)]
     pub verbose: bool,
+    /// Fit a recording whose delivered pulses differ from the decided ones (pulses the
+    /// driver refused or sent while not armed): by default such a data set is refused. The
+    /// model's provenance then records how many differed (`undelivered_pulses`).
+    #[arg(long)]
+    pub allow_undelivered: bool,
 }
 
 /// `--knots`.
@@ -179,6 +184,26 @@ pub fn load_records(dir: &Path) -> Result<RecordSet> {
     RecordSet::load(dir).with_context(|| format!("cannot use data set {}", dir.display()))
 }
 
+/// [`load_records`], refusing a recording whose deliveries differ from its decisions
+/// unless `--allow-undelivered`; returns the differences to stamp into the model.
+pub fn load_delivered(dir: &Path, fit: &FitArgs) -> Result<(RecordSet, Undelivered)> {
+    let records = load_records(dir)?;
+    let undelivered = records
+        .check_deliveries(fit.allow_undelivered)
+        .with_context(|| format!("cannot use data set {}", dir.display()))?;
+    Ok((records, undelivered))
+}
+
+/// Says in the model's provenance how many pulses of its data were not as decided (only
+/// when some were: `--allow-undelivered`).
+pub fn stamp_undelivered(lmn: &mut rt_core::model::Lmn, undelivered: Undelivered) {
+    if !undelivered.is_none() {
+        lmn.provenance
+            .extra
+            .insert("undelivered_pulses".into(), serde_json::json!(undelivered));
+    }
+}
+
 /// Prints the run's figures (`data_ts_s`: the data's sampling period).
 pub fn print_summary(r: &Identified, data_ts_s: f64) {
     let m = &r.metrics;
@@ -225,13 +250,14 @@ pub fn print_summary(r: &Identified, data_ts_s: f64) {
 
 /// Runs `fes identify`.
 pub fn run(args: Args) -> Result<()> {
-    let records = load_records(&args.data)?;
+    let (records, undelivered) = load_delivered(&args.data, &args.fit)?;
     let opts = args.fit.options(args.structure, args.units, records.ts)?;
     let fb = Feedback::new("", args.fit.verbose);
     let result = fb.with_hooks(|h| identify(&records, &opts, h));
     fb.finish();
     let mut result = result.context("identification failed")?;
     super::stamp_tool(&mut result.lmn, "identify");
+    stamp_undelivered(&mut result.lmn, undelivered);
     file::save(&result.lmn, &args.out)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     print_summary(&result, records.ts);

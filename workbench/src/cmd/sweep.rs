@@ -1,7 +1,7 @@
 //! `fes sweep`: every network size of one structure, the table and bar plot of thesis
 //! Figs. 5.13-5.21, and the size with the lowest test MSSE (the thesis's rule).
 
-use super::identify::{FitArgs, load_records};
+use super::identify::{FitArgs, load_delivered, stamp_undelivered};
 use super::{Feedback, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
 use fes_ident::ident::sweep::{Sweep, SweepRow, sweep};
@@ -231,7 +231,7 @@ fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Resu
 
 /// Runs `fes sweep`.
 pub fn run(args: Args) -> Result<()> {
-    let records = load_records(&args.data)?;
+    let (records, undelivered) = load_delivered(&args.data, &args.fit)?;
     let opts = args
         .fit
         .options(args.structure, *args.units.start(), records.ts)?;
@@ -271,6 +271,7 @@ pub fn run(args: Args) -> Result<()> {
             let p = dir.join(format!("units_{}.lmn.json", r.units));
             let mut m = m.clone();
             super::stamp_tool(&mut m, "sweep");
+            stamp_undelivered(&mut m, undelivered);
             file::save(&m, &p).with_context(|| format!("cannot write {}", p.display()))?;
         }
         let md = dir.join("sweep.md");

@@ -167,6 +167,63 @@ fn identify_writes_a_loadable_model_with_provenance() {
     assert!(lmn.provenance.train_mspe.is_some());
 }
 
+/// A recording whose delivered pulses differ from the decided ones (the driver refused
+/// one) is refused by `fes identify` naming the counts and the flag; with
+/// `--allow-undelivered` the delivered pulses are fitted and the model says how many
+/// differed (issue 19, item 5).
+#[test]
+fn identify_refuses_a_recording_with_undelivered_pulses_unless_allowed() {
+    use fes_dataset::DataSet;
+    let dir = tmp("identify_undelivered");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).expect("dir");
+    small_dataset(&data, 4);
+    // What a recording of the chain writes: the decision beside the delivery, one pulse of
+    // record 0 refused by the driver.
+    let mut ds = DataSet::read(&data).expect("read");
+    let r = &mut ds.records[0];
+    let mut decided = r.pulse.clone();
+    let k = r.pulse.iter().position(|&p| p).expect("a pulse");
+    r.pulse[k] = false;
+    decided[k] = true;
+    r.decided = Some(decided);
+    ds.write(&data, WriteMode::Overwrite).expect("write");
+    let out = dir.join("m.lmn.json");
+    let args = |extra: &[&'static str]| {
+        let mut a = vec![
+            "identify",
+            "--data",
+            data.to_str().expect("utf8"),
+            "--structure",
+            "ss-eig-common",
+            "--units",
+            "2",
+            "--max-iter",
+            "10",
+            "--out",
+            out.to_str().expect("utf8"),
+        ];
+        a.extend_from_slice(extra);
+        a
+    };
+    let o = run(&args(&[]));
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("1 pulse(s) were decided but not delivered")
+            && e.contains("--allow-undelivered"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a refused run wrote a model");
+    let o = run(&args(&["--allow-undelivered"]));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lmn = file::load_allow_unstable(&out).expect("load").0;
+    assert_eq!(
+        lmn.provenance.extra.get("undelivered_pulses"),
+        Some(&serde_json::json!({"decided_not_delivered": 1, "delivered_not_decided": 0}))
+    );
+}
+
 /// Each bad input ends with a non-zero status and a message naming the problem.
 #[test]
 fn bad_inputs_are_refused_with_clear_errors() {

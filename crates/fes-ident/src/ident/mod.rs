@@ -38,7 +38,7 @@ pub mod sweep;
 
 pub use identify::{Hooks, IdentOptions, Identified, Mode, Progress, SchedulingKind, identify};
 pub use metrics::Metrics;
-pub use records::{IdentRecord, RecordSet, RecordsError};
+pub use records::{IdentRecord, RecordSet, RecordsError, Undelivered};
 pub use regression::Learning;
 
 /// Why an identification failed. Every message names the problem.

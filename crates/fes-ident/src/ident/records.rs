@@ -14,6 +14,16 @@ pub enum RecordsError {
     /// The data set could not be read (missing directory, bad file...).
     #[error("data set: {0}")]
     Read(#[from] ReadError),
+    /// The pulses delivered differ from the pulses decided.
+    #[error(
+        "{} pulse(s) were decided but not delivered and {} delivered but not decided \
+         (the data set's `decided` column against its `pulse` column): a model fitted to it \
+         would fit pulses the muscle did not receive; --allow-undelivered fits the delivered \
+         pulses anyway and says so in the model's provenance",
+        .0.decided_not_delivered,
+        .0.delivered_not_decided
+    )]
+    Undelivered(Undelivered),
     /// Fewer records than identification needs.
     #[error("the data set has {found} {which} record(s); identification needs at least {needed}")]
     TooFew {
@@ -137,6 +147,28 @@ pub struct RecordSet {
     pub train: Vec<IdentRecord>,
     /// Test records.
     pub test: Vec<IdentRecord>,
+    /// Samples of the data set whose decision and delivery differ (a recording's `decided`
+    /// column against its `pulse` column, [`DataSet::undelivered`]): identification uses the
+    /// delivered pulses; a caller refuses the set unless told otherwise
+    /// ([`RecordSet::check_deliveries`]).
+    pub undelivered: Undelivered,
+}
+
+/// How many pulses of a data set were decided but not delivered, or delivered but not
+/// decided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+pub struct Undelivered {
+    /// Decided by the pattern generator, not delivered (refused by the driver, not armed).
+    pub decided_not_delivered: usize,
+    /// Delivered without a decision (not expected: a foreign pulse).
+    pub delivered_not_decided: usize,
+}
+
+impl Undelivered {
+    /// No difference.
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 impl RecordSet {
@@ -165,7 +197,19 @@ impl RecordSet {
             ts,
             train,
             test,
+            undelivered: Undelivered::default(),
         })
+    }
+
+    /// Refuses a set whose decisions and deliveries differ, unless `allow`: a model fitted
+    /// to such data would be fitted to pulses the muscle never received (or did without
+    /// a decision). Returns the differences (for the model's provenance when allowed).
+    pub fn check_deliveries(&self, allow: bool) -> Result<Undelivered, RecordsError> {
+        if self.undelivered.is_none() || allow {
+            Ok(self.undelivered)
+        } else {
+            Err(RecordsError::Undelivered(self.undelivered))
+        }
     }
 
     /// The records of a data set, split as its metadata says.
@@ -180,6 +224,11 @@ impl RecordSet {
             .collect::<Result<Vec<_>, _>>()?;
         let mut set = Self::new(ds.header.ts_s, train, test)?;
         set.force_scale_n = ds.header.scale_n;
+        let (decided_not_delivered, delivered_not_decided) = ds.undelivered();
+        set.undelivered = Undelivered {
+            decided_not_delivered,
+            delivered_not_decided,
+        };
         Ok(set)
     }
 

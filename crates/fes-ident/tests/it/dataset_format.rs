@@ -46,6 +46,54 @@ fn round_trip_is_exact() {
     );
 }
 
+/// A recording's records carry the decisions beside the delivered pulses (a fourth
+/// column, `decided`): they round-trip, the differences are counted both ways, a
+/// three-column record reads as "the pulses are the decisions", and a fourth column of
+/// another name or a value other than 0/1 is refused by name.
+#[test]
+fn the_decided_column_round_trips_and_counts_what_was_not_delivered() {
+    let dir = Scratch::new("fmt-decided");
+    let mut ds = small_dataset();
+    // Record 0: the second decided pulse was refused by the driver (not delivered).
+    let r = &mut ds.records[0];
+    let mut decided = r.pulse.clone();
+    let k = decided
+        .iter()
+        .position(|&p| !p)
+        .expect("a sample without a pulse");
+    decided[k] = true;
+    r.decided = Some(decided);
+    ds.write(dir.path(), WriteMode::Overwrite).expect("write");
+    let back = DataSet::read(dir.path()).expect("read back");
+    assert_eq!(back, ds);
+    assert_eq!(back.undelivered(), (1, 0));
+    assert_eq!(back.records[1].undelivered(), (0, 0));
+    assert_eq!(back.records[1].decided, None);
+    let csv = fs::read_to_string(dir.join(&back.records[0].file)).expect("csv");
+    assert!(csv.starts_with("t_ms,pulse,force,decided\n"), "{csv}");
+    // Delivered but not decided (a foreign pulse) counts the other way.
+    let mut other = ds.clone();
+    let r = &mut other.records[0];
+    r.decided = Some(r.pulse.iter().map(|_| false).collect());
+    let pulses = r.pulses();
+    assert_eq!(other.undelivered().1, pulses);
+    // A wrong fourth column and a wrong value.
+    let file = back.records[0].file.clone();
+    put(&dir, &file, "t_ms,pulse,force,wanted\n0,1,0,1\n1,0,0.1,0\n");
+    assert!(
+        read_err(&dir).contains("extra column(s) `wanted`"),
+        "{}",
+        read_err(&dir)
+    );
+    put(
+        &dir,
+        &file,
+        "t_ms,pulse,force,decided\n0,1,0,2\n1,0,0.1,0\n",
+    );
+    let e = read_err(&dir);
+    assert!(e.contains("decided") && e.contains(":2"), "{e}");
+}
+
 /// A non-empty directory is refused without overwriting; overwriting replaces only the
 /// previous data set's files.
 #[test]

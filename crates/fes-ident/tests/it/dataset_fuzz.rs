@@ -12,8 +12,9 @@ use proptest::prelude::*;
 
 /// Checks the invariants of an accepted record.
 fn assert_valid(cols: &fes_ident::dataset::Columns) {
-    let (t, p, f) = cols;
+    let (t, p, f) = (&cols.t_ms, &cols.pulse, &cols.force);
     assert!(t.len() >= 2 && t.len() == p.len() && t.len() == f.len());
+    assert!(cols.decided.as_ref().is_none_or(|d| d.len() == t.len()));
     assert!(t[0] >= 0.0 && t.windows(2).all(|w| w[1] > w[0]));
     assert!(
         f.iter()
