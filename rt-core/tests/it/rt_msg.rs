@@ -53,6 +53,13 @@ fn layouts_are_pinned() {
     assert_eq!(offset_of!(TimingReport, input), 104);
     assert_eq!(offset_of!(TimingReport, ipc), 224);
     assert_eq!(offset_of!(TimingReport, source), 264);
+
+    assert_eq!(
+        (size_of::<PulseOutcome>(), align_of::<PulseOutcome>()),
+        (40, 8)
+    );
+    assert_eq!(offset_of!(PulseOutcome, tick_seq), 16);
+    assert_eq!(offset_of!(PulseOutcome, fate), 32);
 }
 
 #[test]
@@ -63,6 +70,37 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v1");
     assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");
     assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
+    assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v1");
+}
+
+/// A PulseOutcome from another process is validated like every message: its fate is one of
+/// the four, its sequence numbers are set, its reserved bytes are zero.
+#[test]
+fn pulse_outcome_validation() {
+    let ok = PulseOutcome::new(1, 5, 7, 3, PulseFate::Refused);
+    assert_eq!(ok.validate(), Ok(()));
+    assert_eq!(ok.fate(), Ok(PulseFate::Refused));
+    for fate in [
+        PulseFate::Sent,
+        PulseFate::Refused,
+        PulseFate::NotArmed,
+        PulseFate::NotWritten,
+    ] {
+        assert_eq!(PulseFate::try_from(fate as u8), Ok(fate));
+    }
+    let bad = [
+        PulseOutcome { seq: 0, ..ok },
+        PulseOutcome { tick_seq: 0, ..ok },
+        PulseOutcome { fate: 0, ..ok },
+        PulseOutcome { fate: 5, ..ok },
+        PulseOutcome {
+            reserved: [0, 0, 1, 0, 0, 0, 0],
+            ..ok
+        },
+    ];
+    for b in bad {
+        assert!(b.validate().is_err(), "{b:?}");
+    }
 }
 
 fn tick() -> StimTick {

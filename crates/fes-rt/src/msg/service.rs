@@ -39,6 +39,8 @@ pub const TOPIC_DRIVER_STATUS: &str = "driver_status";
 pub const TOPIC_TIMING: &str = "timing";
 /// Topic of [`super::DriverCommand`]: supervisor -> stim-driver (arm, disarm, safe stop).
 pub const TOPIC_DRIVER_COMMAND: &str = "driver_command";
+/// Topic of [`super::PulseOutcome`]: stim-driver -> supervisor (what became of each pulse).
+pub const TOPIC_PULSE_OUTCOME: &str = "pulse_outcome";
 
 /// Longest accepted prefix (iceoryx2 service names are bounded; the topic is appended).
 pub const MAX_PREFIX_LEN: usize = 64;
