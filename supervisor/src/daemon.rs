@@ -19,8 +19,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use rt_core::msg::service::{ServiceError, open_pubsub};
 use rt_core::msg::{
-    Contract, DriverCommand, DriverCommandKind, DriverStatus, ForceSample, Reference, StimTick,
-    TimingReport,
+    Contract, DriverCommand, DriverCommandKind, DriverStatus, ForceSample, PulseOutcome, Reference,
+    StimTick, TimingReport,
 };
 use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
@@ -115,6 +115,8 @@ struct Ports {
     /// The DriverStatus service, whose publishers are this stack's stim-driver.
     status_service: PubSubService<DriverStatus>,
     timings: Subscriber<ipc::Service, TimingReport, ()>,
+    /// What the driver did with each pulse decision (for the recording).
+    outcomes: Subscriber<ipc::Service, PulseOutcome, ()>,
 }
 
 /// A publish-subscribe service of the stack.
@@ -133,6 +135,7 @@ impl Ports {
             tick_service: open_pubsub::<StimTick>(node, prefix)?,
             status_service: open_pubsub::<DriverStatus>(node, prefix)?,
             timings: port::subscriber::<TimingReport>(node, prefix)?,
+            outcomes: port::subscriber::<PulseOutcome>(node, prefix)?,
         })
     }
 }
@@ -319,6 +322,7 @@ impl<'a> Daemon<'a> {
             self.statuses_in.push(*s.payload());
         }
         self.read_ticks(now);
+        self.read_outcomes(now);
         self.read_forces(now);
         self.judge_statuses(now);
         self.read_timings();
@@ -335,6 +339,18 @@ impl<'a> Daemon<'a> {
                     self.core.on_pulse(t.t_ns);
                 }
                 self.run.record(&mut self.core, Item::Tick(t, now));
+            }
+        }
+    }
+
+    /// The PulseOutcomes received (valid ones): recording, so that the data set says what
+    /// was delivered.
+    fn read_outcomes(&mut self, now: u64) {
+        while let Ok(Some(s)) = self.ports.outcomes.receive() {
+            let o = *s.payload();
+            drop(s);
+            if o.validate().is_ok() {
+                self.run.record(&mut self.core, Item::Outcome(o, now));
             }
         }
     }

@@ -7,14 +7,19 @@
 //!
 //! | file | content |
 //! |---|---|
-//! | `dataset.json`, `record_NNN.csv` | the data set: per 1 ms tick, `pulse` (StimTick) and `force` (the measured, normalised force nearest in time); one record per beat (cardiac) or per `max_record_ms`, and a new record after any gap |
+//! | `dataset.json`, `record_NNN.csv` | the data set: per 1 ms tick, `pulse` (what the driver delivered: the StimTick fired and its [`PulseOutcome`] says sent), `force` (the measured, normalised force nearest in time) and `decided` (the StimTick fired); one record per beat (cardiac) or per `max_record_ms`, and a new record after any gap |
 //! | `ticks.csv` | every StimTick, all fields |
 //! | `force.csv` | every ForceSample |
 //! | `references.csv` | every published Reference |
 //! | `status.csv` | every DriverStatus |
+//! | `outcomes.csv` | every PulseOutcome: what the driver did with each pulse decision |
 //! | `timing.csv` | every TimingReport |
 //! | `beats.csv` | per beat: target, reference amplitude, measured plateau/peak/FTI, pulses, outer-loop correction, pulses the driver refused |
 //! | `events.jsonl` | commands, faults, warnings, with CLOCK_MONOTONIC and wall-clock times |
+//!
+//! A pulse the driver never reported on within [`OUTCOME_WAIT_NS`] (or before a report on a
+//! later tick) is recorded as not delivered: the data set never claims a pulse that nobody
+//! saw sent (issue 19, item 5).
 //!
 //! Durability: the stream files are flushed at least every `flush_period_ms` (default
 //! 1 s); each data-set record is at most `max_record_ms` (default 1 s) long, and when it
@@ -33,7 +38,9 @@ use std::io::{BufWriter, Write};
 use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-use rt_core::msg::{DriverStatus, ForceSample, Reference, StimTick, TimingReport};
+use rt_core::msg::{
+    DriverStatus, ForceSample, PulseFate, PulseOutcome, Reference, StimTick, TimingReport,
+};
 
 use crate::core::BeatRecord;
 
@@ -186,6 +193,10 @@ pub struct RecordingSummary {
     pub ticks: u64,
     /// ForceSamples recorded.
     pub force_samples: u64,
+    /// Pulses the pattern generator decided, over the data set's rows.
+    pub pulses_decided: u64,
+    /// Of those, pulses the driver reported sent.
+    pub pulses_delivered: u64,
 }
 
 /// Records one stimulation run.
@@ -196,10 +207,14 @@ pub struct Recorder {
     force: Stream,
     references: Stream,
     status: Stream,
+    outcomes: Stream,
     timing: Stream,
     beats: Stream,
     events: Stream,
     record: Option<OpenRecord>,
+    pending_outcomes: VecDeque<(u64, PulseFate)>,
+    pulses_decided: u64,
+    pulses_delivered: u64,
     entries: Vec<Entry>,
     next_record: usize,
     pending_ticks: VecDeque<StimTick>,
@@ -218,6 +233,10 @@ pub struct Recorder {
 pub const FORCE_WAIT_NS: u64 = 100_000_000;
 /// A force sample further than this from a tick's time does not belong to it, ns.
 pub const FORCE_MATCH_NS: u64 = 1_500_000;
+/// A tick that fired waits at most this long (after its grid time, by the recorder's
+/// clock) for the driver's [`PulseOutcome`]; without one its pulse is recorded as not
+/// delivered, ns. Outcomes cross two processes and the recorder thread may be descheduled.
+pub const OUTCOME_WAIT_NS: u64 = 500_000_000;
 
 impl Recorder {
     /// Creates the run directory `root/name` (0750, parents too) and its files.
@@ -259,6 +278,7 @@ impl Recorder {
                     "seq,t_ns,ticks_received,ticks_lost,pulses_sent,pulses_rejected,can_tx_errors,watchdog_trips,fault_code,state,stimulator_state",
                 ),
             )?,
+            outcomes: Stream::create(d, "outcomes.csv", Some("seq,t_ns,tick_seq,tick_t_ns,fate"))?,
             timing: Stream::create(
                 d,
                 "timing.csv",
@@ -277,6 +297,9 @@ impl Recorder {
             dir,
             settings,
             record: None,
+            pending_outcomes: VecDeque::new(),
+            pulses_decided: 0,
+            pulses_delivered: 0,
             entries: Vec::new(),
             next_record: 0,
             pending_ticks: VecDeque::new(),
@@ -393,6 +416,56 @@ impl Recorder {
         self.guard(r)
     }
 
+    /// Records the driver's outcome of one pulse decision (what the data set's `pulse`
+    /// column says was delivered). An outcome that does not decode is kept in
+    /// `outcomes.csv` and counts as not delivered.
+    pub fn on_outcome(&mut self, o: &PulseOutcome, now_ns: u64) -> Result<(), RecordingError> {
+        self.ok()?;
+        let fate = o.fate();
+        let r = self.outcomes.line(format_args!(
+            "{},{},{},{},{}",
+            o.seq,
+            o.t_ns,
+            o.tick_seq,
+            o.tick_t_ns,
+            fate.map_or("invalid", PulseFate::name)
+        ));
+        self.guard(r)?;
+        let fate = fate.unwrap_or(PulseFate::Refused);
+        // Outcomes come in tick order, and may overtake their tick on the way here; one of
+        // a tick already written is too late and dropped.
+        if o.tick_seq > self.last_tick_seq {
+            self.pending_outcomes.push_back((o.tick_seq, fate));
+            while self.pending_outcomes.len() > 4096 {
+                self.pending_outcomes.pop_front();
+            }
+        }
+        let r = self.drain(now_ns);
+        self.guard(r)
+    }
+
+    /// The driver's outcome for tick `seq` has arrived, or cannot arrive any more (an
+    /// outcome of a later tick is in).
+    fn outcome_known(&self, seq: u64) -> bool {
+        self.pending_outcomes.iter().any(|&(s, _)| s >= seq)
+    }
+
+    /// Whether the pulse of tick `seq` was delivered: its outcome says sent. Forgets the
+    /// outcomes up to it.
+    fn take_delivered(&mut self, seq: u64) -> bool {
+        let mut delivered = false;
+        while let Some(&(s, fate)) = self.pending_outcomes.front() {
+            if s > seq {
+                break;
+            }
+            self.pending_outcomes.pop_front();
+            if s == seq {
+                delivered = fate == PulseFate::Sent;
+            }
+        }
+        delivered
+    }
+
     /// Records a TimingReport.
     pub fn on_timing(&mut self, r: &TimingReport) -> Result<(), RecordingError> {
         self.ok()?;
@@ -485,14 +558,17 @@ impl Recorder {
     fn drain(&mut self, now_ns: u64) -> Result<(), RecordingError> {
         let latest_force = self.recent_force.back().map_or(0, |&(t, _)| t);
         while let Some(t) = self.pending_ticks.front().copied() {
-            let due =
+            let force_due =
                 latest_force >= t.t_ns + FORCE_MATCH_NS / 2 || now_ns >= t.t_ns + FORCE_WAIT_NS;
-            if !due {
+            let outcome_due =
+                !t.fires() || self.outcome_known(t.seq) || now_ns >= t.t_ns + OUTCOME_WAIT_NS;
+            if !(force_due && outcome_due) {
                 break;
             }
             self.pending_ticks.pop_front();
             let force = self.force_at(t.t_ns);
-            self.row(&t, force)?;
+            let delivered = t.fires() && self.take_delivered(t.seq);
+            self.row(&t, force, delivered)?;
         }
         // Forget force samples no pending tick can use.
         let oldest = self
@@ -506,7 +582,12 @@ impl Recorder {
         Ok(())
     }
 
-    fn row(&mut self, t: &StimTick, force: Option<f64>) -> Result<(), RecordingError> {
+    fn row(
+        &mut self,
+        t: &StimTick,
+        force: Option<f64>,
+        delivered: bool,
+    ) -> Result<(), RecordingError> {
         while self.boundaries.front().is_some_and(|(b, _)| *b <= t.t_ns) {
             if let Some((_, kind)) = self.boundaries.pop_front() {
                 self.boundary_pending = Some(kind);
@@ -539,7 +620,7 @@ impl Recorder {
                 .unwrap_or_else(|| "continued".into());
             let file = format!("record_{:05}.csv", self.next_record);
             self.next_record += 1;
-            let stream = Stream::create(&self.dir, &file, Some("t_ms,pulse,force"))?;
+            let stream = Stream::create(&self.dir, &file, Some(fes_dataset::CSV_HEADER_DECIDED))?;
             self.record = Some(OpenRecord {
                 file,
                 kind: format!("{kind} (tick {})", t.seq),
@@ -554,13 +635,16 @@ impl Recorder {
             return Ok(());
         };
         r.stream.line(format_args!(
-            "{},{},{}",
+            "{},{},{},{}",
             r.samples,
-            u8::from(t.fires()),
-            force
+            u8::from(delivered),
+            force,
+            u8::from(t.fires())
         ))?;
         r.samples += 1;
-        r.pulses += usize::from(t.fires());
+        r.pulses += usize::from(delivered);
+        self.pulses_decided += u64::from(t.fires());
+        self.pulses_delivered += u64::from(delivered);
         r.last_grid_ns = t.t_ns;
         Ok(())
     }
@@ -652,6 +736,7 @@ impl Recorder {
             &mut self.force,
             &mut self.references,
             &mut self.status,
+            &mut self.outcomes,
             &mut self.timing,
             &mut self.beats,
             &mut self.events,
@@ -668,7 +753,7 @@ impl Recorder {
     /// flushed and fsynced, the directory fsynced.
     pub fn finish(mut self, now_ns: u64) -> Result<RecordingSummary, RecordingError> {
         self.ok()?;
-        let far = now_ns.saturating_add(FORCE_WAIT_NS);
+        let far = now_ns.saturating_add(FORCE_WAIT_NS.max(OUTCOME_WAIT_NS));
         self.drain(far)?;
         self.end_record()?;
         for s in [
@@ -676,6 +761,7 @@ impl Recorder {
             &mut self.force,
             &mut self.references,
             &mut self.status,
+            &mut self.outcomes,
             &mut self.timing,
             &mut self.beats,
             &mut self.events,
@@ -690,6 +776,8 @@ impl Recorder {
             records: self.entries.len(),
             ticks: self.tick_count,
             force_samples: self.force_count,
+            pulses_decided: self.pulses_decided,
+            pulses_delivered: self.pulses_delivered,
         })
     }
 }

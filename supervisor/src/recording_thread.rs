@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use crossbeam::channel::{Sender, TrySendError, bounded};
-use rt_core::msg::{DriverStatus, ForceSample, Reference, StimTick, TimingReport};
+use rt_core::msg::{DriverStatus, ForceSample, PulseOutcome, Reference, StimTick, TimingReport};
 
 use crate::core::BeatRecord;
 use crate::recording::{Recorder, RecorderSettings, RecordingError, RecordingSummary};
@@ -117,6 +117,8 @@ pub enum Item {
     Reference(Reference),
     /// A DriverStatus.
     Status(DriverStatus),
+    /// A PulseOutcome and when it was taken, ns.
+    Outcome(PulseOutcome, u64),
     /// A TimingReport.
     Timing(TimingReport),
     /// A completed beat.
@@ -293,6 +295,7 @@ fn apply(rec: &mut Recorder, item: Item) -> Result<(), RecordingError> {
         Item::Force(f, now) => rec.on_force(&f, now),
         Item::Reference(r) => rec.on_reference(&r),
         Item::Status(s) => rec.on_status(&s),
+        Item::Outcome(o, now) => rec.on_outcome(&o, now),
         Item::Timing(t) => rec.on_timing(&t),
         Item::Beat(b) => rec.on_beat(&b),
         Item::Boundary(t, kind) => {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use fes_dataset::DataSet;
-use rt_core::msg::{ForceSample, Reference, StimTick};
+use rt_core::msg::{ForceSample, PulseFate, PulseOutcome, Reference, StimTick};
 use supervisor::core::FaultCause;
 use supervisor::health::Cause;
 use supervisor::recording::{Recorder, RecorderSettings};
@@ -68,19 +68,51 @@ fn sample(k: u64) -> ForceSample {
     }
 }
 
+/// The driver refused the pulse of tick k (one in four of the pulses, k = 53, 153, ...).
+fn refused(k: u64) -> bool {
+    k % 100 == 53
+}
+
+/// The driver's outcome of tick k's pulse.
+fn outcome(k: u64, n: &mut u64) -> PulseOutcome {
+    *n += 1;
+    let fate = if refused(k) {
+        PulseFate::Refused
+    } else {
+        PulseFate::Sent
+    };
+    PulseOutcome::new(*n, T0 + k * MS + 400_000, k + 1, T0 + k * MS, fate)
+}
+
 fn tempdir(tag: &str) -> fes_testkit::Scratch {
     fes_testkit::Scratch::new(tag)
 }
 
-/// Feeds `n` ms of a run: ticks first, their force 2 ms later (as over CAN), a beat
-/// boundary every 800 ms, a reference every 10 ms.
+/// Feeds `n` ms of a run: ticks first, the driver's outcome of each pulse with it (the
+/// outcome of the tick before: it may also overtake its tick), their force 2 ms later (as
+/// over CAN), a beat boundary every 800 ms, a reference every 10 ms.
 fn feed(r: &mut Recorder, n: u64) {
+    feed_with(r, n, |_| true);
+}
+
+/// [`feed`], with the driver's outcome of tick k's pulse sent only when `reported(k)`.
+fn feed_with(r: &mut Recorder, n: u64, reported: impl Fn(u64) -> bool) {
+    let mut outcomes = 0;
     for k in 0..n {
         let now = T0 + k * MS + 500_000;
         if k % 800 == 0 {
             r.boundary(T0 + k * MS, format!("beat {}", k / 800));
         }
-        r.on_stim_tick(&tick(k), now).unwrap();
+        let t = tick(k);
+        // The even pulses' outcomes arrive before their ticks, the odd ones' after.
+        let early = (k / 25) % 2 == 0;
+        if t.fires() && reported(k) && early {
+            r.on_outcome(&outcome(k, &mut outcomes), now).unwrap();
+        }
+        r.on_stim_tick(&t, now).unwrap();
+        if t.fires() && reported(k) && !early {
+            r.on_outcome(&outcome(k, &mut outcomes), now).unwrap();
+        }
         if k >= 2 {
             r.on_force(&sample(k - 2), now).unwrap();
         }
@@ -103,6 +135,7 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
     r.on_event(T0 + 3000 * MS, "stop").unwrap();
     let s = r.finish(T0 + 3001 * MS).unwrap();
     assert_eq!(s.ticks, 3000);
+    assert_eq!((s.pulses_decided, s.pulses_delivered), (120, 90));
     let dir = root.join("run1");
     assert_eq!(
         std::fs::metadata(&dir).unwrap().permissions().mode() & 0o777,
@@ -113,6 +146,7 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         "ticks.csv",
         "force.csv",
         "events.jsonl",
+        "outcomes.csv",
         "record_00000.csv",
     ] {
         let m = std::fs::metadata(dir.join(f)).unwrap().permissions().mode() & 0o777;
@@ -126,9 +160,14 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
     let mut k = 0u64;
     for rec in &ds.records {
         assert!(rec.kind.starts_with("beat"), "{}", rec.kind);
+        let decided = rec
+            .decided
+            .as_ref()
+            .expect("a recording has the decided column");
         for (i, (&p, &f)) in rec.pulse.iter().zip(&rec.force).enumerate() {
             assert_eq!(rec.t_ms[i], i as f64);
-            assert_eq!(p, k % 25 == 3, "pulse at {k}");
+            assert_eq!(decided[i], k % 25 == 3, "decided at {k}");
+            assert_eq!(p, k % 25 == 3 && !refused(k), "delivered at {k}");
             assert_eq!(f, force(k), "force at {k}");
             k += 1;
         }
@@ -144,11 +183,52 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         "{}",
         ds.header.offset_n
     );
+    // The refused pulses are told apart, and identification refuses such data by default.
+    assert_eq!(ds.undelivered(), (30, 0));
     let ticks = std::fs::read_to_string(dir.join("ticks.csv")).unwrap();
     assert_eq!(ticks.lines().count(), 3001);
+    let outcomes = std::fs::read_to_string(dir.join("outcomes.csv")).unwrap();
+    assert_eq!(outcomes.lines().count(), 121);
+    assert!(outcomes.contains(",54,10053000000,refused"), "{outcomes}");
     let refs = std::fs::read_to_string(dir.join("references.csv")).unwrap();
     assert_eq!(refs.lines().count(), 301);
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A pulse decision the driver never reported on (its outcome lost, or the driver gone)
+/// is recorded as decided, not as delivered, once the outcome wait is over; the rows
+/// after it are not held up for longer than that.
+#[test]
+fn a_pulse_the_driver_never_reported_is_not_recorded_as_delivered() {
+    let root = tempdir("unreported");
+    let mut r = Recorder::create(&root, "run", settings(), T0).unwrap();
+    // The outcomes of ticks 503 and 1603 are lost; from 2000 on the driver is silent.
+    feed_with(&mut r, 2400, |k| k != 503 && k != 1603 && k < 2000);
+    let end = T0 + 2400 * MS + supervisor::recording::OUTCOME_WAIT_NS;
+    r.on_force(&sample(2398), end).unwrap();
+    r.on_force(&sample(2399), end).unwrap();
+    let s = r.finish(end).unwrap();
+    assert_eq!(s.ticks, 2400);
+    let ds = DataSet::read(root.join("run")).unwrap();
+    let lens: Vec<usize> = ds.records.iter().map(|r| r.len()).collect();
+    assert_eq!(lens, vec![800, 800, 800]);
+    let mut k = 0u64;
+    for rec in &ds.records {
+        let decided = rec.decided.as_ref().unwrap();
+        for (i, &p) in rec.pulse.iter().enumerate() {
+            let fires = k % 25 == 3;
+            assert_eq!(decided[i], fires, "decided at {k}");
+            let delivered = fires && !refused(k) && k != 503 && k != 1603 && k < 2000;
+            assert_eq!(p, delivered, "delivered at {k}");
+            k += 1;
+        }
+    }
+    // 96 decided; 20 refused, 2 lost, 16 after the driver fell silent (2003..2378).
+    assert_eq!(
+        (s.pulses_decided, s.pulses_delivered),
+        (96, 96 - 20 - 2 - 16)
+    );
+    assert_eq!(ds.undelivered(), (38, 0));
 }
 
 /// A crash (the recorder dropped without `finish`) loses at most the record being
@@ -424,8 +504,9 @@ fn kill_one(
 }
 
 /// Checks that every sample of every record of the recording `run`'s data set is the tick
-/// its record names (`... (tick N)`, then N + 1, ...): its pulse is that tick's pulse in
-/// `ticks.csv`, the raw stream (as far as it was flushed). Returns the number of samples.
+/// its record names (`... (tick N)`, then N + 1, ...): its decision is that tick's pulse in
+/// `ticks.csv`, the raw stream (as far as it was flushed), and it was delivered only if it
+/// was decided. Returns the number of samples.
 fn records_match_the_ticks(run: &Path, ds: &DataSet) -> Result<usize, String> {
     let raw = stack_support::raw_ticks(run);
     let pulse_of: std::collections::HashMap<u64, bool> =
@@ -443,8 +524,18 @@ fn records_match_the_ticks(run: &Path, ds: &DataSet) -> Result<usize, String> {
             .rsplit_once("(tick ")
             .and_then(|(_, t)| t.trim_end_matches(')').parse().ok())
             .ok_or_else(|| format!("{}: kind `{}` names no tick", r.file, r.kind))?;
-        for (i, &pulse) in r.pulse.iter().enumerate() {
+        let decided = r
+            .decided
+            .as_ref()
+            .ok_or_else(|| format!("{}: no decided column", r.file))?;
+        for (i, (&delivered, &pulse)) in r.pulse.iter().zip(decided).enumerate() {
             let seq = first + i as u64;
+            if delivered && !pulse {
+                return Err(format!(
+                    "{} sample {i} (tick {seq}): delivered but not decided",
+                    r.file
+                ));
+            }
             if seq > last_raw {
                 break;
             }
@@ -452,7 +543,7 @@ fn records_match_the_ticks(run: &Path, ds: &DataSet) -> Result<usize, String> {
                 Some(&p) if p == pulse => {}
                 other => {
                     return Err(format!(
-                        "{} sample {i} (tick {seq}): pulse {pulse}, ticks.csv {other:?}",
+                        "{} sample {i} (tick {seq}): decided {pulse}, ticks.csv {other:?}",
                         r.file
                     ));
                 }
