@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 
 use crossbeam::queue::ArrayQueue;
 use fes_can::{Emcy, NmtState, Status, StimState};
-use fes_rt::msg::{DeviceState, ValidationError};
+use fes_rt::msg::{DeviceState, DriverCommand, PulseFate, ValidationError};
 
 use crate::fault::{ArmRefusal, Fault};
 use crate::interlock::Violation;
@@ -213,6 +213,16 @@ pub enum DriverEvent {
         /// Retries after a full transmit queue.
         retries: u32,
     },
+    /// What became of the pulse a StimTick asked for (one per such tick received): the
+    /// recording's record of what was delivered (issue 19, item 5).
+    Outcome {
+        /// The StimTick's sequence number.
+        tick_seq: u64,
+        /// Its grid time, ns.
+        tick_t_ns: u64,
+        /// Sent, refused, not armed or not written.
+        fate: PulseFate,
+    },
     /// A tick was refused (its pulse, if any, not sent).
     Rejected {
         /// The tick's sequence number.
@@ -389,6 +399,12 @@ pub struct Counters {
     pub stimulator_pulses: u32,
     /// Wake-ups of the forward loop (its progress, for the systemd watchdog).
     pub wakeups: u64,
+    /// `seq` of the last DriverCommand handled (below [`DriverCommand::MAX_SEQ`]); 0 = none.
+    pub command_seq: u64,
+    /// What was done with it, a [`fes_rt::msg::CommandResult`] as `u8`.
+    pub command_result: u8,
+    /// Why it was refused, a [`fes_rt::msg::CommandRefusal`] as `u8`; 0 unless refused.
+    pub command_reason: u8,
 }
 
 /// [`Counters`] shared between threads: one writer (the forward thread), relaxed stores.
@@ -412,6 +428,9 @@ pub struct SharedStatus {
     last_pulse_tick_seq: AtomicU64,
     stimulator_pulses: AtomicU64,
     wakeups: AtomicU64,
+    /// `command_seq << 8 | command_result << 6 | command_reason`: the acknowledgement in one
+    /// store, so a reader never sees the seq of one command with the result of another.
+    command_ack: AtomicU64,
     /// Liveness of the StimTick publisher (a [`Liveness`] as `u8`), written by the report
     /// thread, read by the forward thread.
     pub liveness: AtomicU8,
@@ -442,11 +461,18 @@ impl SharedStatus {
         self.stimulator_pulses
             .store(u64::from(c.stimulator_pulses), r);
         self.wakeups.store(c.wakeups, r);
+        self.command_ack.store(
+            (c.command_seq & (DriverCommand::MAX_SEQ - 1)) << 8
+                | u64::from(c.command_result & 0x3) << 6
+                | u64::from(c.command_reason & 0x3f),
+            r,
+        );
     }
 
     /// Reads a snapshot (fields individually consistent; the set may straddle a wake-up).
     pub fn load(&self) -> Counters {
         let r = Ordering::Relaxed;
+        let ack = self.command_ack.load(r);
         Counters {
             ticks_received: self.ticks_received.load(r),
             ticks_lost: self.ticks_lost.load(r),
@@ -466,6 +492,9 @@ impl SharedStatus {
             last_pulse_tick_seq: self.last_pulse_tick_seq.load(r),
             stimulator_pulses: u32::try_from(self.stimulator_pulses.load(r)).unwrap_or(0),
             wakeups: self.wakeups.load(r),
+            command_seq: ack >> 8,
+            command_result: ((ack >> 6) & 0x3) as u8,
+            command_reason: (ack & 0x3f) as u8,
         }
     }
 
@@ -520,6 +549,9 @@ mod tests {
             last_pulse_tick_seq: 14,
             stimulator_pulses: 15,
             wakeups: 16,
+            command_seq: (1 << 56) - 1,
+            command_result: 2,
+            command_reason: 12,
         };
         let s = SharedStatus::default();
         s.store(&c);

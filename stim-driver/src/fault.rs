@@ -194,6 +194,25 @@ pub enum ArmRefusal {
     TxFailed,
 }
 
+impl ArmRefusal {
+    /// The reason as the DriverStatus acknowledgement carries it.
+    pub const fn reason(&self) -> fes_rt::msg::CommandRefusal {
+        use fes_rt::msg::CommandRefusal as R;
+        match self {
+            ArmRefusal::NotConfigured => R::NotConfigured,
+            ArmRefusal::LinkDown => R::LinkDown,
+            ArmRefusal::StimulatorSilent => R::StimulatorSilent,
+            ArmRefusal::StimulatorConfigMismatch { .. } => R::StimulatorConfigMismatch,
+            ArmRefusal::NoTicks => R::NoTicks,
+            ArmRefusal::PublisherNotAlive => R::PublisherNotAlive,
+            ArmRefusal::SupervisorDead => R::SupervisorDead,
+            ArmRefusal::GeneratorStopped => R::GeneratorStopped,
+            ArmRefusal::StaleCommand => R::StaleCommand,
+            ArmRefusal::TxFailed => R::TxFailed,
+        }
+    }
+}
+
 impl core::fmt::Display for ArmRefusal {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {

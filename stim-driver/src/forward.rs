@@ -26,7 +26,9 @@
 //! STATUS that still shows the stimulator operational gets another NMT stop.
 
 use fes_can::{ErrorCode, NmtState, Nodes, Status, StimLimits, StimState};
-use fes_rt::msg::{Contract, DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::msg::{
+    CommandRefusal, CommandResult, Contract, DriverCommand, DriverCommandKind, PulseFate, StimTick,
+};
 
 use crate::event::{
     BringUp, BusErrorKind, BusEvent, Counters, DriverEvent, DriverState, EventSink, FrameKind,
@@ -65,6 +67,15 @@ pub struct ForwardSettings {
     pub max_wait_ns: u64,
     /// Trip when the supervisor's node dies or leaves while armed ([`ForwardPath::on_supervisor_liveness`]).
     pub supervisor_watch: bool,
+}
+
+/// Reports what became of the pulse `tick` asked for.
+fn outcome(tick: &StimTick, fate: PulseFate, ev: &mut impl EventSink) {
+    ev.emit(DriverEvent::Outcome {
+        tick_seq: tick.seq,
+        tick_t_ns: tick.t_ns,
+        fate,
+    });
 }
 
 /// A pending NMT stop is not re-sent more often than this, ns.
@@ -214,6 +225,9 @@ impl<T: CanTx> ForwardPath<T> {
                 seq: tick.seq,
                 age_ns,
             });
+            if tick.pulse != 0 {
+                outcome(tick, PulseFate::Refused, ev);
+            }
             if self.is_armed() {
                 self.trip(Fault::StaleTick { age_ns }, now_ns, ev);
             }
@@ -253,6 +267,9 @@ impl<T: CanTx> ForwardPath<T> {
                 violation,
                 pulse,
             });
+            if pulse {
+                outcome(tick, PulseFate::Refused, ev);
+            }
             self.finish(before, ev);
             return;
         }
@@ -270,19 +287,30 @@ impl<T: CanTx> ForwardPath<T> {
                     violation,
                     pulse,
                 });
+                if pulse {
+                    outcome(tick, PulseFate::Refused, ev);
+                }
             }
-            Verdict::Pulse(command) => self.forward(&command, now_ns, ev),
+            Verdict::Pulse(command) => {
+                let fate = self.forward(&command, now_ns, ev);
+                outcome(tick, fate, ev);
+            }
         }
         self.finish(before, ev);
     }
 
-    /// Sends an accepted pulse if armed.
-    fn forward(&mut self, command: &PulseCommand, now_ns: u64, ev: &mut impl EventSink) {
+    /// Sends an accepted pulse if armed; what became of it.
+    fn forward(
+        &mut self,
+        command: &PulseCommand,
+        now_ns: u64,
+        ev: &mut impl EventSink,
+    ) -> PulseFate {
         let result = match self.output.as_mut() {
             Some(Output::Armed(armed)) => armed.send_pulse(command),
             _ => {
                 self.counters.pulses_not_armed += 1;
-                return;
+                return PulseFate::NotArmed;
             }
         };
         match result {
@@ -299,8 +327,12 @@ impl<T: CanTx> ForwardPath<T> {
                     write_ns: sent.done.write_ns,
                     retries: sent.done.retries,
                 });
+                PulseFate::Sent
             }
-            Err(error) => self.tx_problem(FrameKind::Pulse, error, now_ns, ev),
+            Err(error) => {
+                self.tx_problem(FrameKind::Pulse, error, now_ns, ev);
+                PulseFate::NotWritten
+            }
         }
     }
 
@@ -411,6 +443,9 @@ impl<T: CanTx> ForwardPath<T> {
         let before = self.state();
         if let Err(error) = command.validate() {
             self.counters.commands_refused += 1;
+            if (1..DriverCommand::MAX_SEQ).contains(&command.seq) {
+                self.acknowledge(command.seq, Some(CommandRefusal::InvalidCommand));
+            }
             ev.emit(DriverEvent::CommandInvalid {
                 seq: command.seq,
                 error,
@@ -440,19 +475,34 @@ impl<T: CanTx> ForwardPath<T> {
                 if self.is_armed() {
                     self.mode = Mode::Disarmed;
                 }
+                self.acknowledge(command.seq, None);
                 ev.emit(DriverEvent::Disarmed {
                     command_seq: command.seq,
                 });
             }
-            Ok(DriverCommandKind::SafeStop) => self.trip(Fault::SafeStopCommand, now_ns, ev),
+            Ok(DriverCommandKind::SafeStop) => {
+                self.trip(Fault::SafeStopCommand, now_ns, ev);
+                self.acknowledge(command.seq, None);
+            }
             // validate() above decoded the kind already.
             Err(_) => {}
         }
         self.finish(before, ev);
     }
 
+    /// Records what was done with command `seq` (the acknowledgement in DriverStatus):
+    /// accepted, or refused for `refusal`.
+    fn acknowledge(&mut self, seq: u64, refusal: Option<CommandRefusal>) {
+        self.counters.command_seq = seq;
+        (self.counters.command_result, self.counters.command_reason) = match refusal {
+            None => (CommandResult::Accepted as u8, 0),
+            Some(r) => (CommandResult::Refused as u8, r as u8),
+        };
+    }
+
     fn refuse_arm(&mut self, command_seq: u64, refusal: ArmRefusal, ev: &mut impl EventSink) {
         self.counters.commands_refused += 1;
+        self.acknowledge(command_seq, Some(refusal.reason()));
         ev.emit(DriverEvent::ArmRefused {
             command_seq,
             refusal,
@@ -500,6 +550,7 @@ impl<T: CanTx> ForwardPath<T> {
 
     fn try_arm(&mut self, command_seq: u64, now_ns: u64, ev: &mut impl EventSink) {
         if self.is_armed() {
+            self.acknowledge(command_seq, None);
             return;
         }
         if let Some(refusal) = self.arm_refusal(now_ns) {
@@ -516,6 +567,7 @@ impl<T: CanTx> ForwardPath<T> {
                     };
                     self.interlocks.resync_sequence();
                     self.supervisor_seen_armed = self.supervisor == Liveness::Alive;
+                    self.acknowledge(command_seq, None);
                     ev.emit(DriverEvent::Armed { command_seq });
                 }
                 Err((disarmed, error)) => {

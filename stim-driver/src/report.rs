@@ -6,6 +6,8 @@
 //!   ([`crate::txstamp`]);
 //! * checks the StimTick publisher's liveness through iceoryx2 ([`LivenessMonitor`]) every
 //!   `liveness_check_ms` and hands it to the forward thread;
+//! * publishes a [`PulseOutcome`] for every StimTick that asked for a pulse (sent, refused,
+//!   not armed, not written), so that a recording says what was delivered;
 //! * publishes [`DriverStatus`] every `status_period_ms` and at once on a state change, and
 //!   a cumulative [`TimingReport`] (and an `.hlog` interval) every `report_period_ms`;
 //! * once the forward thread has ended: a last drain, the final DriverStatus and the final
@@ -16,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use fes_can::{Message, MessageKind, Nodes};
 use fes_rt::msg::port;
-use fes_rt::msg::{DeviceState, DriverCommand, DriverStatus, StimTick, TimingReport};
+use fes_rt::msg::{DeviceState, DriverCommand, DriverStatus, PulseOutcome, StimTick, TimingReport};
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::hlog::HlogWriter;
 use fes_rt::rt::node::{RunError, create_node};
@@ -60,13 +62,20 @@ pub fn driver_status(seq: u64, t_ns: u64, c: &Counters) -> DriverStatus {
         fault_code: c.fault_code,
         state,
         stimulator_state: c.stimulator_state,
+        command_seq: c.command_seq,
+        command_result: c.command_result,
+        command_reason: c.command_reason,
+        reserved: [0; 6],
     }
 }
 
 /// Logs one event at its level (the per-tick timing events are not logged).
 pub fn log_event(event: &DriverEvent) {
     match *event {
-        DriverEvent::Wake { .. } | DriverEvent::Tick { .. } | DriverEvent::PulseSent { .. } => {}
+        DriverEvent::Wake { .. }
+        | DriverEvent::Tick { .. }
+        | DriverEvent::PulseSent { .. }
+        | DriverEvent::Outcome { .. } => {}
         DriverEvent::Rejected {
             tick_seq,
             violation,
@@ -174,6 +183,7 @@ pub fn run_report(
     let ports = ReportPorts {
         status: port::publisher::<DriverStatus>(&node, prefix)?,
         timing: port::publisher::<TimingReport>(&node, prefix)?,
+        outcome: port::publisher::<PulseOutcome>(&node, prefix)?,
         generator: LivenessMonitor::<StimTick>::new(&node, prefix)?,
         supervisor: LivenessMonitor::<DriverCommand>::new(&node, prefix)?,
     };
@@ -209,6 +219,7 @@ fn test_panic_after() -> Option<Duration> {
 struct ReportPorts {
     status: Publisher<ipc::Service, DriverStatus, ()>,
     timing: Publisher<ipc::Service, TimingReport, ()>,
+    outcome: Publisher<ipc::Service, PulseOutcome, ()>,
     generator: LivenessMonitor<StimTick>,
     supervisor: LivenessMonitor<DriverCommand>,
 }
@@ -226,6 +237,9 @@ struct Reporter<'a> {
     stamps_paired: u64,
     status_seq: u64,
     report_seq: u64,
+    outcome_seq: u64,
+    /// The command acknowledgement last published: a new one is published at once.
+    last_ack: (u64, u8),
     start: Instant,
     status_period: Duration,
     report_period: Duration,
@@ -260,6 +274,8 @@ impl<'a> Reporter<'a> {
             stamps_paired: 0,
             status_seq: 0,
             report_seq: 0,
+            outcome_seq: 0,
+            last_ack: (0, 0),
             start,
             status_period: Duration::from_millis(config.telemetry.status_period_ms),
             report_period,
@@ -281,7 +297,12 @@ impl<'a> Reporter<'a> {
             self.next_liveness = now + self.liveness_period;
             self.check_liveness();
         }
-        if changed || now >= self.next_status {
+        let ack = {
+            let c = self.shared.status.load();
+            (c.command_seq, c.command_result)
+        };
+        if changed || ack != self.last_ack || now >= self.next_status {
+            self.last_ack = ack;
             self.next_status = now + self.status_period;
             self.publish_status();
         }
@@ -326,6 +347,23 @@ impl<'a> Reporter<'a> {
                     t_publish_ns,
                     ..
                 } => self.pulse_times.insert(pulse_seq, t_publish_ns),
+                DriverEvent::Outcome {
+                    tick_seq,
+                    tick_t_ns,
+                    fate,
+                } => {
+                    self.outcome_seq += 1;
+                    let outcome = PulseOutcome::new(
+                        self.outcome_seq,
+                        monotonic_ns(),
+                        tick_seq,
+                        tick_t_ns,
+                        fate,
+                    );
+                    // A lost outcome is not fatal: the recorder counts a pulse it never
+                    // heard of as not delivered.
+                    let _ = self.ports.outcome.send_copy(outcome);
+                }
                 DriverEvent::StateChanged { .. } => state_changed = true,
                 _ => {}
             }

@@ -738,6 +738,10 @@ mod tests {
             fault_code: 0,
             state: DeviceState::Armed as u8,
             stimulator_state: DeviceState::Armed as u8,
+            command_seq: 0,
+            command_result: 0,
+            command_reason: 0,
+            reserved: [0; 6],
         };
         // Beat 6 of the profile ([4.8 s, 5.6 s)) has its pulse refused at about 4.95 s,
         // and its contraction falls to half; every other beat gets 80 % of the reference.

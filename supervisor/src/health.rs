@@ -1087,6 +1087,10 @@ mod tests {
             fault_code: 0,
             state: DeviceState::Armed as u8,
             stimulator_state: DeviceState::Armed as u8,
+            command_seq: 0,
+            command_result: 0,
+            command_reason: 0,
+            reserved: [0; 6],
         }
     }
 

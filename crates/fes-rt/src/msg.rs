@@ -26,7 +26,7 @@ mod timing_report;
 mod validate;
 
 pub use driver_command::{DriverCommand, DriverCommandKind};
-pub use driver_status::{DeviceState, DriverStatus};
+pub use driver_status::{CommandAck, CommandRefusal, CommandResult, DeviceState, DriverStatus};
 pub use force_sample::ForceSample;
 pub use iceoryx2::prelude::ZeroCopySend;
 pub use port::PortError;

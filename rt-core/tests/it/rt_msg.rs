@@ -39,10 +39,13 @@ fn layouts_are_pinned() {
 
     assert_eq!(
         (size_of::<DriverStatus>(), align_of::<DriverStatus>()),
-        (64, 8)
+        (80, 8)
     );
     assert_eq!(offset_of!(DriverStatus, watchdog_trips), 56);
     assert_eq!(offset_of!(DriverStatus, state), 62);
+    assert_eq!(offset_of!(DriverStatus, command_seq), 64);
+    assert_eq!(offset_of!(DriverStatus, command_result), 72);
+    assert_eq!(offset_of!(DriverStatus, command_reason), 73);
 
     assert_eq!(size_of::<LatencySummary>(), 40);
     assert_eq!(
@@ -67,7 +70,7 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<Reference>(), "fes::Reference::v1");
     assert_eq!(type_name::<StimTick>(), "fes::StimTick::v1");
     assert_eq!(type_name::<ForceSample>(), "fes::ForceSample::v1");
-    assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v1");
+    assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v2");
     assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");
     assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
     assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v1");
@@ -434,6 +437,10 @@ fn driver_status_validation_table() {
         fault_code: 0,
         state: DeviceState::Armed as u8,
         stimulator_state: DeviceState::Unknown as u8,
+        command_seq: 0,
+        command_result: 0,
+        command_reason: 0,
+        reserved: [0; 6],
     };
     table(
         base,
@@ -467,9 +474,82 @@ fn driver_status_validation_table() {
                 |s| s.pulses_sent = 101,
                 Some(Inconsistent("more pulses sent than StimTicks received")),
             ),
+            (
+                "an accepted command",
+                |s| {
+                    s.command_seq = 7;
+                    s.command_result = CommandResult::Accepted as u8;
+                },
+                None,
+            ),
+            (
+                "a refused command with its reason",
+                |s| {
+                    s.command_seq = 7;
+                    s.command_result = CommandResult::Refused as u8;
+                    s.command_reason = CommandRefusal::NoTicks as u8;
+                },
+                None,
+            ),
+            (
+                "a result without a command",
+                |s| s.command_result = CommandResult::Accepted as u8,
+                Some(Inconsistent(
+                    "command_seq, command_result and command_reason disagree",
+                )),
+            ),
+            (
+                "a command without a result",
+                |s| s.command_seq = 3,
+                Some(Inconsistent(
+                    "command_seq, command_result and command_reason disagree",
+                )),
+            ),
+            (
+                "an accepted command with a reason",
+                |s| {
+                    s.command_seq = 3;
+                    s.command_result = CommandResult::Accepted as u8;
+                    s.command_reason = 2;
+                },
+                Some(Inconsistent(
+                    "command_seq, command_result and command_reason disagree",
+                )),
+            ),
+            (
+                "an unknown refusal reason",
+                |s| {
+                    s.command_seq = 3;
+                    s.command_result = CommandResult::Refused as u8;
+                    s.command_reason = 200;
+                },
+                Some(UnknownEnum {
+                    field: "command_reason",
+                    value: 200,
+                }),
+            ),
+            (
+                "an unknown result",
+                |s| {
+                    s.command_seq = 3;
+                    s.command_result = 3;
+                },
+                Some(Inconsistent(
+                    "command_seq, command_result and command_reason disagree",
+                )),
+            ),
+            (
+                "reserved bytes set",
+                |s| s.reserved[5] = 1,
+                Some(ReservedNotZero { field: "reserved" }),
+            ),
         ],
     );
     assert_eq!(base.state(), Ok(DeviceState::Armed));
+    assert_eq!(base.command_ack(), Ok(CommandAck::None));
+    for r in CommandRefusal::ALL {
+        assert_eq!(CommandRefusal::try_from(r as u8), Ok(r));
+    }
     for v in 0..=255u8 {
         let known = matches!(v, 0..=5 | 255);
         assert_eq!(DeviceState::try_from(v).is_ok(), known, "{v}");

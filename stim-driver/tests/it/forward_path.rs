@@ -7,7 +7,10 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_can::{Emcy, ErrorCode, Message, NmtCommand, NmtState, Nodes, StimLimits, StimState};
-use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::msg::{
+    CommandAck, CommandRefusal, CommandResult, Contract, DriverCommand, DriverCommandKind,
+    PulseFate, StimTick,
+};
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
 use stim_driver::fault::{ArmRefusal, Fault};
@@ -980,4 +983,112 @@ fn malformed_configurations_are_refused_clearly_without_a_panic() {
         String::from_utf8_lossy(&out.stderr)
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The driver's outcome of every pulse decision (what the recording records as delivered,
+/// issue 19 item 5): not armed before the Arm, sent while armed, refused by an interlock,
+/// not armed again after a disarm; one outcome per tick that asked for a pulse, none for
+/// the others.
+#[test]
+fn every_pulse_decision_gets_its_outcome() {
+    let outcomes = |r: &Rig| -> Vec<(u64, PulseFate)> {
+        r.ev.iter()
+            .filter_map(|e| match e {
+                DriverEvent::Outcome { tick_seq, fate, .. } => Some((*tick_seq, *fate)),
+                _ => None,
+            })
+            .collect()
+    };
+    let mut r = Rig::configured(settings());
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.advance(MS);
+    r.tick(true);
+    let before_arm = r.tick_seq;
+    r.advance(MS);
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    r.advance(30 * MS);
+    r.tick(true);
+    let sent = r.tick_seq;
+    // The next pulse 1 ms later breaks the minimum inter-pulse interval: refused.
+    r.advance(MS);
+    r.tick(true);
+    let refused = r.tick_seq;
+    r.command(DriverCommandKind::Disarm);
+    r.advance(30 * MS);
+    r.tick(true);
+    let after_disarm = r.tick_seq;
+    assert_eq!(
+        outcomes(&r),
+        vec![
+            (before_arm, PulseFate::NotArmed),
+            (sent, PulseFate::Sent),
+            (refused, PulseFate::Refused),
+            (after_disarm, PulseFate::NotArmed),
+        ],
+        "{:?}",
+        r.ev
+    );
+    assert_eq!(r.bus.pulses().len(), 1);
+}
+
+/// Every command is acknowledged in the counters the DriverStatus carries (issue 19 item
+/// 3): an Arm refused with its reason, an Arm accepted, a Disarm and a SafeStop accepted,
+/// an invalid command refused as invalid.
+#[test]
+fn every_command_is_acknowledged_with_its_outcome() {
+    let ack = |r: &Rig| {
+        let c = r.fp.counters();
+        (c.command_seq, c.command_result, c.command_reason)
+    };
+    let mut r = Rig::configured(settings());
+    assert_eq!(ack(&r), (0, 0, 0));
+    // No ticks yet: the Arm is refused.
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(
+        ack(&r),
+        (
+            r.cmd_seq,
+            CommandResult::Refused as u8,
+            CommandRefusal::NoTicks as u8
+        )
+    );
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    assert_eq!(ack(&r), (r.cmd_seq, CommandResult::Accepted as u8, 0));
+    r.advance(MS);
+    r.command(DriverCommandKind::Disarm);
+    assert_eq!(ack(&r), (r.cmd_seq, CommandResult::Accepted as u8, 0));
+    r.advance(MS);
+    r.command(DriverCommandKind::SafeStop);
+    assert_eq!(ack(&r), (r.cmd_seq, CommandResult::Accepted as u8, 0));
+    r.cmd_seq += 1;
+    let mut bad = DriverCommand::new(r.cmd_seq, r.now, DriverCommandKind::Arm);
+    bad.reserved[0] = 1;
+    r.fp.on_command(&bad, r.now, &mut r.ev);
+    assert_eq!(
+        ack(&r),
+        (
+            r.cmd_seq,
+            CommandResult::Refused as u8,
+            CommandRefusal::InvalidCommand as u8
+        )
+    );
+    // What the DriverStatus carries validates and decodes to the same.
+    let s = stim_driver::report::driver_status(1, r.now, r.fp.counters());
+    assert_eq!(s.validate(), Ok(()));
+    assert_eq!(
+        s.command_ack(),
+        Ok(CommandAck::Refused {
+            seq: r.cmd_seq,
+            reason: CommandRefusal::InvalidCommand
+        })
+    );
 }

@@ -194,6 +194,10 @@ impl World {
             fault_code,
             state: if valid { state as u8 } else { 250 },
             stimulator_state: DeviceState::Armed as u8,
+            command_seq: 0,
+            command_result: 0,
+            command_reason: 0,
+            reserved: [0; 6],
         }
     }
 

@@ -4,7 +4,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_DRIVER_COMMAND};
-use super::validate::{ValidationError, nonzero_seq, reserved_zero};
+use super::validate::{ValidationError, int_in_range, nonzero_seq, reserved_zero};
 
 /// What the supervisor asks the driver to do.
 #[repr(u8)]
@@ -59,6 +59,10 @@ pub struct DriverCommand {
 }
 
 impl DriverCommand {
+    /// `seq` must be below this (2^56): the driver's acknowledgement packs it with its
+    /// result into one word. The supervisor counts from its start time in µs.
+    pub const MAX_SEQ: u64 = 1 << 56;
+
     /// A command of `kind`.
     pub fn new(seq: u64, t_ns: u64, kind: DriverCommandKind) -> Self {
         Self {
@@ -89,6 +93,7 @@ impl Contract for DriverCommand {
 
     fn validate(&self) -> Result<(), ValidationError> {
         nonzero_seq(self.seq)?;
+        int_in_range("seq", self.seq, 1, Self::MAX_SEQ - 1)?;
         self.kind()?;
         reserved_zero("reserved", &self.reserved)?;
         if self.t_ns == 0 {

@@ -4,7 +4,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_DRIVER_STATUS};
-use super::validate::{ValidationError, nonzero_seq};
+use super::validate::{ValidationError, nonzero_seq, reserved_zero};
 
 /// Life-cycle state of the driver or the stimulator (the stimulator's STATUS frame states).
 #[repr(u8)]
@@ -49,10 +49,124 @@ impl TryFrom<u8> for DeviceState {
     }
 }
 
-/// Periodic status of the stimulator driver, with counters since it started.
+/// What the driver did with a [`super::DriverCommand`] (the acknowledgement a
+/// [`DriverStatus`] carries, issue 19 item 3).
+#[repr(u8)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CommandResult {
+    /// No command handled yet (`command_seq` is 0).
+    None = 0,
+    /// Carried out (an Arm: armed, or armed already; a Disarm or SafeStop: stopped).
+    Accepted = 1,
+    /// Refused, for the [`CommandRefusal`] in `command_reason`.
+    Refused = 2,
+}
+
+/// Why the driver refused a command (`command_reason` of a [`DriverStatus`]).
+#[repr(u8)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CommandRefusal {
+    /// The stimulator is not configured yet (or refused the configuration).
+    NotConfigured = 1,
+    /// The bus link is down, or a stop is still waiting to be written.
+    LinkDown = 2,
+    /// No recent STATUS from the stimulator.
+    StimulatorSilent = 3,
+    /// The stimulator does not report the driver's configuration.
+    StimulatorConfigMismatch = 4,
+    /// No valid StimTick within the watchdog time.
+    NoTicks = 5,
+    /// The StimTick publisher is not alive.
+    PublisherNotAlive = 6,
+    /// The supervisor's node was last seen dead.
+    SupervisorDead = 7,
+    /// The pattern generator has published its final tick.
+    GeneratorStopped = 8,
+    /// The command was too old, from the future, or not newer than the last one.
+    StaleCommand = 9,
+    /// The NMT start could not be written.
+    TxFailed = 10,
+    /// The command did not validate.
+    InvalidCommand = 11,
+    /// The stimulator does not report the limits the driver configured.
+    StimulatorLimitsMismatch = 12,
+}
+
+impl CommandRefusal {
+    /// Every reason, in code order.
+    pub const ALL: [CommandRefusal; 12] = [
+        Self::NotConfigured,
+        Self::LinkDown,
+        Self::StimulatorSilent,
+        Self::StimulatorConfigMismatch,
+        Self::NoTicks,
+        Self::PublisherNotAlive,
+        Self::SupervisorDead,
+        Self::GeneratorStopped,
+        Self::StaleCommand,
+        Self::TxFailed,
+        Self::InvalidCommand,
+        Self::StimulatorLimitsMismatch,
+    ];
+
+    /// The reason's name (logs, `supervisor status`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::NotConfigured => "the stimulator is not configured",
+            Self::LinkDown => "the bus link is down",
+            Self::StimulatorSilent => "no recent STATUS from the stimulator",
+            Self::StimulatorConfigMismatch => "the stimulator reports another configuration",
+            Self::NoTicks => "no valid StimTick within the watchdog time",
+            Self::PublisherNotAlive => "the StimTick publisher is not alive",
+            Self::SupervisorDead => "the supervisor was seen dead",
+            Self::GeneratorStopped => "the pattern generator has stopped",
+            Self::StaleCommand => "the command was stale",
+            Self::TxFailed => "the NMT start could not be written",
+            Self::InvalidCommand => "the command was invalid",
+            Self::StimulatorLimitsMismatch => "the stimulator reports other limits",
+        }
+    }
+}
+
+impl TryFrom<u8> for CommandRefusal {
+    type Error = ValidationError;
+
+    fn try_from(v: u8) -> Result<Self, ValidationError> {
+        Self::ALL
+            .iter()
+            .copied()
+            .find(|r| *r as u8 == v)
+            .ok_or(ValidationError::UnknownEnum {
+                field: "command_reason",
+                value: v.into(),
+            })
+    }
+}
+
+/// The acknowledgement of the last command, decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CommandAck {
+    /// No command handled yet.
+    None,
+    /// Command `seq` was carried out.
+    Accepted {
+        /// The command's `seq`.
+        seq: u64,
+    },
+    /// Command `seq` was refused.
+    Refused {
+        /// The command's `seq`.
+        seq: u64,
+        /// Why.
+        reason: CommandRefusal,
+    },
+}
+
+/// Periodic status of the stimulator driver, with counters since it started, and the
+/// acknowledgement of the last DriverCommand it handled.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("fes::DriverStatus::v1")]
+#[type_name("fes::DriverStatus::v2")]
 pub struct DriverStatus {
     /// Sequence number, 1, 2, ... per publisher.
     pub seq: u64,
@@ -76,6 +190,14 @@ pub struct DriverStatus {
     pub state: u8,
     /// Stimulator state from its STATUS frames, a [`DeviceState`] as `u8`.
     pub stimulator_state: u8,
+    /// `seq` of the last DriverCommand the driver handled; 0 = none.
+    pub command_seq: u64,
+    /// What it did with it, a [`CommandResult`] as `u8`.
+    pub command_result: u8,
+    /// Why it refused it, a [`CommandRefusal`] as `u8`; 0 unless refused.
+    pub command_reason: u8,
+    /// Reserved, zero.
+    pub reserved: [u8; 6],
 }
 
 impl DriverStatus {
@@ -162,6 +284,22 @@ impl DriverStatus {
         )
     }
 
+    /// The acknowledgement of the last command, decoded.
+    pub fn command_ack(&self) -> Result<CommandAck, ValidationError> {
+        let seq = self.command_seq;
+        match (self.command_result, self.command_reason) {
+            (0, 0) if seq == 0 => Ok(CommandAck::None),
+            (1, 0) if seq != 0 => Ok(CommandAck::Accepted { seq }),
+            (2, r) if seq != 0 => Ok(CommandAck::Refused {
+                seq,
+                reason: CommandRefusal::try_from(r)?,
+            }),
+            _ => Err(ValidationError::Inconsistent(
+                "command_seq, command_result and command_reason disagree",
+            )),
+        }
+    }
+
     /// The driver's state, decoded.
     pub fn state(&self) -> Result<DeviceState, ValidationError> {
         DeviceState::try_from(self.state)
@@ -190,6 +328,8 @@ impl Contract for DriverStatus {
         nonzero_seq(self.seq)?;
         self.state()?;
         self.stimulator_state()?;
+        self.command_ack()?;
+        reserved_zero("reserved", &self.reserved)?;
         if self.pulses_sent > self.ticks_received {
             return Err(ValidationError::Inconsistent(
                 "more pulses sent than StimTicks received",
