@@ -64,6 +64,23 @@ pub enum FaultCause {
     Recording,
     /// The supervisor's own loop stalled while armed.
     SelfStall,
+    /// The driver's answer to an order ([`crate::command_link`]).
+    Driver {
+        /// What was wrong with it.
+        problem: DriverProblem,
+    },
+}
+
+/// What was wrong with the driver's answer to an order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DriverProblem {
+    /// It refused the Arm.
+    ArmRefused,
+    /// It did not acknowledge the Arm in time.
+    Unacknowledged,
+    /// Its state contradicts the order it confirmed.
+    StateMismatch,
 }
 
 impl FaultCause {
@@ -73,6 +90,8 @@ impl FaultCause {
             FaultCause::Process { cause, .. } => cause.is_timing(),
             FaultCause::SelfStall => true,
             FaultCause::Recording => false,
+            // The acknowledgement travels through the driver's report thread.
+            FaultCause::Driver { problem } => problem == DriverProblem::Unacknowledged,
         }
     }
 }
@@ -408,6 +427,12 @@ impl SupervisorCore {
             self.beat_starts.push(b);
         }
         self.profile = Some(run);
+    }
+
+    /// Orders another safe stop (the driver still armed after confirming a stop), whatever
+    /// the state.
+    pub fn reissue_safe_stop(&mut self) {
+        self.orders.push(DriverOrder::SafeStop);
     }
 
     /// Stops stimulation because of `fault`. Returns false when already in a fault (the

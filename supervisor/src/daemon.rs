@@ -19,12 +19,13 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use rt_core::msg::service::{ServiceError, open_pubsub};
 use rt_core::msg::{
-    Contract, DriverCommand, DriverCommandKind, DriverStatus, ForceSample, PulseOutcome, Reference,
-    StimTick, TimingReport,
+    Contract, DriverCommand, DriverStatus, ForceSample, PulseOutcome, Reference, StimTick,
+    TimingReport,
 };
 use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
 
+use crate::command_link::{CommandLink, LinkEvent, LinkSettings};
 use crate::config::{RecordingConfig, SupervisorConfig};
 use crate::control::{ControlServer, Pending};
 use crate::core::{ArmState, DriverOrder, Fault, FaultCause, SupervisorCore};
@@ -196,8 +197,8 @@ struct Daemon<'a> {
     last_state: ArmState,
     /// When the last pass began (for the self-stall check).
     last_pass: u64,
-    /// Sequence number of the last DriverCommand.
-    cmd_seq: u64,
+    /// The orders to the driver and their acknowledgements.
+    link: CommandLink,
     /// The DriverStatuses of this pass, taken off their queue before the StimTicks.
     statuses_in: Vec<DriverStatus>,
 }
@@ -277,7 +278,13 @@ impl<'a> Daemon<'a> {
             next_watchdog: start_ns,
             last_state,
             last_pass: monotonic_ns(),
-            cmd_seq: 0,
+            link: CommandLink::new(
+                start_ns / 1_000,
+                LinkSettings {
+                    required: cfg.health.watch_stim_driver,
+                    ..LinkSettings::default()
+                },
+            ),
             statuses_in: Vec::with_capacity(64),
         })
     }
@@ -371,13 +378,19 @@ impl<'a> Daemon<'a> {
     /// The DriverStatuses taken off their queue at the start of [`Self::read_inputs`]:
     /// health, refused pulses, recording.
     fn judge_statuses(&mut self, now: u64) {
-        for st in self.statuses_in.drain(..) {
+        let mut statuses = std::mem::take(&mut self.statuses_in);
+        for st in statuses.drain(..) {
             self.health.on_driver_status(&st, now);
             if st.validate().is_ok() {
                 self.core.on_driver_status(&st);
+                if let Some(e) = self.link.on_status(&st) {
+                    self.on_link_event(e);
+                }
             }
             self.run.record(&mut self.core, Item::Status(st));
         }
+        // The buffer is kept (no allocation per pass).
+        self.statuses_in = statuses;
     }
 
     /// The TimingReports received: health, recording.
@@ -444,21 +457,40 @@ impl<'a> Daemon<'a> {
         }
     }
 
-    /// The core's orders to the driver.
+    /// The core's orders to the driver, the stops it has not acknowledged yet again, and
+    /// what the wait for acknowledgements found ([`CommandLink`]).
     fn send_orders(&mut self, now: u64) {
         for order in self.core.take_orders() {
-            self.cmd_seq += 1;
-            let kind = match order {
-                DriverOrder::Arm => DriverCommandKind::Arm,
-                DriverOrder::Disarm => DriverCommandKind::Disarm,
-                DriverOrder::SafeStop => DriverCommandKind::SafeStop,
-            };
-            let command = DriverCommand::new(self.cmd_seq, now, kind);
-            if let Err(e) = self.ports.command.send_copy(command) {
-                self.core
-                    .note(format!("driver order {order:?} not sent: {e}"));
-                tracing::error!("driver order {order:?} not sent: {e}");
-            }
+            let command = self.link.issue(order, now);
+            self.send_command(command);
+        }
+        let (resend, event) = self.link.poll(now);
+        if let Some(command) = resend {
+            self.send_command(command);
+        }
+        if let Some(e) = event {
+            self.on_link_event(e);
+        }
+        // A fault found just now orders a safe stop: send it in this pass.
+        for order in self.core.take_orders() {
+            let command = self.link.issue(order, now);
+            self.send_command(command);
+        }
+    }
+
+    fn send_command(&mut self, command: DriverCommand) {
+        if let Err(e) = self.ports.command.send_copy(command) {
+            let kind = command.kind();
+            self.core
+                .note(format!("driver order {kind:?} not sent: {e}"));
+            tracing::error!("driver order {kind:?} not sent: {e}");
+        }
+    }
+
+    /// Acts on a [`LinkEvent`]; alarms and faults go to the log at `err`.
+    fn on_link_event(&mut self, event: LinkEvent) {
+        if let Some(m) = pass::on_link_event(&mut self.core, event) {
+            tracing::error!("{m}");
         }
     }
 
@@ -576,8 +608,7 @@ impl<'a> Daemon<'a> {
         let t = monotonic_ns();
         let r = self.core.reference(t);
         let _ = self.ports.reference.send_copy(r);
-        self.cmd_seq += 1;
-        let disarm = DriverCommand::new(self.cmd_seq, t, DriverCommandKind::Disarm);
+        let disarm = self.link.issue(DriverOrder::Disarm, t);
         let _ = self.ports.command.send_copy(disarm);
     }
 
@@ -620,7 +651,10 @@ impl<'a> Daemon<'a> {
         let last = self.core.last_reference();
         let (driver_state, stimulator_state) = self.health.device_states();
         Status {
-            state: self.core.state().name().into(),
+            state: match self.core.state() {
+                ArmState::Armed if !self.link.armed_confirmed() => "arming".into(),
+                state => state.name().into(),
+            },
             fault: match self.core.state() {
                 ArmState::Fault(f) => Some(f.message.clone()),
                 _ => None,

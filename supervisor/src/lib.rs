@@ -16,6 +16,7 @@
 #![deny(missing_docs)]
 
 pub mod cli;
+pub mod command_link;
 pub mod config;
 pub mod contraction;
 pub mod control;

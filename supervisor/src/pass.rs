@@ -4,7 +4,8 @@
 //! check (a fault stops stimulation at once: the first names the stop, later ones are
 //! noted).
 
-use crate::core::{CommandError, Fault, SupervisorCore};
+use crate::command_link::LinkEvent;
+use crate::core::{CommandError, DriverOrder, DriverProblem, Fault, FaultCause, SupervisorCore};
 use crate::health::{HealthEvent, HealthMonitor, ProcState, Severity};
 use crate::protocol::Command;
 
@@ -48,4 +49,70 @@ pub fn check_health(
         }
     }
     events
+}
+
+/// Acts on what the driver's statuses said about the orders ([`crate::command_link`]): a
+/// refused or unacknowledged Arm and a driver not armed after confirming one are faults;
+/// a driver still armed after confirming a stop gets another safe stop; an unacknowledged
+/// or refused stop is an alarm (the link keeps re-sending it). Returns the alarm or fault
+/// text for the log at `err`, or `None` for a plain confirmation.
+pub fn on_link_event(core: &mut SupervisorCore, event: LinkEvent) -> Option<String> {
+    let driver_fault =
+        |problem, message: String| Fault::new(FaultCause::Driver { problem }, message);
+    match event {
+        LinkEvent::Confirmed(order) => {
+            if order == DriverOrder::Arm {
+                core.note("stim-driver confirmed the arm".into());
+            }
+            None
+        }
+        LinkEvent::Refused {
+            order: DriverOrder::Arm,
+            reason,
+        } => {
+            let m = format!("stim-driver refused the arm: {}", reason.name());
+            core.fault(driver_fault(DriverProblem::ArmRefused, m.clone()));
+            Some(m)
+        }
+        LinkEvent::Refused { order, reason } => {
+            let m = format!(
+                "ALARM: stim-driver refused the {order:?}: {}; re-sending",
+                reason.name()
+            );
+            core.note(m.clone());
+            Some(m)
+        }
+        LinkEvent::Unacknowledged {
+            order: DriverOrder::Arm,
+            waited_ns,
+        } => {
+            let m = format!(
+                "stim-driver did not acknowledge the arm within {} ms",
+                waited_ns / 1_000_000
+            );
+            core.fault(driver_fault(DriverProblem::Unacknowledged, m.clone()));
+            Some(m)
+        }
+        LinkEvent::Unacknowledged { order, waited_ns } => {
+            let m = format!(
+                "ALARM: stim-driver has not acknowledged the {order:?} for {} ms; re-sending",
+                waited_ns / 1_000_000
+            );
+            core.note(m.clone());
+            Some(m)
+        }
+        LinkEvent::NotArmed { state } => {
+            let m = format!("stim-driver reports {state:?} after confirming the arm");
+            core.fault(driver_fault(DriverProblem::StateMismatch, m.clone()));
+            Some(m)
+        }
+        LinkEvent::StillArmed { state } => {
+            let m = format!("ALARM: stim-driver reports {state:?} after confirming a stop");
+            if !core.fault(driver_fault(DriverProblem::StateMismatch, m.clone())) {
+                core.note(m.clone());
+                core.reissue_safe_stop();
+            }
+            Some(m)
+        }
+    }
 }

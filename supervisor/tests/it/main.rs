@@ -4,6 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod bad_input_bus;
+mod command_link_props;
 mod control_protocol;
 mod control_socket;
 mod health_props;
