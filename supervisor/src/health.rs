@@ -267,6 +267,10 @@ pub enum Cause {
     TransmitErrors,
     /// Heap allocations on a hot path (warning).
     HeapAllocation,
+    /// rt-core rejected a Reference the supervisor published.
+    ReferenceRejected,
+    /// rt-core's reference went stale: the supervisor's References stopped reaching it.
+    ReferenceStale,
 }
 
 impl Cause {
@@ -275,7 +279,7 @@ impl Cause {
     pub fn is_timing(self) -> bool {
         matches!(
             self,
-            Cause::Stalled | Cause::Silent | Cause::WatchdogTripped
+            Cause::Stalled | Cause::Silent | Cause::WatchdogTripped | Cause::ReferenceStale
         )
     }
 }
@@ -367,6 +371,9 @@ pub struct HealthMonitor {
     driver: Option<DriverStatus>,
     timing: BTreeMap<u8, TimingReport>,
     warned_degraded: bool,
+    /// The reference flags (rejected, stale) of the last StimTick: a fault is raised when
+    /// one appears, not on every tick that carries it.
+    last_reference_flags: u16,
     last_tick_seq: u64,
     /// rt-core's speech by its own clock: the newest StimTick's grid time and the last
     /// silence between two StimTicks, for blaming a driver watchdog trip.
@@ -523,6 +530,7 @@ impl HealthMonitor {
             driver: None,
             timing: BTreeMap::new(),
             warned_degraded: false,
+            last_reference_flags: 0,
             last_tick_seq: 0,
             ticks: TickGaps::default(),
             events: Vec::new(),
@@ -622,6 +630,7 @@ impl HealthMonitor {
                 format!("rt-core stopped: final tick {} received", tick.seq),
             );
         }
+        self.on_reference_flags(tick);
         if tick.has(StimTick::FLAG_DEGRADED) && !self.warned_degraded {
             self.warned_degraded = true;
             self.raise(
@@ -629,6 +638,38 @@ impl HealthMonitor {
                 Severity::Warning,
                 Cause::BestEffort,
                 "rt-core runs best-effort (no real-time guarantee)".into(),
+            );
+        }
+    }
+
+    /// rt-core's verdict on the supervisor's References: a rejected one (the supervisor
+    /// published what rt-core would not take) or a stale one (they stopped reaching it) is
+    /// a fault, raised when the flag appears.
+    fn on_reference_flags(&mut self, tick: &StimTick) {
+        let flags =
+            tick.flags & (StimTick::FLAG_REFERENCE_REJECTED | StimTick::FLAG_STALE_REFERENCE);
+        let new = flags & !self.last_reference_flags;
+        self.last_reference_flags = flags;
+        if new & StimTick::FLAG_REFERENCE_REJECTED != 0 {
+            self.raise(
+                Process::RtCore,
+                Severity::Fault,
+                Cause::ReferenceRejected,
+                format!(
+                    "rt-core rejected a Reference of the supervisor (tick {}, reference seq {})",
+                    tick.seq, tick.ref_seq
+                ),
+            );
+        }
+        if new & StimTick::FLAG_STALE_REFERENCE != 0 {
+            self.raise(
+                Process::RtCore,
+                Severity::Fault,
+                Cause::ReferenceStale,
+                format!(
+                    "rt-core: the supervisor's reference went stale (tick {}): References are not reaching it",
+                    tick.seq
+                ),
             );
         }
     }
