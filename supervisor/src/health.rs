@@ -1195,6 +1195,45 @@ mod tests {
         assert!(h.take_events().is_empty());
     }
 
+    /// rt-core's verdict on the References: a rejected one and a stale one are faults of
+    /// rt-core, each raised once when its flag appears (not on every flagged tick), again
+    /// after the flag cleared and came back.
+    #[test]
+    fn rejected_and_stale_references_are_faults_when_they_appear() {
+        let flagged = |seq: u64, flags: u16| {
+            let mut t = tick(seq, seq * MS);
+            t.flags |= flags;
+            t
+        };
+        for (flag, cause, words) in [
+            (
+                StimTick::FLAG_REFERENCE_REJECTED,
+                Cause::ReferenceRejected,
+                "rejected a Reference",
+            ),
+            (
+                StimTick::FLAG_STALE_REFERENCE,
+                Cause::ReferenceStale,
+                "reference went stale",
+            ),
+        ] {
+            let mut h = HealthMonitor::new(HealthSettings::default());
+            h.on_stim_tick(&tick(1, MS), MS);
+            assert!(h.take_events().is_empty());
+            h.on_stim_tick(&flagged(2, flag), 2 * MS);
+            h.on_stim_tick(&flagged(3, flag), 3 * MS);
+            let ev = h.take_events();
+            assert_eq!(ev.len(), 1, "{ev:?}");
+            assert_eq!(
+                (ev[0].process, ev[0].severity, ev[0].cause),
+                (Process::RtCore, Severity::Fault, cause)
+            );
+            assert!(ev[0].message.contains(words), "{}", ev[0].message);
+            assert!(h.ready().is_err());
+        }
+        assert!(Cause::ReferenceStale.is_timing() && !Cause::ReferenceRejected.is_timing());
+    }
+
     /// A killed rt-core: its pid is gone; the message says who and why.
     #[test]
     fn dead_process_is_named_with_its_pid() {
