@@ -39,6 +39,7 @@
 //! arm_confirm_ms = 100           # NMT start must show in STATUS (and the supervisor be seen) within this
 //! command_max_age_ms = 100       # an older Arm is refused
 //! liveness_check_ms = 20         # how often the publishers' nodes are checked
+//! liveness_unknown_grace_ms = 200 # a publisher's liveness unknown for longer counts as dead
 //! supervisor_watch = true        # the supervisor's node dead or gone while armed -> NMT stop
 //!
 //! [force]
@@ -260,6 +261,9 @@ pub struct WatchdogConfig {
     pub command_max_age_ms: u32,
     /// Period of the publisher-liveness check, ms (1..=1000).
     pub liveness_check_ms: u32,
+    /// A publisher whose liveness stays unknown (its node's state unreadable) for longer
+    /// than this counts as dead, ms (1..=10000).
+    pub liveness_unknown_grace_ms: u32,
     /// Watch the supervisor too: while armed, its node (the DriverCommand publisher) dead
     /// or gone trips the safe state, and an Arm is refused while it is seen dead. On by
     /// default: without the supervisor nobody watches health, records, or can stop.
@@ -276,6 +280,7 @@ impl Default for WatchdogConfig {
             arm_confirm_ms: 100,
             command_max_age_ms: 100,
             liveness_check_ms: 20,
+            liveness_unknown_grace_ms: 200,
             supervisor_watch: true,
         }
     }
@@ -583,6 +588,12 @@ impl DriverConfig {
             "1..=1000",
         )?;
         config_file::range(
+            (1..=10_000).contains(&w.liveness_unknown_grace_ms),
+            "watchdog.liveness_unknown_grace_ms",
+            w.liveness_unknown_grace_ms,
+            "1..=10000",
+        )?;
+        config_file::range(
             self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
             "force.max_n",
             self.force.max_n,
@@ -632,6 +643,7 @@ impl DriverConfig {
             bringup_retry_ns: u64::from(self.can.bringup_retry_ms) * MS,
             max_wait_ns: period_ns,
             supervisor_watch: w.supervisor_watch,
+            liveness_unknown_grace_ns: u64::from(w.liveness_unknown_grace_ms) * MS,
         })
     }
 

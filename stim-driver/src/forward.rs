@@ -67,6 +67,13 @@ pub struct ForwardSettings {
     pub max_wait_ns: u64,
     /// Trip when the supervisor's node dies or leaves while armed ([`ForwardPath::on_supervisor_liveness`]).
     pub supervisor_watch: bool,
+    /// A liveness that stays [`Liveness::Unknown`] longer than this counts as dead, ns.
+    pub liveness_unknown_grace_ns: u64,
+}
+
+/// A liveness [`Liveness::Unknown`] since `since` has lasted beyond the grace period.
+fn unknown_too_long(since: Option<u64>, s: &ForwardSettings, now_ns: u64) -> bool {
+    since.is_some_and(|t| now_ns.saturating_sub(t) > s.liveness_unknown_grace_ns)
 }
 
 /// Reports what became of the pulse `tick` asked for.
@@ -124,6 +131,9 @@ pub struct ForwardPath<T: CanTx> {
     generator_stopped: bool,
     liveness: Liveness,
     supervisor: Liveness,
+    /// Since when each liveness has been [`Liveness::Unknown`] (publisher, supervisor).
+    liveness_unknown_since: Option<u64>,
+    supervisor_unknown_since: Option<u64>,
     last_status: Option<(Status, u64)>,
     last_command_t_ns: u64,
     /// The supervisor has been seen alive since the last Arm (see [`Self::poll`]).
@@ -153,6 +163,8 @@ impl<T: CanTx> ForwardPath<T> {
             generator_stopped: false,
             liveness: Liveness::Unknown,
             supervisor: Liveness::Unknown,
+            liveness_unknown_since: None,
+            supervisor_unknown_since: None,
             last_status: None,
             last_command_t_ns: 0,
             supervisor_seen_armed: false,
@@ -539,7 +551,10 @@ impl<T: CanTx> ForwardPath<T> {
         }
         // The command itself proves a publisher existed when it was sent; a node seen
         // dead means it came from a sample its dead sender left behind.
-        if s.supervisor_watch && self.supervisor == Liveness::Dead {
+        if s.supervisor_watch
+            && (self.supervisor == Liveness::Dead
+                || unknown_too_long(self.supervisor_unknown_since, s, now_ns))
+        {
             return Some(ArmRefusal::SupervisorDead);
         }
         if self.generator_stopped {
@@ -752,6 +767,7 @@ impl<T: CanTx> ForwardPath<T> {
         }
         let before = self.state();
         self.liveness = liveness;
+        self.liveness_unknown_since = (liveness == Liveness::Unknown).then_some(now_ns);
         ev.emit(DriverEvent::Liveness(liveness));
         if self.is_armed() {
             match liveness {
@@ -779,6 +795,7 @@ impl<T: CanTx> ForwardPath<T> {
         }
         let before = self.state();
         self.supervisor = liveness;
+        self.supervisor_unknown_since = (liveness == Liveness::Unknown).then_some(now_ns);
         if liveness == Liveness::Alive {
             self.supervisor_seen_armed = true;
         }
@@ -821,6 +838,13 @@ impl<T: CanTx> ForwardPath<T> {
                 );
             } else if !confirmed && now_ns.saturating_sub(since_ns) > s.arm_confirm_ns {
                 self.trip(Fault::StimulatorNotOperational, now_ns, ev);
+            } else if unknown_too_long(self.liveness_unknown_since, &s, now_ns) {
+                // A node whose state cannot be read for this long is taken as dead.
+                self.trip(Fault::PublisherDead, now_ns, ev);
+            } else if s.supervisor_watch
+                && unknown_too_long(self.supervisor_unknown_since, &s, now_ns)
+            {
+                self.trip(Fault::SupervisorDead, now_ns, ev);
             } else if s.supervisor_watch
                 && !self.supervisor_seen_armed
                 && now_ns.saturating_sub(since_ns) > s.arm_confirm_ns
@@ -894,6 +918,12 @@ impl<T: CanTx> ForwardPath<T> {
             }
             if !confirmed {
                 d = d.min(since_ns + s.arm_confirm_ns + 1);
+            }
+            for since in [self.liveness_unknown_since, self.supervisor_unknown_since]
+                .into_iter()
+                .flatten()
+            {
+                d = d.min(since + s.liveness_unknown_grace_ns + 1);
             }
         }
         d.max(now_ns)

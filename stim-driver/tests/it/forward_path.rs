@@ -1092,3 +1092,45 @@ fn every_command_is_acknowledged_with_its_outcome() {
         })
     );
 }
+
+/// A liveness that stays unknown (the node's state unreadable) beyond the grace period
+/// counts as dead while armed: the StimTick publisher's trips PublisherDead, the
+/// supervisor's SupervisorDead; within the grace nothing trips, and an Arm is refused while
+/// the supervisor's has been unknown too long (issue 19, item 6).
+#[test]
+fn a_liveness_unknown_beyond_its_grace_counts_as_dead() {
+    let s = settings();
+    let grace = s.liveness_unknown_grace_ns;
+    assert!(grace > 0);
+    for supervisor in [false, true] {
+        let mut r = Rig::armed(s);
+        let id = r.config_id;
+        if supervisor {
+            r.fp.on_supervisor_liveness(Liveness::Unknown, r.now, &mut r.ev);
+        } else {
+            r.fp.on_liveness(Liveness::Unknown, r.now, &mut r.ev);
+        }
+        let since = r.now;
+        // Ticks and STATUS keep coming: only the unknown liveness can trip.
+        while r.now < since + grace {
+            r.advance(MS);
+            r.bus_event(status(StimState::Armed, id));
+            r.tick(false);
+            assert_eq!(r.fp.state(), DriverState::Armed, "within the grace");
+        }
+        assert!(r.fp.next_deadline(r.now) <= since + grace + 1);
+        r.advance(MS);
+        r.bus_event(status(StimState::Armed, id));
+        r.tick(false);
+        let expected = if supervisor {
+            Fault::SupervisorDead
+        } else {
+            Fault::PublisherDead
+        };
+        assert_eq!(r.fault(), Some(expected), "supervisor: {supervisor}");
+        if supervisor {
+            r.command(DriverCommandKind::Arm);
+            assert_eq!(r.fault(), Some(expected), "re-armed while unknown");
+        }
+    }
+}
