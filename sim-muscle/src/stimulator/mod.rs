@@ -79,9 +79,6 @@ pub struct StimulatorArgs {
     /// Write a CSV line per tick (time, lateness, state, force, applied pulse) to this file.
     #[arg(long)]
     pub record: Option<PathBuf>,
-    /// Log filter for the stimulator's event log on stderr (tracing syntax, e.g. `debug`).
-    #[arg(long, default_value = "info")]
-    pub log: String,
     /// Stop by itself after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration_s: Option<f64>,
@@ -170,15 +167,9 @@ pub fn run_until(
     mut plant: Box<dyn MusclePlant>,
     stop: &AtomicBool,
 ) -> anyhow::Result<RunSummary> {
-    // A subscriber may already be installed by the binary; then this one is not needed.
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_new(&args.log)
-                .with_context(|| format!("--log {:?}", args.log))?,
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .try_init();
+    // The journal with priorities under systemd, stderr otherwise; the filter is RUST_LOG.
+    // A subscriber installed already (a test's process) stays.
+    rt_core::rt::logging::init("sim-muscle");
     let settings = args.settings()?;
     let ts = plant.ts();
     if (ts - 1e-3).abs() > 1e-12 {

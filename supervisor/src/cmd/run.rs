@@ -23,9 +23,6 @@ pub struct Args {
     /// Print the complete default configuration and exit.
     #[arg(long)]
     pub print_example_config: bool,
-    /// Log filter (tracing syntax), e.g. `info` or `debug`.
-    #[arg(long, default_value = "info")]
-    pub log: String,
 }
 
 /// Runs the daemon until SIGINT/SIGTERM.
@@ -42,14 +39,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}: ok", args.config.display());
         return Ok(());
     }
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_new(&args.log)
-                .with_context(|| format!("--log {}", args.log))?,
-        )
-        .init();
+    // The journal with priorities under systemd, stderr otherwise; the filter is RUST_LOG.
+    rt_core::rt::logging::init("supervisor");
     let stop = rt_core::rt::signals::install_stop_handler().context("signal handlers")?;
     let outcome = daemon::run(&cfg, stop, |socket| {
         tracing::info!("supervisor ready; control socket {}", socket.display());

@@ -383,7 +383,6 @@ impl Stimulator {
             heartbeat_ms: 100,
             host_heartbeat_ms: 10,
             record: None,
-            log: "warn".into(),
             duration_s: None,
         };
         let thread = std::thread::spawn(move || {
