@@ -27,7 +27,12 @@ ESTIMATION (App. B)
 
 ERRORS (5.3, eq. B.8, normalised force, always at the data's 1 ms)
   train MSPE (ARX), train MSSE, test MSSE; stored in the model file's provenance with the
-  options, the data set, the seed and the fit time.
+  options, the data set, the seed and the fit time. Beside them, as the field reports a
+  model: NRMSE fit % (MATLAB compare; 100 = perfect, 0 = the mean), RRSE (sysidentpy),
+  and the residual tests of MATLAB resid (autocorrelation of the test residuals, their
+  cross-correlation with the input, +-25 lags, 99 % band): train_fit_percent,
+  test_fit_percent, test_rrse, test_resid in the provenance; --validation DIR writes the
+  traces and the tests as CSV and a figure.
 
 EXAMPLES
   fes identify --data data/fast --structure ss-eig-common --units 4 --out fast.lmn.json
@@ -51,6 +56,11 @@ pub struct Args {
     /// Output model file (fes-lmn/1 JSON).
     #[arg(long)]
     pub out: PathBuf,
+    /// Also write the validation as the field reports it into this directory: measured
+    /// and simulated traces per record (`traces_train.csv`, `traces_test.csv`) and the
+    /// residual tests of MATLAB's `resid` (`resid.csv`, `resid.png`).
+    #[arg(long)]
+    pub validation: Option<PathBuf>,
     #[command(flatten)]
     pub fit: FitArgs,
 }
@@ -215,6 +225,23 @@ pub fn print_summary(r: &Identified, data_ts_s: f64) {
     println!("train MSPE     {}", fmt_err(m.train_mspe));
     println!("train MSSE     {}", fmt_err(Some(m.train_msse)));
     println!("test MSSE      {}", fmt_err(Some(m.test_msse)));
+    let v = &r.validation;
+    let pct = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:.1} %"));
+    println!(
+        "fit (NRMSE)    train {}, test {}; test RRSE {}",
+        pct(v.train_fit_percent),
+        pct(v.test_fit_percent),
+        v.test_rrse.map_or("-".to_owned(), |x| format!("{x:.4}"))
+    );
+    if let Some(res) = &v.resid {
+        println!(
+            "resid (99 %)   {} of {} autocorrelation lags, {} of {} input cross-correlation lags outside the band",
+            res.autocorr_outside,
+            fes_ident::ident::validation::RESID_LAGS,
+            res.xcorr_outside,
+            2 * fes_ident::ident::validation::RESID_LAGS + 1
+        );
+    }
     println!(
         "iterations     {} (final fit {}{})",
         r.iterations,
@@ -262,5 +289,13 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     print_summary(&result, records.ts);
     println!("model          {}", args.out.display());
+    if let Some(dir) = &args.validation {
+        let name = args.out.file_name().map_or_else(
+            || args.out.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        super::validation::write(dir, &result.validation, records.ts, &name)?;
+        println!("validation     {}", dir.display());
+    }
     Ok(())
 }

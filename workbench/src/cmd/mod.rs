@@ -16,6 +16,7 @@ pub mod modify;
 pub mod osp;
 pub mod plots;
 pub mod sweep;
+pub mod validation;
 
 use clap::ValueEnum;
 use fes_ident::ident::{Hooks, Learning, Mode, Progress, SchedulingKind};

@@ -167,6 +167,75 @@ fn identify_writes_a_loadable_model_with_provenance() {
     assert!(lmn.provenance.train_mspe.is_some());
 }
 
+/// `fes identify --validation DIR`: the traces and the residual tests as CSV and a figure;
+/// the fit and RRSE in the provenance are what the written traces give when recomputed
+/// here from the CSV (MATLAB's definition), and the summary prints them.
+#[test]
+fn identify_writes_the_fields_validation_figures() {
+    let dir = tmp("identify_validation");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).expect("dir");
+    small_dataset(&data, 4);
+    let out = dir.join("m.lmn.json");
+    let val = dir.join("validation");
+    let o = run(&[
+        "identify",
+        "--data",
+        data.to_str().expect("utf8"),
+        "--structure",
+        "ss-eig-common",
+        "--units",
+        "2",
+        "--max-iter",
+        "15",
+        "--out",
+        out.to_str().expect("utf8"),
+        "--validation",
+        val.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(
+        text.contains("fit (NRMSE)") && text.contains("resid (99 %)"),
+        "{text}"
+    );
+    let p = file::load(&out).expect("model").provenance;
+    let test_fit = p.extra["test_fit_percent"]
+        .as_f64()
+        .expect("test_fit_percent");
+    let test_rrse = p.extra["test_rrse"].as_f64().expect("test_rrse");
+    assert!(p.extra["train_fit_percent"].is_f64());
+    assert_eq!(p.extra["test_resid"]["lags"], 25);
+    // Recompute from the written traces: fit = 100 (1 - ||y - yh|| / ||y - mean y||).
+    let csv = std::fs::read_to_string(val.join("traces_test.csv")).expect("traces");
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("record,t_ms,measured,simulated"));
+    let (y, yh): (Vec<f64>, Vec<f64>) = lines
+        .map(|l| {
+            let f: Vec<f64> = l.split(',').map(|v| v.parse().expect("number")).collect();
+            (f[2], f[3])
+        })
+        .unzip();
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let num: f64 = y.iter().zip(&yh).map(|(a, b)| (a - b).powi(2)).sum();
+    let den: f64 = y.iter().map(|a| (a - mean).powi(2)).sum();
+    let rrse = (num / den).sqrt();
+    assert!(
+        (rrse - test_rrse).abs() < 1e-9 * rrse.max(1.0),
+        "{rrse} vs {test_rrse}"
+    );
+    assert!((100.0 * (1.0 - rrse) - test_fit).abs() < 1e-7);
+    let resid = std::fs::read_to_string(val.join("resid.csv")).expect("resid.csv");
+    assert_eq!(resid.lines().count(), 1 + 51, "header + lags -25..25");
+    assert!(
+        resid.lines().nth(26).expect("lag 0").starts_with("0,1,"),
+        "r_ee(0) = 1"
+    );
+    let png = std::fs::read(val.join("resid.png")).expect("resid.png");
+    assert_eq!(&png[..4], b"\x89PNG");
+    assert!(val.join("traces_train.csv").exists());
+}
+
 /// A recording whose delivered pulses differ from the decided ones (the driver refused
 /// one) is refused by `fes identify` naming the counts and the flag; with
 /// `--allow-undelivered` the delivered pulses are fitted and the model says how many

@@ -34,6 +34,7 @@ use super::records::RecordSet;
 use super::regression::{Learning, fit_prediction};
 use super::resample::PulseShift;
 use super::start;
+use super::validation::{Validation, validate};
 use crate::model::lmn::{Lmn, LocalModelSet, Provenance, Structure};
 use crate::model::network::MAX_DELAY;
 use crate::model::params::ParamLayout;
@@ -288,6 +289,8 @@ pub struct Identified {
     pub pulse_shift: PulseShift,
     /// Things the user should know (small units, collapsed eigenvalues, ...).
     pub warnings: Vec<String>,
+    /// The field's validation figures: fit %, RRSE, residual tests, traces.
+    pub validation: Validation,
 }
 
 /// Runs one identification (module docs).
@@ -356,6 +359,7 @@ pub fn identify(
         run.optimise_knots(&mut outcome)?;
     }
     let metrics = evaluate(&outcome.lmn, &train, &test)?;
+    let validation = validate(&outcome.lmn, &train, &test);
     let seconds = (hooks.clock)() - t0;
     let mut lmn = outcome.lmn;
     lmn.provenance = provenance(
@@ -363,7 +367,7 @@ pub fn identify(
         opts,
         &run,
         (outcome.final_iterations, outcome.stop),
-        &metrics,
+        (&metrics, &validation),
         seconds,
         (&train, &test),
     );
@@ -378,6 +382,7 @@ pub fn identify(
         unit_weights: run.unit_weights,
         pulse_shift: train.shift.merge(test.shift),
         warnings: run.warnings,
+        validation,
     })
 }
 
@@ -387,7 +392,7 @@ fn provenance(
     opts: &IdentOptions,
     run: &Run<'_>,
     (final_iterations, stop): (usize, Option<StopReason>),
-    metrics: &Metrics,
+    (metrics, validation): (&Metrics, &Validation),
     seconds: f64,
     (train, test): (&ModelData, &ModelData),
 ) -> Provenance {
@@ -423,6 +428,23 @@ fn provenance(
     }
     if !run.warnings.is_empty() {
         extra.insert("warnings".into(), json!(run.warnings));
+    }
+    // The field's figures beside the thesis's MSSE (docs/identification.md, "Validation").
+    for (key, v) in [
+        ("train_fit_percent", validation.train_fit_percent),
+        ("test_fit_percent", validation.test_fit_percent),
+        ("test_rrse", validation.test_rrse),
+    ] {
+        if let Some(v) = v.filter(|v| v.is_finite()) {
+            extra.insert(key.into(), json!(v));
+        }
+    }
+    if let Some(r) = &validation.resid {
+        extra.insert(
+            "test_resid".into(),
+            json!({"lags": super::validation::RESID_LAGS, "band_99": r.band,
+                   "autocorr_outside": r.autocorr_outside, "xcorr_outside": r.xcorr_outside}),
+        );
     }
     Provenance {
         train_mspe: metrics.train_mspe.and_then(finite),

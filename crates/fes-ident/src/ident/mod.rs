@@ -19,6 +19,7 @@
 //! - [`metrics`]: training MSPE, training / test MSSE (eq. B.8) and each unit's validity
 //!   weight.
 //! - [`identify`](mod@identify): one run with options, stages and provenance.
+//! - [`validation`]: the field's figures: NRMSE fit %, RRSE, residual tests (`resid`).
 //! - [`sweep`]: network sizes swept (Figs. 5.13-5.21) and the comparison of Tables 5.1/5.2.
 //!
 //! Method, options and pitfalls: `docs/identification.md`.
@@ -35,6 +36,7 @@ pub mod regression;
 pub mod resample;
 pub mod start;
 pub mod sweep;
+pub mod validation;
 
 pub use identify::{Hooks, IdentOptions, Identified, Mode, Progress, SchedulingKind, identify};
 pub use metrics::Metrics;

@@ -377,6 +377,30 @@ fn identify_reaches_the_noise_floor_on_data_from_a_known_network() {
         }
         assert!(r.lmn.stability().iter().all(|s| s.stable));
         assert_eq!(r.lmn.provenance.train_msse, Some(r.metrics.train_msse));
+        // The field's figures agree with the thesis's: RRSE^2 = N MSSE / sum (y - mean)^2
+        // over the same base-period samples, fit = 100 (1 - RRSE).
+        let v = &r.validation;
+        let y: Vec<f64> = v.test.iter().flat_map(|t| t.measured.clone()).collect();
+        let mean = y.iter().sum::<f64>() / y.len() as f64;
+        let spread: f64 = y.iter().map(|a| (a - mean) * (a - mean)).sum();
+        let rrse = v.test_rrse.expect("test RRSE");
+        let via_msse = (y.len() as f64 * r.metrics.test_msse / spread).sqrt();
+        assert!(
+            (rrse - via_msse).abs() < 1e-9 * via_msse,
+            "{rrse} vs {via_msse}"
+        );
+        assert!((v.test_fit_percent.unwrap() - 100.0 * (1.0 - rrse)).abs() < 1e-9);
+        let p = &r.lmn.provenance.extra;
+        assert_eq!(p["test_rrse"].as_f64(), Some(rrse));
+        assert_eq!(p["test_fit_percent"].as_f64(), v.test_fit_percent);
+        assert_eq!(p["train_fit_percent"].as_f64(), v.train_fit_percent);
+        // At the noise floor the residuals are the white noise added: few of the 25 lags
+        // of either test outside the 99 % band.
+        let resid = v.resid.as_ref().expect("residual tests");
+        assert!(
+            resid.autocorr_outside <= 3 && resid.xcorr_outside <= 4,
+            "zero offsets {zero_offsets}: {resid:?}"
+        );
     }
 }
 

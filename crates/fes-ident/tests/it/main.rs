@@ -18,4 +18,5 @@ mod dataset_fuzz;
 mod ident_estimation;
 mod ident_jacobian;
 mod ident_resample;
+mod ident_validation;
 mod model_analysis;
