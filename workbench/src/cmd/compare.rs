@@ -53,16 +53,17 @@ fn e3(v: Option<f64>) -> String {
 /// repair with `modify --stabilise`, not one to design a controller from).
 pub fn table(rows: &[CompareRow]) -> String {
     let mut s = String::from(
-        "| scheduling | parameter domain | estimation | Ts (ms) | # units | train MSSE (x1e-3) | test MSSE (x1e-3) | train MSPE (x1e-3) | stable | sizes tried | time (s) |\n|---|---|---|---:|---:|---:|---:|---:|---|---|---:|\n",
+        "| scheduling | parameter domain | estimation | Ts (ms) | # units | train MSSE (x1e-3) | test MSSE (x1e-3) | train MSPE (x1e-3) | test fit (%) | stable | sizes tried | time (s) |\n|---|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|\n",
     );
     for r in rows {
-        let (units, train, test, mspe, stable) = match &r.best {
+        let (units, train, test, mspe, fit, stable) = match &r.best {
             Some(b) => (
                 b.units.to_string(),
                 e3(b.train_msse),
                 e3(b.test_msse),
                 b.train_mspe
                     .map_or("-".into(), |v| format!("{:.4}", v * 1e3)),
+                b.test_fit_percent.map_or("-".into(), |v| format!("{v:.1}")),
                 if b.stable { "yes" } else { "NO" },
             ),
             None => (
@@ -70,11 +71,12 @@ pub fn table(rows: &[CompareRow]) -> String {
                 "diverges".into(),
                 "diverges".into(),
                 "-".into(),
+                "-".into(),
                 "-",
             ),
         };
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {units} | {train} | {test} | {mspe} | {stable} | {}..{} | {:.0} |\n",
+            "| {} | {} | {} | {} | {units} | {train} | {test} | {mspe} | {fit} | {stable} | {}..{} | {:.0} |\n",
             r.scheduling, r.domain, r.mode, r.ts_ms, r.units_tried.0, r.units_tried.1, r.seconds
         ));
     }

@@ -86,16 +86,18 @@ pub fn parse_units(s: &str) -> Result<RangeInclusive<usize>, UnitsError> {
 /// The Markdown table of a sweep (best size marked with *).
 pub fn table(sw: &Sweep) -> String {
     let mut s = String::from(
-        "| units | train MSPE | train MSSE | test MSSE | iterations | time (s) | stable |\n|---:|---:|---:|---:|---:|---:|:---:|\n",
+        "| units | train MSPE | train MSSE | test MSSE | test fit (%) | iterations | time (s) | stable |\n|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
     );
     for (i, r) in sw.rows.iter().enumerate() {
         let mark = if sw.best == Some(i) { " *" } else { "" };
         s.push_str(&format!(
-            "| {}{mark} | {} | {} | {} | {} | {:.1} | {} |\n",
+            "| {}{mark} | {} | {} | {} | {} | {} | {:.1} | {} |\n",
             r.units,
             fmt_err(r.train_mspe),
             fmt_diverging(r.train_msse),
             fmt_diverging(r.test_msse),
+            r.test_fit_percent
+                .map_or_else(|| "-".to_owned(), |v| format!("{v:.1}")),
             r.iterations,
             r.seconds,
             if r.stable { "yes" } else { "no" }

@@ -632,6 +632,12 @@ fn sweep_and_compare_write_tables_and_plot() {
         serde_json::from_str(&std::fs::read_to_string(sw.join("sweep.json")).expect("json"))
             .expect("parse");
     assert_eq!(json["rows"].as_array().map(|r| r.len()), Some(3));
+    // Each size carries the field's fit and RRSE beside the MSSE: fit = 100 (1 - RRSE).
+    for row in json["rows"].as_array().expect("rows") {
+        let (fit, rrse) = (row["test_fit_percent"].as_f64(), row["test_rrse"].as_f64());
+        let (fit, rrse) = (fit.expect("test_fit_percent"), rrse.expect("test_rrse"));
+        assert!((fit - 100.0 * (1.0 - rrse)).abs() < 1e-9, "{row}");
+    }
     let cmp = dir.join("compare");
     let o = run(&[
         "compare",

@@ -24,6 +24,10 @@ pub struct SweepRow {
     pub train_msse: Option<f64>,
     /// Test MSSE (`None` if the simulation diverges).
     pub test_msse: Option<f64>,
+    /// Test NRMSE fit, % ([`super::validation`]).
+    pub test_fit_percent: Option<f64>,
+    /// Test RRSE.
+    pub test_rrse: Option<f64>,
     /// LM iterations over all stages.
     pub iterations: usize,
     /// Fit time, s.
@@ -48,6 +52,8 @@ impl SweepRow {
             train_mspe: train_mspe.and_then(f),
             train_msse: f(train_msse),
             test_msse: f(test_msse),
+            test_fit_percent: r.validation.test_fit_percent.and_then(f),
+            test_rrse: r.validation.test_rrse.and_then(f),
             iterations: r.iterations,
             seconds: r.seconds,
             stable: r.lmn.stability().iter().all(|s| s.stable),
