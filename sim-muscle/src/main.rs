@@ -297,8 +297,8 @@ struct PlotArgs {
     /// Data-set directory.
     #[arg(long, value_name = "DIR")]
     data: PathBuf,
-    /// Output PNG file.
-    #[arg(long, value_name = "FILE.png")]
+    /// Output image: a .png (raster) or .svg (vector) file.
+    #[arg(long, value_name = "FILE.png|FILE.svg")]
     out: PathBuf,
     /// Record indices to show, comma-separated [default: three random records and the
     /// first constant-frequency record].

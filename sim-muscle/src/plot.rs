@@ -28,8 +28,8 @@ pub enum PlotError {
         /// Height, px.
         height: u32,
     },
-    /// The output is not a PNG file name.
-    #[error("{}: the output must be a .png file", path.display())]
+    /// The output is neither a PNG nor an SVG file name.
+    #[error("{}: the output must be a .png or .svg file", path.display())]
     NotPng {
         /// The path given.
         path: PathBuf,
@@ -41,7 +41,7 @@ pub enum PlotError {
         path: PathBuf,
         /// What plotters reported.
         #[source]
-        source: DrawError,
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
 }
 
@@ -69,7 +69,8 @@ pub fn default_selection(ds: &DataSet) -> Vec<usize> {
     pick
 }
 
-/// Draws `records` of `ds` into the PNG file `out` of `width` x `height` pixels.
+/// Draws `records` of `ds` into the PNG or SVG file `out` (by its extension) of `width` x
+/// `height` pixels.
 pub fn plot_records(
     ds: &DataSet,
     records: &[usize],
@@ -89,31 +90,47 @@ pub fn plot_records(
     if !(200..=4000).contains(&width) || !(200..=4000).contains(&height) {
         return Err(PlotError::BadSize { width, height });
     }
-    if !out
+    let size = (width, height);
+    let ext = out
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
-        return Err(PlotError::NotPng {
-            path: out.to_path_buf(),
-        });
-    }
-    draw(ds, records, title, out, (width, height)).map_err(|source| PlotError::Draw {
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let drawn = match ext.as_deref() {
+        Some("png") => draw(
+            BitMapBackend::new(out, size).into_drawing_area(),
+            ds,
+            records,
+            title,
+            size,
+        )
+        .map_err(|e| Box::new(e) as Box<dyn std::error::Error + Send + Sync>),
+        Some("svg") => draw(
+            SVGBackend::new(out, size).into_drawing_area(),
+            ds,
+            records,
+            title,
+            size,
+        )
+        .map_err(|e| Box::new(e) as Box<dyn std::error::Error + Send + Sync>),
+        _ => {
+            return Err(PlotError::NotPng {
+                path: out.to_path_buf(),
+            });
+        }
+    };
+    drawn.map_err(|source| PlotError::Draw {
         path: out.to_path_buf(),
         source,
     })
 }
 
-/// What plotters reports when drawing to a PNG fails.
-pub type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
-
-/// The drawing itself.
-fn draw(
+/// The drawing itself, on either backend.
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, plotters::coord::Shift>,
     ds: &DataSet,
     records: &[usize],
     title: &str,
-    out: &Path,
     size: (u32, u32),
-) -> Result<(), DrawError> {
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let ts_ms = ds.header.ts_s * 1e3;
     // Start time of each selected record on the concatenated axis.
     let mut starts = Vec::with_capacity(records.len());
@@ -128,7 +145,6 @@ fn draw(
         .fold(0.0, f64::min)
         .min(-0.02);
 
-    let root = BitMapBackend::new(out, size).into_drawing_area();
     root.fill(&WHITE)?;
     let root = root.titled(title, ("sans-serif", 18))?;
     let (upper, lower) = root.split_vertically(size.1 * 18 / 100);

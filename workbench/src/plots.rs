@@ -1,5 +1,6 @@
-//! PNG figures of a run: reference, measured and model force with the pulse raster;
-//! per-beat contraction (outer loop on/off); latency percentile curves.
+//! Figures of a run (PNG or SVG, by the file's extension: [`FigureFormat`]): reference,
+//! measured and model force with the pulse raster; per-beat contraction (outer loop
+//! on/off); latency percentile curves.
 
 use std::path::{Path, PathBuf};
 
@@ -14,6 +15,67 @@ pub struct PlotError {
     /// plotters' reason.
     pub message: String,
 }
+
+/// The formats figures are written in, chosen by the output file's extension (plotters'
+/// bitmap and SVG backends; plotters has no PDF backend).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum FigureFormat {
+    /// Raster (`.png`).
+    #[default]
+    Png,
+    /// Vector (`.svg`), for papers.
+    Svg,
+}
+
+impl FigureFormat {
+    /// The file extension.
+    pub const fn ext(self) -> &'static str {
+        match self {
+            FigureFormat::Png => "png",
+            FigureFormat::Svg => "svg",
+        }
+    }
+
+    /// The format of `path`, by its extension.
+    pub fn of(path: &Path) -> Result<Self, PlotError> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("png") => Ok(FigureFormat::Png),
+            Some("svg") => Ok(FigureFormat::Svg),
+            _ => Err(PlotError {
+                path: path.to_path_buf(),
+                message: "figures are written as .png or .svg files".into(),
+            }),
+        }
+    }
+
+    /// `stem.<ext>` in `dir`.
+    pub fn file(self, dir: &Path, stem: &str) -> PathBuf {
+        dir.join(format!("{stem}.{}", self.ext()))
+    }
+}
+
+/// Runs `$body` with `$root` the drawing area of a `$size` figure at `$path`, drawn with
+/// the bitmap or the SVG backend by the path's extension ([`FigureFormat::of`]; its error
+/// is returned with `?`). The body is compiled once per backend.
+#[macro_export]
+macro_rules! on_figure {
+    ($path:expr, $size:expr, |$root:ident| $body:block) => {{
+        match $crate::plots::FigureFormat::of($path)? {
+            $crate::plots::FigureFormat::Png => {
+                let $root = plotters::prelude::BitMapBackend::new($path, $size).into_drawing_area();
+                $body
+            }
+            $crate::plots::FigureFormat::Svg => {
+                let $root = plotters::prelude::SVGBackend::new($path, $size).into_drawing_area();
+                $body
+            }
+        }
+    }};
+}
+pub use on_figure;
 
 fn fail(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
     move |e| PlotError {
@@ -47,83 +109,86 @@ pub fn plot_run(
 ) -> Result<(), PlotError> {
     let e = fail(out);
     let size = (1400u32, 700u32);
-    let root = BitMapBackend::new(out, size).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let root = root.titled(title, ("sans-serif", 20)).map_err(|x| e(&x))?;
-    let (upper, lower) = root.split_vertically(size.1 * 15 / 100);
-    let mut top = ChartBuilder::on(&upper)
-        .margin_left(10)
-        .margin_right(20)
-        .y_label_area_size(70)
-        .build_cartesian_2d(from_s..to_s, 0.0..1.2)
+    on_figure!(out, size, |root| {
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        let root = root.titled(title, ("sans-serif", 20)).map_err(|x| e(&x))?;
+        let (upper, lower) = root.split_vertically(size.1 * 15 / 100);
+        let mut top = ChartBuilder::on(&upper)
+            .margin_left(10)
+            .margin_right(20)
+            .y_label_area_size(70)
+            .build_cartesian_2d(from_s..to_s, 0.0..1.2)
+            .map_err(|x| e(&x))?;
+        top.configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .y_labels(2)
+            .y_desc("pulse")
+            .draw()
+            .map_err(|x| e(&x))?;
+        top.draw_series(
+            run.pulses_s
+                .iter()
+                .filter(|t| (from_s..to_s).contains(*t))
+                .map(|&t| PathElement::new(vec![(t, 0.0), (t, 1.0)], BLACK.stroke_width(1))),
+        )
         .map_err(|x| e(&x))?;
-    top.configure_mesh()
-        .disable_mesh()
-        .disable_x_axis()
-        .y_labels(2)
-        .y_desc("pulse")
-        .draw()
-        .map_err(|x| e(&x))?;
-    top.draw_series(
-        run.pulses_s
+        let in_window = |v: &[f64]| -> Vec<(f64, f64)> {
+            run.t_s
+                .iter()
+                .zip(v)
+                .filter(|(t, _)| (from_s..to_s).contains(*t))
+                .map(|(&t, &y)| (t, y))
+                .collect()
+        };
+        let ymax = run
+            .measured
             .iter()
-            .filter(|t| (from_s..to_s).contains(*t))
-            .map(|&t| PathElement::new(vec![(t, 0.0), (t, 1.0)], BLACK.stroke_width(1))),
-    )
-    .map_err(|x| e(&x))?;
-    let in_window = |v: &[f64]| -> Vec<(f64, f64)> {
-        run.t_s
-            .iter()
-            .zip(v)
-            .filter(|(t, _)| (from_s..to_s).contains(*t))
-            .map(|(&t, &y)| (t, y))
-            .collect()
-    };
-    let ymax = run
-        .measured
-        .iter()
-        .chain(&run.model)
-        .chain(&run.reference)
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(0.1, f64::max)
-        * 1.1;
-    let mut bottom = ChartBuilder::on(&lower)
-        .margin_left(10)
-        .margin_right(20)
-        .margin_bottom(5)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(from_s..to_s, -0.05..ymax)
-        .map_err(|x| e(&x))?;
-    bottom
-        .configure_mesh()
-        .light_line_style(WHITE.mix(0.0))
-        .x_desc("time (s)")
-        .y_desc("force (normalised)")
-        .draw()
-        .map_err(|x| e(&x))?;
-    for (series, color, label) in [
-        (&run.reference, BLACK, "reference"),
-        (&run.model, BLUE, "model force (rt-core LMN)"),
-        (&run.measured, RED, "measured force"),
-    ] {
-        let c = color;
+            .chain(&run.model)
+            .chain(&run.reference)
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.1, f64::max)
+            * 1.1;
+        let mut bottom = ChartBuilder::on(&lower)
+            .margin_left(10)
+            .margin_right(20)
+            .margin_bottom(5)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(from_s..to_s, -0.05..ymax)
+            .map_err(|x| e(&x))?;
         bottom
-            .draw_series(LineSeries::new(in_window(series), c.stroke_width(2)))
-            .map_err(|x| e(&x))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-    }
-    bottom
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+            .configure_mesh()
+            .light_line_style(WHITE.mix(0.0))
+            .x_desc("time (s)")
+            .y_desc("force (normalised)")
+            .draw()
+            .map_err(|x| e(&x))?;
+        for (series, color, label) in [
+            (&run.reference, BLACK, "reference"),
+            (&run.model, BLUE, "model force (rt-core LMN)"),
+            (&run.measured, RED, "measured force"),
+        ] {
+            let c = color;
+            bottom
+                .draw_series(LineSeries::new(in_window(series), c.stroke_width(2)))
+                .map_err(|x| e(&x))?
+                .label(label)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+        }
+        bottom
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|x| e(&x))?;
+        root.present().map_err(|x| e(&x))?;
+        Ok(())
+    })
 }
 
 /// One line of per-beat values.
@@ -145,71 +210,74 @@ pub fn plot_beats(
     band: f64,
 ) -> Result<(), PlotError> {
     let e = fail(out);
-    let root = BitMapBackend::new(out, (1200, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let t_max = lines
-        .iter()
-        .flat_map(|l| l.points.iter().map(|p| p.0))
-        .fold(1.0, f64::max);
-    let y_max = lines
-        .iter()
-        .flat_map(|l| l.points.iter().map(|p| p.1))
-        .fold(target * (1.0 + 2.0 * band), f64::max)
-        * 1.05;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..t_max, 0.0..y_max)
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .light_line_style(WHITE.mix(0.0))
-        .x_desc("time (s)")
-        .y_desc(y_desc)
-        .draw()
-        .map_err(|x| e(&x))?;
-    chart
-        .draw_series(std::iter::once(Rectangle::new(
-            [(0.0, target * (1.0 - band)), (t_max, target * (1.0 + band))],
-            RGBColor(220, 235, 220).filled(),
-        )))
-        .map_err(|x| e(&x))?
-        .label(format!("target +-{:.0} %", band * 100.0))
-        .legend(|(x, y)| {
-            Rectangle::new(
-                [(x, y - 5), (x + 20, y + 5)],
-                RGBColor(220, 235, 220).filled(),
-            )
-        });
-    chart
-        .draw_series(LineSeries::new(
-            vec![(0.0, target), (t_max, target)],
-            BLACK.stroke_width(1),
-        ))
-        .map_err(|x| e(&x))?;
-    let colors = [RED, BLUE, GREEN, MAGENTA];
-    for (i, l) in lines.iter().enumerate() {
-        let c = colors[i % colors.len()];
-        chart
-            .draw_series(LineSeries::new(l.points.clone(), c.stroke_width(2)))
-            .map_err(|x| e(&x))?
-            .label(l.label.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        chart
-            .draw_series(l.points.iter().map(|&p| Circle::new(p, 3, c.filled())))
+    on_figure!(out, (1200, 600), |root| {
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        let t_max = lines
+            .iter()
+            .flat_map(|l| l.points.iter().map(|p| p.0))
+            .fold(1.0, f64::max);
+        let y_max = lines
+            .iter()
+            .flat_map(|l| l.points.iter().map(|p| p.1))
+            .fold(target * (1.0 + 2.0 * band), f64::max)
+            * 1.05;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_max, 0.0..y_max)
             .map_err(|x| e(&x))?;
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerLeft)
-        .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+        chart
+            .configure_mesh()
+            .light_line_style(WHITE.mix(0.0))
+            .x_desc("time (s)")
+            .y_desc(y_desc)
+            .draw()
+            .map_err(|x| e(&x))?;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(0.0, target * (1.0 - band)), (t_max, target * (1.0 + band))],
+                RGBColor(220, 235, 220).filled(),
+            )))
+            .map_err(|x| e(&x))?
+            .label(format!("target +-{:.0} %", band * 100.0))
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 5), (x + 20, y + 5)],
+                    RGBColor(220, 235, 220).filled(),
+                )
+            });
+        chart
+            .draw_series(LineSeries::new(
+                vec![(0.0, target), (t_max, target)],
+                BLACK.stroke_width(1),
+            ))
+            .map_err(|x| e(&x))?;
+        let colors = [RED, BLUE, GREEN, MAGENTA];
+        for (i, l) in lines.iter().enumerate() {
+            let c = colors[i % colors.len()];
+            chart
+                .draw_series(LineSeries::new(l.points.clone(), c.stroke_width(2)))
+                .map_err(|x| e(&x))?
+                .label(l.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+            chart
+                .draw_series(l.points.iter().map(|&p| Circle::new(p, 3, c.filled())))
+                .map_err(|x| e(&x))?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::LowerLeft)
+            .draw()
+            .map_err(|x| e(&x))?;
+        root.present().map_err(|x| e(&x))?;
+        Ok(())
+    })
 }
 
 /// One latency distribution: (percentile in [0, 100), latency in µs) points.
@@ -232,60 +300,61 @@ pub fn percentile_grid() -> Vec<f64> {
 /// Draws latency percentile curves (log latency axis).
 pub fn plot_latency(out: &Path, title: &str, curves: &[LatencyCurve]) -> Result<(), PlotError> {
     let e = fail(out);
-    let root = BitMapBackend::new(out, (1200, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let y_max = curves
-        .iter()
-        .flat_map(|c| c.points.iter().map(|p| p.1))
-        .fold(10.0, f64::max)
-        * 2.0;
-    let y_min = curves
-        .iter()
-        .flat_map(|c| c.points.iter().map(|p| p.1))
-        .filter(|v| *v > 0.0)
-        .fold(y_max, f64::min)
-        .max(0.01)
-        / 2.0;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..4.0, (y_min..y_max).log_scale())
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_labels(5)
-        .x_label_formatter(&|x| format!("{}", 100.0 - 100.0 * 10f64.powf(-x)))
-        .x_desc("percentile")
-        .y_desc("latency (µs)")
-        .draw()
-        .map_err(|x| e(&x))?;
-    let colors = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
-    for (i, c) in curves.iter().enumerate() {
-        let color = colors[i % colors.len()];
-        let pts: Vec<(f64, f64)> = c
-            .points
+    on_figure!(out, (1200, 600), |root| {
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        let y_max = curves
             .iter()
-            .map(|&(q, v)| (-(1.0 - q / 100.0).max(1e-4).log10(), v.max(y_min)))
-            .collect();
+            .flat_map(|c| c.points.iter().map(|p| p.1))
+            .fold(10.0, f64::max)
+            * 2.0;
+        let y_min = curves
+            .iter()
+            .flat_map(|c| c.points.iter().map(|p| p.1))
+            .filter(|v| *v > 0.0)
+            .fold(y_max, f64::min)
+            .max(0.01)
+            / 2.0;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..4.0, (y_min..y_max).log_scale())
+            .map_err(|x| e(&x))?;
         chart
-            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
-            .map_err(|x| e(&x))?
-            .label(c.label.clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+            .configure_mesh()
+            .x_labels(5)
+            .x_label_formatter(&|x| format!("{}", 100.0 - 100.0 * 10f64.powf(-x)))
+            .x_desc("percentile")
+            .y_desc("latency (µs)")
+            .draw()
+            .map_err(|x| e(&x))?;
+        let colors = [RED, BLUE, GREEN, MAGENTA, CYAN, BLACK];
+        for (i, c) in curves.iter().enumerate() {
+            let color = colors[i % colors.len()];
+            let pts: Vec<(f64, f64)> = c
+                .points
+                .iter()
+                .map(|&(q, v)| (-(1.0 - q / 100.0).max(1e-4).log10(), v.max(y_min)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+                .map_err(|x| e(&x))?
+                .label(c.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(|x| e(&x))?;
+        root.present().map_err(|x| e(&x))?;
+        Ok(())
+    })
 }
 
 /// The CFT front (issue 17, [`crate::cft`]): RMS tracking error against pulses per
@@ -297,101 +366,102 @@ pub fn plot_front(
     verdict: &crate::cft::FrontVerdict,
 ) -> Result<(), PlotError> {
     let e = fail(out);
-    let root = BitMapBackend::new(out, (1000, 650)).into_drawing_area();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let pts: Vec<&crate::cft::FrontPoint> = verdict
-        .cft_front
-        .iter()
-        .chain(std::iter::once(&verdict.lcn))
-        .filter(|p| p.rms_error.is_finite() && p.pulses_per_contraction.is_finite())
-        .collect();
-    let x_max = pts
-        .iter()
-        .map(|p| p.pulses_per_contraction)
-        .fold(1.0, f64::max)
-        * 1.05;
-    let y_max = pts.iter().map(|p| p.rms_error).fold(0.01, f64::max) * 1.1;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..x_max, 0.0..y_max)
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc("pulses per contraction")
-        .y_desc("RMS tracking error (normalised force)")
-        .draw()
-        .map_err(|x| e(&x))?;
-    let reference = verdict.reference_fti_per_contraction;
-    let equal = |p: &crate::cft::FrontPoint| {
-        (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
-    };
-    let line: Vec<(f64, f64)> = verdict
-        .cft_front
-        .iter()
-        .map(|p| (p.pulses_per_contraction, p.rms_error))
-        .collect();
-    chart
-        .draw_series(LineSeries::new(line, BLUE.stroke_width(1)))
-        .map_err(|x| e(&x))?
-        .label("constant-frequency trains, 5-100 Hz")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1)));
-    chart
-        .draw_series(verdict.cft_front.iter().map(|p| {
-            if equal(p) {
-                Circle::new((p.pulses_per_contraction, p.rms_error), 5, GREEN.filled())
-            } else {
-                Circle::new(
-                    (p.pulses_per_contraction, p.rms_error),
-                    3,
-                    BLUE.stroke_width(1),
-                )
-            }
-        }))
-        .map_err(|x| e(&x))?;
-    chart
-        .draw_series(
-            verdict
-                .cft_front
-                .iter()
-                .filter(|p| p.hz.is_some_and(|h| h % 10 == 0))
-                .map(|p| {
-                    Text::new(
-                        format!("{} Hz", p.hz.unwrap_or(0)),
+    on_figure!(out, (1000, 650), |root| {
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        let pts: Vec<&crate::cft::FrontPoint> = verdict
+            .cft_front
+            .iter()
+            .chain(std::iter::once(&verdict.lcn))
+            .filter(|p| p.rms_error.is_finite() && p.pulses_per_contraction.is_finite())
+            .collect();
+        let x_max = pts
+            .iter()
+            .map(|p| p.pulses_per_contraction)
+            .fold(1.0, f64::max)
+            * 1.05;
+        let y_max = pts.iter().map(|p| p.rms_error).fold(0.01, f64::max) * 1.1;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..x_max, 0.0..y_max)
+            .map_err(|x| e(&x))?;
+        chart
+            .configure_mesh()
+            .x_desc("pulses per contraction")
+            .y_desc("RMS tracking error (normalised force)")
+            .draw()
+            .map_err(|x| e(&x))?;
+        let reference = verdict.reference_fti_per_contraction;
+        let equal = |p: &crate::cft::FrontPoint| {
+            (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
+        };
+        let line: Vec<(f64, f64)> = verdict
+            .cft_front
+            .iter()
+            .map(|p| (p.pulses_per_contraction, p.rms_error))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(line, BLUE.stroke_width(1)))
+            .map_err(|x| e(&x))?
+            .label("constant-frequency trains, 5-100 Hz")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1)));
+        chart
+            .draw_series(verdict.cft_front.iter().map(|p| {
+                if equal(p) {
+                    Circle::new((p.pulses_per_contraction, p.rms_error), 5, GREEN.filled())
+                } else {
+                    Circle::new(
                         (p.pulses_per_contraction, p.rms_error),
-                        ("sans-serif", 13),
+                        3,
+                        BLUE.stroke_width(1),
                     )
-                }),
-        )
-        .map_err(|x| e(&x))?;
-    let l = &verdict.lcn;
-    chart
-        .draw_series(std::iter::once(Circle::new(
-            (l.pulses_per_contraction, l.rms_error),
-            7,
-            RED.filled(),
-        )))
-        .map_err(|x| e(&x))?
-        .label(format!(
-            "LCN: {:.2} pulses, RMS {:.4}{}",
-            l.pulses_per_contraction,
-            l.rms_error,
-            if verdict.lcn_dominated {
-                " (dominated)"
-            } else {
-                ""
-            }
-        ))
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|x| e(&x))?;
-    root.present().map_err(|x| e(&x))?;
-    Ok(())
+                }
+            }))
+            .map_err(|x| e(&x))?;
+        chart
+            .draw_series(
+                verdict
+                    .cft_front
+                    .iter()
+                    .filter(|p| p.hz.is_some_and(|h| h % 10 == 0))
+                    .map(|p| {
+                        Text::new(
+                            format!("{} Hz", p.hz.unwrap_or(0)),
+                            (p.pulses_per_contraction, p.rms_error),
+                            ("sans-serif", 13),
+                        )
+                    }),
+            )
+            .map_err(|x| e(&x))?;
+        let l = &verdict.lcn;
+        chart
+            .draw_series(std::iter::once(Circle::new(
+                (l.pulses_per_contraction, l.rms_error),
+                7,
+                RED.filled(),
+            )))
+            .map_err(|x| e(&x))?
+            .label(format!(
+                "LCN: {:.2} pulses, RMS {:.4}{}",
+                l.pulses_per_contraction,
+                l.rms_error,
+                if verdict.lcn_dominated {
+                    " (dominated)"
+                } else {
+                    ""
+                }
+            ))
+            .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|x| e(&x))?;
+        root.present().map_err(|x| e(&x))?;
+        Ok(())
+    })
 }

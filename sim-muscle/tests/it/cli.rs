@@ -404,6 +404,15 @@ fn plot_and_overwrite() {
     ]);
     let bytes = fs::read(&png).expect("png");
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    // The same figure as a vector image, by the extension.
+    let svg = dir.join("slow.svg");
+    run_ok(&["plot", "--data", d, "--out", svg.to_str().expect("utf-8")]);
+    let text = fs::read_to_string(&svg).expect("svg");
+    assert!(
+        text.starts_with("<svg") && text.contains("</svg>"),
+        "{}",
+        &text[..80]
+    );
 }
 
 /// Each bad invocation: non-zero exit, an error naming the problem on stderr, nothing

@@ -48,6 +48,9 @@ pub struct Args {
     /// Test records drawn in validation.png (all are scored).
     #[arg(long, default_value_t = 4)]
     pub plot_records: usize,
+    /// Format of the figures: png (raster) or svg (vector, for papers).
+    #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
+    pub format: workbench::plots::FigureFormat,
 }
 
 /// Runs the command.
@@ -84,7 +87,14 @@ pub fn run(args: Args) -> Result<()> {
     let mut md = String::new();
     let _ = writeln!(md, "# Analysis of `{}`\n", args.model.display());
     stability_section(&mut md, &model, &report);
-    static_section(&mut md, &args.out, &model.lmn, &report, train_phi)?;
+    static_section(
+        &mut md,
+        &args.out,
+        args.format,
+        &model.lmn,
+        &report,
+        train_phi,
+    )?;
     ff_section(&mut md, &args, &net, train_phi)?;
     if let Some(d) = &data {
         validation_section(&mut md, &args, &net, d)?;
@@ -284,6 +294,7 @@ fn static_findings(rep: &StaticReport) -> StaticFindings {
 fn static_section(
     md: &mut String,
     out: &Path,
+    format: workbench::plots::FigureFormat,
     lmn: &Lmn,
     rep: &StaticReport,
     train_phi: Option<(f64, f64)>,
@@ -298,7 +309,7 @@ fn static_section(
     }));
     plots::save(
         &static_figure(lmn, rep, bands),
-        &out.join("static.png"),
+        &format.file(out, "static"),
         (900, 900),
     )?;
     write_static_csv(&out.join("static.csv"), lmn.units(), rep)?;
@@ -546,7 +557,7 @@ fn ff_section(
     let ff = force_frequency_curve(args, net, train_phi)?;
     plots::save(
         &ff_figure(args, &ff, train_phi),
-        &args.out.join("force_frequency.png"),
+        &args.format.file(&args.out, "force_frequency"),
         (900, 650),
     )?;
     write_ff_csv(
@@ -708,7 +719,7 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
     let traces = concatenate(d, &v.fits, shown, net.ts() * 1e3);
     plots::save(
         &validation_figure(traces, shown, d.test.len()),
-        &args.out.join("validation.png"),
+        &args.format.file(&args.out, "validation"),
         (1100, 600),
     )?;
     let rows: Vec<Vec<String>> = d

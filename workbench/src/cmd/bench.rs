@@ -87,6 +87,9 @@ pub struct Args {
     /// its real-time latencies); `auto`: `can` where the kernel has CAN, else `host`.
     #[arg(long, value_enum, default_value_t = BusChoice::Auto)]
     pub bus: BusChoice,
+    /// Format of the figures: png (raster) or svg (vector, for papers).
+    #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
+    pub format: workbench::plots::FigureFormat,
 }
 
 /// `--bus`.
@@ -545,7 +548,7 @@ fn draw(
             .collect(),
     };
     if let Some(v) = &s.front {
-        let p = out.join("front.png");
+        let p = a.format.file(out, "front");
         plot_front(
             &p,
             &format!(
@@ -557,7 +560,7 @@ fn draw(
         paths.push(p);
     }
     let from = 2.0f64.min(s.duration_s / 2.0);
-    let p = out.join("force.png");
+    let p = a.format.file(out, "force");
     plot_run(
         &p,
         &format!(
@@ -592,7 +595,7 @@ fn draw(
         }
     }
     if latency && !curves.is_empty() {
-        let p = out.join("latency.png");
+        let p = a.format.file(out, "latency");
         plot_latency(
             &p,
             if s.timing_functional_only {

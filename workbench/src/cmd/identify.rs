@@ -63,6 +63,9 @@ pub struct Args {
     pub validation: Option<PathBuf>,
     #[command(flatten)]
     pub fit: FitArgs,
+    /// Format of the figures: png (raster) or svg (vector, for papers).
+    #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
+    pub format: workbench::plots::FigureFormat,
 }
 
 /// The options shared by identify, sweep and compare.
@@ -294,7 +297,7 @@ pub fn run(args: Args) -> Result<()> {
             || args.out.display().to_string(),
             |n| n.to_string_lossy().into_owned(),
         );
-        super::validation::write(dir, &result.validation, records.ts, &name)?;
+        super::validation::write(dir, &result.validation, records.ts, &name, args.format)?;
         println!("validation     {}", dir.display());
     }
     Ok(())

@@ -42,6 +42,9 @@ pub struct Args {
     /// Length of that train, ms.
     #[arg(long, default_value_t = 3000)]
     pub long_train_ms: u32,
+    /// Format of the figures: png (raster) or svg (vector, for papers).
+    #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
+    pub format: workbench::plots::FigureFormat,
 }
 
 /// Where the plot and the report go: next to `--out`, named after it.
@@ -102,7 +105,7 @@ pub fn run(args: Args) -> Result<()> {
         )
     })?;
 
-    let png = side_file(&args.out, "-long-train.png");
+    let png = side_file(&args.out, &format!("-long-train.{}", args.format.ext()));
     let long = long_train(&args, &model.lmn, &fixed, &result, &png)?;
     let md = report(&args, &result, before, after, &png, long);
     let md_path = side_file(&args.out, "-modify.md");

@@ -1,4 +1,4 @@
-//! Plotting helpers of the analysis commands (plotters, PNG): figures made of line panels
+//! Plotting helpers of the analysis commands (plotters, PNG or SVG by the file's extension): figures made of line panels
 //! arranged in columns, and FTIpP heat maps.
 //!
 //! Values outside a panel's range are clamped to its edge (a diverging simulation runs along
@@ -459,53 +459,40 @@ fn fmt_tick(v: f64) -> String {
     }
 }
 
-fn check_png(path: &Path) -> Result<()> {
-    if !path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
-        return Err(anyhow!(
-            "{}: plots are written as .png files",
-            path.display()
-        ));
-    }
-    Ok(())
-}
-
-/// Draws a figure into a PNG of `size` pixels.
+/// Draws a figure into a PNG or SVG (by `path`'s extension) of `size` pixels.
 pub fn save(fig: &Figure, path: &Path, size: (u32, u32)) -> Result<()> {
-    check_png(path)?;
     let draw = || -> Result<()> {
-        let root = BitMapBackend::new(path, size).into_drawing_area();
-        root.fill(&WHITE).map_err(drawing_failed)?;
-        let root = if fig.title.is_empty() {
-            root
-        } else {
-            root.titled(&fig.title, ("sans-serif", 18))
-                .map_err(drawing_failed)?
-        };
-        let cols = root.split_evenly((1, fig.columns.len().max(1)));
-        for (col, area) in fig.columns.iter().zip(cols) {
-            let total: u32 = col.iter().map(|(w, _)| *w).sum::<u32>().max(1);
-            let (_, h) = area.dim_in_pixel();
-            let mut rest = area;
-            let mut used = 0;
-            for (i, (w, panel)) in col.iter().enumerate() {
-                used += w;
-                let cell = if i + 1 == col.len() {
-                    rest.clone()
-                } else {
-                    let cut = (h as u64 * *w as u64 / total as u64) as i32;
-                    let (a, b) = rest.split_vertically(cut);
-                    rest = b;
-                    a
-                };
-                draw_panel(&cell, panel)?;
+        workbench::on_figure!(path, size, |root| {
+            root.fill(&WHITE).map_err(drawing_failed)?;
+            let root = if fig.title.is_empty() {
+                root
+            } else {
+                root.titled(&fig.title, ("sans-serif", 18))
+                    .map_err(drawing_failed)?
+            };
+            let cols = root.split_evenly((1, fig.columns.len().max(1)));
+            for (col, area) in fig.columns.iter().zip(cols) {
+                let total: u32 = col.iter().map(|(w, _)| *w).sum::<u32>().max(1);
+                let (_, h) = area.dim_in_pixel();
+                let mut rest = area;
+                let mut used = 0;
+                for (i, (w, panel)) in col.iter().enumerate() {
+                    used += w;
+                    let cell = if i + 1 == col.len() {
+                        rest.clone()
+                    } else {
+                        let cut = (h as u64 * *w as u64 / total as u64) as i32;
+                        let (a, b) = rest.split_vertically(cut);
+                        rest = b;
+                        a
+                    };
+                    draw_panel(&cell, panel)?;
+                }
+                let _ = used;
             }
-            let _ = used;
-        }
-        root.present().map_err(drawing_failed)?;
-        Ok(())
+            root.present().map_err(drawing_failed)?;
+            Ok(())
+        })
     };
     draw().with_context(|| format!("writing {}", path.display()))
 }
@@ -564,21 +551,21 @@ pub fn save_heatmaps(
     path: &Path,
     size: (u32, u32),
 ) -> Result<()> {
-    check_png(path)?;
     let draw = || -> Result<()> {
-        let root = BitMapBackend::new(path, size).into_drawing_area();
-        root.fill(&WHITE).map_err(drawing_failed)?;
-        let root = root
-            .titled(title, ("sans-serif", 18))
-            .map_err(drawing_failed)?;
-        let (maps_area, bar_area) = root.split_horizontally(size.0 as i32 - 110);
-        let areas = maps_area.split_evenly((1, maps.len().max(1)));
-        for (m, area) in maps.iter().zip(areas) {
-            draw_heatmap(&area, m, scale)?;
-        }
-        draw_colour_bar(&bar_area, scale, scale_label)?;
-        root.present().map_err(drawing_failed)?;
-        Ok(())
+        workbench::on_figure!(path, size, |root| {
+            root.fill(&WHITE).map_err(drawing_failed)?;
+            let root = root
+                .titled(title, ("sans-serif", 18))
+                .map_err(drawing_failed)?;
+            let (maps_area, bar_area) = root.split_horizontally(size.0 as i32 - 110);
+            let areas = maps_area.split_evenly((1, maps.len().max(1)));
+            for (m, area) in maps.iter().zip(areas) {
+                draw_heatmap(&area, m, scale)?;
+            }
+            draw_colour_bar(&bar_area, scale, scale_label)?;
+            root.present().map_err(drawing_failed)?;
+            Ok(())
+        })
     };
     draw().with_context(|| format!("writing {}", path.display()))
 }
@@ -708,60 +695,60 @@ pub fn save_surfaces(
     path: &Path,
     size: (u32, u32),
 ) -> Result<()> {
-    check_png(path)?;
     let (lo, mid, hi) = scale;
     let draw = || -> Result<()> {
-        let root = BitMapBackend::new(path, size).into_drawing_area();
-        root.fill(&WHITE).map_err(drawing_failed)?;
-        let root = root
-            .titled(title, ("sans-serif", 18))
-            .map_err(drawing_failed)?;
-        let areas = root.split_evenly((1, maps.len().max(1)));
-        for (m, area) in maps.iter().zip(areas) {
-            let (x0, x1) = (m.xs[0], m.xs[m.xs.len() - 1]);
-            let (z0, z1) = (m.ys[0], m.ys[m.ys.len() - 1]);
-            let mut chart = ChartBuilder::on(&area)
-                .margin(10)
-                .caption(
-                    format!(
-                        "{}: {} along the front, {} to the right, {z_label} up",
-                        m.title, m.x_label, m.y_label
-                    ),
-                    ("sans-serif", 14),
-                )
-                .build_cartesian_3d(x0..x1, lo..hi, z0..z1)
+        workbench::on_figure!(path, size, |root| {
+            root.fill(&WHITE).map_err(drawing_failed)?;
+            let root = root
+                .titled(title, ("sans-serif", 18))
                 .map_err(drawing_failed)?;
-            chart.with_projection(|mut pb| {
-                pb.yaw = 0.6;
-                pb.pitch = 0.35;
-                pb.scale = 0.8;
-                pb.into_matrix()
-            });
-            chart
-                .configure_axes()
-                .light_grid_style(RGBColor(230, 230, 230))
-                .max_light_lines(2)
-                .label_style(("sans-serif", 12))
-                .x_formatter(&|v| format!("{v:.0}"))
-                .z_formatter(&|v| format!("{v:.0}"))
-                .y_formatter(&|v| format!("{v:.2}"))
-                .draw()
-                .map_err(drawing_failed)?;
-            let value = |x: f64, z: f64| {
-                let ix = m.xs.iter().position(|&v| v == x).unwrap_or(0);
-                let iz = m.ys.iter().position(|&v| v == z).unwrap_or(0);
-                m.z[iz][ix].clamp(lo, hi)
-            };
-            let style = |y: &f64| diverging(*y, lo, mid, hi).filled();
-            chart
-                .draw_series(
-                    SurfaceSeries::xoz(m.xs.iter().copied(), m.ys.iter().copied(), value)
-                        .style_func(&style),
-                )
-                .map_err(drawing_failed)?;
-        }
-        root.present().map_err(drawing_failed)?;
-        Ok(())
+            let areas = root.split_evenly((1, maps.len().max(1)));
+            for (m, area) in maps.iter().zip(areas) {
+                let (x0, x1) = (m.xs[0], m.xs[m.xs.len() - 1]);
+                let (z0, z1) = (m.ys[0], m.ys[m.ys.len() - 1]);
+                let mut chart = ChartBuilder::on(&area)
+                    .margin(10)
+                    .caption(
+                        format!(
+                            "{}: {} along the front, {} to the right, {z_label} up",
+                            m.title, m.x_label, m.y_label
+                        ),
+                        ("sans-serif", 14),
+                    )
+                    .build_cartesian_3d(x0..x1, lo..hi, z0..z1)
+                    .map_err(drawing_failed)?;
+                chart.with_projection(|mut pb| {
+                    pb.yaw = 0.6;
+                    pb.pitch = 0.35;
+                    pb.scale = 0.8;
+                    pb.into_matrix()
+                });
+                chart
+                    .configure_axes()
+                    .light_grid_style(RGBColor(230, 230, 230))
+                    .max_light_lines(2)
+                    .label_style(("sans-serif", 12))
+                    .x_formatter(&|v| format!("{v:.0}"))
+                    .z_formatter(&|v| format!("{v:.0}"))
+                    .y_formatter(&|v| format!("{v:.2}"))
+                    .draw()
+                    .map_err(drawing_failed)?;
+                let value = |x: f64, z: f64| {
+                    let ix = m.xs.iter().position(|&v| v == x).unwrap_or(0);
+                    let iz = m.ys.iter().position(|&v| v == z).unwrap_or(0);
+                    m.z[iz][ix].clamp(lo, hi)
+                };
+                let style = |y: &f64| diverging(*y, lo, mid, hi).filled();
+                chart
+                    .draw_series(
+                        SurfaceSeries::xoz(m.xs.iter().copied(), m.ys.iter().copied(), value)
+                            .style_func(&style),
+                    )
+                    .map_err(drawing_failed)?;
+            }
+            root.present().map_err(drawing_failed)?;
+            Ok(())
+        })
     };
     draw().with_context(|| format!("writing {}", path.display()))
 }

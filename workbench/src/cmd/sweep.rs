@@ -38,6 +38,9 @@ pub struct Args {
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub fit: FitArgs,
+    /// Format of the figures: png (raster) or svg (vector, for papers).
+    #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
+    pub format: workbench::plots::FigureFormat,
 }
 
 /// A `--units` value that is not a range of network sizes.
@@ -113,8 +116,10 @@ fn fmt_diverging(v: Option<f64>) -> String {
 /// Grouped bars per size (train MSPE where defined, train MSSE, test MSSE) on a log scale,
 /// the best size marked with *; a diverging fit is drawn as a pale full-height bar.
 pub fn plot(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Result<()> {
-    draw(rows, best, title, out)
-        .map_err(|m| anyhow::anyhow!("{}: drawing failed: {m}", out.display()))
+    workbench::on_figure!(out, (900, 500), |root| {
+        draw(&root, rows, best, title)
+            .map_err(|m| anyhow::anyhow!("{}: drawing failed: {m}", out.display()))
+    })
 }
 
 /// The log axis's range: a third of the smallest positive error to five times the largest
@@ -152,19 +157,20 @@ fn bar_x(units: usize, k: f64) -> f64 {
     units as f64 - 0.4 + 0.8 * k / 3.0
 }
 
-/// Why drawing the sweep plot failed: plotters' error of its bitmap backend.
-type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
-
-fn draw(rows: &[SweepRow], best: Option<usize>, title: &str, out: &Path) -> Result<(), DrawError> {
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    rows: &[SweepRow],
+    best: Option<usize>,
+    title: &str,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let (lo, hi) = mse_axis(rows);
-    let root = BitMapBackend::new(out, (900, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     // Groups centred on the unit counts.
     let (u0, u1) = match (rows.first(), rows.last()) {
         (Some(a), Some(b)) => (a.units as f64, b.units as f64),
         _ => (1.0, 1.0),
     };
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(40)
@@ -292,7 +298,7 @@ pub fn run(args: Args) -> Result<()> {
         });
         std::fs::write(&js, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("cannot write {}", js.display()))?;
-        let png = dir.join("sweep.png");
+        let png = args.format.file(dir, "sweep");
         plot(
             &sw.rows,
             sw.best,

@@ -112,8 +112,15 @@ fn resid_figure(r: &Resid, title: &str) -> Figure {
     }
 }
 
-/// Writes `traces_train.csv`, `traces_test.csv`, `resid.csv` and `resid.png` into `dir`.
-pub fn write(dir: &Path, v: &Validation, ts_s: f64, model: &str) -> Result<()> {
+/// Writes `traces_train.csv`, `traces_test.csv`, `resid.csv` and `resid.png` (or `.svg`)
+/// into `dir`.
+pub fn write(
+    dir: &Path,
+    v: &Validation,
+    ts_s: f64,
+    model: &str,
+    format: workbench::plots::FigureFormat,
+) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let put = |name: &str, text: String| {
         let p = dir.join(name);
@@ -124,7 +131,7 @@ pub fn write(dir: &Path, v: &Validation, ts_s: f64, model: &str) -> Result<()> {
     if let Some(r) = &v.resid {
         put("resid.csv", resid_csv(r))?;
         let fig = resid_figure(r, &format!("residual tests of {model} on the test records"));
-        plots::save(&fig, &dir.join("resid.png"), (900, 700))?;
+        plots::save(&fig, &format.file(dir, "resid"), (900, 700))?;
     }
     Ok(())
 }

@@ -7,6 +7,37 @@ use crate::analysis_support;
 use analysis_support::*;
 use rt_core::model::simulate::{mse, simulate};
 
+/// `--format svg`: the analysis's figures are written as SVG (vector, for papers) under
+/// the same names, and no PNG is.
+#[test]
+fn figures_are_svg_when_asked() {
+    let dir = tmp("analyse-svg");
+    let model = save_model(&dir, "u.json", &fixtures::unstable());
+    let data = save_dataset(&dir, &fixtures::truth(), 12, 590, 8, 3);
+    let out = dir.join("out");
+    let o = run(&[
+        "analyse",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--format",
+        "svg",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for name in ["static", "force_frequency", "validation"] {
+        let text = std::fs::read_to_string(out.join(format!("{name}.svg")))
+            .unwrap_or_else(|e| panic!("{name}.svg: {e}"));
+        assert!(
+            text.starts_with("<svg") && text.contains("</svg>"),
+            "{name}"
+        );
+        assert!(!out.join(format!("{name}.png")).exists(), "{name}.png");
+    }
+}
+
 /// The unstable Table 5.3 model with a data set from the stable truth: the report flags the
 /// instability prominently, says the eigenvectors are local with the LPV caveat, marks
 /// extrapolation above the training phi range, and each test record's MSSE in

@@ -234,6 +234,28 @@ fn identify_writes_the_fields_validation_figures() {
     let png = std::fs::read(val.join("resid.png")).expect("resid.png");
     assert_eq!(&png[..4], b"\x89PNG");
     assert!(val.join("traces_train.csv").exists());
+    // The figure as SVG when asked.
+    let svg_dir = dir.join("validation-svg");
+    let o = run(&[
+        "identify",
+        "--data",
+        data.to_str().expect("utf8"),
+        "--structure",
+        "ss-eig-common",
+        "--units",
+        "1",
+        "--max-iter",
+        "5",
+        "--out",
+        dir.join("m1.lmn.json").to_str().expect("utf8"),
+        "--validation",
+        svg_dir.to_str().expect("utf8"),
+        "--format",
+        "svg",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let svg = std::fs::read_to_string(svg_dir.join("resid.svg")).expect("resid.svg");
+    assert!(svg.starts_with("<svg"));
 }
 
 /// A recording whose delivered pulses differ from the decided ones (the driver refused

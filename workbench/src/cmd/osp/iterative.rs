@@ -73,7 +73,7 @@ fn report(args: &Args, out: &IterativeOutcome, md: &mut String) -> Result<()> {
             ),
             columns,
         },
-        &args.out.join("iterative.png"),
+        &args.format.file(&args.out, "iterative"),
         (560 * out.subjects.len() as u32 + 80, 820),
     )?;
     write_csv(

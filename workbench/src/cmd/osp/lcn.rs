@@ -128,7 +128,7 @@ fn report(args: &Args, c: &Controller, out: &LcnOutcome, md: &mut String) -> Res
             title: "LCN pattern generator on step references (6.5, Figs. 6.9 / 6.11)".into(),
             columns: vec![column],
         },
-        &args.out.join("lcn.png"),
+        &args.format.file(&args.out, "lcn"),
         (1000, h.min(2400)),
     )?;
     let csv: Vec<Vec<String>> = out

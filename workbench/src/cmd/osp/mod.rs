@@ -111,6 +111,9 @@ pub struct Args {
     /// Length of each `lcn` run, ms (the step comes at 50 ms).
     #[arg(long, default_value_t = 800)]
     pub lcn_ms: u32,
+    /// Format of the figures: png (raster) or svg (vector, for papers).
+    #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
+    pub format: workbench::plots::FigureFormat,
 }
 
 /// One muscle or model the methods run on.

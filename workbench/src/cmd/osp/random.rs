@@ -111,7 +111,7 @@ fn report(args: &Args, out: &RandomOutcome, md: &mut String) -> Result<()> {
             ),
             columns,
         },
-        &args.out.join("random.png"),
+        &args.format.file(&args.out, "random"),
         (560 * out.subjects.len() as u32 + 80, 760),
     )?;
     write_csv(

@@ -80,7 +80,7 @@ fn report(args: &Args, out: &TrainsOutcome, md: &mut String) -> Result<()> {
         "constant-frequency train method (6.3, Fig. 6.3): FTIpP (red > 1 > blue)",
         (lo, 1.0, hi),
         "FTIpP",
-        &args.out.join("trains.png"),
+        &args.format.file(&args.out, "trains"),
         (520 * n + 110, 520),
     )?;
     plots::save_surfaces(
@@ -88,7 +88,7 @@ fn report(args: &Args, out: &TrainsOutcome, md: &mut String) -> Result<()> {
         "constant-frequency train method (6.3, Fig. 6.3): FTIpP surface",
         (lo, 1.0, hi),
         "FTIpP",
-        &args.out.join("trains_3d.png"),
+        &args.format.file(&args.out, "trains_3d"),
         (560 * n, 520),
     )?;
     write_csv(
