@@ -14,6 +14,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod candump;
 pub mod config;
 pub mod counter;
 pub mod crc;

@@ -7,6 +7,7 @@
 
 pub mod baseline;
 pub mod bench;
+pub mod canlog;
 pub mod cft;
 pub mod plots;
 pub mod simulation;

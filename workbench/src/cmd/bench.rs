@@ -19,6 +19,7 @@ use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
 use workbench::baseline::{BeatShape, baseline_40hz};
 use workbench::bench::{ChainTiming, Stack, StackOptions, process_logs};
+use workbench::canlog::CanLog;
 use workbench::plots::{
     LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
 };
@@ -222,6 +223,9 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let out = std::fs::canonicalize(out)?;
     announce(a, &iface, uml);
+    // Every frame of the run, bring-up included, in candump -L format.
+    let can_log = out.join("can.log");
+    let canlog = CanLog::start(&iface, &can_log)?;
     let stack = start_healthy(a, bin_dir, &out, iface, uml)?;
     stack.arm_with(ProfileSpec::Cardiac(cardiac(a)))?;
     println!(
@@ -243,6 +247,8 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     let scale_n = stack.scale_n();
     let delay = stack.delay();
     let unclean = stop(stack, uml);
+    let frames = canlog.finish()?;
+    println!("bench: {frames} CAN frames in {}", can_log.display());
     if let Some(f) = failure {
         bail!("bench run failed: {f}");
     }

@@ -15,5 +15,6 @@ mod analysis_osp;
 mod fault_injection;
 mod ident_cli;
 mod lcn_targets;
+mod runtime_canlog;
 mod runtime_outer_loop;
 mod runtime_recording;
