@@ -72,8 +72,8 @@ impl CanLog {
         let frames = Arc::new(AtomicU64::new(0));
         let source = match fes_hostbus::bus_dir(iface) {
             Some(dir) => {
-                let tap = HostBus::open(&dir, Station::Tap, Some(Duration::from_millis(20)))
-                    .map_err(io("open the host bus's tap", &dir))?;
+                let tap = HostBus::open(dir, Station::Tap, Some(Duration::from_millis(20)))
+                    .map_err(io("open the host bus's tap", dir))?;
                 let file = File::create(path).map_err(io("create", path))?;
                 let stop = Arc::new(AtomicBool::new(false));
                 let (s, n, p) = (stop.clone(), frames.clone(), path.to_path_buf());
