@@ -21,6 +21,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+pub mod import;
+
 /// Value of the `schema` field this module reads and writes.
 pub const SCHEMA: &str = "fes-dataset/1";
 /// Name of the metadata file inside a data-set directory.
