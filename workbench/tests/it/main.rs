@@ -12,6 +12,7 @@ mod analysis_analyse;
 mod analysis_design;
 mod analysis_modify;
 mod analysis_osp;
+mod dataset_import_cli;
 mod fault_injection;
 mod ident_cli;
 mod lcn_targets;
