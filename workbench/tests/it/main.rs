@@ -16,5 +16,6 @@ mod dataset_import_cli;
 mod fault_injection;
 mod ident_cli;
 mod lcn_targets;
+mod readers;
 mod runtime_outer_loop;
 mod runtime_recording;
