@@ -49,7 +49,8 @@ WHAT IT DOES
   6. The first half of the records trains, the rest test (--train-records N, or
      --test-records 3,7,...).
   Any problem is an error naming the file, line and column. Data-set format and reader:
-  docs/sim-muscle.md; the importer: docs/identification.md (\"Use your own data\").
+  docs/sim-muscle.md, \"Importing data and reading it elsewhere\"; README, \"Use your own
+  data\".
 
 EXAMPLES
   Time in seconds at 2 kHz, a 0/1 stimulation column, force in mN, trials separated by
