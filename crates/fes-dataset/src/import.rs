@@ -105,32 +105,8 @@ pub enum ImportError {
         problem: String,
     },
     /// Two pulses fall on one tick of the grid.
-    #[error(
-        "{}:{line}: column {column} `{name}`: the pulse at t = {t} falls on the same {ts_ms} ms tick (record {record}, sample {tick}) as the pulse of line {first_line}; the grid holds one pulse per sample: import at a shorter sample period, or {hint}",
-        path.display()
-    )]
-    PulseCollision {
-        /// The file holding the pulse (input, or the pulse-time list).
-        path: PathBuf,
-        /// Line of the second pulse.
-        line: usize,
-        /// Line of the first pulse.
-        first_line: usize,
-        /// 1-based column number (1 in a list of times).
-        column: usize,
-        /// Column name.
-        name: String,
-        /// Time of the second pulse on the input's clock, as written, with its unit.
-        t: String,
-        /// Record index.
-        record: usize,
-        /// Sample index in the record.
-        tick: usize,
-        /// The grid's sample period, ms.
-        ts_ms: f64,
-        /// What else could be meant.
-        hint: &'static str,
-    },
+    #[error("{0}")]
+    PulseCollision(Box<PulseCollision>),
     /// A pulse time lies in no record.
     #[error("{}:{line}: pulse at t = {t} is in no record: {problem}", path.display())]
     PulseOutside {
@@ -218,6 +194,35 @@ pub enum ImportError {
     /// every rule is checked before).
     #[error(transparent)]
     Format(#[from] FormatError),
+}
+
+/// Two pulses on one tick of the grid ([`ImportError::PulseCollision`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "{}:{line}: column {column} `{name}`: the pulse at t = {t} falls on the same {ts_ms} ms tick (record {record}, sample {tick}) as the pulse of line {first_line}; the grid holds one pulse per sample: import at a shorter sample period, or {hint}",
+    path.display()
+)]
+pub struct PulseCollision {
+    /// The file holding the pulse (input, or the pulse-time list).
+    pub path: PathBuf,
+    /// Line of the second pulse.
+    pub line: usize,
+    /// Line of the first pulse.
+    pub first_line: usize,
+    /// 1-based column number (1 in a list of times).
+    pub column: usize,
+    /// Column name.
+    pub name: String,
+    /// Time of the second pulse on the input's clock, as written, with its unit.
+    pub t: String,
+    /// Record index.
+    pub record: usize,
+    /// Sample index in the record.
+    pub tick: usize,
+    /// The grid's sample period, ms.
+    pub ts_ms: f64,
+    /// What else could be meant.
+    pub hint: &'static str,
 }
 
 /// How the fields of a line are separated.
@@ -978,7 +983,7 @@ pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Importe
     for p in &placed {
         let slot = &mut grid[p.record][p.tick];
         if let Some(first) = *slot {
-            return Err(ImportError::PulseCollision {
+            return Err(ImportError::PulseCollision(Box::new(PulseCollision {
                 path: pulse_path,
                 line: p.line,
                 first_line: first,
@@ -989,7 +994,7 @@ pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Importe
                 tick: p.tick,
                 ts_ms,
                 hint,
-            });
+            })));
         }
         *slot = Some(p.line);
     }
@@ -1027,7 +1032,7 @@ pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Importe
                 .flat_map(|s| s.f.iter())
                 .map(|f| f - offset_n)
                 .fold(f64::NEG_INFINITY, f64::max);
-            if !(peak > 0.0) {
+            if peak.is_nan() || peak <= 0.0 {
                 return Err(ImportError::Normalise {
                     path: path.to_path_buf(),
                     problem: format!(
