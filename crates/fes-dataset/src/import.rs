@@ -32,6 +32,10 @@ use std::path::{Path, PathBuf};
 
 use crate::{DataSet, FORCE_SLACK, FormatError, Header, Record, Split};
 
+/// The most samples one record may have on the grid (about 2.8 hours at 1 ms): beyond it a
+/// time column is in the wrong unit or records are not split.
+pub const MAX_GRID_SAMPLES: usize = 10_000_000;
+
 /// Refused input or options, naming the file, line (1-based, as an editor counts) and
 /// column.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -136,6 +140,23 @@ pub enum ImportError {
         ts_ms: f64,
         /// What splits records.
         hint: String,
+    },
+    /// A record would be longer than [`MAX_GRID_SAMPLES`] on the grid (a time in the wrong
+    /// unit, or a missing split).
+    #[error("{}:{first_line}-{last_line}: record {record} spans {span_ms} ms: more than {max} samples of {ts_ms} ms; check the time unit and the record split", path.display(), max = MAX_GRID_SAMPLES)]
+    RecordTooLong {
+        /// The file.
+        path: PathBuf,
+        /// Record index.
+        record: usize,
+        /// Its first line.
+        first_line: usize,
+        /// Its last line.
+        last_line: usize,
+        /// Its span, ms.
+        span_ms: f64,
+        /// The grid's sample period, ms.
+        ts_ms: f64,
     },
     /// Fewer than two records: a data set needs a train and a test record.
     #[error("{}: {count} record(s); a data set needs at least 2 (train and test): {hint}", path.display())]
@@ -772,7 +793,17 @@ pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Importe
     let mut prev: Option<(f64, &Row, &str)> = None;
     for (k, row) in table.rows.iter().enumerate() {
         let t = match time_col {
-            Some(c) => number(row, c)? * unit_ms,
+            Some(c) => {
+                let t = number(row, c)? * unit_ms;
+                if !t.is_finite() {
+                    return Err(value_err(
+                        row,
+                        c,
+                        format!("{} is out of range", row.fields[c]),
+                    ));
+                }
+                t
+            }
             None => k as f64 * 1e3 / rate_hz,
         };
         let f = number(row, force_col)? * opts.force_gain;
@@ -837,7 +868,18 @@ pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Importe
     for (i, s) in segments.iter().enumerate() {
         let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
         let span = t1 - t0;
-        let n = (span / ts_ms + 1e-6).floor() as usize + 1;
+        let steps = (span / ts_ms + 1e-6).floor();
+        if steps.is_nan() || steps >= MAX_GRID_SAMPLES as f64 {
+            return Err(ImportError::RecordTooLong {
+                path: path.to_path_buf(),
+                record: i,
+                first_line: s.lines[0],
+                last_line: s.lines[s.lines.len() - 1],
+                span_ms: span,
+                ts_ms,
+            });
+        }
+        let n = steps as usize + 1;
         if n < 2 {
             return Err(ImportError::RecordTooShort {
                 path: path.to_path_buf(),

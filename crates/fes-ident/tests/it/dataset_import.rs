@@ -333,3 +333,66 @@ fn an_import_writes_a_data_set_the_reader_accepts() {
     assert_eq!(back, ds);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A time in the wrong unit (ms read as s) makes a record of hours: refused by name
+/// before any memory is taken for it.
+#[test]
+fn a_record_too_long_for_the_grid_is_refused() {
+    let text = "time_s,force,stim\n0,0,0\n20000,0.5,1\n50000,0,0\n50001,0,0\n";
+    let mut o = opts();
+    o.split_gap_s = Some(25_000.0);
+    assert_eq!(
+        err(text, &o),
+        "in.csv:2-3: record 0 spans 20000000 ms: more than 10000000 samples of 1 ms; check the time unit and the record split"
+    );
+}
+
+mod never_panics {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn check(text: &[u8], o: &ImportOptions) {
+        if let Ok(i) = import(&path(), text, o) {
+            i.dataset.validate(Path::new("out")).unwrap();
+            assert!(i.dataset.records.len() >= 2);
+            let pulses: usize = i.dataset.records.iter().map(|r| r.pulses()).sum();
+            assert_eq!(pulses, i.report.pulses);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1000))]
+
+        /// Arbitrary bytes: an error or a valid data set, never a panic.
+        #[test]
+        fn arbitrary_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..300)) {
+            check(&bytes, &opts());
+        }
+
+        /// Table-like text under the option sets of the tests above.
+        #[test]
+        fn table_like_text(body in "[0-9,.;\\- \t\"eEa\n]{0,300}", which in 0u8..3) {
+            let mut o = opts();
+            match which {
+                0 => {}
+                1 => {
+                    o.time = TimeSource::Rate { hz: 2000.0 };
+                    o.force = ColumnRef::Number(1);
+                    o.pulses = Pulses::Column { column: ColumnRef::Number(2), edges: true };
+                    o.record_column = Some(ColumnRef::Number(3));
+                    o.force_offset = Level::Auto;
+                    o.force_scale = Level::Auto;
+                }
+                _ => {
+                    o.pulses = Pulses::Times {
+                        path: "p.txt".into(),
+                        times: vec![(1, 0.0), (2, 0.0021), (3, 0.5)],
+                    };
+                }
+            }
+            let text = format!("time_s,force,stim\n{body}");
+            check(text.as_bytes(), &o);
+            check(body.as_bytes(), &o);
+        }
+    }
+}
