@@ -346,3 +346,48 @@ fn import_refusals_name_the_line_and_column_and_help_has_examples() {
         assert!(help.contains(key), "{key} missing from --help");
     }
 }
+
+/// The README's "Use your own data" commands, as written there (with this build's `fes`
+/// for `target/release/fes` and a scratch directory for `target/mine`), on the committed
+/// `examples/lab-export.csv`: a CSV becomes a data set, a model, an analysis and a
+/// controller file.
+#[test]
+fn the_readme_use_your_own_data_commands_run() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let readme = std::fs::read_to_string(repo.join("README.md")).unwrap();
+    let section = readme
+        .split("## Use your own data")
+        .nth(1)
+        .and_then(|s| s.split("```").nth(1))
+        .expect("README has the section and its code block");
+    let joined = section.replace("\\\n", " ");
+    let commands: Vec<&str> = joined
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with("target/release/fes "))
+        .collect();
+    assert_eq!(commands.len(), 4, "{section}");
+    let dir = scratch("readme_own_data");
+    let mine = dir.join("mine");
+    for c in commands {
+        let args: Vec<String> = c
+            .split_whitespace()
+            .skip(1)
+            .map(|a| a.replace("target/mine", mine.to_str().unwrap()))
+            .collect();
+        let o = Command::new(BIN)
+            .args(&args)
+            .current_dir(&repo)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{c}\n{}", text(&o.stderr));
+    }
+    let ds = DataSet::read(mine.join("data")).unwrap();
+    assert_eq!(ds.records.len(), 20);
+    assert_eq!(ds.header.split.train.len(), 10);
+    let lcn: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(mine.join("mine.lcn.json")).unwrap())
+            .unwrap();
+    assert_eq!(lcn["schema"], "fes-lcn/1");
+    assert!(mine.join("analysis/report.md").exists());
+}
