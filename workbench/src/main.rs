@@ -16,6 +16,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Data sets from elsewhere: `fes dataset import` turns a CSV of force and
+    /// stimulation into a data set.
+    Dataset(cmd::dataset::Args),
     /// Identify a Local Model Network from a data set (thesis 5.3, 5.4, App. B).
     Identify(cmd::identify::Args),
     /// Fit every network size of one structure and choose the size (Figs. 5.13-5.21).
@@ -43,6 +46,7 @@ enum Command {
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Dataset(args) => cmd::dataset::run(args),
         Command::Identify(args) => cmd::identify::run(args),
         Command::Sweep(args) => cmd::sweep::run(args),
         Command::Compare(args) => cmd::compare::run(args),

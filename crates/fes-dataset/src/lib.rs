@@ -11,7 +11,9 @@
 //! without the column takes the pulses as the decisions). `docs/sim-muscle.md` documents
 //! every field. Simulated and rig recordings
 //! use the same format and the same validating reader, [`DataSet::read`]; every
-//! violation is reported with the file, line and field.
+//! violation is reported with the file, line and field. Tables recorded elsewhere (any
+//! rate, columns, units and record layout) become data sets through [`import`]
+//! (`fes dataset import`).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
@@ -20,6 +22,8 @@ use std::io;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+
+pub mod import;
 
 /// Value of the `schema` field this module reads and writes.
 pub const SCHEMA: &str = "fes-dataset/1";

@@ -122,15 +122,19 @@ pub fn out_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))
 }
 
-/// Writes a CSV file: a header line and one line per row (fields already formatted).
+/// Writes a CSV file: a header line and one line per row (fields already formatted),
+/// quoted where a field holds a comma, a quote or a line break (record names and kinds
+/// come from the user's data set).
 pub fn write_csv(path: &Path, header: &[&str], rows: &[Vec<String>]) -> Result<()> {
-    let mut s = header.join(",");
-    s.push('\n');
-    for r in rows {
-        s.push_str(&r.join(","));
-        s.push('\n');
-    }
-    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+    let mut w = csv::WriterBuilder::new()
+        .flexible(true)
+        .from_path(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    w.write_record(header)
+        .and_then(|()| rows.iter().try_for_each(|r| w.write_record(r)))
+        .with_context(|| format!("writing {}", path.display()))?;
+    w.flush()
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// A Markdown table.

@@ -2,12 +2,13 @@
 //! identification, a progress bar, table formatting (and, in [`plots`] and [`inputs`], what
 //! the analysis commands share).
 //!
-//! Offline model work: [`identify`], [`sweep`], [`compare`], [`analyse`], [`modify`],
+//! Data: [`dataset`] (import). Offline model work: [`identify`], [`sweep`], [`compare`], [`analyse`], [`modify`],
 //! [`design`], [`lcn_variants`], [`osp`]; and the end-to-end [`mod@bench`].
 
 pub mod analyse;
 pub mod bench;
 pub mod compare;
+pub mod dataset;
 pub mod design;
 pub mod identify;
 pub mod inputs;

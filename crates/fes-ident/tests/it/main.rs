@@ -15,6 +15,7 @@ mod analysis_stabilise;
 mod control_loop;
 mod dataset_format;
 mod dataset_fuzz;
+mod dataset_import;
 mod ident_estimation;
 mod ident_jacobian;
 mod ident_resample;
