@@ -29,7 +29,7 @@
 //! one). A frame the receive socket drops (its queue full) is skipped over, so a foreign
 //! frame identical to a dropped echo would pass unnoticed. Detection is not prevention: a
 //! forged PULSE may reach the stimulator before the driver's NMT stop does (the measured
-//! bound is in docs/safety.md); the private bus ([`docs/deployment.md`], the CAN interface
+//! bound is in docs/safety.md); the private bus (docs/deployment.md: the CAN interface
 //! in a network namespace only the driver joins) is what keeps other senders off.
 //!
 //! Hot-path rules: [`SentLog::record`] (forward thread) is wait-free, allocation-free and
