@@ -8,7 +8,9 @@
 //! a tap injects, and the link is always up.
 //!
 //! Its socket accepts exactly FORCE, STATUS, EMCY and the stimulator heartbeat (standard
-//! data frames) plus every error frame (`CAN_RAW_ERR_FILTER` = all), so bus-off,
+//! data frames), the driver's own transmit identifiers (NMT, PULSE, CONFIG, host heartbeat:
+//! each such frame the driver did not write is an intrusion, [`crate::intrusion`]) plus
+//! every error frame (`CAN_RAW_ERR_FILTER` = all), so bus-off,
 //! error-passive and controller problems arrive as frames. A read failing with `ENETDOWN`
 //! and the interface flags (`SIOCGIFFLAGS`: up and running), polled every
 //! [`LINK_CHECK_NS`], tell when the link goes down and comes back.
@@ -33,6 +35,7 @@ use socketcan::{
 };
 
 use crate::event::{BusErrorKind, BusEvent, SharedStatus};
+use crate::intrusion::{OWN_KINDS, SentLog, SentMatcher, own_kind};
 
 /// How often the interface flags are read, ns.
 pub const LINK_CHECK_NS: u64 = 10_000_000;
@@ -136,6 +139,11 @@ pub struct BusCounters {
     pub publish_errors: AtomicU64,
     /// Bus events dropped because the queue to the forward thread was full.
     pub events_lost: AtomicU64,
+    /// Echoes of the driver's own frames recognised (SocketCAN: the transmit socket's
+    /// frames looped back to the receive socket).
+    pub own_echoes: AtomicU64,
+    /// Frames on the driver's own identifiers that it did not write.
+    pub intrusions: AtomicU64,
 }
 
 impl BusCounters {
@@ -168,12 +176,17 @@ pub enum BusError {
     Ipc(String),
 }
 
-/// The stimulator's message kinds the receive socket accepts.
-const ACCEPTED: [MessageKind; 4] = [
+/// The message kinds the receive socket accepts: the stimulator's, and the driver's own
+/// ([`OWN_KINDS`], for intrusion detection).
+const ACCEPTED: [MessageKind; 8] = [
     MessageKind::Force,
     MessageKind::Status,
     MessageKind::Emcy,
     MessageKind::StimHeartbeat,
+    OWN_KINDS[0],
+    OWN_KINDS[1],
+    OWN_KINDS[2],
+    OWN_KINDS[3],
 ];
 
 /// The receive socket: the stimulator's frames and every error frame, on a CAN interface
@@ -276,6 +289,13 @@ impl RxSocket {
         }
     }
 
+    /// Whether a frame on one of the driver's own identifiers can be the driver's own
+    /// (SocketCAN loops the transmit socket's frames back to this one; on the host bus a
+    /// station never receives frames sent as itself).
+    fn echoes_own_frames(&self) -> bool {
+        matches!(self, RxSocket::Can(_))
+    }
+
     /// The interface's link state (the host bus is always up).
     fn link_is_up(&self, iface: &str) -> Option<bool> {
         match self {
@@ -286,16 +306,19 @@ impl RxSocket {
 }
 
 /// Runs the receive thread until `stop` is set. `on_ready` is called once the socket and
-/// the ForceSample publisher exist.
+/// the ForceSample publisher exist. `sent` is the log of the frames the forward thread
+/// writes ([`crate::intrusion`]).
 pub fn run_bus(
     settings: &BusSettings,
     to_forward: &ArrayQueue<BusEvent>,
     status: &SharedStatus,
     counters: &BusCounters,
+    sent: &SentLog,
     stop: &AtomicBool,
     on_ready: impl FnOnce(),
 ) -> Result<(), BusError> {
     let socket = open_socket(settings)?;
+    let mut echoes = SentMatcher::new();
     let node = create_node("stim-driver-bus").map_err(|e| BusError::Ipc(e.to_string()))?;
     let publisher = port::publisher::<ForceSample>(&node, &settings.prefix)?;
     on_ready();
@@ -331,6 +354,15 @@ pub fn run_bus(
             }
             Ok(Rx::Data(id, data, len)) => {
                 BusCounters::bump(&counters.frames);
+                if let Some(kind) = own_kind(&settings.nodes, id) {
+                    if socket.echoes_own_frames() && echoes.matches(sent, id, &data, len) {
+                        BusCounters::bump(&counters.own_echoes);
+                    } else {
+                        BusCounters::bump(&counters.intrusions);
+                        push(BusEvent::Intrusion { cob_id: id, kind });
+                    }
+                    continue;
+                }
                 match settings.nodes.decode(u32::from(id), &data[..len]) {
                     Ok(Message::Force(f)) => {
                         if let Some(last) = last_frame_seq {

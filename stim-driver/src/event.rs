@@ -10,7 +10,7 @@
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 
 use crossbeam::queue::ArrayQueue;
-use fes_can::{Emcy, NmtState, Status, StimState};
+use fes_can::{Emcy, MessageKind, NmtState, Status, StimState};
 use fes_rt::msg::{DeviceState, DriverCommand, PulseFate, ValidationError};
 
 use crate::fault::{ArmRefusal, Fault};
@@ -57,6 +57,14 @@ pub enum BusEvent {
     LinkUp,
     /// Bus events were dropped because the queue to the forward thread was full.
     EventsLost,
+    /// A frame on one of the driver's own transmit identifiers that the driver did not
+    /// write ([`crate::intrusion`]).
+    Intrusion {
+        /// The frame's COB-ID.
+        cob_id: u16,
+        /// The message kind of that identifier.
+        kind: MessageKind,
+    },
 }
 
 /// Liveness of a service's publisher — the StimTick publisher (rt-core) or the

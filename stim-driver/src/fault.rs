@@ -2,10 +2,10 @@
 //! ([`ArmRefusal`]), with the codes `DriverStatus.fault_code` carries.
 //!
 //! Codes: a stimulator EMCY is reported with the stimulator's own CANopen code; the
-//! driver's own conditions use the manufacturer-specific range 0xFF21..=0xFF2F (the bus
+//! driver's own conditions use the manufacturer-specific range 0xFF21..=0xFF3F (the bus
 //! protocol's own codes stop at 0xFF0B; these never appear on the bus).
 
-use fes_can::ErrorCode;
+use fes_can::{ErrorCode, MessageKind};
 use fes_rt::msg::DriverStatus;
 
 /// A condition that stops stimulation: NMT stop on the bus, the driver's safe state, and
@@ -68,6 +68,27 @@ pub enum Fault {
         /// Index of the offending limit (see docs/can-protocol.md).
         detail: u16,
     },
+    /// A frame on one of the driver's own transmit identifiers (NMT, PULSE, CONFIG, host
+    /// heartbeat) that the driver did not write: another sender is on the bus
+    /// ([`crate::intrusion`]). Trips in every mode, not only while armed.
+    Intrusion {
+        /// The frame's COB-ID.
+        cob_id: u16,
+        /// The message kind that identifier carries.
+        kind: MessageKind,
+    },
+    /// A STATUS whose delivered-pulse count does not match the PULSE frames the driver
+    /// wrote since the Arm, beyond the pulses in flight ([`crate::forward`],
+    /// "Reconciliation"). Counts are modulo 2^24, as STATUS carries them.
+    DeliveryMismatch {
+        /// PULSE frames the driver wrote since the Arm.
+        sent: u32,
+        /// Pulses the stimulator reports applied since the Arm.
+        delivered: u32,
+        /// The allowance: pulses written within the in-flight window (fewer delivered)
+        /// or just before the Arm (more delivered).
+        allowed: u32,
+    },
 }
 
 impl Fault {
@@ -91,6 +112,8 @@ impl Fault {
             Fault::TxFailed { .. } => DriverStatus::FAULT_TX_FAILED,
             Fault::SupervisorDead => DriverStatus::FAULT_SUPERVISOR_DEAD,
             Fault::SupervisorGone => DriverStatus::FAULT_SUPERVISOR_GONE,
+            Fault::Intrusion { .. } => DriverStatus::FAULT_INTRUSION,
+            Fault::DeliveryMismatch { .. } => DriverStatus::FAULT_DELIVERY_MISMATCH,
         }
     }
 
@@ -159,6 +182,19 @@ impl core::fmt::Display for Fault {
                     "the stimulator refused the CONFIG (limit index {detail})"
                 )
             }
+            Fault::Intrusion { cob_id, kind } => write!(
+                f,
+                "intrusion: a {} frame (COB-ID {cob_id:#05x}) the driver did not send",
+                kind.name()
+            ),
+            Fault::DeliveryMismatch {
+                sent,
+                delivered,
+                allowed,
+            } => write!(
+                f,
+                "delivery mismatch: the stimulator applied {delivered} pulses since the Arm, the driver wrote {sent} (allowance {allowed})"
+            ),
         }
     }
 }
@@ -257,9 +293,18 @@ mod tests {
             Fault::TxFailed { errno: 5 },
             Fault::SupervisorDead,
             Fault::SupervisorGone,
+            Fault::Intrusion {
+                cob_id: 0x110,
+                kind: MessageKind::Pulse,
+            },
+            Fault::DeliveryMismatch {
+                sent: 1,
+                delivered: 2,
+                allowed: 0,
+            },
         ];
         let mut codes: Vec<u16> = faults.iter().map(Fault::code).collect();
-        assert!(codes.iter().all(|c| (0xFF21..=0xFF2F).contains(c)));
+        assert!(codes.iter().all(|c| (0xFF21..=0xFF3F).contains(c)));
         codes.sort_unstable();
         codes.dedup();
         assert_eq!(codes.len(), faults.len());

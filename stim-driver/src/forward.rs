@@ -21,9 +21,13 @@
 //! While armed, the watchdog trips on: no valid StimTick for `tick_timeout`, a StimTick
 //! older than `stale_after` on arrival, the final tick, the publisher's node dead or gone,
 //! no STATUS for `stimulator_timeout`, NMT start not confirmed within `arm_confirm`; and
-//! the bus side trips on an EMCY, bus-off, the link going down, a failed write, and lost bus
-//! events. An NMT stop that could not be written is retried until it is; while disarmed, a
-//! STATUS that still shows the stimulator operational gets another NMT stop.
+//! the bus side trips on an EMCY, bus-off, the link going down, a failed write, lost bus
+//! events, and a STATUS whose delivered-pulse count disagrees with the pulses written
+//! ([`crate::reconcile`]). In every mode, armed or not, a frame on one of the driver's own
+//! identifiers that it did not write trips ([`crate::intrusion`]), and every further one
+//! gets another NMT stop. An NMT stop that could not be written is retried until it is;
+//! while disarmed, a STATUS that still shows the stimulator operational gets another NMT
+//! stop.
 
 use fes_can::{ErrorCode, NmtState, Nodes, Status, StimLimits, StimState};
 use fes_rt::msg::{
@@ -37,6 +41,7 @@ use crate::event::{
 use crate::fault::{ArmRefusal, Fault};
 use crate::interlock::{InterlockLimits, Interlocks, PulseCommand, Verdict, Violation};
 use crate::output::{ControlFrame, Disarmed, Output, SendError};
+use crate::reconcile::{self, Baseline, PulseWindow};
 use crate::tx::{CanTx, TxError};
 
 /// Timing and identity settings of the forward path (from the configuration file).
@@ -138,6 +143,10 @@ pub struct ForwardPath<T: CanTx> {
     last_command_t_ns: u64,
     /// The supervisor has been seen alive since the last Arm (see [`Self::poll`]).
     supervisor_seen_armed: bool,
+    /// PULSE frames written over the last in-flight window ([`crate::reconcile`]).
+    pulse_window: PulseWindow,
+    /// The reconciliation baseline of the current armed period.
+    baseline: Option<Baseline>,
 }
 
 impl<T: CanTx> ForwardPath<T> {
@@ -168,6 +177,8 @@ impl<T: CanTx> ForwardPath<T> {
             last_status: None,
             last_command_t_ns: 0,
             supervisor_seen_armed: false,
+            pulse_window: PulseWindow::new(settings.stimulator_timeout_ns),
+            baseline: None,
         }
     }
 
@@ -328,6 +339,7 @@ impl<T: CanTx> ForwardPath<T> {
         match result {
             Ok(sent) => {
                 self.counters.pulses_sent += 1;
+                self.pulse_window.record(now_ns);
                 self.counters.tx_retries += u64::from(sent.done.retries);
                 self.counters.last_pulse_ns = sent.done.written_ns.max(now_ns);
                 self.counters.last_pulse_tick_seq = command.tick_seq;
@@ -576,6 +588,12 @@ impl<T: CanTx> ForwardPath<T> {
             Some(Output::Disarmed(disarmed)) => match disarmed.arm() {
                 Ok(armed) => {
                     self.output = Some(Output::Armed(armed));
+                    // arm_refusal() required a recent STATUS.
+                    self.baseline = self.last_status.map(|(status, _)| Baseline {
+                        delivered: status.pulses_delivered,
+                        sent: self.counters.pulses_sent,
+                        carry: self.pulse_window.count(now_ns),
+                    });
                     self.mode = Mode::Armed {
                         since_ns: now_ns,
                         confirmed: false,
@@ -660,6 +678,18 @@ impl<T: CanTx> ForwardPath<T> {
                     self.trip(Fault::BusEventsLost, now_ns, ev);
                 }
             }
+            BusEvent::Intrusion { cob_id, kind } => {
+                ev.emit(DriverEvent::Bus(event));
+                if matches!(self.mode, Mode::Safe(Fault::Intrusion { .. })) {
+                    // Tripped on an intrusion already: stop again at once (the intruder
+                    // may have started the stimulator since), without a new trip.
+                    if self.send_stop(now_ns, ev) {
+                        ev.emit(DriverEvent::StopResent);
+                    }
+                } else {
+                    self.trip(Fault::Intrusion { cob_id, kind }, now_ns, ev);
+                }
+            }
         }
         self.finish(before, ev);
     }
@@ -696,6 +726,17 @@ impl<T: CanTx> ForwardPath<T> {
             } => {
                 if Some(status.config_id) != self.config_id() {
                     self.stimulator_lost(now_ns, ev);
+                    return;
+                }
+                if let Some(base) = self.baseline
+                    && let Some(fault) = reconcile::check(
+                        &base,
+                        status.pulses_delivered,
+                        self.counters.pulses_sent,
+                        self.pulse_window.count(now_ns),
+                    )
+                {
+                    self.trip(fault, now_ns, ev);
                     return;
                 }
                 if operational && !confirmed {

@@ -528,7 +528,9 @@ impl Interlocks {
             });
         }
         if let Some(last) = self.last_pulse_t_ns {
-            let ipi_ns = tick.t_ns - last;
+            // A tick stamped before the last pulse (possible right after a resync, which
+            // forgets the tick order but not the pulse history) is an interval of 0.
+            let ipi_ns = tick.t_ns.saturating_sub(last);
             if ipi_ns < l.min_ipi_ns {
                 return Err(Violation::MinIpi {
                     ipi_ns,
@@ -637,6 +639,25 @@ mod tests {
             verdict(&mut i, &tick(3, 15, true)),
             Verdict::Pulse(_)
         ));
+    }
+
+    #[test]
+    fn a_pulse_stamped_before_the_last_one_after_a_resync_is_refused_not_a_panic() {
+        // Found by the forward-path property test: a pulse, an Arm (resync), then a
+        // tick whose grid time precedes that pulse's underflowed the interval.
+        let mut i = Interlocks::new(limits());
+        assert!(matches!(
+            verdict(&mut i, &tick(1, 10, true)),
+            Verdict::Pulse(_)
+        ));
+        i.resync_sequence();
+        assert_eq!(
+            rejected(verdict(&mut i, &tick(2, 9, true))),
+            Violation::MinIpi {
+                ipi_ns: 0,
+                min_ns: 5 * MS
+            }
+        );
     }
 
     #[test]

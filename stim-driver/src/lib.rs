@@ -13,7 +13,9 @@
 //! - [`tx`]: the write seam ([`tx::CanTx`]): SocketCAN, or a counting sink.
 //! - [`event`], [`fault`]: what the threads exchange, and the fault and refusal reasons.
 //! - [`config`]: the TOML configuration file.
-//! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state).
+//! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state, and frames
+//!   on the driver's own identifiers for [`intrusion`] detection).
+//! - [`reconcile`]: STATUS reconciliation (delivered pulses against pulses written).
 //! - [`runner`] (the real-time forward thread), [`report`] (logs, DriverStatus,
 //!   TimingReport), [`telemetry`], [`liveness`], [`txstamp`]: the process. systemd
 //!   notification is rt-core's ([`fes_rt::rt::notify`]).
@@ -27,8 +29,10 @@ pub mod event;
 pub mod fault;
 pub mod forward;
 pub mod interlock;
+pub mod intrusion;
 pub mod liveness;
 pub mod output;
+pub mod reconcile;
 pub mod report;
 pub mod runner;
 pub mod safe_stop;

@@ -332,6 +332,7 @@ fn spawn_bus<'scope>(
                 &shared.bus_events,
                 &shared.status,
                 &shared.bus,
+                &shared.sent_log,
                 &shared.forward_ended,
                 move || {
                     let _ = ready_tx.send(());

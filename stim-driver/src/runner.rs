@@ -31,6 +31,7 @@ use crate::bus::BusCounters;
 use crate::config::DriverConfig;
 use crate::event::{BusEvent, DriverEvent, EventSink, QueueSink, SharedStatus};
 use crate::forward::ForwardPath;
+use crate::intrusion::{LoggingTx, SentLog};
 use crate::tx::CanTx;
 
 /// The iceoryx2 node name of the forward thread (the supervisor watches it).
@@ -51,6 +52,9 @@ pub struct Shared {
     pub bus_events: ArrayQueue<BusEvent>,
     /// The receive thread's counters.
     pub bus: BusCounters,
+    /// The frames the forward thread wrote, for the receive thread to tell their echoes
+    /// from foreign frames ([`crate::intrusion`]).
+    pub sent_log: SentLog,
     /// Heap allocations of the forward loop since it started (0 is the requirement).
     pub hot_path_allocations: AtomicU64,
     /// Set when the forward thread has ended (the other threads then finish).
@@ -70,6 +74,7 @@ impl Shared {
             event_overflows: AtomicU64::new(0),
             bus_events: ArrayQueue::new(BUS_QUEUE_CAPACITY),
             bus: BusCounters::default(),
+            sent_log: SentLog::new(),
             hot_path_allocations: AtomicU64::new(0),
             forward_ended: AtomicBool::new(false),
             failed: AtomicBool::new(false),
@@ -143,7 +148,7 @@ pub fn run_forward<T: CanTx>(
     // SAFETY: the descriptor stays owned by `listener`, which outlives every use below; it
     // is only polled, never stored elsewhere or closed here.
     let listener_fd = unsafe { listener.file_descriptor().native_handle() };
-    let mut path = ForwardPath::new(settings, tx);
+    let mut path = ForwardPath::new(settings, LoggingTx::new(tx, &shared.sent_log));
     let mut sink = QueueSink::new(&shared.events, &shared.event_overflows);
     let _ = shared.rt_status.set(rt.clone());
     on_ready(&rt);

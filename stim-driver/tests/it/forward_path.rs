@@ -21,7 +21,7 @@ const MS: u64 = 1_000_000;
 const T0: u64 = 1_000 * MS;
 
 use crate::recording_bus;
-use recording_bus::{Bus, status};
+use recording_bus::{Bus, status, status_delivered};
 
 fn settings() -> ForwardSettings {
     DriverConfig::with_defaults("vcan0", 40.0)
@@ -660,6 +660,194 @@ fn bus_off_a_down_interface_and_lost_events_trip() {
         r.fp.state(),
         DriverState::Armed,
         "error-passive is reported only"
+    );
+}
+
+/// A frame on one of the driver's own identifiers that it did not write (issue 19, item
+/// 1): a trip in every mode, NMT stop at once, the named fault with the COB-ID and kind in
+/// `DriverStatus.fault_code` (0xFF30); every further one is stopped again without a new
+/// trip; only an Arm leaves it.
+#[test]
+fn a_foreign_frame_on_an_own_identifier_trips_in_every_mode() {
+    let nodes = Nodes::DEFAULT;
+    for kind in [
+        fes_can::MessageKind::Nmt,
+        fes_can::MessageKind::Pulse,
+        fes_can::MessageKind::Config,
+        fes_can::MessageKind::HostHeartbeat,
+    ] {
+        let cob_id = nodes.id_of(kind);
+        let intrusion = BusEvent::Intrusion { cob_id, kind };
+        let starting = {
+            let mut r = Rig::new(settings());
+            r.fp.start(r.now, &mut r.ev);
+            r
+        };
+        for (mode, mut r) in [
+            ("starting", starting),
+            ("disarmed", Rig::configured(settings())),
+            ("armed", Rig::armed(settings())),
+        ] {
+            r.bus.clear();
+            r.advance(MS);
+            r.bus_event(intrusion);
+            let fault = Fault::Intrusion { cob_id, kind };
+            assert_eq!(r.fault(), Some(fault), "{kind:?} while {mode}");
+            assert_eq!(r.fp.counters().fault_code, 0xFF30);
+            assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)], "{mode}");
+            assert!(r.ev.contains(&DriverEvent::Tripped {
+                fault,
+                stop_sent: true
+            }));
+            assert!(
+                fault.to_string().contains(&format!("{cob_id:#05x}")),
+                "{fault}"
+            );
+            // Another one: stopped again at once, no second trip.
+            let trips = r.fp.counters().trips;
+            r.advance(MS);
+            r.bus_event(intrusion);
+            assert_eq!(r.fp.counters().trips, trips);
+            assert_eq!(r.bus.nmt().len(), 2, "{mode}: stopped again");
+            // Nothing re-arms by itself; pulses are not forwarded.
+            for _ in 0..5 {
+                r.advance(MS);
+                r.tick(true);
+            }
+            assert_eq!(r.fault(), Some(fault));
+            assert!(r.bus.pulses().is_empty());
+        }
+    }
+    // An intrusion overrides an earlier, other safe state (the named fault is the
+    // intrusion's).
+    let mut r = Rig::armed(settings());
+    r.command(DriverCommandKind::SafeStop);
+    assert_eq!(r.fault(), Some(Fault::SafeStopCommand));
+    r.bus_event(BusEvent::Intrusion {
+        cob_id: 0x000,
+        kind: fes_can::MessageKind::Nmt,
+    });
+    assert!(matches!(
+        r.fault(),
+        Some(Fault::Intrusion { cob_id: 0, .. })
+    ));
+}
+
+/// STATUS reconciliation (issue 19, item 1): a stimulator that applied every PULSE written
+/// since the Arm, or all but those written within the in-flight window
+/// (`stimulator_timeout_ms`), passes; one pulse more than written, or one missing that
+/// was written before the window, trips 0xFF31 with NMT stop.
+#[test]
+fn status_reconciles_delivered_pulses_with_pulses_written() {
+    let s = settings();
+    let window = s.stimulator_timeout_ns;
+    // The stimulator had applied 1000 pulses before this driver armed.
+    let armed = |r: &mut Rig| {
+        let id = r.config_id;
+        r.bus_event(status_delivered(StimState::PreOperational, id, 1000));
+        r.advance(MS);
+        r.tick(false);
+        r.command(DriverCommandKind::Arm);
+        assert_eq!(r.fp.state(), DriverState::Armed);
+        r.advance(MS);
+        r.bus_event(status_delivered(StimState::Armed, id, 1000));
+    };
+    // `n` pulses 50 ms apart, with a STATUS every 10 ms from a stimulator that applies
+    // each at once.
+    let pulses = |r: &mut Rig, n: u32| {
+        let id = r.config_id;
+        for _ in 0..n {
+            for k in 0..50 {
+                r.advance(MS);
+                r.tick(k == 0);
+                if k % 10 == 5 {
+                    let applied = r.bus.pulses().len() as u32;
+                    r.bus_event(status_delivered(StimState::Stimulating, id, 1000 + applied));
+                }
+            }
+        }
+        assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.fault());
+    };
+    // Honest, with the pulses of the last window (the last 2, 50 ms apart) in flight.
+    let mut r = Rig::configured(s);
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    armed(&mut r);
+    pulses(&mut r, 10);
+    assert_eq!(r.bus.pulses().len(), 10);
+    let id = r.config_id;
+    for delivered in [1008, 1009, 1010] {
+        r.bus_event(status_delivered(StimState::Stimulating, id, delivered));
+        assert_eq!(r.fp.state(), DriverState::Armed, "{delivered} delivered");
+    }
+    // One more than written: a pulse the driver never sent was applied.
+    r.bus_event(status_delivered(StimState::Stimulating, id, 1011));
+    assert_eq!(
+        r.fault(),
+        Some(Fault::DeliveryMismatch {
+            sent: 10,
+            delivered: 11,
+            allowed: 0
+        })
+    );
+    assert_eq!(r.fp.counters().fault_code, 0xFF31);
+    assert_eq!(r.bus.nmt().last().map(|(_, c)| *c), Some(NmtCommand::Stop));
+
+    // Fewer: fine while the missing ones are in flight, a trip once they are older.
+    let mut r = Rig::configured(s);
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    armed(&mut r);
+    pulses(&mut r, 4);
+    let id = r.config_id;
+    r.bus_event(status_delivered(StimState::Stimulating, id, 1003));
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    // Quiet for the window and one bucket more (ticks keep the watchdog fed).
+    let quiet_until = r.now + window + window / 16 + MS;
+    while r.now < quiet_until {
+        r.advance(MS);
+        r.tick(false);
+        r.bus_event(status_delivered(StimState::Armed, id, 1004));
+    }
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    r.bus_event(status_delivered(StimState::Armed, id, 1003));
+    assert_eq!(
+        r.fault(),
+        Some(Fault::DeliveryMismatch {
+            sent: 4,
+            delivered: 3,
+            allowed: 0
+        })
+    );
+
+    // A quick re-arm: pulses of the last armed period applied after the baseline STATUS
+    // are carried, not counted as forged.
+    let mut r = Rig::configured(s);
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    armed(&mut r);
+    pulses(&mut r, 1);
+    let id = r.config_id;
+    // The baseline STATUS does not show the pulse yet.
+    r.bus_event(status_delivered(StimState::Stimulating, id, 1000));
+    r.command(DriverCommandKind::Disarm);
+    r.advance(MS);
+    r.tick(false);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    r.advance(MS);
+    // The carry is the 1 pulse written within the window before the Arm: applied after
+    // the baseline, it passes; one more does not.
+    r.bus_event(status_delivered(StimState::Armed, id, 1001));
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.fault());
+    r.bus_event(status_delivered(StimState::Armed, id, 1002));
+    assert_eq!(
+        r.fault(),
+        Some(Fault::DeliveryMismatch {
+            sent: 0,
+            delivered: 2,
+            allowed: 1
+        })
     );
 }
 

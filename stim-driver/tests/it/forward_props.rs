@@ -12,6 +12,16 @@
 //! * every stop condition while armed ends it in that same call: Disarm, SafeStop, an
 //!   EMCY with an error code, the stimulator's boot-up, bus-off, link down, lost bus
 //!   events, the generator's or (watched) supervisor's publisher turning dead or gone;
+//! * a frame on one of the driver's own identifiers that it did not write (an intrusion)
+//!   ends in the safe state with the intrusion fault and an NMT stop written in that same
+//!   call, in every mode (not only while armed);
+//! * STATUS reconciliation: the model's stimulator applies every PULSE written at once,
+//!   and a STATUS reports its count honestly, lagging (pulses missing) or with forged
+//!   pulses added. While armed, a STATUS showing more pulses applied since the Arm than
+//!   written plus the carry (pulses written within the window before the Arm, counted
+//!   generously by the model), or fewer than written less those within the in-flight
+//!   window (likewise), ends it; an honest STATUS, against an honest baseline and with no
+//!   forged pulse since, never trips a delivery mismatch;
 //! * armed after a timer pass means a StimTick arrived within the tick timeout, and the
 //!   supervisor has been seen alive since the Arm or the Arm is younger than the arm
 //!   confirmation time (the test found a driver armed while its supervisor watch said "no
@@ -20,15 +30,16 @@
 //! The interlocks' own limits over whole trains are `interlock_props.rs`.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use fes_can::{Emcy, ErrorCode, Message, NmtState, StimState};
+use fes_can::{Emcy, ErrorCode, Message, MessageKind, NmtCommand, NmtState, Nodes, StimState};
 use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
 use proptest::prelude::*;
 use stim_driver::config::DriverConfig;
 use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
+use stim_driver::fault::Fault;
 use stim_driver::forward::{ForwardPath, ForwardSettings};
 
 use crate::recording_bus;
-use recording_bus::{Bus, status};
+use recording_bus::{Bus, status, status_delivered};
 
 const MS: u64 = 1_000_000;
 const T0: u64 = 1_000 * MS;
@@ -51,8 +62,10 @@ enum Input {
     Generator(Liveness),
     /// The DriverCommand publisher's liveness.
     Supervisor(Liveness),
-    /// STATUS from the stimulator: state, and our config id or another.
-    Status(StimState, bool),
+    /// STATUS from the stimulator: state, our config id or another, and its count.
+    Status(StimState, bool, Delivered),
+    /// A frame of this kind on the driver's own identifier that it did not write.
+    Intrusion(MessageKind),
     /// EMCY from the stimulator.
     Emcy(ErrorCode),
     /// The stimulator's heartbeat.
@@ -61,6 +74,28 @@ enum Input {
     Bus(BusEvent),
     /// Only the timers.
     Poll,
+}
+
+/// What a STATUS reports as applied, against the model stimulator's true count (every
+/// PULSE written, applied at once, plus the forged ones).
+#[derive(Debug, Clone, Copy)]
+enum Delivered {
+    /// The true count.
+    Honest,
+    /// The true count less this many (pulses lost or still in flight).
+    Lagging(u32),
+    /// This many forged pulses applied first (they stay in the count).
+    Forged(u32),
+}
+
+fn delivered() -> impl Strategy<Value = Delivered> {
+    prop_oneof![
+        12 => Just(Delivered::Honest),
+        2 => (1u32..=4).prop_map(Delivered::Lagging),
+        1 => (5u32..=100_000).prop_map(Delivered::Lagging),
+        2 => (1u32..=4).prop_map(Delivered::Forged),
+        1 => (5u32..=100_000).prop_map(Delivered::Forged),
+    ]
 }
 
 fn liveness() -> impl Strategy<Value = Liveness> {
@@ -99,8 +134,11 @@ fn input() -> impl Strategy<Value = Input> {
         6 => (
             proptest::sample::select(StimState::ALL),
             proptest::bool::weighted(0.9),
+            delivered(),
         )
-            .prop_map(|(s, ours)| Input::Status(s, ours)),
+            .prop_map(|(s, ours, d)| Input::Status(s, ours, d)),
+        1 => proptest::sample::select(stim_driver::intrusion::OWN_KINDS.to_vec())
+            .prop_map(Input::Intrusion),
         1 => proptest::sample::select(ErrorCode::ALL).prop_map(Input::Emcy),
         1 => prop_oneof![
             4 => Just(NmtState::Operational),
@@ -195,6 +233,17 @@ fn run(steps: &[(u64, Input)]) -> Result<usize, TestCaseError> {
         supervisor: Liveness::Alive,
     };
     let mut pulses = 0;
+    // The reconciliation model: forged pulses applied so far, the count the last STATUS
+    // reported, and per armed period its baseline (the count reported before the Arm,
+    // PULSE frames written at the Arm, the Arm's time, and whether that count was honest
+    // and no forged pulse came since).
+    let mut forged = 0u32;
+    let mut last_reported = 0u32;
+    let mut last_report_honest = true;
+    let mut baseline: Option<(u32, usize, u64, bool)> = None;
+    // The in-flight window and a generous bound of what the path may count in it.
+    let window = s.stimulator_timeout_ns;
+    let generous = |t: u64| t.saturating_sub(window + 2 * (window / 16) + 1);
     for (gap, input) in steps {
         now += gap;
         bus.now.set(now);
@@ -233,13 +282,37 @@ fn run(steps: &[(u64, Input)]) -> Result<usize, TestCaseError> {
             }
             Input::Generator(l) => fp.on_liveness(*l, now, &mut ev),
             Input::Supervisor(l) => fp.on_supervisor_liveness(*l, now, &mut ev),
-            Input::Status(state, ours) => {
+            Input::Status(state, ours, d) => {
                 let id = if *ours {
                     fp.config_id().unwrap_or(0)
                 } else {
                     fp.config_id().unwrap_or(0).wrapping_add(1)
                 };
-                fp.on_bus(status(*state, id), now, &mut ev);
+                if let Delivered::Forged(k) = d {
+                    forged = forged.wrapping_add(*k);
+                    if let Some(b) = baseline.as_mut() {
+                        b.3 = false;
+                    }
+                }
+                let truth = (bus.pulses().len() as u32).wrapping_add(forged);
+                let reported = match d {
+                    Delivered::Lagging(k) => truth.wrapping_sub(*k),
+                    _ => truth,
+                } & 0xFF_FFFF;
+                fp.on_bus(status_delivered(*state, id, reported), now, &mut ev);
+                last_reported = reported;
+                last_report_honest = !matches!(d, Delivered::Lagging(_));
+            }
+            Input::Intrusion(kind) => {
+                let cob_id = Nodes::DEFAULT.id_of(*kind);
+                fp.on_bus(
+                    BusEvent::Intrusion {
+                        cob_id,
+                        kind: *kind,
+                    },
+                    now,
+                    &mut ev,
+                );
             }
             Input::Emcy(code) => fp.on_bus(
                 BusEvent::Emcy(Emcy::new(*code, StimState::Armed, 0, 0)),
@@ -292,6 +365,68 @@ fn run(steps: &[(u64, Input)]) -> Result<usize, TestCaseError> {
         if before == DriverState::Armed && stops(input, seen, s.supervisor_watch) {
             prop_assert_ne!(after, DriverState::Armed, "still armed after {:?}", input);
         }
+        if let Input::Intrusion(kind) = input {
+            let cob_id = Nodes::DEFAULT.id_of(*kind);
+            prop_assert!(
+                matches!(after, DriverState::SafeState(Fault::Intrusion { .. })),
+                "{:?} from {:?} left the path {:?}",
+                input,
+                before,
+                after
+            );
+            prop_assert!(
+                matches!(after, DriverState::SafeState(Fault::Intrusion { cob_id: c, kind: k }) if c == cob_id && k == *kind)
+                    || matches!(before, DriverState::SafeState(Fault::Intrusion { .. })),
+                "the fault does not name the frame: {:?}",
+                after
+            );
+            prop_assert!(
+                new.iter()
+                    .any(|m| matches!(m, Message::Nmt(n) if n.command == NmtCommand::Stop)),
+                "no NMT stop written on {:?}",
+                input
+            );
+        }
+        // Reconciliation, for a STATUS with our configuration while armed.
+        if let (Input::Status(_, true, d), DriverState::Armed, Some(b)) = (input, before, baseline)
+        {
+            let (base_reported, base_written, armed_ns, clean) = b;
+            let times: Vec<u64> = bus.pulses().iter().map(|(t, _)| *t).collect();
+            let sent = (times.len() - base_written) as u32;
+            let delivered = last_reported.wrapping_sub(base_reported) & 0xFF_FFFF;
+            let carry_max = times[..base_written]
+                .iter()
+                .filter(|&&t| t >= generous(armed_ns))
+                .count() as u32;
+            let in_flight_max = times.iter().filter(|&&t| t >= generous(now)).count() as u32;
+            let lag = sent.wrapping_sub(delivered) & 0xFF_FFFF;
+            let must_trip = if lag < 1 << 23 {
+                lag > in_flight_max
+            } else {
+                (1 << 24) - lag > carry_max
+            };
+            if must_trip {
+                prop_assert_ne!(
+                    after,
+                    DriverState::Armed,
+                    "still armed after a STATUS of {} applied since the Arm, {} written ({:?})",
+                    delivered,
+                    sent,
+                    d
+                );
+            }
+            if clean && matches!(d, Delivered::Honest) {
+                prop_assert!(
+                    !matches!(
+                        after,
+                        DriverState::SafeState(Fault::DeliveryMismatch { .. })
+                    ),
+                    "an honest STATUS tripped: {:?} ({} written since the Arm)",
+                    after,
+                    sent
+                );
+            }
+        }
         match input {
             Input::Generator(l) => seen.generator = *l,
             Input::Supervisor(l) => seen.supervisor = *l,
@@ -299,9 +434,20 @@ fn run(steps: &[(u64, Input)]) -> Result<usize, TestCaseError> {
         }
         if after != DriverState::Armed {
             armed_at = None;
+            baseline = None;
         } else if before != DriverState::Armed {
             armed_at = Some(now);
             supervisor_seen_armed = seen.supervisor == Liveness::Alive;
+            baseline = Some((
+                last_reported,
+                bus.pulses().len()
+                    - new
+                        .iter()
+                        .filter(|m| matches!(m, Message::Pulse(_)))
+                        .count(),
+                now,
+                last_report_honest,
+            ));
         }
         supervisor_seen_armed |= seen.supervisor == Liveness::Alive;
         if let Some(t) = armed_at
@@ -366,7 +512,10 @@ fn a_healthy_stream_is_forwarded() {
         ));
     }
     steps.push((0, Input::Command(DriverCommandKind::Arm, 1)));
-    steps.push((MS / 2, Input::Status(StimState::Armed, true)));
+    steps.push((
+        MS / 2,
+        Input::Status(StimState::Armed, true, Delivered::Honest),
+    ));
     for k in 0..500u64 {
         steps.push((
             MS,
@@ -380,7 +529,10 @@ fn a_healthy_stream_is_forwarded() {
             },
         ));
         if k % 10 == 0 {
-            steps.push((0, Input::Status(StimState::Stimulating, true)));
+            steps.push((
+                0,
+                Input::Status(StimState::Stimulating, true, Delivered::Honest),
+            ));
         }
     }
     assert_eq!(run(&steps).unwrap(), 25);

@@ -131,3 +131,35 @@ fn a_stale_socket_is_replaced_a_live_one_refused_and_bad_datagrams_rejected() {
     assert!(!d.join("stimulator.sock").exists());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// As on SocketCAN (`CAN_RAW_RECV_OWN_MSGS` off), a station never hears its own frames,
+/// from its bound socket or from a second, send-only socket of the same station (the
+/// driver writes through one, stim-driver/src/tx.rs); every other sender reaches it. So on
+/// the host bus each frame on the driver's own identifiers that reaches its station is
+/// someone else's (the intrusion detection, stim-driver/src/intrusion.rs).
+#[test]
+fn a_station_never_hears_itself_and_hears_every_other_sender() {
+    let d = dir("own");
+    let driver = HostBus::open(&d, Station::Driver, None).unwrap();
+    let stim = HostBus::open(&d, Station::Stimulator, None).unwrap();
+    let tap = HostBus::open(&d, Station::Tap, None).unwrap();
+    let own_sender = HostBus::sender(&d, Some(Station::Driver)).unwrap();
+    let nmt_start = RawFrame::data(0x000, &[0x01, 0x10]).unwrap();
+    driver.send(&nmt_start).unwrap();
+    own_sender.send(&nmt_start).unwrap();
+    for _ in 0..2 {
+        assert_eq!(stim.recv().unwrap().unwrap().frame, nmt_start);
+        assert_eq!(tap.recv().unwrap().unwrap().frame, nmt_start);
+    }
+    assert_eq!(driver.recv().unwrap(), None, "the driver heard itself");
+    // The same frame from anyone else reaches the driver: from the tap, from a sender in
+    // no station's name, from a sender in the stimulator's.
+    let anyone = HostBus::sender(&d, None).unwrap();
+    let as_stim = HostBus::sender(&d, Some(Station::Stimulator)).unwrap();
+    for s in [&tap, &anyone, &as_stim] {
+        s.send(&nmt_start).unwrap();
+        assert_eq!(driver.recv().unwrap().unwrap().frame, nmt_start);
+    }
+    assert_eq!(driver.recv().unwrap(), None);
+    let _ = std::fs::remove_dir_all(&d);
+}

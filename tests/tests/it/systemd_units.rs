@@ -6,6 +6,8 @@
 //!   supervisor) and stops what depends on a stopped unit (driver -> rt-core, stimulator);
 //! - the real-time settings of the units agree with the shipped configuration files;
 //! - the safety, iceoryx2 and hardening settings are there;
+//! - the private bus: the CAN interface lives in a network namespace of its own that only
+//!   the driver (and the bench's virtual stimulator) joins;
 //! - the installer keeps the operator's configuration and rejects bad options;
 //! - `notify`: the real rt-core binary against a fake service manager (READY, watchdog
 //!   feeding only while the loop ticks, STOPPING), in one test binary with the above;
@@ -30,6 +32,8 @@ const SERVICES: [&str; 5] = [
     "fes-rt-core.service",
     "fes-supervisor.service",
 ];
+/// The private bus's network namespace (issue 19, item 1).
+const NETNS: &str = "fes-can-netns.service";
 /// Processes that share iceoryx2 services.
 const ICEORYX2_USERS: [&str; 3] = [
     "fes-stim-driver.service",
@@ -106,13 +110,17 @@ fn systemd_analyze_verify_accepts_every_unit_silently() {
     for mode in ["--rig", "--bench"] {
         let (scratch, units) = staged(mode);
         let expected: BTreeSet<&str> = if mode == "--bench" {
-            SERVICES.iter().copied().chain(["fes.target"]).collect()
+            SERVICES
+                .iter()
+                .copied()
+                .chain(["fes.target", NETNS])
+                .collect()
         } else {
             SERVICES
                 .iter()
                 .copied()
                 .filter(|u| *u != "fes-sim-muscle.service")
-                .chain(["fes.target"])
+                .chain(["fes.target", NETNS])
                 .collect()
         };
         let got: BTreeSet<&str> = units.keys().map(String::as_str).collect();
@@ -281,6 +289,144 @@ fn unit_graph_orders_and_binds_the_stack() {
         assert!(u(s).has_word("Install", "WantedBy", "fes.target"), "{s}");
     }
     assert!(target.has_word("Install", "WantedBy", "multi-user.target"));
+}
+
+/// The private bus (issue 19, item 1): on both variants the CAN interface exists only in
+/// the network namespace /run/netns/fes, made before it and removed after it; the driver's
+/// unit and the bench's virtual stimulator join it, nothing else does; the units'
+/// sandboxing does not fight it (no PrivateNetwork=, AF_CAN allowed, RestrictNamespaces=
+/// applies to the process, systemd joins the namespace for it).
+#[test]
+fn private_bus_only_the_driver_and_the_stimulator_join_the_can_namespace() {
+    for mode in ["--rig", "--bench"] {
+        let (_scratch, units) = staged(mode);
+        let u = |n: &str| {
+            units
+                .get(n)
+                .unwrap_or_else(|| panic!("{mode}: {n} not installed"))
+        };
+        let netns = u(NETNS);
+        let start = netns.values("Service", "ExecStart").join(" ; ");
+        assert!(
+            start.contains("ip netns add fes"),
+            "{mode}: {NETNS} makes /run/netns/fes: {start}"
+        );
+        assert!(
+            netns
+                .values("Service", "ExecStop")
+                .join(" ")
+                .contains("ip netns delete fes"),
+            "{mode}: {NETNS} removes it on stop"
+        );
+        assert!(netns.is("Service", "RemainAfterExit", "yes"), "{mode}");
+        assert!(netns.has_word("Unit", "PartOf", "fes.target"), "{mode}");
+        assert!(
+            netns.has_word("Install", "WantedBy", "fes.target"),
+            "{mode}"
+        );
+        assert!(u("fes.target").has_word("Unit", "Wants", NETNS), "{mode}");
+
+        // The interface is put in the namespace (rig: moved; bench: created there) and
+        // configured only there.
+        let can = u("fes-can.service");
+        assert!(can.has_word("Unit", "BindsTo", NETNS), "{mode}");
+        assert!(can.has_word("Unit", "After", NETNS), "{mode}");
+        let can_start = can.values("Service", "ExecStart");
+        if mode == "--rig" {
+            let moved = can_start
+                .iter()
+                .position(|c| c.contains("link set dev ${FES_CAN_IFACE} netns fes"))
+                .unwrap_or_else(|| panic!("rig: the interface is moved: {can_start:?}"));
+            for c in &can_start[moved + 1..] {
+                assert!(
+                    c.contains("ip -n fes "),
+                    "rig: {c:?} runs outside the namespace"
+                );
+            }
+            assert!(
+                can_start[moved + 1..].iter().any(|c| c.ends_with(" up")),
+                "rig: brought up in the namespace: {can_start:?}"
+            );
+            assert!(
+                !can.has_word("Unit", "BindsTo", "sys-subsystem-net-devices-can0.device"),
+                "rig: BindsTo= the device unit would stop the interface once it is moved"
+            );
+        } else {
+            assert!(
+                can_start
+                    .iter()
+                    .any(|c| c.contains("ip -n fes link add dev ${FES_CAN_IFACE} type vcan")),
+                "bench: vcan made in the namespace: {can_start:?}"
+            );
+            assert!(
+                can_start.iter().all(|c| c.contains("ip -n fes ")),
+                "bench: every interface command in the namespace: {can_start:?}"
+            );
+        }
+
+        // Who joins it.
+        let joiners: Vec<&str> = if mode == "--bench" {
+            vec!["fes-stim-driver.service", "fes-sim-muscle.service"]
+        } else {
+            vec!["fes-stim-driver.service"]
+        };
+        for (name, unit) in &units {
+            let joins = unit.get("Service", "NetworkNamespacePath");
+            if joiners.contains(&name.as_str()) {
+                assert_eq!(
+                    joins.as_deref(),
+                    Some("/run/netns/fes"),
+                    "{mode}: {name} must join the private bus"
+                );
+                assert!(unit.has_word("Unit", "Requires", NETNS), "{mode}: {name}");
+                assert!(unit.has_word("Unit", "After", NETNS), "{mode}: {name}");
+                assert!(
+                    !unit.is("Service", "PrivateNetwork", "yes"),
+                    "{mode}: {name}: PrivateNetwork= would replace the namespace"
+                );
+                for af in ["AF_CAN", "AF_UNIX", "AF_NETLINK"] {
+                    assert!(
+                        unit.has_word("Service", "RestrictAddressFamilies", af),
+                        "{mode}: {name}: {af}"
+                    );
+                }
+                // RestrictNamespaces= stops the process from making or entering namespaces;
+                // the namespace systemd joins for it is set up before.
+                assert!(
+                    unit.is("Service", "RestrictNamespaces", "yes"),
+                    "{mode}: {name}"
+                );
+            } else {
+                assert_eq!(
+                    joins, None,
+                    "{mode}: {name} does not need the bus and must not join it"
+                );
+            }
+        }
+
+        // Order and binding: namespace, interface, then its users; stopping the namespace
+        // stops everything on the bus.
+        let order = start_order(&units);
+        let pos = |n: &str| order.iter().position(|o| o == n).unwrap();
+        assert!(pos(NETNS) < pos("fes-can.service"), "{mode}: {order:?}");
+        for j in &joiners {
+            assert!(pos("fes-can.service") < pos(j), "{mode}: {order:?}");
+        }
+        let gone = stopped_with(&units, NETNS);
+        for s in joiners
+            .iter()
+            .chain(&["fes-can.service", "fes-rt-core.service"])
+        {
+            assert!(
+                gone.contains(*s),
+                "{mode}: {s} must stop with the namespace"
+            );
+        }
+        assert!(
+            !gone.contains("fes-supervisor.service"),
+            "{mode}: the supervisor survives it (and reports)"
+        );
+    }
 }
 
 /// Reads a TOML file shipped in deploy/.
@@ -504,10 +650,14 @@ fn installer_keeps_the_operators_configuration() {
         env(root).contains("FES_CAN_IFACE=vcan7\n"),
         "kept without --iface"
     );
-    // Rig: the device dependency names the interface; no virtual stimulator.
+    // Rig: the device dependency names the interface (Wants=, not BindsTo=: the device
+    // unit goes when the interface moves into the private namespace); no virtual
+    // stimulator.
     stage("--rig", root, &bins, &["--iface", "can1"]);
     let can = UnitFile::load(&root.join(UNIT_DIR).join("fes-can.service"));
-    assert!(can.has_word("Unit", "BindsTo", "sys-subsystem-net-devices-can1.device"));
+    assert!(can.has_word("Unit", "Wants", "sys-subsystem-net-devices-can1.device"));
+    assert!(can.has_word("Unit", "After", "sys-subsystem-net-devices-can1.device"));
+    assert!(!can.has_word("Unit", "BindsTo", "sys-subsystem-net-devices-can1.device"));
     assert!(!root.join(UNIT_DIR).join("fes-sim-muscle.service").exists());
     // Bad options: exit status 2 and a message naming the problem.
     for (args, message) in [

@@ -234,11 +234,17 @@ impl DriverStatus {
     pub const FAULT_SUPERVISOR_DEAD: u16 = 0xFF2E;
     /// Driver fault: the DriverCommand service has no publisher.
     pub const FAULT_SUPERVISOR_GONE: u16 = 0xFF2F;
+    /// Driver fault: a frame on one of the driver's own transmit identifiers (NMT, PULSE,
+    /// CONFIG, host heartbeat) that the driver did not send: someone else is on the bus.
+    pub const FAULT_INTRUSION: u16 = 0xFF30;
+    /// Driver fault: the stimulator's delivered-pulse count (STATUS) does not match the
+    /// PULSE frames the driver wrote, beyond the pulses in flight.
+    pub const FAULT_DELIVERY_MISMATCH: u16 = 0xFF31;
 
-    /// The driver's own fault codes (manufacturer-specific EMCY range 0xFF21..=0xFF2F),
+    /// The driver's own fault codes (manufacturer-specific EMCY range 0xFF21..=0xFF3F),
     /// with their names: the contract between stim-driver, which reports them, and the
     /// supervisor, which names them (docs/stim-driver.md).
-    pub const DRIVER_FAULTS: [(u16, &'static str); 15] = [
+    pub const DRIVER_FAULTS: [(u16, &'static str); 17] = [
         (Self::FAULT_TICK_TIMEOUT, "tick_timeout"),
         (Self::FAULT_GENERATOR_DEAD, "generator_dead"),
         (Self::FAULT_GENERATOR_GONE, "generator_gone"),
@@ -257,6 +263,8 @@ impl DriverStatus {
         (Self::FAULT_TX_FAILED, "tx_failed"),
         (Self::FAULT_SUPERVISOR_DEAD, "supervisor_dead"),
         (Self::FAULT_SUPERVISOR_GONE, "supervisor_gone"),
+        (Self::FAULT_INTRUSION, "intrusion"),
+        (Self::FAULT_DELIVERY_MISMATCH, "delivery_mismatch"),
     ];
 
     /// The name of a driver fault code, if it is one.

@@ -66,18 +66,30 @@ impl Bus {
             .collect()
     }
 
+    /// A STATUS from a stimulator that has applied every PULSE written so far (those
+    /// still recorded: [`Self::clear`] forgets them).
+    pub fn honest_status(&self, state: StimState, config_id: u8) -> BusEvent {
+        status_delivered(state, config_id, self.pulses().len() as u32)
+    }
+
     pub fn clear(&self) {
         self.frames.borrow_mut().clear();
     }
 }
 
-/// A STATUS event from the stimulator: `state`, confirming configuration `config_id`.
+/// A STATUS event from the stimulator: `state`, confirming configuration `config_id`,
+/// no pulse applied yet.
 pub fn status(state: StimState, config_id: u8) -> BusEvent {
+    status_delivered(state, config_id, 0)
+}
+
+/// A STATUS event reporting `delivered` pulses applied (modulo 2^24, as STATUS carries it).
+pub fn status_delivered(state: StimState, config_id: u8, delivered: u32) -> BusEvent {
     BusEvent::Status(Status {
         state,
         counter: 0,
         last_error: ErrorCode::NoError,
-        pulses_delivered: 0,
+        pulses_delivered: delivered & 0xFF_FFFF,
         rejected: 0,
         config_id,
     })

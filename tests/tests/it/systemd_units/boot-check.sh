@@ -49,6 +49,14 @@ wait_for fes-supervisor ActiveState active 180 || say fail "supervisor not activ
 say supervisor-restarts "$(prop fes-supervisor NRestarts)"
 state up
 
+# The private bus: the CAN interface exists only in /run/netns/fes, which the driver and
+# the virtual stimulator joined (rt-core did not); the host's namespace has no such link.
+iface=$(sed -n 's/^FES_CAN_IFACE=//p' /etc/fes/can.env)
+if ip link show "$iface" >/dev/null 2>&1; then say netns-host-iface visible; else say netns-host-iface absent; fi
+if ip -n fes link show "$iface" >/dev/null 2>&1; then say netns-fes-iface present; else say netns-fes-iface missing; fi
+ns_of() { readlink "/proc/$(prop "$1" MainPID)/ns/net"; }
+say netns-ids "$(ns_of fes-stim-driver) $(ns_of fes-sim-muscle) $(ns_of fes-rt-core) $(stat -L -c 'net:[%i]' /run/netns/fes) $(readlink /proc/1/ns/net)"
+
 # Watchdog: stop rt-core's process; systemd must kill it (WatchdogSec=2) and restart it.
 pid=$(prop fes-rt-core MainPID)
 kill -STOP "$pid"

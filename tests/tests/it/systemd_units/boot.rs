@@ -4,7 +4,9 @@
 //! copy of `/etc` (empty `fstab`, our test target as the only unit in
 //! `/etc/systemd/system`). The check script (`boot-check.sh`, a oneshot unit) runs the
 //! real installer (`scripts/install --bench --no-build`), starts `fes.target` and exercises
-//! ordering, the watchdog, `BindsTo=` and the driver's `ExecStopPost=` safe stop; it prints
+//! ordering, the private bus (the CAN interface only in the namespace the driver and the
+//! virtual stimulator join), the watchdog, `BindsTo=` and the driver's `ExecStopPost=`
+//! safe stop; it prints
 //! `@@SD` lines that [`booted_units_start_in_order_and_stop_safely`] asserts on.
 //!
 //! The guest has one CPU, emulated with ptrace: the four processes' 1 ms loops saturate it
@@ -249,6 +251,24 @@ fn booted_units_start_in_order_and_stop_safely() {
         r.value("install")
     );
     assert_eq!(r.value("enabled"), "enabled");
+    // The private bus (issue 19, item 1): the interface only in /run/netns/fes, joined by
+    // the driver and the virtual stimulator, not by rt-core (nor the host).
+    assert_eq!(r.value("netns-host-iface"), "absent", "{r:#?}");
+    assert_eq!(r.value("netns-fes-iface"), "present", "{r:#?}");
+    let ns: Vec<&str> = r.value("netns-ids").split_whitespace().collect();
+    assert_eq!(
+        ns.len(),
+        5,
+        "driver, stimulator, rt-core, fes, host: {ns:?}"
+    );
+    let (driver, stim, rt, fes, host) = (ns[0], ns[1], ns[2], ns[3], ns[4]);
+    assert_ne!(fes, host, "{ns:?}");
+    assert_eq!(driver, fes, "the driver joins the private bus: {ns:?}");
+    assert_eq!(
+        stim, fes,
+        "the virtual stimulator joins the private bus: {ns:?}"
+    );
+    assert_eq!(rt, host, "rt-core stays in the host's namespace: {ns:?}");
     assert_eq!(r.value("start"), "0");
 
     // Order: CAN -> stimulator, driver -> rt-core (after the driver's READY) -> supervisor.
