@@ -128,10 +128,16 @@ enum Failure {
 }
 
 fn main() -> ExitCode {
-    fes_rt::rt::logging::init("stim-driver");
+    let cli = Cli::parse();
+    // safe-stop (ExecStopPost=) lives for milliseconds: its lines go through its stderr
+    // stream so journald attributes them to the unit (fes_rt::rt::logging).
+    if matches!(cli.command, Command::SafeStop { .. }) {
+        fes_rt::rt::logging::init_stream();
+    } else {
+        fes_rt::rt::logging::init("stim-driver");
+    }
     fes_rt::rt::panic::install("stim-driver");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
-    let cli = Cli::parse();
     let result = match cli.command {
         Command::Run {
             config,

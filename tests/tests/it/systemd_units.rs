@@ -689,3 +689,35 @@ fn installer_keeps_the_operators_configuration() {
     assert!(!root.join("usr/local/bin/rt-core").exists());
     assert!(conf.exists(), "configuration kept");
 }
+
+/// The driver's `safe-stop` (the units' `ExecStopPost=`) lives for milliseconds, so it logs
+/// through its stderr stream, each line with its `<priority>` prefix: journald attributes a
+/// stream's lines to the unit, while a native-protocol datagram of a process that has
+/// already exited loses its unit (the boot test's missing second "safe-stop: NMT stop
+/// written" after a SIGKILL, issue 19 item 7). Run with `JOURNAL_STREAM` naming its stderr,
+/// as systemd starts it, on a host bus.
+#[test]
+fn safe_stop_logs_through_its_journal_stream_with_priorities() {
+    use std::os::unix::fs::MetadataExt;
+    let bins = build_stack();
+    let dir = scratch("safe-stop-log");
+    let err_path = dir.join("stderr");
+    let err = std::fs::File::create(&err_path).unwrap();
+    let meta = err.metadata().unwrap();
+    let out = Command::new(bins.join("stim-driver"))
+        .args(["safe-stop", "--iface"])
+        .arg(format!("hostbus:{}", dir.join("bus").display()))
+        .env("JOURNAL_STREAM", format!("{}:{}", meta.dev(), meta.ino()))
+        .env_remove("RUST_LOG")
+        .stderr(err)
+        .output()
+        .expect("run stim-driver safe-stop");
+    assert!(out.status.success(), "{:?}", out.status);
+    let text = std::fs::read_to_string(&err_path).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.contains("safe-stop: NMT stop written"))
+        .unwrap_or_else(|| panic!("no safe-stop line on the stream: {text:?}"));
+    assert!(line.starts_with("<5>"), "info priority prefix: {line}");
+    assert!(!line.contains('\u{1b}'), "no colour codes: {line}");
+}

@@ -9,6 +9,15 @@
 //! captures, without colours. Outside systemd: stderr, coloured only when it is a
 //! terminal. The filter is `RUST_LOG` (tracing's env-filter syntax), default `info`.
 //! Logging is never done on a real-time hot path, so the choice does not affect timing.
+//!
+//! A short-lived process (the driver's `safe-stop`, run by `ExecStopPost=`) logs through
+//! its stderr stream instead ([`init_stream`]): journald attributes a native-protocol
+//! datagram to a unit by reading the sender's cgroup from `/proc` when it processes the
+//! datagram, which fails once the sender has exited, so a process that logs and exits at
+//! once may have its lines missing from `journalctl -u <unit>` (the boot test's missing
+//! second "safe-stop: NMT stop written", issue 19 item 7). A stream's lines are attributed
+//! by the stream, which systemd opened for the unit. Each line carries its priority as a
+//! `<N>` prefix, which journald reads (`SyslogLevelPrefix=`, on by default).
 
 use std::io::IsTerminal;
 use std::os::unix::fs::MetadataExt;
@@ -103,6 +112,63 @@ pub fn init(identifier: &str) -> LogSink {
         .with_env_filter(filter())
         .try_init();
     sink
+}
+
+/// The syslog priority of a level (error 3, warn 4, info 5, debug 6, trace 7), as
+/// `tracing-journald` maps them.
+pub fn syslog_priority(level: &tracing::Level) -> u8 {
+    match *level {
+        tracing::Level::ERROR => 3,
+        tracing::Level::WARN => 4,
+        tracing::Level::INFO => 5,
+        tracing::Level::DEBUG => 6,
+        tracing::Level::TRACE => 7,
+    }
+}
+
+/// Lines prefixed with `<priority>` for journald's stream parser, without time or colours.
+struct PriorityPrefixed;
+
+impl<S, N> tracing_subscriber::fmt::FormatEvent<S, N> for PriorityPrefixed
+where
+    S: tracing::Subscriber + for<'a> tracing_subscriber::registry::LookupSpan<'a>,
+    N: for<'a> tracing_subscriber::fmt::FormatFields<'a> + 'static,
+{
+    fn format_event(
+        &self,
+        ctx: &tracing_subscriber::fmt::FmtContext<'_, S, N>,
+        mut writer: tracing_subscriber::fmt::format::Writer<'_>,
+        event: &tracing::Event<'_>,
+    ) -> std::fmt::Result {
+        write!(writer, "<{}>", syslog_priority(event.metadata().level()))?;
+        tracing_subscriber::fmt::format()
+            .without_time()
+            .with_level(false)
+            .with_ansi(false)
+            .format_event(ctx, writer, event)
+    }
+}
+
+/// Installs the subscriber of a short-lived process (see the module documentation): under
+/// systemd, stderr lines with `<priority>` prefixes (attributed to the unit by its stream);
+/// otherwise as [`init`]'s stderr. The filter is `RUST_LOG`, default `info`.
+pub fn init_stream() -> LogSink {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    if stderr_is_journal() {
+        let _ = tracing_subscriber::fmt()
+            .with_writer(std::io::stderr)
+            .with_env_filter(filter)
+            .event_format(PriorityPrefixed)
+            .try_init();
+        return LogSink::Stderr { ansi: false };
+    }
+    let ansi = std::io::stderr().is_terminal();
+    let _ = tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_ansi(ansi)
+        .with_env_filter(filter)
+        .try_init();
+    LogSink::Stderr { ansi }
 }
 
 #[cfg(test)]
