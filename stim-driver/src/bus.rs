@@ -47,6 +47,7 @@ pub fn forward_event(message: &Message) -> Option<BusEvent> {
         Message::Status(s) => Some(BusEvent::Status(*s)),
         Message::Emcy(e) => Some(BusEvent::Emcy(*e)),
         Message::StimHeartbeat(h) => Some(BusEvent::StimHeartbeat(h.state)),
+        Message::ConfigApplied(c) => Some(BusEvent::ConfigApplied(*c)),
         _ => None,
     }
 }
@@ -169,11 +170,12 @@ pub enum BusError {
 }
 
 /// The stimulator's message kinds the receive socket accepts.
-const ACCEPTED: [MessageKind; 4] = [
+const ACCEPTED: [MessageKind; 5] = [
     MessageKind::Force,
     MessageKind::Status,
     MessageKind::Emcy,
     MessageKind::StimHeartbeat,
+    MessageKind::ConfigApplied,
 ];
 
 /// The receive socket: the stimulator's frames and every error frame, on a CAN interface

@@ -57,6 +57,8 @@ pub enum BusEvent {
     LinkUp,
     /// Bus events were dropped because the queue to the forward thread was full.
     EventsLost,
+    /// A CONFIG_APPLIED page: limits the stimulator says it applied.
+    ConfigApplied(fes_can::Config),
 }
 
 /// Liveness of a service's publisher — the StimTick publisher (rt-core) or the
@@ -158,6 +160,14 @@ pub enum BringUp {
     ConfigRefused {
         /// Index of the offending limit.
         detail: u16,
+    },
+    /// The stimulator read back the limits it applied (CONFIG_APPLIED, all pages).
+    LimitsReadBack {
+        /// The configuration id.
+        config_id: u8,
+        /// The first limit that differs from what was sent (CONFIG signal name), if any:
+        /// the configuration is then refused and arming with it is impossible.
+        differs: Option<&'static str>,
     },
     /// No confirmation in time: starting over.
     Retry,
