@@ -75,7 +75,8 @@ pub struct StimulatorArgs {
     pub max_charge_uc: f64,
     /// TEST ONLY, a fault to inject: apply every CONFIG with this stimulator's own amplitude
     /// ceiling instead of the requested one (and report it in CONFIG_APPLIED). The host must
-    /// refuse to arm. Never use it on a rig.
+    /// refuse to arm. Never use it on a rig. The environment variable
+    /// FES_TEST_FAULT_LOOSE_CONFIG=1 sets it too.
     #[arg(long, hide = true)]
     pub test_fault_loose_config: bool,
     /// Period of the stimulator's heartbeat, ms.
@@ -134,15 +135,19 @@ impl StimulatorArgs {
             watchdog_ms: self.watchdog_ms,
             max_charge_10nc: charge_10nc as u16,
         };
+        // The test fault, also by environment (FES_TEST_FAULT_LOOSE_CONFIG=1) for the stack
+        // tests, which start this process with fixed options.
+        let test_fault_loose_config = self.test_fault_loose_config
+            || std::env::var_os("FES_TEST_FAULT_LOOSE_CONFIG").is_some_and(|v| v == "1");
         let settings = Settings {
             nodes,
             ceiling,
             channels: self.channels,
             heartbeat_ms: self.heartbeat_ms,
             host_heartbeat_ms: self.host_heartbeat_ms,
-            test_fault_loose_config: self.test_fault_loose_config,
+            test_fault_loose_config,
         };
-        if self.test_fault_loose_config {
+        if test_fault_loose_config {
             eprintln!(
                 "sim-muscle stimulator: TEST FAULT --test-fault-loose-config: CONFIG amplitude \
                  ceilings are ignored"
