@@ -131,6 +131,15 @@ impl Bench {
         let rows = stimulator_rows(&dir.join("stimulator.csv"));
         let run = recordings.last().expect("a recording run");
         let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{}: {e}", run.display()));
+        // Every recording names the prescription it was made under (issue 19, item 4).
+        let meta = std::fs::read_to_string(run.join("dataset.json")).unwrap_or_default();
+        let meta: serde_json::Value = serde_json::from_str(&meta).unwrap_or_default();
+        assert_eq!(
+            meta["prescription_sha256"].as_str(),
+            Some(fes_prescription::sha256_hex(workbench::bench::PRESCRIPTION.as_bytes()).as_str()),
+            "{}: dataset.json prescription_sha256",
+            run.display()
+        );
         let decided_ns = stack_support::raw_ticks(run)
             .iter()
             .filter(|t| t.pulse)
