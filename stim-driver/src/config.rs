@@ -772,7 +772,20 @@ mod tests {
             .expect("deploy/etc/fes/stim-driver.toml");
         let mut expected = DriverConfig::with_defaults("can0", 40.0);
         expected.rt.on_missing_rights = fes_rt::rt::config::MissingRightsPolicy::Refuse;
+        // The one intended difference: the limits cut to the shipped prescription's dose
+        // (20 mA, 200 us, 4 uC per phase; issue 19, item 4), which bounds them.
+        expected.stimulator.max_amplitude_ua = 20_000;
+        expected.stimulator.max_width_us = 200;
+        expected.stimulator.max_charge_nc = 4000;
+        expected.interlocks.max_amplitude_ua = 20_000;
+        expected.interlocks.max_width_us = 200;
+        expected.interlocks.max_charge_nc = 4000;
         assert_eq!(rig, expected);
+        let dose = fes_prescription::Prescription::parse(include_str!(
+            "../../deploy/etc/fes/prescription.toml"
+        ))
+        .unwrap();
+        rig.check_prescription(&dose).unwrap();
     }
 
     #[test]
