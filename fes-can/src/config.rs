@@ -19,6 +19,8 @@ pub struct StimLimits {
     pub rate_window_ms: u16,
     /// Host heartbeat timeout in ms (operational state).
     pub watchdog_ms: u16,
+    /// Charge-per-phase ceiling (amplitude x width of one phase) in 10 nC steps.
+    pub max_charge_10nc: u16,
 }
 
 /// A limit outside the range the protocol can carry.
@@ -45,7 +47,9 @@ impl Default for StimLimits {
 
 impl StimLimits {
     /// 100 mA, 500 us, 1 ms minimum IPI, at most 100 pulses per 1000 ms (a mean of
-    /// 100 Hz), 100 ms watchdog (10 host heartbeats).
+    /// 100 Hz), 100 ms watchdog (10 host heartbeats), 50 uC per phase (100 mA x 500 us:
+    /// the stimulator's own ceiling adds nothing to its amplitude and width ceilings; a
+    /// CONFIG makes it the prescription's).
     ///
     /// The minimum IPI is the stimulator's ceiling against a runaway host (1000 Hz), judged
     /// on the pulses' arrival: the pattern's own 2 ms minimum (DESIGN.md) is the driver's,
@@ -59,10 +63,11 @@ impl StimLimits {
         max_pulses: 100,
         rate_window_ms: 1000,
         watchdog_ms: 100,
+        max_charge_10nc: 5000,
     };
 
     /// Each limit with its CONFIG signal, in page order.
-    fn fields(&self) -> [(&'static SignalDesc, u16); 6] {
+    fn fields(&self) -> [(&'static SignalDesc, u16); 7] {
         [
             (&sig::MAX_AMPLITUDE, self.max_amplitude_100ua),
             (&sig::MAX_WIDTH, self.max_width_us),
@@ -70,6 +75,7 @@ impl StimLimits {
             (&sig::MAX_PULSES, self.max_pulses),
             (&sig::RATE_WINDOW, self.rate_window_ms),
             (&sig::WATCHDOG, self.watchdog_ms),
+            (&sig::MAX_CHARGE, self.max_charge_10nc),
         ]
     }
 
@@ -91,7 +97,7 @@ impl StimLimits {
         Ok(())
     }
 
-    /// Index (0-5, page order) of the first limit outside its range, for EMCY details.
+    /// Index (0-6, page order) of the first limit outside its range, for EMCY details.
     pub fn field_index(name: &str) -> Option<u16> {
         StimLimits::default()
             .fields()
@@ -100,8 +106,9 @@ impl StimLimits {
             .and_then(|i| u16::try_from(i).ok())
     }
 
-    /// The two CONFIG frames that carry these limits under `config_id` (1..=255).
-    pub const fn to_pages(&self, config_id: u8) -> [Config; 2] {
+    /// The three CONFIG frames that carry these limits under `config_id` (1..=255); the
+    /// stimulator answers with the same three pages as CONFIG_APPLIED.
+    pub const fn to_pages(&self, config_id: u8) -> [Config; 3] {
         [
             Config {
                 config_id,
@@ -119,7 +126,18 @@ impl StimLimits {
                     watchdog_ms: self.watchdog_ms,
                 },
             },
+            Config {
+                config_id,
+                page: ConfigPage::Charge {
+                    max_charge_10nc: self.max_charge_10nc,
+                },
+            },
         ]
+    }
+
+    /// Charge-per-phase ceiling in nC.
+    pub const fn max_charge_nc(&self) -> u32 {
+        self.max_charge_10nc as u32 * 10
     }
 
     /// Amplitude ceiling in mA.
@@ -128,14 +146,15 @@ impl StimLimits {
     }
 }
 
-/// Collects the two CONFIG pages of one configuration.
+/// Collects the three CONFIG (or CONFIG_APPLIED) pages of one configuration.
 ///
-/// Pages are staged until both carry the same `config_id`; the later page completes the
+/// Pages are staged until all three carry the same `config_id`; the last page completes the
 /// configuration. A page with another id replaces the staged one of its kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ConfigAssembler {
     output: Option<(u8, u16, u16, u16)>,
     rate: Option<(u8, u16, u16, u16)>,
+    charge: Option<(u8, u16)>,
 }
 
 impl ConfigAssembler {
@@ -144,6 +163,7 @@ impl ConfigAssembler {
         Self {
             output: None,
             rate: None,
+            charge: None,
         }
     }
 
@@ -154,10 +174,10 @@ impl ConfigAssembler {
 
     /// True when a page is staged but the configuration is incomplete.
     pub const fn is_partial(&self) -> bool {
-        self.output.is_some() || self.rate.is_some()
+        self.output.is_some() || self.rate.is_some() || self.charge.is_some()
     }
 
-    /// Stages `page`; returns the configuration id and limits when both pages match.
+    /// Stages `page`; returns the configuration id and limits when all pages match.
     pub fn push(&mut self, page: &Config) -> Option<(u8, StimLimits)> {
         match page.page {
             ConfigPage::OutputLimits {
@@ -179,9 +199,14 @@ impl ConfigAssembler {
             } => {
                 self.rate = Some((page.config_id, max_pulses, rate_window_ms, watchdog_ms));
             }
+            ConfigPage::Charge { max_charge_10nc } => {
+                self.charge = Some((page.config_id, max_charge_10nc));
+            }
         }
-        match (self.output, self.rate) {
-            (Some((a, amp, width, ipi)), Some((b, pulses, window, wd))) if a == b => {
+        match (self.output, self.rate, self.charge) {
+            (Some((a, amp, width, ipi)), Some((b, pulses, window, wd)), Some((c, charge)))
+                if a == b && b == c =>
+            {
                 self.clear();
                 Some((
                     a,
@@ -192,6 +217,7 @@ impl ConfigAssembler {
                         max_pulses: pulses,
                         rate_window_ms: window,
                         watchdog_ms: wd,
+                        max_charge_10nc: charge,
                     },
                 ))
             }
@@ -226,6 +252,12 @@ mod tests {
         };
         assert_eq!(l.validate().unwrap_err().field, "max_amplitude");
         assert_eq!(StimLimits::field_index("watchdog"), Some(5));
+        assert_eq!(StimLimits::field_index("max_charge"), Some(6));
+        let l = StimLimits {
+            max_charge_10nc: 15001,
+            ..StimLimits::default()
+        };
+        assert_eq!(l.validate().unwrap_err().field, "max_charge");
     }
 
     #[test]
@@ -235,25 +267,28 @@ mod tests {
             min_ipi_ms: 5,
             ..StimLimits::default()
         };
-        let [a, b] = l.to_pages(9);
+        let [a, b, c] = l.to_pages(9);
         let mut asm = ConfigAssembler::new();
         assert_eq!(asm.push(&b), None);
         assert!(asm.is_partial());
+        assert_eq!(asm.push(&c), None);
         assert_eq!(asm.push(&a), Some((9, l)));
         assert!(!asm.is_partial());
         assert_eq!(asm.push(&a), None);
+        assert_eq!(asm.push(&c), None);
         assert_eq!(asm.push(&b), Some((9, l)));
     }
 
     #[test]
     fn mismatched_ids_do_not_combine() {
         let l = StimLimits::default();
-        let [a, _] = l.to_pages(1);
-        let [_, b] = l.to_pages(2);
+        let [a, _, _] = l.to_pages(1);
+        let [_, b, c] = l.to_pages(2);
         let mut asm = ConfigAssembler::new();
         assert_eq!(asm.push(&a), None);
         assert_eq!(asm.push(&b), None);
-        let [a2, _] = l.to_pages(2);
+        assert_eq!(asm.push(&c), None);
+        let [a2, _, _] = l.to_pages(2);
         assert_eq!(asm.push(&a2), Some((2, l)));
     }
 }

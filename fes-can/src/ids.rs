@@ -2,7 +2,7 @@
 //!
 //! A COB-ID is a function code plus a node id, as in CANopen's predefined connection
 //! set: EMCY 0x080, PULSE 0x100, FORCE 0x180, STATUS 0x280, CONFIG 0x300 (each + the
-//! stimulator's node id), heartbeat 0x700 + the sender's node id, NMT fixed at 0x000.
+//! stimulator's node id), CONFIG_APPLIED 0x380 + stimulator, heartbeat 0x700 + the sender's node id, NMT fixed at 0x000.
 
 use crate::desc::MessageDesc;
 use crate::table::MESSAGES;
@@ -39,8 +39,11 @@ pub enum MessageKind {
     Force,
     /// Stimulator status, every 10 ms.
     Status,
-    /// Run limits (multiplexed, two pages), host -> stimulator, pre-operational only.
+    /// Run limits (multiplexed, three pages), host -> stimulator, pre-operational only.
     Config,
+    /// The limits the stimulator applied (CONFIG's layout), stimulator -> host, once per
+    /// page after a complete CONFIG: the host compares them with what it sent.
+    ConfigApplied,
     /// Host heartbeat.
     HostHeartbeat,
     /// Stimulator heartbeat (and boot-up message).
@@ -49,13 +52,14 @@ pub enum MessageKind {
 
 impl MessageKind {
     /// Every message kind, in COB-ID order for the default nodes.
-    pub const ALL: [MessageKind; 8] = [
+    pub const ALL: [MessageKind; 9] = [
         MessageKind::Nmt,
         MessageKind::Emcy,
         MessageKind::Pulse,
         MessageKind::Force,
         MessageKind::Status,
         MessageKind::Config,
+        MessageKind::ConfigApplied,
         MessageKind::HostHeartbeat,
         MessageKind::StimHeartbeat,
     ];
@@ -197,6 +201,7 @@ mod tests {
         assert_eq!(n.id_of(MessageKind::Force), 0x190);
         assert_eq!(n.id_of(MessageKind::Status), 0x290);
         assert_eq!(n.id_of(MessageKind::Config), 0x310);
+        assert_eq!(n.id_of(MessageKind::ConfigApplied), 0x390);
         assert_eq!(n.id_of(MessageKind::HostHeartbeat), 0x701);
         assert_eq!(n.id_of(MessageKind::StimHeartbeat), 0x710);
     }

@@ -38,7 +38,8 @@ pub use counter::{AliveCheck, AliveCounter, AliveError, SequenceCheck, SequenceE
 pub use error::{DecodeError, EncodeError};
 pub use ids::{MessageKind, NodeError, Nodes, Role, parse_node_id};
 pub use message::{
-    Config, ConfigPage, Emcy, Force, Frame, Heartbeat, Message, Nmt, Pulse, Status, decode,
+    Config, ConfigPage, Emcy, Force, Frame, Heartbeat, INTERPHASE_GAP_US, Message, Nmt, Pulse,
+    Status, decode,
 };
 pub use values::{ConfigPageId, ErrorCode, NmtCommand, NmtState, StimState};
 

@@ -84,6 +84,11 @@ impl Emcy {
 }
 
 /// One stimulation pulse. The CRC is computed by `encode` and checked by `decode`.
+///
+/// One PULSE is one charge-balanced biphasic pulse: a cathodic phase of `width_us` at
+/// `amplitude_100ua`, an interphase gap of [`INTERPHASE_GAP_US`], then an anodic phase of the
+/// same amplitude and width (symmetric, so no net charge). The charge per phase is
+/// amplitude x width ([`Pulse::charge_nc`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Pulse {
     /// Pulse sequence number.
@@ -98,7 +103,16 @@ pub struct Pulse {
     pub width_us: u16,
 }
 
+/// The interphase gap of every PULSE, us: fixed by the protocol (docs/can-protocol.md,
+/// "What one PULSE is"), not configurable.
+pub const INTERPHASE_GAP_US: u16 = 100;
+
 impl Pulse {
+    /// Charge per phase in nC (amplitude x width; 0.1 mA x 1 us = 0.1 nC per raw unit).
+    pub fn charge_nc(&self) -> u32 {
+        u32::from(self.amplitude_100ua) * u32::from(self.width_us) / 10
+    }
+
     /// Amplitude in mA.
     pub fn amplitude_ma(&self) -> f64 {
         pulse::AMPLITUDE.physical(i64::from(self.amplitude_100ua))
@@ -174,6 +188,11 @@ pub enum ConfigPage {
         /// Host heartbeat timeout in ms, 20..=5000.
         watchdog_ms: u16,
     },
+    /// Page 2.
+    Charge {
+        /// Charge-per-phase ceiling in 10 nC (0.01 uC) steps, 0..=15000 (0-150 uC).
+        max_charge_10nc: u16,
+    },
 }
 
 impl ConfigPage {
@@ -182,6 +201,7 @@ impl ConfigPage {
         match self {
             ConfigPage::OutputLimits { .. } => ConfigPageId::OutputLimits,
             ConfigPage::RateAndWatchdog { .. } => ConfigPageId::RateAndWatchdog,
+            ConfigPage::Charge { .. } => ConfigPageId::Charge,
         }
     }
 }
@@ -217,6 +237,8 @@ pub enum Message {
     Status(Status),
     /// One page of run limits.
     Config(Config),
+    /// One page of the limits the stimulator applied (its answer to a complete CONFIG).
+    ConfigApplied(Config),
     /// Host heartbeat.
     HostHeartbeat(Heartbeat),
     /// Stimulator heartbeat.
@@ -233,6 +255,7 @@ impl Message {
             Message::Force(_) => MessageKind::Force,
             Message::Status(_) => MessageKind::Status,
             Message::Config(_) => MessageKind::Config,
+            Message::ConfigApplied(_) => MessageKind::ConfigApplied,
             Message::HostHeartbeat(_) => MessageKind::HostHeartbeat,
             Message::StimHeartbeat(_) => MessageKind::StimHeartbeat,
         }
@@ -287,7 +310,7 @@ impl Message {
                 put(&status::REJECTED, &mut d, i64::from(m.rejected))?;
                 put(&status::CONFIG_ID, &mut d, i64::from(m.config_id))?;
             }
-            Message::Config(m) => {
+            Message::Config(m) | Message::ConfigApplied(m) => {
                 put(&config::PAGE, &mut d, i64::from(m.page.id().raw()))?;
                 put(&config::CONFIG_ID, &mut d, i64::from(m.config_id))?;
                 match m.page {
@@ -312,6 +335,9 @@ impl Message {
                         put(&config::MAX_PULSES, &mut d, i64::from(max_pulses))?;
                         put(&config::RATE_WINDOW, &mut d, i64::from(rate_window_ms))?;
                         put(&config::WATCHDOG, &mut d, i64::from(watchdog_ms))?;
+                    }
+                    ConfigPage::Charge { max_charge_10nc } => {
+                        put(&config::MAX_CHARGE, &mut d, i64::from(max_charge_10nc))?;
                     }
                 }
             }
@@ -424,7 +450,7 @@ impl Nodes {
                 rejected: field(k, &status::REJECTED, &d)?,
                 config_id: field(k, &status::CONFIG_ID, &d)?,
             }),
-            MessageKind::Config => {
+            MessageKind::Config | MessageKind::ConfigApplied => {
                 let page = enumerated(k, &config::PAGE, &d, ConfigPageId::from_raw)?;
                 let config_id = field(k, &config::CONFIG_ID, &d)?;
                 let page = match page {
@@ -438,8 +464,16 @@ impl Nodes {
                         rate_window_ms: field(k, &config::RATE_WINDOW, &d)?,
                         watchdog_ms: field(k, &config::WATCHDOG, &d)?,
                     },
+                    ConfigPageId::Charge => ConfigPage::Charge {
+                        max_charge_10nc: field(k, &config::MAX_CHARGE, &d)?,
+                    },
                 };
-                Message::Config(Config { config_id, page })
+                let c = Config { config_id, page };
+                if kind == MessageKind::Config {
+                    Message::Config(c)
+                } else {
+                    Message::ConfigApplied(c)
+                }
             }
             MessageKind::HostHeartbeat => Message::HostHeartbeat(Heartbeat {
                 state: enumerated(k, &heartbeat::STATE, &d, NmtState::from_raw)?,
@@ -607,8 +641,13 @@ mod tests {
                 raw: 1
             })
         );
+        // Page 3 is the first undefined page (0-2 are output limits, rate, charge).
         assert!(matches!(
-            decode(0x310, &[2, 1, 0, 0, 0, 0, 1, 0]),
+            decode(0x310, &[3, 1, 0, 0, 0, 0, 1, 0]),
+            Err(DecodeError::OutOfRange { signal: "page", .. })
+        ));
+        assert!(matches!(
+            decode(0x390, &[3, 1, 0, 0, 0, 0, 1, 0]),
             Err(DecodeError::OutOfRange { signal: "page", .. })
         ));
     }

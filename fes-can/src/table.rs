@@ -116,13 +116,14 @@ pub mod status {
     ];
 }
 
-/// CONFIG (COB-ID 0x300 + stimulator), multiplexed by `page`.
+/// CONFIG (COB-ID 0x300 + stimulator), multiplexed by `page`; CONFIG_APPLIED (COB-ID
+/// 0x380 + stimulator) has the same layout.
 pub mod config {
     use super::*;
     /// Page multiplexor.
     pub const PAGE: SignalDesc = SignalDesc::new("page", 0, 8)
         .multiplexor()
-        .range(0.0, 1.0)
+        .range(0.0, 2.0)
         .values(ConfigPageId::VALUES);
     /// Configuration id (0 is reserved for the stimulator's defaults).
     pub const CONFIG_ID: SignalDesc = SignalDesc::new("config_id", 8, 8).range(1.0, 255.0);
@@ -157,6 +158,12 @@ pub mod config {
         .page(1)
         .range(20.0, 5000.0)
         .unit("ms");
+    /// Page 2: charge-per-phase ceiling, 0.01 uC (10 nC) per bit.
+    pub const MAX_CHARGE: SignalDesc = SignalDesc::new("max_charge", 16, 16)
+        .page(2)
+        .scale(0.01, 0.0)
+        .range(0.0, 150.0)
+        .unit("uC");
     /// All signals in DBC order.
     pub const SIGNALS: &[SignalDesc] = &[
         PAGE,
@@ -167,6 +174,7 @@ pub mod config {
         MAX_PULSES,
         RATE_WINDOW,
         WATCHDOG,
+        MAX_CHARGE,
     ];
 }
 
@@ -182,7 +190,7 @@ pub mod heartbeat {
 }
 
 /// Every message, indexed by `MessageKind as usize`.
-pub const MESSAGES: [MessageDesc; 8] = [
+pub const MESSAGES: [MessageDesc; 9] = [
     MessageDesc {
         kind: MessageKind::Nmt,
         name: "NMT",
@@ -250,6 +258,17 @@ pub const MESSAGES: [MessageDesc; 8] = [
         signals: config::SIGNALS,
     },
     MessageDesc {
+        kind: MessageKind::ConfigApplied,
+        name: "CONFIG_APPLIED",
+        function_code: 0x380,
+        id_node: Some(Role::Stim),
+        dlc: 8,
+        cycle_time_ms: None,
+        sender: Role::Stim,
+        receiver: Role::Host,
+        signals: config::SIGNALS,
+    },
+    MessageDesc {
         kind: MessageKind::HostHeartbeat,
         name: "HOST_HEARTBEAT",
         function_code: 0x700,
@@ -282,7 +301,7 @@ mod tests {
     fn signals_fit_their_frame_and_do_not_overlap() {
         for m in &MESSAGES {
             // Each multiplexor page (and the plain signals) must be overlap-free.
-            for page in [None, Some(0u8), Some(1u8)] {
+            for page in [None, Some(0u8), Some(1u8), Some(2u8)] {
                 let mut used = 0u64;
                 for s in m.signals {
                     let present = match s.mux {

@@ -156,6 +156,8 @@ value_enum! {
         ChannelInvalid = 0xFF0A => "channel_invalid",
         /// A signal outside its range, or an undefined enumerated value.
         ValueOutOfRange = 0xFF0B => "value_out_of_range",
+        /// PULSE charge per phase (amplitude x width) above the charge ceiling.
+        ChargeCeiling = 0xFF0C => "charge_ceiling",
     }
 }
 
@@ -189,7 +191,9 @@ impl ErrorCode {
             ErrorCode::BadCrc | ErrorCode::BadAliveCounter | ErrorCode::SequenceError => {
                 GENERIC | COMMUNICATION | MANUFACTURER
             }
-            ErrorCode::AmplitudeCeiling => GENERIC | CURRENT | MANUFACTURER,
+            ErrorCode::AmplitudeCeiling | ErrorCode::ChargeCeiling => {
+                GENERIC | CURRENT | MANUFACTURER
+            }
             ErrorCode::MinIpiViolation
             | ErrorCode::RateViolation
             | ErrorCode::WidthCeiling
@@ -208,6 +212,8 @@ value_enum! {
         OutputLimits = 0 => "output_limits",
         /// Page 1: rate limit and watchdog.
         RateAndWatchdog = 1 => "rate_and_watchdog",
+        /// Page 2: charge-per-phase ceiling.
+        Charge = 2 => "charge",
     }
 }
 

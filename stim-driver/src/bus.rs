@@ -50,6 +50,7 @@ pub fn forward_event(message: &Message) -> Option<BusEvent> {
         Message::Status(s) => Some(BusEvent::Status(*s)),
         Message::Emcy(e) => Some(BusEvent::Emcy(*e)),
         Message::StimHeartbeat(h) => Some(BusEvent::StimHeartbeat(h.state)),
+        Message::ConfigApplied(c) => Some(BusEvent::ConfigApplied(*c)),
         _ => None,
     }
 }
@@ -178,11 +179,12 @@ pub enum BusError {
 
 /// The message kinds the receive socket accepts: the stimulator's, and the driver's own
 /// ([`OWN_KINDS`], for intrusion detection).
-const ACCEPTED: [MessageKind; 8] = [
+const ACCEPTED: [MessageKind; 9] = [
     MessageKind::Force,
     MessageKind::Status,
     MessageKind::Emcy,
     MessageKind::StimHeartbeat,
+    MessageKind::ConfigApplied,
     OWN_KINDS[0],
     OWN_KINDS[1],
     OWN_KINDS[2],

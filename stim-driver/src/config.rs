@@ -3,6 +3,8 @@
 //!
 //! ```toml
 //! schema = "fes-stim-driver/1"
+//! prescription = "/etc/fes/prescription.toml"  # the dose (fes-prescription/1, root-owned);
+//!                                # relative: to this file. Nothing below may exceed it.
 //!
 //! [can]
 //! iface = "can0"                 # required; "hostbus:<dir>" for the host bus (docs/vcan.md)
@@ -16,6 +18,7 @@
 //! [stimulator]                   # the run's limits, sent in CONFIG (stricter than its own)
 //! max_amplitude_ua = 100000      # multiple of 100 uA, <= 150 mA
 //! max_width_us = 500
+//! max_charge_nc = 50000          # per phase, multiple of 10 nC, <= 150 uC
 //! min_ipi_ms = 1                # on arrival; <= (min_ipi_us - max_pulse_delay_us) / 1000
 //! max_pulses = 100
 //! rate_window_ms = 1000
@@ -65,6 +68,7 @@
 use std::path::{Path, PathBuf};
 
 use fes_can::{Nodes, StimLimits};
+use fes_prescription::{Ceilings, Exceeded, Prescription, pulses_per_s};
 use fes_rt::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
 use fes_rt::rt::RtConfig;
 use fes_rt::rt::config::RtConfigError;
@@ -87,6 +91,10 @@ const US: u64 = 1_000;
 pub struct DriverConfig {
     /// Must be [`SCHEMA`].
     pub schema: String,
+    /// The prescription file (`fes-prescription/1`); relative paths are relative to this
+    /// file. Default `/etc/fes/prescription.toml`.
+    #[serde(default = "default_prescription")]
+    pub prescription: PathBuf,
     /// The CAN side.
     pub can: CanConfig,
     /// Limits sent to the stimulator.
@@ -112,6 +120,10 @@ pub struct DriverConfig {
     /// iceoryx2.
     #[serde(default)]
     pub ipc: IpcConfig,
+}
+
+fn default_prescription() -> PathBuf {
+    PathBuf::from(fes_prescription::DEFAULT_PATH)
 }
 
 /// The forward thread's default real-time settings: [`RtConfig`]'s, at priority 79: one
@@ -171,7 +183,8 @@ fn default_bringup_retry_ms() -> u32 {
 }
 
 /// `[stimulator]`: the run's limits sent in CONFIG. Defaults: the protocol's
-/// (`StimLimits::DEFAULT`: 100 mA, 500 µs, 2 ms, 100 pulses per 1000 ms, 100 ms watchdog).
+/// (`StimLimits::DEFAULT`: 100 mA, 500 µs, 1 ms, 100 pulses per 1000 ms, 100 ms watchdog,
+/// 50 µC per phase).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct StimulatorConfig {
@@ -187,6 +200,8 @@ pub struct StimulatorConfig {
     pub rate_window_ms: u16,
     /// Host heartbeat timeout, ms (20..=5000, and at least two heartbeat periods).
     pub watchdog_ms: u16,
+    /// Charge-per-phase ceiling, nC (a multiple of 10 nC, at most 150 µC).
+    pub max_charge_nc: u32,
 }
 
 impl Default for StimulatorConfig {
@@ -199,6 +214,7 @@ impl Default for StimulatorConfig {
             max_pulses: d.max_pulses,
             rate_window_ms: d.rate_window_ms,
             watchdog_ms: d.watchdog_ms,
+            max_charge_nc: d.max_charge_nc(),
         }
     }
 }
@@ -369,6 +385,7 @@ impl DriverConfig {
     pub fn with_defaults(iface: &str, max_n: f64) -> Self {
         Self {
             schema: SCHEMA.to_owned(),
+            prescription: default_prescription(),
             can: CanConfig {
                 iface: iface.to_owned(),
                 host_node: default_host_node(),
@@ -389,13 +406,73 @@ impl DriverConfig {
         }
     }
 
-    /// Reads, parses and validates a file.
+    /// Reads, parses and validates a file; a relative prescription path is resolved
+    /// against the file's directory.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = config_file::read(path)?;
-        Self::parse(&text).map_err(|e| match e {
+        let mut config = Self::parse(&text).map_err(|e| match e {
             ConfigError::File(f) => ConfigError::File(f.in_file(path)),
             other => other,
-        })
+        })?;
+        if config.prescription.is_relative() {
+            let joined = path
+                .parent()
+                .unwrap_or(Path::new(""))
+                .join(&config.prescription);
+            config.prescription = std::path::absolute(&joined).unwrap_or(joined);
+        }
+        Ok(config)
+    }
+
+    /// Holds the interlocks and the CONFIG limits against the prescription: none may be
+    /// looser (issue 19, item 4). The driver refuses to start otherwise.
+    ///
+    /// Amplitude, phase width, charge per phase, minimum IPI and pulses in any 1 s for the
+    /// interlocks; amplitude, width, charge and pulses in any 1 s for the stimulator. The
+    /// stimulator's minimum IPI is judged on arrival, where legal pulses come up to
+    /// `interlocks.max_pulse_delay_us` plus one stimulator tick (1 ms) closer than on the
+    /// grid, so it must be at least the prescription's minus that allowance.
+    pub fn check_prescription(&self, p: &Prescription) -> Result<(), Exceeded> {
+        let i = &self.interlocks;
+        p.check(
+            "stim-driver interlocks",
+            &Ceilings {
+                amplitude_ua: Some(i.max_amplitude_ua),
+                width_us: Some(u32::from(i.max_width_us)),
+                charge_nc: Some(u32::try_from(i.max_charge_nc).unwrap_or(u32::MAX)),
+                min_ipi_us: Some(i.min_ipi_us),
+                pulses_per_s: Some(pulses_per_s(u32::from(i.max_pulses), i.rate_window_ms)),
+            },
+        )?;
+        let s = &self.stimulator;
+        let arrival_allowance_us = i.max_pulse_delay_us.saturating_add(1000);
+        p.check(
+            "stim-driver [stimulator] (CONFIG)",
+            &Ceilings {
+                amplitude_ua: Some(s.max_amplitude_ua),
+                width_us: Some(u32::from(s.max_width_us)),
+                charge_nc: Some(s.max_charge_nc),
+                min_ipi_us: None,
+                pulses_per_s: Some(pulses_per_s(
+                    u32::from(s.max_pulses),
+                    u32::from(s.rate_window_ms),
+                )),
+            },
+        )?;
+        let stim_ipi_us = u32::from(s.min_ipi_ms) * 1000;
+        let floor_us = p.min_ipi_us.saturating_sub(arrival_allowance_us);
+        if stim_ipi_us < floor_us {
+            return Err(Exceeded {
+                layer: "stim-driver [stimulator] (CONFIG)",
+                field: "minimum IPI on arrival (shorter than the prescription's minus max_pulse_delay_us + 1 ms)",
+                value: u64::from(stim_ipi_us),
+                limit: u64::from(floor_us),
+                unit: "us",
+                prescription: p.name(),
+                sha256: p.sha256.clone(),
+            });
+        }
+        Ok(())
     }
 
     /// Parses and validates TOML text.
@@ -427,6 +504,18 @@ impl DriverConfig {
                     allowed: "0..=150000",
                 }
             })?;
+        config_file::range(
+            s.max_charge_nc.is_multiple_of(10),
+            "stimulator.max_charge_nc",
+            s.max_charge_nc,
+            "a multiple of 10 nC (the bus step)",
+        )?;
+        let max_charge_10nc =
+            u16::try_from(s.max_charge_nc / 10).map_err(|_| FileError::Range {
+                field: "stimulator.max_charge_nc",
+                value: s.max_charge_nc.to_string(),
+                allowed: "0..=150000",
+            })?;
         let limits = StimLimits {
             max_amplitude_100ua,
             max_width_us: s.max_width_us,
@@ -434,6 +523,7 @@ impl DriverConfig {
             max_pulses: s.max_pulses,
             rate_window_ms: s.rate_window_ms,
             watchdog_ms: s.watchdog_ms,
+            max_charge_10nc,
         };
         limits.validate()?;
         Ok(limits)
@@ -694,7 +784,20 @@ mod tests {
             .expect("deploy/etc/fes/stim-driver.toml");
         let mut expected = DriverConfig::with_defaults("can0", 40.0);
         expected.rt.on_missing_rights = fes_rt::rt::config::MissingRightsPolicy::Refuse;
+        // The one intended difference: the limits cut to the shipped prescription's dose
+        // (20 mA, 200 us, 4 uC per phase; issue 19, item 4), which bounds them.
+        expected.stimulator.max_amplitude_ua = 20_000;
+        expected.stimulator.max_width_us = 200;
+        expected.stimulator.max_charge_nc = 4000;
+        expected.interlocks.max_amplitude_ua = 20_000;
+        expected.interlocks.max_width_us = 200;
+        expected.interlocks.max_charge_nc = 4000;
         assert_eq!(rig, expected);
+        let dose = fes_prescription::Prescription::parse(include_str!(
+            "../../deploy/etc/fes/prescription.toml"
+        ))
+        .unwrap();
+        rig.check_prescription(&dose).unwrap();
     }
 
     #[test]

@@ -65,6 +65,8 @@ pub enum BusEvent {
         /// The message kind of that identifier.
         kind: MessageKind,
     },
+    /// A CONFIG_APPLIED page: limits the stimulator says it applied.
+    ConfigApplied(fes_can::Config),
 }
 
 /// Liveness of a service's publisher — the StimTick publisher (rt-core) or the
@@ -166,6 +168,14 @@ pub enum BringUp {
     ConfigRefused {
         /// Index of the offending limit.
         detail: u16,
+    },
+    /// The stimulator read back the limits it applied (CONFIG_APPLIED, all pages).
+    LimitsReadBack {
+        /// The configuration id.
+        config_id: u8,
+        /// The first limit that differs from what was sent (CONFIG signal name), if any:
+        /// the configuration is then refused and arming with it is impossible.
+        differs: Option<&'static str>,
     },
     /// No confirmation in time: starting over.
     Retry,

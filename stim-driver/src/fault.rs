@@ -228,6 +228,15 @@ pub enum ArmRefusal {
     StaleCommand,
     /// The NMT start could not be written.
     TxFailed,
+    /// The stimulator has not read back the limits it applied for our configuration
+    /// (CONFIG_APPLIED), so what it enforces is unknown.
+    LimitsNotReadBack,
+    /// The stimulator read back other limits than the driver sent: it enforces something
+    /// else than the configuration (e.g. a looser ceiling).
+    StimulatorLimitsDiffer {
+        /// The first differing limit (CONFIG signal name).
+        field: &'static str,
+    },
 }
 
 impl ArmRefusal {
@@ -245,6 +254,9 @@ impl ArmRefusal {
             ArmRefusal::GeneratorStopped => R::GeneratorStopped,
             ArmRefusal::StaleCommand => R::StaleCommand,
             ArmRefusal::TxFailed => R::TxFailed,
+            ArmRefusal::StimulatorLimitsDiffer { .. } | ArmRefusal::LimitsNotReadBack => {
+                R::StimulatorLimitsMismatch
+            }
         }
     }
 }
@@ -267,6 +279,13 @@ impl core::fmt::Display for ArmRefusal {
                 f.write_str("the command is stale, from the future, or not newer than the last")
             }
             ArmRefusal::TxFailed => f.write_str("NMT start could not be written"),
+            ArmRefusal::LimitsNotReadBack => {
+                f.write_str("the stimulator has not read back the limits it applied")
+            }
+            ArmRefusal::StimulatorLimitsDiffer { field } => write!(
+                f,
+                "the stimulator applied another {field} than the configuration sent"
+            ),
         }
     }
 }

@@ -12,7 +12,10 @@
 //!   a STATUS showing pre-operational, both CONFIG pages with a configuration id different
 //!   from the one the stimulator reports; on a STATUS showing that id, confirmed. No
 //!   confirmation within the retry time, or a stimulator that restarts or loses the
-//!   configuration, starts it over; an EMCY `config_invalid` ends it (refused).
+//!   configuration, starts it over; an EMCY `config_invalid` ends it (refused). The
+//!   stimulator reads back the limits it applied (CONFIG_APPLIED, all pages): limits that
+//!   differ in any field end it too (refused), and no Arm is accepted until the read-back
+//!   equals what was sent (issue 19, item 4).
 //! * **mode**: disarmed, armed, or the safe state. Only an Arm command arms (after checking
 //!   its preconditions: see [`crate::fault::ArmRefusal`]); every fault while armed sends NMT
 //!   stop and enters the safe state, which only an Arm command leaves. The driver never
@@ -29,7 +32,7 @@
 //! while disarmed, a STATUS that still shows the stimulator operational gets another NMT
 //! stop.
 
-use fes_can::{ErrorCode, NmtState, Nodes, Status, StimLimits, StimState};
+use fes_can::{ConfigAssembler, ErrorCode, NmtState, Nodes, Status, StimLimits, StimState};
 use fes_rt::msg::{
     CommandRefusal, CommandResult, Contract, DriverCommand, DriverCommandKind, PulseFate, StimTick,
 };
@@ -147,6 +150,28 @@ pub struct ForwardPath<T: CanTx> {
     pulse_window: PulseWindow,
     /// The reconciliation baseline of the current armed period.
     baseline: Option<Baseline>,
+    /// CONFIG_APPLIED pages of the current configuration attempt.
+    readback: ConfigAssembler,
+    /// The limits the stimulator read back for the current attempt (id, limits).
+    applied: Option<(u8, StimLimits)>,
+}
+
+/// The first limit in which `a` and `b` differ (CONFIG signal name), if any.
+pub fn first_difference(a: &StimLimits, b: &StimLimits) -> Option<&'static str> {
+    [
+        (
+            "max_amplitude",
+            a.max_amplitude_100ua == b.max_amplitude_100ua,
+        ),
+        ("max_width", a.max_width_us == b.max_width_us),
+        ("min_ipi", a.min_ipi_ms == b.min_ipi_ms),
+        ("max_pulses", a.max_pulses == b.max_pulses),
+        ("rate_window", a.rate_window_ms == b.rate_window_ms),
+        ("watchdog", a.watchdog_ms == b.watchdog_ms),
+        ("max_charge", a.max_charge_10nc == b.max_charge_10nc),
+    ]
+    .into_iter()
+    .find_map(|(name, same)| (!same).then_some(name))
 }
 
 impl<T: CanTx> ForwardPath<T> {
@@ -179,6 +204,8 @@ impl<T: CanTx> ForwardPath<T> {
             supervisor_seen_armed: false,
             pulse_window: PulseWindow::new(settings.stimulator_timeout_ns),
             baseline: None,
+            readback: ConfigAssembler::new(),
+            applied: None,
         }
     }
 
@@ -536,9 +563,18 @@ impl<T: CanTx> ForwardPath<T> {
     /// The first unmet precondition of arming, if any.
     fn arm_refusal(&self, now_ns: u64) -> Option<ArmRefusal> {
         let s = &self.settings;
+        if let Some((_, applied)) = self.applied
+            && let Some(field) = first_difference(&applied, &s.stim_limits)
+        {
+            return Some(ArmRefusal::StimulatorLimitsDiffer { field });
+        }
         let Some(expected) = self.config_id() else {
             return Some(ArmRefusal::NotConfigured);
         };
+        // The limits in force, as the stimulator reports them, must be exactly ours.
+        if self.applied != Some((expected, s.stim_limits)) {
+            return Some(ArmRefusal::LimitsNotReadBack);
+        }
         if !self.link_up || self.stop_pending {
             return Some(ArmRefusal::LinkDown);
         }
@@ -690,6 +726,7 @@ impl<T: CanTx> ForwardPath<T> {
                     self.trip(Fault::Intrusion { cob_id, kind }, now_ns, ev);
                 }
             }
+            BusEvent::ConfigApplied(page) => self.on_config_applied(&page, ev),
         }
         self.finish(before, ev);
     }
@@ -792,8 +829,34 @@ impl<T: CanTx> ForwardPath<T> {
         }
     }
 
+    /// A CONFIG_APPLIED page: collects the read-back of the current attempt; limits that
+    /// differ from the ones sent refuse the configuration.
+    fn on_config_applied(&mut self, page: &fes_can::Config, ev: &mut impl EventSink) {
+        let id = match self.config {
+            ConfigState::Configuring { id, .. } | ConfigState::Confirmed { id } => id,
+            _ => return,
+        };
+        if page.config_id != id {
+            return;
+        }
+        let Some((config_id, limits)) = self.readback.push(page) else {
+            return;
+        };
+        self.applied = Some((config_id, limits));
+        let differs = first_difference(&limits, &self.settings.stim_limits);
+        ev.emit(DriverEvent::BringUp(BringUp::LimitsReadBack {
+            config_id,
+            differs,
+        }));
+        if differs.is_some() && !self.is_armed() {
+            self.config = ConfigState::Refused;
+        }
+    }
+
     /// Sends NMT enter pre-operational and waits for the stimulator to show it.
     fn probe(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        self.readback.clear();
+        self.applied = None;
         if self.control(ControlFrame::EnterPreOperational, now_ns, ev) {
             ev.emit(DriverEvent::BringUp(BringUp::PreOperationalSent));
         }

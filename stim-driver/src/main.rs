@@ -247,6 +247,16 @@ fn load_config(path: &std::path::Path, iface: Option<String>) -> Result<DriverCo
             .context("--iface")
             .map_err(Failure::Config)?;
     }
+    // The prescription: read-only to this service, separate from its configuration. Nothing
+    // this driver would let through or send in CONFIG may exceed it (issue 19, item 4).
+    let prescription = fes_prescription::Prescription::load(&config.prescription)
+        .context("configuration: prescription")
+        .map_err(Failure::Config)?;
+    config
+        .check_prescription(&prescription)
+        .context("configuration refused by the prescription")
+        .map_err(Failure::Config)?;
+    info!("{}", prescription.summary());
     let c = &config;
     info!(
         "config {}: {} (stimulator node {:#04x}), tick {} us, watchdog {} ticks, \

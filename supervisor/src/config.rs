@@ -158,6 +158,11 @@ pub struct RecordingConfig {
     pub offset_n: f64,
     /// Free text naming the rig in `dataset.json` `source`. Default "fes-supervisor".
     pub source: String,
+    /// The prescription file (`fes-prescription/1`) whose SHA-256 goes into every
+    /// recording's `dataset.json` (`prescription_sha256`); relative: to this file. With
+    /// recording enabled the daemon refuses to start when it cannot read it. Default
+    /// /etc/fes/prescription.toml.
+    pub prescription: PathBuf,
 }
 
 impl Default for RecordingConfig {
@@ -170,6 +175,7 @@ impl Default for RecordingConfig {
             scale_n: 1.0,
             offset_n: 0.0,
             source: "fes-supervisor".into(),
+            prescription: PathBuf::from(fes_prescription::DEFAULT_PATH),
         }
     }
 }
@@ -229,7 +235,11 @@ impl SupervisorConfig {
         })?;
         let mut cfg = Self::from_toml(&text, path)?;
         let base = path.parent().unwrap_or(Path::new("."));
-        for p in [&mut cfg.control.socket, &mut cfg.recording.dir] {
+        for p in [
+            &mut cfg.control.socket,
+            &mut cfg.recording.dir,
+            &mut cfg.recording.prescription,
+        ] {
             if p.is_relative() {
                 *p = base.join(&*p);
             }

@@ -53,6 +53,10 @@ pub enum DaemonError {
     /// Control socket.
     #[error("control socket: {0}")]
     Control(#[from] crate::control::ControlError),
+    /// Recording is on and the prescription, whose checksum every recording carries,
+    /// cannot be read.
+    #[error("recording needs the prescription's checksum ([recording] prescription): {0}")]
+    Prescription(#[from] fes_prescription::PrescriptionError),
 }
 
 /// How the daemon ended.
@@ -233,6 +237,7 @@ fn recorder_settings(cfg: &RecordingConfig) -> RecorderSettings {
         offset_n: cfg.offset_n,
         source: cfg.source.clone(),
         protocol: serde_json::Value::Null,
+        prescription_sha256: None,
     }
 }
 
@@ -243,6 +248,14 @@ impl<'a> Daemon<'a> {
         cfg: &'a SupervisorConfig,
         on_ready: impl FnOnce(&std::path::Path),
     ) -> Result<Self, DaemonError> {
+        // Every recording names the prescription it was made under (issue 19, item 4).
+        let prescription_sha256 = if cfg.recording.enabled {
+            let p = fes_prescription::Prescription::load(&cfg.recording.prescription)?;
+            tracing::info!("{}", p.summary());
+            Some(p.sha256)
+        } else {
+            None
+        };
         let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name)?;
         let ports = Ports::open(&node, cfg.ipc.prefix.as_str())?;
         let (tx, requests) = mpsc::channel::<Pending>();
@@ -268,7 +281,10 @@ impl<'a> Daemon<'a> {
                 dirs: Vec::new(),
                 index: 0,
             },
-            settings: recorder_settings(&cfg.recording),
+            settings: RecorderSettings {
+                prescription_sha256,
+                ..recorder_settings(&cfg.recording)
+            },
             watchdog,
             start_ns,
             period_ns: cfg.reference.period_ms * 1_000_000,

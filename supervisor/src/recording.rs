@@ -66,6 +66,9 @@ pub struct RecorderSettings {
     pub source: String,
     /// Free-form description of the run (goes into `protocol`).
     pub protocol: serde_json::Value,
+    /// SHA-256 of the prescription file the run was made under (`dataset.json`
+    /// `prescription_sha256`; issue 19, item 4); None: none was read.
+    pub prescription_sha256: Option<String>,
 }
 
 /// A recording failure.
@@ -684,6 +687,7 @@ impl Recorder {
         let meta = serde_json::json!({
             "schema": fes_dataset::SCHEMA,
             "source": self.settings.source,
+            "prescription_sha256": self.settings.prescription_sha256,
             "preset": null,
             "parameters": {},
             "noise": null,

@@ -89,7 +89,13 @@ pub struct StackOptions {
     /// Extra environment of each process, by process name (the fault suite's test-only
     /// switches, e.g. stim-driver's `FES_TEST_PANIC_REPORT_AFTER_MS`); empty for a bench.
     pub env: Vec<(&'static str, String, String)>,
+    /// rt-core's `pulse.amplitude_ua` (None: its default, the prescription's 20 mA); the
+    /// fault suite sets a slip.
+    pub pulse_amplitude_ua: Option<u32>,
 }
+
+/// The prescription every stack runs under: the rig's default (deploy/etc/fes).
+pub const PRESCRIPTION: &str = include_str!("../../deploy/etc/fes/prescription.toml");
 
 struct Proc1 {
     name: &'static str,
@@ -247,6 +253,7 @@ impl Stack {
         let t = opts.timing.timeouts();
         let controller_path = std::fs::canonicalize(&opts.controller)
             .map_err(io(format!("resolve {}", opts.controller.display())))?;
+        write_config(d, "prescription.toml", PRESCRIPTION.to_owned())?;
         let rt_cfg = write_config(d, "rt-core.toml", rt_core_toml(&opts, &t, &controller_path))?;
         let drv_cfg = write_config(d, "stim-driver.toml", stim_driver_toml(&opts, &t, scale_n))?;
         let socket = d.join("supervisor.sock");
@@ -575,6 +582,7 @@ fn rt_core_toml(opts: &StackOptions, t: &ChainTimeouts, controller: &Path) -> St
     format!(
         r#"schema = "fes-rt-core/1"
 period_us = 1000
+prescription = "prescription.toml"
 
 [source]
 kind = "controller"
@@ -588,6 +596,9 @@ on_missing_rights = "best-effort"
 stale_after_ms = {stale_ms}
 stale_ramp_per_s = 2.0
 
+[pulse]
+amplitude_ua = {amplitude_ua}
+
 [telemetry]
 hlog = "{dir}/rt-core.hlog"
 report_period_ms = 1000
@@ -597,25 +608,34 @@ prefix = "{prefix}"
 "#,
         controller = controller.display(),
         stale_ms = t.reference_stale_ms,
+        amplitude_ua = opts.pulse_amplitude_ua.unwrap_or(20_000),
         dir = opts.dir.display(),
         prefix = opts.prefix,
     )
 }
 
-/// `stim-driver.toml`: the CAN interface, the interlocks and watchdogs of the test bed, the
+/// `stim-driver.toml`: the prescription, the CAN interface, the dose-bound limits, the
+/// interlocks and watchdogs of the test bed, the
 /// force limit (the controller model's full scale), telemetry and the iceoryx2 prefix.
 fn stim_driver_toml(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> String {
     format!(
         r#"schema = "fes-stim-driver/1"
+prescription = "prescription.toml"
 
 [can]
 iface = "{iface}"
 
 [stimulator]
 watchdog_ms = {stim_wd}
+max_amplitude_ua = 20000
+max_width_us = 200
+max_charge_nc = 4000
 
 [interlocks]
 max_pulse_delay_us = {late_us}
+max_amplitude_ua = 20000
+max_width_us = 200
+max_charge_nc = 4000
 
 [watchdog]
 timeout_ticks = {drv_ticks}
@@ -689,6 +709,7 @@ stimulator_pid = {sim_pid}
 dir = "{dir}/recording"
 scale_n = {scale_n}
 source = "fes bench"
+prescription = "prescription.toml"
 "#,
         prefix = opts.prefix,
         socket = s.socket.display(),

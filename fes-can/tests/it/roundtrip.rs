@@ -101,8 +101,17 @@ fn config() -> impl Strategy<Value = Message> {
             watchdog_ms: w,
         }
     });
-    (1u8..=255, prop_oneof![output, rate])
-        .prop_map(|(config_id, page)| Message::Config(Config { config_id, page }))
+    let charge = (0u16..=15000).prop_map(|c| ConfigPage::Charge { max_charge_10nc: c });
+    (1u8..=255, prop_oneof![output, rate, charge], any::<bool>()).prop_map(
+        |(config_id, page, applied)| {
+            let c = Config { config_id, page };
+            if applied {
+                Message::ConfigApplied(c)
+            } else {
+                Message::Config(c)
+            }
+        },
+    )
 }
 
 fn heartbeat() -> impl Strategy<Value = Message> {

@@ -5,6 +5,7 @@
 //! ```toml
 //! schema = "fes-rt-core/1"
 //! period_us = 1000                 # tick period, 100..=1000000 us
+//! prescription = "/etc/fes/prescription.toml"  # optional: [pulse] may not exceed it
 //!
 //! [source]                         # what runs every tick (required)
 //! kind = "test-pattern"            # bench source without a model ...
@@ -66,6 +67,11 @@ pub struct RtCoreConfig {
     /// Tick period, µs. Default 1000 (1 ms, the thesis's Ts).
     #[serde(default = "default_period_us")]
     pub period_us: u64,
+    /// The prescription file (`fes-prescription/1`) the pulse is held against at start:
+    /// amplitude, phase width and charge per phase may not exceed it (issue 19, item 4).
+    /// Relative: to this file. None: not checked here (stim-driver still enforces it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prescription: Option<PathBuf>,
     /// What runs every tick.
     pub source: SourceConfig,
     /// Real-time settings of the loop thread.
@@ -231,6 +237,12 @@ pub enum ConfigError {
     /// The service-name prefix is invalid.
     #[error("ipc.prefix: {0}")]
     Prefix(#[from] ServiceError),
+    /// The prescription cannot be read or is invalid.
+    #[error(transparent)]
+    Prescription(#[from] fes_prescription::PrescriptionError),
+    /// The pulse exceeds the prescription.
+    #[error("[pulse] refused: {0}")]
+    AbovePrescription(#[from] fes_prescription::Exceeded),
 }
 
 impl RtCoreConfig {
@@ -239,6 +251,7 @@ impl RtCoreConfig {
         Self {
             schema: SCHEMA.to_owned(),
             period_us: default_period_us(),
+            prescription: None,
             source,
             rt: RtConfig::default(),
             reference: ReferenceConfig::default(),
@@ -266,7 +279,32 @@ impl RtCoreConfig {
             // at the same file.
             *controller = std::path::absolute(&joined).unwrap_or(joined);
         }
+        if let Some(p) = &mut config.prescription
+            && p.is_relative()
+        {
+            let joined = path.parent().unwrap_or(Path::new("")).join(&*p);
+            *p = std::path::absolute(&joined).unwrap_or(joined);
+        }
         Ok(config)
+    }
+
+    /// Reads the prescription, if one is configured, and holds the pulse against it:
+    /// amplitude, phase width and charge per phase (amplitude x width) may not exceed it.
+    /// rt-core refuses to start otherwise, so a slip in `[pulse]` (e.g. 100 mA for 20 mA)
+    /// emits no tick at all. Returns the prescription read.
+    pub fn check_prescription(
+        &self,
+    ) -> Result<Option<fes_prescription::Prescription>, ConfigError> {
+        let Some(path) = &self.prescription else {
+            return Ok(None);
+        };
+        let p = fes_prescription::Prescription::load(path)?;
+        p.check_pulse(
+            "rt-core [pulse]",
+            self.pulse.amplitude_ua,
+            u32::from(self.pulse.width_us),
+        )?;
+        Ok(Some(p))
     }
 
     /// Parses and validates TOML text.

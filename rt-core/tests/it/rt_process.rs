@@ -16,9 +16,11 @@ use rt_core::msg::port;
 use rt_core::msg::{Contract, ForceSample, Reference, StimTick, TimingReport};
 use rt_core::rt::clock::monotonic_ns;
 use rt_core::rt::hlog::merge_by_tag;
-use rt_core::rt::process_config::SourceConfig;
+use rt_core::rt::process_config::{PulseConfig, RtCoreConfig, SourceConfig};
 use rt_core::rt::runner::create_node;
 use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE};
+use std::path::PathBuf;
+use std::process::Command;
 
 const MS: u64 = 1_000_000;
 
@@ -752,4 +754,78 @@ fn a_restart_after_sigkill_reclaims_the_stale_services() {
         (1, 0, 0)
     );
     assert!(read_ticks(&dir).len() > 300);
+}
+
+/// A 5x amplitude slip in rt-core's `[pulse]` (100 mA for the prescription's 20 mA) is
+/// refused at start, before the loop exists, so no StimTick (let alone a pulse) is ever
+/// published (issue 19, item 4); so are a longer phase and a charge above the
+/// prescription's, and an unreadable prescription. The prescribed pulse starts.
+#[test]
+fn a_5x_amplitude_slip_is_refused_before_any_tick() {
+    let dir = Scratch::new("presc");
+    std::fs::write(
+        dir.join("prescription.toml"),
+        "format = \"fes-prescription/1\"\nmax_amplitude_ua = 20000\nmax_phase_width_us = 200\n\
+         max_charge_per_phase_nc = 3000\nmin_ipi_us = 2000\nmax_pulses_per_s = 100\n",
+    )
+    .unwrap();
+    let mut config = config(&prefix("presc"), 2);
+    config.prescription = Some(PathBuf::from("prescription.toml"));
+    config.pulse.amplitude_ua = 15_000;
+    config.pulse.width_us = 200;
+    let refused = |config: &RtCoreConfig, needle: &str| {
+        let (status, stderr) =
+            start_rt_core(&write_config(&dir, config), false).finish(Duration::from_secs(10));
+        assert_eq!(status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(needle), "{needle}: {stderr}");
+        assert!(
+            !stderr.contains("real-time") && !stderr.contains("running"),
+            "refused before the loop started: {stderr}"
+        );
+    };
+    let slip = RtCoreConfig {
+        pulse: PulseConfig {
+            amplitude_ua: 100_000,
+            ..config.pulse
+        },
+        ..config.clone()
+    };
+    refused(
+        &slip,
+        "amplitude = 100000 uA exceeds the prescription's 20000 uA",
+    );
+    let wide = RtCoreConfig {
+        pulse: PulseConfig {
+            width_us: 201,
+            ..config.pulse
+        },
+        ..config.clone()
+    };
+    refused(&wide, "phase width = 201 us");
+    // 20 mA x 200 us = 4 uC: each within its ceiling, the charge above 3 uC.
+    let charge = RtCoreConfig {
+        pulse: PulseConfig {
+            amplitude_ua: 20_000,
+            ..config.pulse
+        },
+        ..config.clone()
+    };
+    refused(&charge, "charge per phase = 4000 nC");
+    let missing = RtCoreConfig {
+        prescription: Some(PathBuf::from("missing.toml")),
+        ..config.clone()
+    };
+    refused(&missing, "missing.toml");
+    // The prescribed pulse passes the same check.
+    let out = Command::new(RT_CORE)
+        .arg("--config")
+        .arg(write_config(&dir, &config))
+        .arg("--check")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

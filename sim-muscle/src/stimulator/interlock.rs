@@ -106,6 +106,14 @@ impl Interlock {
                 detail: pulse.width_us,
             });
         }
+        // Charge per phase = amplitude x width: 0.1 mA x 1 us = 0.1 nC, the ceiling 10 nC.
+        let charge_100pc = u32::from(pulse.amplitude_100ua) * u32::from(pulse.width_us);
+        if charge_100pc > u32::from(limits.max_charge_10nc) * 100 {
+            return Err(Refusal {
+                code: ErrorCode::ChargeCeiling,
+                detail: u16::try_from(charge_100pc / 100).unwrap_or(u16::MAX),
+            });
+        }
         let last = queued.last().copied().or(self.applied.newest());
         let ipi = last.map(|last| tick.saturating_sub(last));
         if let Some(ipi) = ipi
@@ -135,7 +143,7 @@ impl Interlock {
 }
 
 /// True when the limits `config` are at least as strict as the stimulator's own `ceiling`;
-/// otherwise the index (0-5, CONFIG signal order) of the first looser limit.
+/// otherwise the index (0-6, CONFIG signal order) of the first looser limit.
 ///
 /// The rate limit (n pulses per W ms) is at least as strict as (N per W_c) when
 /// `n * ceil(W_c / W) <= N`: any W_c-long interval splits into `ceil(W_c / W)` pieces no
@@ -157,6 +165,9 @@ pub fn no_looser_than(config: &StimLimits, ceiling: &StimLimits) -> Result<(), u
     }
     if config.watchdog_ms > ceiling.watchdog_ms {
         return Err(5);
+    }
+    if config.max_charge_10nc > ceiling.max_charge_10nc {
+        return Err(6);
     }
     Ok(())
 }
@@ -183,6 +194,7 @@ mod tests {
             max_pulses: 4,
             rate_window_ms: 20,
             watchdog_ms: 100,
+            max_charge_10nc: 5000,
         }
     }
 

@@ -48,6 +48,12 @@ pub struct Settings {
     pub heartbeat_ms: u16,
     /// Period at which the host sends its heartbeat, ms; a watchdog must span at least two.
     pub host_heartbeat_ms: u16,
+    /// TEST ONLY (a fault to inject, never on a rig): apply every CONFIG with the amplitude
+    /// ceiling of the stimulator's own limits instead of the one requested, i.e. a stimulator
+    /// that applies a looser limit than it was sent. It reports what it applied in
+    /// CONFIG_APPLIED, so the host must refuse to arm (`sim-muscle stimulator
+    /// --test-fault-loose-config`).
+    pub test_fault_loose_config: bool,
 }
 
 /// Invalid [`Settings`].
@@ -527,9 +533,22 @@ impl Stimulator {
         if u32::from(limits.watchdog_ms) < 2 * u32::from(self.settings.host_heartbeat_ms) {
             return self.reject(ErrorCode::ConfigInvalid, 0, 5, out);
         }
-        self.limits = limits;
+        let applied = if self.settings.test_fault_loose_config {
+            StimLimits {
+                max_amplitude_100ua: self.settings.ceiling.max_amplitude_100ua,
+                ..limits
+            }
+        } else {
+            limits
+        };
+        self.limits = applied;
         self.config_id = config_id;
-        self.watchdog.set_timeout(limits.watchdog_ms);
+        self.watchdog.set_timeout(applied.watchdog_ms);
+        // The read-back: the limits now in force (not an echo of the request), so the host
+        // can refuse to arm on any difference.
+        for page in applied.to_pages(config_id) {
+            self.send(Message::ConfigApplied(page), out);
+        }
     }
 
     /// Reports a bus problem seen by the adapter (error frame, full transmit queue).

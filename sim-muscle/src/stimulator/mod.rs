@@ -70,6 +70,15 @@ pub struct StimulatorArgs {
     /// Watchdog: operational output stops when no host heartbeat arrives for this long, ms.
     #[arg(long, default_value_t = StimLimits::DEFAULT.watchdog_ms)]
     pub watchdog_ms: u16,
+    /// Charge-per-phase ceiling (amplitude x width), uC (a multiple of 0.01 uC, at most 150).
+    #[arg(long, default_value_t = f64::from(StimLimits::DEFAULT.max_charge_10nc) / 100.0)]
+    pub max_charge_uc: f64,
+    /// TEST ONLY, a fault to inject: apply every CONFIG with this stimulator's own amplitude
+    /// ceiling instead of the requested one (and report it in CONFIG_APPLIED). The host must
+    /// refuse to arm. Never use it on a rig. The environment variable
+    /// FES_TEST_FAULT_LOOSE_CONFIG=1 sets it too.
+    #[arg(long, hide = true)]
+    pub test_fault_loose_config: bool,
     /// Period of the stimulator's heartbeat, ms.
     #[arg(long, default_value_t = 100)]
     pub heartbeat_ms: u16,
@@ -104,6 +113,16 @@ impl StimulatorArgs {
                 self.max_amplitude_ma
             );
         }
+        let charge_10nc = (self.max_charge_uc * 100.0).round();
+        if !self.max_charge_uc.is_finite()
+            || (charge_10nc / 100.0 - self.max_charge_uc).abs() > 1e-9
+            || !(0.0..=f64::from(u16::MAX)).contains(&charge_10nc)
+        {
+            bail!(
+                "--max-charge-uc {} is not a multiple of 0.01 uC in 0..=150",
+                self.max_charge_uc
+            );
+        }
         let ceiling = StimLimits {
             max_amplitude_100ua: amplitude_100ua as u16,
             max_width_us: self.max_width_us,
@@ -111,14 +130,26 @@ impl StimulatorArgs {
             max_pulses: self.max_pulses,
             rate_window_ms: self.rate_window_ms,
             watchdog_ms: self.watchdog_ms,
+            max_charge_10nc: charge_10nc as u16,
         };
+        // The test fault, also by environment (FES_TEST_FAULT_LOOSE_CONFIG=1) for the stack
+        // tests, which start this process with fixed options.
+        let test_fault_loose_config = self.test_fault_loose_config
+            || std::env::var_os("FES_TEST_FAULT_LOOSE_CONFIG").is_some_and(|v| v == "1");
         let settings = Settings {
             nodes,
             ceiling,
             channels: self.channels,
             heartbeat_ms: self.heartbeat_ms,
             host_heartbeat_ms: self.host_heartbeat_ms,
+            test_fault_loose_config,
         };
+        if test_fault_loose_config {
+            eprintln!(
+                "sim-muscle stimulator: TEST FAULT --test-fault-loose-config: CONFIG amplitude \
+                 ceilings are ignored"
+            );
+        }
         settings.validate().context("invalid stimulator options")?;
         Ok(settings)
     }

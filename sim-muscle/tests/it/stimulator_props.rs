@@ -78,6 +78,7 @@ fn limits() -> impl Strategy<Value = StimLimits> {
         1u16..3000,
         // The CONFIG signal's range starts at 20 ms (two host heartbeats of 10 ms).
         20u16..1000,
+        1u16..15000,
     )
         .prop_map(
             |(
@@ -87,6 +88,7 @@ fn limits() -> impl Strategy<Value = StimLimits> {
                 max_pulses,
                 rate_window_ms,
                 watchdog_ms,
+                max_charge_10nc,
             )| {
                 StimLimits {
                     max_amplitude_100ua,
@@ -95,6 +97,7 @@ fn limits() -> impl Strategy<Value = StimLimits> {
                     max_pulses,
                     rate_window_ms,
                     watchdog_ms,
+                    max_charge_10nc,
                 }
             },
         )
@@ -160,6 +163,7 @@ fn run(ceiling: StimLimits, channels: u8, steps: &[Step]) -> Result<Applied, Tes
         channels,
         heartbeat_ms: 100,
         host_heartbeat_ms: HOST_HEARTBEAT_MS,
+        test_fault_loose_config: false,
     };
     settings.validate().expect("valid settings");
     let mut out = Outbox::new();
@@ -313,6 +317,13 @@ fn check_train(ceiling: &StimLimits, channels: u8, applied: &Applied) -> Result<
             p.width_us <= l.max_width_us && p.width_us <= ceiling.max_width_us,
             "tick {tick}: {} us beyond {l:?}",
             p.width_us
+        );
+        let charge_100pc = u32::from(p.amplitude_100ua) * u32::from(p.width_us);
+        prop_assert!(
+            charge_100pc <= u32::from(l.max_charge_10nc) * 100
+                && charge_100pc <= u32::from(ceiling.max_charge_10nc) * 100,
+            "tick {tick}: {} x 0.1 nC per phase beyond {l:?}",
+            charge_100pc
         );
         prop_assert!(p.channel < channels, "tick {tick}: channel {}", p.channel);
         if let Some((prev, _, _)) = i.checked_sub(1).map(|j| applied[j]) {

@@ -37,6 +37,12 @@ struct Rig {
     tick_seq: u64,
     cmd_seq: u64,
     config_id: u8,
+    /// The last complete CONFIG the driver wrote (id, limits), collected from the bus.
+    sent: Option<(u8, StimLimits)>,
+    sent_pages: fes_can::ConfigAssembler,
+    /// Answer a complete CONFIG with CONFIG_APPLIED pages of the same limits (a conforming
+    /// stimulator) just before the STATUS that confirms it.
+    auto_readback: bool,
 }
 
 fn tick(seq: u64, t_ns: u64, pulse: bool) -> StimTick {
@@ -61,6 +67,9 @@ impl Rig {
             tick_seq: 0,
             cmd_seq: 0,
             config_id: 0,
+            sent: None,
+            sent_pages: fes_can::ConfigAssembler::new(),
+            auto_readback: true,
         }
     }
 
@@ -79,6 +88,23 @@ impl Rig {
     }
 
     fn bus_event(&mut self, e: BusEvent) {
+        for (_, m) in self.bus.messages() {
+            if let Message::Config(c) = m
+                && let Some(done) = self.sent_pages.push(&c)
+            {
+                self.sent = Some(done);
+            }
+        }
+        if let BusEvent::Status(s) = e
+            && s.state == StimState::PreOperational
+            && self.auto_readback
+            && let Some((id, limits)) = self.sent
+            && id == s.config_id
+        {
+            for a in recording_bus::applied(&limits, id) {
+                self.fp.on_bus(a, self.now, &mut self.ev);
+            }
+        }
         self.fp.on_bus(e, self.now, &mut self.ev);
     }
 
@@ -1054,6 +1080,16 @@ fn scripted_tick_publisher() {
     }
 }
 
+/// A prescription that allows the driver's default limits (100 mA, 500 us, 50 uC, 2 ms,
+/// 100 pulses/s).
+const DEFAULT_LIMITS_PRESCRIPTION: &str = r#"format = "fes-prescription/1"
+max_amplitude_ua = 100000
+max_phase_width_us = 500
+max_charge_per_phase_nc = 50000
+min_ipi_us = 2000
+max_pulses_per_s = 100
+"#;
+
 /// Bad-input sweep of the binary's configuration (issue 10, item 3): each malformed file
 /// makes `run --config FILE --check` and a real `run` on a host bus exit 1 with a short
 /// message naming the problem and no panic, and nothing reaches the bus.
@@ -1066,6 +1102,18 @@ fn malformed_configurations_are_refused_clearly_without_a_panic() {
     let good = String::from_utf8(example.stdout).unwrap();
     let dir = std::env::temp_dir().join(format!("stim-driver-badcfg-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
+    // The example's limits are the driver's defaults: a prescription that allows them.
+    let prescription = dir.join("prescription.toml");
+    std::fs::write(&prescription, DEFAULT_LIMITS_PRESCRIPTION).unwrap();
+    let default_path = "prescription = \"/etc/fes/prescription.toml\"";
+    assert!(
+        good.contains(default_path),
+        "example names the default prescription"
+    );
+    let good = good.replace(
+        default_path,
+        &format!("prescription = \"{}\"", prescription.display()),
+    );
     let edit = |from: &str, to: &str| {
         assert!(good.contains(from), "example has no {from:?}");
         good.replacen(from, to, 1).into_bytes()
@@ -1321,4 +1369,222 @@ fn a_liveness_unknown_beyond_its_grace_counts_as_dead() {
             assert_eq!(r.fault(), Some(expected), "re-armed while unknown");
         }
     }
+}
+
+/// After CONFIG the stimulator reads back the limits it applied (CONFIG_APPLIED); the
+/// driver arms only when they equal what it sent (issue 19, item 4). A stimulator that
+/// applied a looser amplitude ceiling than requested is refused at arm, with NMT start never
+/// sent; one that read back nothing is refused too; an exact read-back arms.
+#[test]
+fn a_stimulator_that_applies_a_looser_limit_is_refused_at_arm() {
+    // The prescription's dose as the run's CONFIG: 20 mA, 200 us, 4 uC per phase.
+    let mut s = settings();
+    s.stim_limits = StimLimits {
+        max_amplitude_100ua: 200,
+        max_width_us: 200,
+        max_charge_10nc: 400,
+        ..s.stim_limits
+    };
+    let ready = |r: &mut Rig| {
+        r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+        r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+        for _ in 0..3 {
+            r.advance(MS);
+            r.tick(false);
+        }
+        r.bus.clear();
+        r.command(DriverCommandKind::Arm);
+    };
+    let refusal = |r: &Rig| {
+        r.ev.iter().rev().find_map(|e| match e {
+            DriverEvent::ArmRefused { refusal, .. } => Some(*refusal),
+            _ => None,
+        })
+    };
+    let bring_up = |readback: Option<StimLimits>| {
+        let mut r = Rig::new(s);
+        r.auto_readback = false;
+        r.fp.start(r.now, &mut r.ev);
+        r.advance(MS);
+        r.bus_event(status(StimState::PreOperational, 7));
+        if let Some(l) = readback {
+            for e in recording_bus::applied(&l, 8) {
+                r.bus_event(e);
+            }
+        }
+        r.advance(MS);
+        r.bus_event(status(StimState::PreOperational, 8));
+        r
+    };
+    // The stimulator kept its own 100 mA ceiling and says so.
+    let looser = StimLimits {
+        max_amplitude_100ua: 1000,
+        ..s.stim_limits
+    };
+    let mut r = bring_up(Some(looser));
+    assert!(
+        r.ev.iter().any(|e| matches!(
+            e,
+            DriverEvent::BringUp(stim_driver::event::BringUp::LimitsReadBack {
+                config_id: 8,
+                differs: Some("max_amplitude")
+            })
+        )),
+        "{:?}",
+        r.ev
+    );
+    assert_eq!(r.fp.state(), DriverState::ConfigRefused);
+    ready(&mut r);
+    assert_eq!(
+        refusal(&r),
+        Some(ArmRefusal::StimulatorLimitsDiffer {
+            field: "max_amplitude"
+        })
+    );
+    assert!(!r.fp.is_armed());
+    assert!(r.bus.nmt().is_empty(), "no NMT start: {:?}", r.bus.nmt());
+    // A looser charge ceiling alone is refused the same way.
+    let mut r = bring_up(Some(StimLimits {
+        max_charge_10nc: 401,
+        ..s.stim_limits
+    }));
+    ready(&mut r);
+    assert_eq!(
+        refusal(&r),
+        Some(ArmRefusal::StimulatorLimitsDiffer {
+            field: "max_charge"
+        })
+    );
+    // No read-back: STATUS confirms the id, but what is enforced is unknown.
+    let mut r = bring_up(None);
+    assert_eq!(r.fp.state(), DriverState::Disarmed);
+    ready(&mut r);
+    assert_eq!(refusal(&r), Some(ArmRefusal::LimitsNotReadBack));
+    assert!(r.bus.nmt().is_empty());
+    // The exact limits read back: armed, NMT start sent.
+    let mut r = bring_up(Some(s.stim_limits));
+    ready(&mut r);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Start)]);
+}
+
+/// The driver's interlocks and the limits it would send in CONFIG may not exceed the
+/// prescription (issue 19, item 4): a configuration with any looser limit, or no readable
+/// prescription, is refused at start (`run --check` and a real `run`, exit 1, naming the
+/// prescription and the limit) before anything reaches the bus; the same limits cut to the
+/// dose start.
+#[test]
+fn limits_looser_than_the_prescription_are_refused_at_start() {
+    use std::process::Command;
+    const EXE: &str = env!("CARGO_BIN_EXE_stim-driver");
+    const DOSE: &str = r#"format = "fes-prescription/1"
+max_amplitude_ua = 20000
+max_phase_width_us = 200
+max_charge_per_phase_nc = 4000
+min_ipi_us = 2000
+max_pulses_per_s = 100
+"#;
+    let dir = std::env::temp_dir().join(format!("stim-driver-presc-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("dose.toml"), DOSE).unwrap();
+    let example = Command::new(EXE).arg("example-config").output().unwrap();
+    let example = String::from_utf8(example.stdout).unwrap();
+    let example = example.replace(
+        "prescription = \"/etc/fes/prescription.toml\"",
+        "prescription = \"dose.toml\"",
+    );
+    // The example's limits cut to the dose, key by key.
+    let dosed = example
+        .replace("max_amplitude_ua = 100000", "max_amplitude_ua = 20000")
+        .replace("max_width_us = 500", "max_width_us = 200")
+        .replace("max_charge_nc = 50000", "max_charge_nc = 4000")
+        .replace("max_charge_nc = 40000", "max_charge_nc = 4000");
+    assert_eq!(dosed.matches("max_amplitude_ua = 20000").count(), 2);
+    let bus = fes_testkit::bus::SilentBus::new("driver-presc");
+    let iface = bus.iface();
+    let path = dir.join("stim-driver.toml");
+    let config = path.to_str().unwrap();
+    let refused = |name: &str, text: &str, needles: &[&str]| {
+        std::fs::write(&path, text).unwrap();
+        for args in [
+            vec!["run", "--check", "--config", config],
+            vec!["run", "--config", config, "--iface", &iface],
+        ] {
+            let out = Command::new(EXE)
+                .args(&args)
+                .env("RUST_BACKTRACE", "0")
+                .output()
+                .unwrap();
+            for needle in needles {
+                fes_testkit::assert_refused(name, &out, &[1], needle, 6);
+            }
+            bus.assert_silent(name);
+        }
+    };
+    let edit = |from: &str, to: &str, nth: usize| {
+        let at = dosed.match_indices(from).nth(nth).expect(from).0;
+        format!("{}{to}{}", &dosed[..at], &dosed[at + from.len()..])
+    };
+    // The example's own limits (100 mA interlocks and CONFIG) against the 20 mA dose.
+    refused("defaults", &example, &["prescription", "amplitude"]);
+    // One limit at a time above the dose: the CONFIG amplitude (a 5x slip), the interlock
+    // width, the CONFIG charge, the interlock IPI and rate, the CONFIG rate.
+    let cases = [
+        (
+            "stimulator amplitude",
+            edit("max_amplitude_ua = 20000", "max_amplitude_ua = 100000", 0),
+            "amplitude",
+        ),
+        (
+            "interlock width",
+            edit("max_width_us = 200", "max_width_us = 201", 1),
+            "phase width",
+        ),
+        (
+            "stimulator charge",
+            edit("max_charge_nc = 4000", "max_charge_nc = 4010", 0),
+            "charge per phase",
+        ),
+        (
+            "interlock charge",
+            edit("max_charge_nc = 4000", "max_charge_nc = 4001", 1),
+            "charge per phase",
+        ),
+        (
+            "interlock IPI",
+            edit("min_ipi_us = 2000", "min_ipi_us = 1999", 0),
+            "minimum IPI",
+        ),
+        (
+            "interlock rate",
+            edit("max_pulses = 100", "max_pulses = 101", 1),
+            "pulses in any 1 s",
+        ),
+        (
+            "stimulator rate",
+            edit("rate_window_ms = 1000", "rate_window_ms = 999", 0),
+            "pulses in any 1 s",
+        ),
+    ];
+    for (name, text, needle) in &cases {
+        refused(name, text, &["prescription", needle]);
+    }
+    // No prescription at all.
+    refused(
+        "missing prescription",
+        &dosed.replace("dose.toml", "missing.toml"),
+        &["missing.toml"],
+    );
+    // The dosed configuration starts (its check passes).
+    std::fs::write(&path, &dosed).unwrap();
+    let out = Command::new(EXE)
+        .args(["run", "--check", "--config", config])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -186,6 +186,12 @@ fn configured(bus: &Bus) -> (ForwardPath<Bus>, u64) {
     for config_id in [7u8, 8] {
         now += MS;
         bus.now.set(now);
+        if config_id == 8 {
+            // The stimulator reads back what it applied (CONFIG_APPLIED) before STATUS.
+            for e in recording_bus::applied(&settings().stim_limits, 8) {
+                fp.on_bus(e, now, &mut ev);
+            }
+        }
         fp.on_bus(status(StimState::PreOperational, config_id), now, &mut ev);
     }
     assert_eq!(fp.state(), DriverState::Disarmed, "{ev:?}");

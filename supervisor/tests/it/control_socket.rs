@@ -35,6 +35,12 @@ fn daemon(tag: &str) -> Daemon {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let cfg = dir.join("supervisor.toml");
+    // Recording is on: the daemon needs the prescription whose checksum it records.
+    std::fs::write(
+        dir.join("prescription.toml"),
+        include_str!("../../../deploy/etc/fes/prescription.toml"),
+    )
+    .unwrap();
     std::fs::write(
         &cfg,
         format!(
@@ -50,6 +56,7 @@ watch_stim_driver = false
 watch_stimulator = false
 [recording]
 dir = "rec"
+prescription = "prescription.toml"
 "#,
             pid = std::process::id()
         ),

@@ -178,6 +178,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         channels: 1,
         heartbeat_ms: 100,
         host_heartbeat_ms: config.can.heartbeat_ms,
+        test_fault_loose_config: false,
     };
     settings.validate().context("virtual stimulator settings")?;
     let (tx, peer) = datagram_bus(config.retry_policy()).context("socket pair")?;

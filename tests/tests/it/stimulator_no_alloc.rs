@@ -26,6 +26,7 @@ fn state_machine_allocates_nothing_per_tick() {
         channels: 1,
         heartbeat_ms: 100,
         host_heartbeat_ms: 10,
+        test_fault_loose_config: false,
     };
     settings.validate().unwrap();
     let mut out = Outbox::new();

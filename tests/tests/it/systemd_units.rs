@@ -721,3 +721,98 @@ fn safe_stop_logs_through_its_journal_stream_with_priorities() {
     assert!(line.starts_with("<5>"), "info priority prefix: {line}");
     assert!(!line.contains('\u{1b}'), "no colour codes: {line}");
 }
+
+/// The prescription (issue 19, item 4) is shipped, bounds every shipped configuration, and
+/// is installed root:root 0644 (read-only to the services, which run as `fes`), apart from
+/// the 0640 configuration; an upgrade never replaces an operator's prescription. The
+/// services cannot write it: every unit has `ProtectSystem=strict` and no writable path
+/// under /etc.
+#[test]
+fn the_prescription_is_installed_read_only_and_bounds_every_shipped_config() {
+    use std::os::unix::fs::PermissionsExt;
+    let deploy = workspace_root().join("deploy");
+    let text = std::fs::read_to_string(deploy.join("etc/fes/prescription.toml")).unwrap();
+    let p = fes_prescription::Prescription::parse(&text).expect("the shipped prescription");
+    // The dose: rt-core's pulse exactly, no margin.
+    assert_eq!(
+        (
+            p.max_amplitude_ua,
+            p.max_phase_width_us,
+            p.max_charge_per_phase_nc
+        ),
+        (20_000, 200, 4000)
+    );
+    for dir in ["etc/fes", "bench/etc/fes"] {
+        let driver = std::fs::read_to_string(deploy.join(dir).join("stim-driver.toml")).unwrap();
+        let driver = stim_driver::config::DriverConfig::parse(&driver).unwrap();
+        assert_eq!(driver.prescription, Path::new("/etc/fes/prescription.toml"));
+        driver
+            .check_prescription(&p)
+            .unwrap_or_else(|e| panic!("{dir}/stim-driver.toml: {e}"));
+        let rt = std::fs::read_to_string(deploy.join(dir).join("rt-core.toml")).unwrap();
+        let rt = rt_core::rt::process_config::RtCoreConfig::parse(&rt).unwrap();
+        assert_eq!(
+            rt.prescription.as_deref(),
+            Some(Path::new("/etc/fes/prescription.toml")),
+            "{dir}/rt-core.toml names the prescription"
+        );
+        p.check_pulse(
+            "rt-core",
+            rt.pulse.amplitude_ua,
+            u32::from(rt.pulse.width_us),
+        )
+        .unwrap_or_else(|e| panic!("{dir}/rt-core.toml: {e}"));
+    }
+    let sup = shipped_toml("etc/fes/supervisor.toml").unwrap();
+    assert_eq!(
+        sup["recording"]["prescription"].as_str(),
+        Some("/etc/fes/prescription.toml")
+    );
+    // Installed: 0644 beside 0640 configuration; kept over an upgrade.
+    let bins = build_stack();
+    let scratch = scratch("prescription");
+    let root = scratch.path();
+    stage("--bench", root, &bins, &[]);
+    let installed = root.join("etc/fes/prescription.toml");
+    let mode = |f: &Path| std::fs::metadata(f).unwrap().permissions().mode() & 0o777;
+    assert_eq!(std::fs::read_to_string(&installed).unwrap(), text);
+    assert_eq!(mode(&installed), 0o644);
+    assert_eq!(mode(&root.join("etc/fes/stim-driver.toml")), 0o640);
+    let operators = text.replace("max_pulses_per_s = 100", "max_pulses_per_s = 50");
+    std::fs::write(&installed, &operators).unwrap();
+    let out = stage("--bench", root, &bins, &[]);
+    assert!(out.contains("prescription.toml.dist"), "{out}");
+    assert_eq!(std::fs::read_to_string(&installed).unwrap(), operators);
+    assert_eq!(mode(&root.join("etc/fes/prescription.toml.dist")), 0o644);
+    let installer = std::fs::read_to_string(workspace_root().join("scripts/install")).unwrap();
+    assert!(
+        installer.contains("-o root -g root")
+            && installer.contains("-name 'prescription.toml*' -exec chown root:root"),
+        "the installer makes the prescription root's"
+    );
+    for (name, unit) in &read_units(&root.join(UNIT_DIR)) {
+        if !name.starts_with("fes-") || name == "fes-can.service" {
+            continue;
+        }
+        if !unit.has_word("Service", "ProtectSystem", "strict") {
+            continue;
+        }
+        for v in unit.values("Service", "ReadWritePaths") {
+            assert!(
+                !v.split_whitespace().any(|p| p.starts_with("/etc")),
+                "{name}: ReadWritePaths={v}"
+            );
+        }
+    }
+    for name in [
+        "fes-stim-driver.service",
+        "fes-rt-core.service",
+        "fes-supervisor.service",
+    ] {
+        let unit = &read_units(&root.join(UNIT_DIR))[name];
+        assert!(
+            unit.has_word("Service", "ProtectSystem", "strict"),
+            "{name}"
+        );
+    }
+}

@@ -295,6 +295,7 @@ fn start_healthy(
         outer_gain: a.outer_gain,
         prefix: format!("bench{}", std::process::id()),
         env: Vec::new(),
+        pulse_amplitude_ua: None,
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
     if let Err(e) = healthy {

@@ -133,6 +133,15 @@ impl Bench {
         let rows = stimulator_rows(&dir.join("stimulator.csv"));
         let run = recordings.last().expect("a recording run");
         let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{}: {e}", run.display()));
+        // Every recording names the prescription it was made under (issue 19, item 4).
+        let meta = std::fs::read_to_string(run.join("dataset.json")).unwrap_or_default();
+        let meta: serde_json::Value = serde_json::from_str(&meta).unwrap_or_default();
+        assert_eq!(
+            meta["prescription_sha256"].as_str(),
+            Some(fes_prescription::sha256_hex(workbench::bench::PRESCRIPTION.as_bytes()).as_str()),
+            "{}: dataset.json prescription_sha256",
+            run.display()
+        );
         let decided_ns = stack_support::raw_ticks(run)
             .iter()
             .filter(|t| t.pulse)
@@ -1180,4 +1189,114 @@ fn shared_memory_and_bus_paths_are_private() {
         "permissions: {} paths checked ({data} data segments), all private",
         paths.len()
     );
+}
+
+/// Starts the stack in a fresh directory without arming; the stack (if it came up) and the
+/// directory.
+fn start_unarmed(
+    tag: &str,
+    pulse_amplitude_ua: Option<u32>,
+    env: Vec<(&'static str, String, String)>,
+) -> (Result<Stack, workbench::bench::BenchError>, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("stack directory");
+    let stack = Stack::start(workbench::bench::StackOptions {
+        dir: dir.clone(),
+        bin_dir: stack_binaries(),
+        controller: fes_tests::stack::workspace_root().join("models/fast.lcn.json"),
+        iface: format!("hostbus:{}", dir.join("bus").display()),
+        timing: TIMING,
+        fatigue: false,
+        outer_loop: true,
+        outer_gain: None,
+        prefix: format!("fi{}{tag}", std::process::id()),
+        env,
+        pulse_amplitude_ua,
+    });
+    (stack, dir)
+}
+
+/// Issue 19, item 4: a 5x amplitude slip in rt-core's file (100 mA for the prescription's
+/// 20 mA) is refused before any pulse: rt-core exits at start naming the prescription, so
+/// the stack never comes up, nothing is armed, and the stimulator applies no pulse.
+#[test]
+fn a_5x_amplitude_slip_in_rt_core_is_refused_before_any_pulse() {
+    let _serial = stack_support::one_stack_at_a_time();
+    let (stack, dir) = start_unarmed("slip", Some(100_000), Vec::new());
+    let logs = process_logs(&dir);
+    let err = match stack {
+        Ok(stack) => {
+            // Without the start check: try to stimulate, and show what reaches the muscle.
+            let armed = stack.arm_with(ProfileSpec::Cardiac(CardiacSpec {
+                bpm: 120.0,
+                duty: 0.4,
+                amplitude: 0.3,
+                edge_rate_per_s: None,
+                outer_loop: None,
+            }));
+            std::thread::sleep(Duration::from_millis(1500));
+            let _ = stack.stop(Duration::from_secs(5));
+            let rows = stimulator_rows(&dir.join("stimulator.csv"));
+            let pulses = rows.iter().filter(|r| r.pulse.is_some()).count();
+            panic!(
+                "the stack started with a 100 mA pulse (arm: {armed:?}; {pulses} pulses applied)\n{}",
+                process_logs(&dir)
+            );
+        }
+        Err(e) => e.to_string(),
+    };
+    let rt_log = std::fs::read_to_string(dir.join("rt-core.log")).unwrap_or_default();
+    assert!(
+        rt_log.contains("amplitude = 100000 uA exceeds the prescription's 20000 uA"),
+        "rt-core must name the prescription: {err}\n{logs}"
+    );
+    let rows = stimulator_rows(&dir.join("stimulator.csv"));
+    assert!(
+        rows.iter()
+            .all(|r| r.pulse.is_none() && !OPERATING.contains(&r.state.as_str())),
+        "the stimulator was operated or applied a pulse\n{logs}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 19, item 4: a stimulator that applies a looser limit than the CONFIG asked for (the
+/// virtual stimulator's test fault: it keeps its own 100 mA amplitude ceiling and reports
+/// it in CONFIG_APPLIED) is refused at arm: the driver names the differing limit, the
+/// stimulator is never started, no pulse is applied.
+#[test]
+fn a_stimulator_that_applies_a_looser_limit_is_refused_at_arm() {
+    let _serial = stack_support::one_stack_at_a_time();
+    let env = vec![(
+        "sim-muscle",
+        "FES_TEST_FAULT_LOOSE_CONFIG".to_string(),
+        "1".to_string(),
+    )];
+    let (stack, dir) = start_unarmed("loose", None, env);
+    let stack = stack.unwrap_or_else(|e| panic!("the stack did not start: {e}"));
+    std::thread::sleep(Duration::from_millis(2000));
+    let armed = stack.arm_with(ProfileSpec::Cardiac(CardiacSpec {
+        bpm: 120.0,
+        duty: 0.4,
+        amplitude: 0.3,
+        edge_rate_per_s: None,
+        outer_loop: None,
+    }));
+    std::thread::sleep(Duration::from_millis(500));
+    let _ = stack.stop(Duration::from_secs(5));
+    let logs = process_logs(&dir);
+    assert!(armed.is_err(), "armed with a looser stimulator\n{logs}");
+    let driver_log = std::fs::read_to_string(dir.join("stim-driver.log")).unwrap_or_default();
+    assert!(
+        driver_log.contains("differs: Some(\"max_amplitude\")"),
+        "the driver must name the differing limit\n{logs}"
+    );
+    let rows = stimulator_rows(&dir.join("stimulator.csv"));
+    assert!(!rows.is_empty(), "no stimulator record\n{logs}");
+    assert!(
+        rows.iter()
+            .all(|r| r.pulse.is_none() && !OPERATING.contains(&r.state.as_str())),
+        "the stimulator was operated or applied a pulse\n{logs}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

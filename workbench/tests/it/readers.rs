@@ -108,6 +108,7 @@ fn recording(root: &Path) -> (PathBuf, serde_json::Value) {
         offset_n: 0.0,
         source: "readers test".into(),
         protocol: json!({"test": true}),
+        prescription_sha256: None,
     };
     let mut r = Recorder::create(root, "run", settings, T0).unwrap();
     let n = 1500u64;

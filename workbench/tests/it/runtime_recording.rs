@@ -15,6 +15,10 @@ use supervisor::recording::{Recorder, RecorderSettings};
 const MS: u64 = 1_000_000;
 const T0: u64 = 10_000 * MS;
 
+/// The checksum the recorder is given (any 64 hex digits).
+const PRESCRIPTION_SHA256: &str =
+    "8d4c6a25f5f8e3b1f8b6e2c6b4a3a1d9e0f1a2b3c4d5e6f708192a3b4c5d6e7f";
+
 fn settings() -> RecorderSettings {
     RecorderSettings {
         flush_period_ns: 1_000 * MS,
@@ -23,6 +27,7 @@ fn settings() -> RecorderSettings {
         offset_n: 0.0,
         source: "test".into(),
         protocol: serde_json::json!({"test": true}),
+        prescription_sha256: Some(PRESCRIPTION_SHA256.into()),
     }
 }
 
@@ -153,6 +158,10 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         assert_eq!(m, 0o640, "{f}: {m:o}");
     }
     let ds = DataSet::read(&dir).unwrap();
+    // The recording names the prescription it was made under (issue 19, item 4).
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("dataset.json")).unwrap()).unwrap();
+    assert_eq!(meta["prescription_sha256"], PRESCRIPTION_SHA256);
     // Beats of 800 ms: records 800, 800, 800, 600 samples.
     let lens: Vec<usize> = ds.records.iter().map(|r| r.len()).collect();
     assert_eq!(lens, vec![800, 800, 800, 600]);

@@ -44,6 +44,7 @@ pub fn start_armed(
         outer_gain: None,
         prefix,
         env,
+        pulse_amplitude_ua: None,
     })
     .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
     let healthy_s = if timing == ChainTiming::Uml { 90 } else { 20 };

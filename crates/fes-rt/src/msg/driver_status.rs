@@ -88,7 +88,8 @@ pub enum CommandRefusal {
     TxFailed = 10,
     /// The command did not validate.
     InvalidCommand = 11,
-    /// The stimulator does not report the limits the driver configured.
+    /// The stimulator does not read back the limits the driver configured (or read back
+    /// none).
     StimulatorLimitsMismatch = 12,
 }
 

@@ -68,6 +68,10 @@ CONFIGURATION FILE (TOML, schema \"fes-rt-core/1\"; `--print-example-config` pri
   [feedback]
     enabled = false           pass measured force (ForceSample) to the generator
     max_age_ms = 5            oldest sample used
+  prescription = \"/etc/fes/prescription.toml\"
+                              optional (top level): [pulse] may not exceed this
+                              prescription (amplitude, phase width, charge); refuse to
+                              start otherwise
   [pulse]
     channel = 0               stimulator channel 0..=15
     amplitude_ua = 20000      pulse amplitude (uA)
@@ -173,6 +177,10 @@ fn print_example_config() {
 /// names (a controller file is read and checked here), and logs what will run.
 fn load_configuration(path: &Path) -> anyhow::Result<(RtCoreConfig, Source)> {
     let config = RtCoreConfig::load(path).context("configuration")?;
+    match config.check_prescription().context("configuration")? {
+        Some(p) => info!("{}", p.summary()),
+        None => info!("no prescription configured: [pulse] is checked by stim-driver only"),
+    }
     let source = Source::load(&config.source, config.period(), config.feedback.enabled)?;
     info!(
         "config {}: period {} us, source {}, prefix {:?}",

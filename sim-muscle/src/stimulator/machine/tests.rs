@@ -17,10 +17,12 @@ fn settings() -> Settings {
             max_pulses: 100,
             rate_window_ms: 1000,
             watchdog_ms: 100,
+            max_charge_10nc: 5000,
         },
         channels: 1,
         heartbeat_ms: 100,
         host_heartbeat_ms: 10,
+        test_fault_loose_config: false,
     }
 }
 
@@ -440,7 +442,7 @@ fn config_only_in_pre_operational_and_never_looser_than_the_ceiling() {
     );
     assert_eq!(b.stim.config_id(), 0);
     // A watchdog of 19 ms is outside the protocol's range: a decode error.
-    let [_, page1] = settings().ceiling.to_pages(4);
+    let [_, page1, _] = settings().ceiling.to_pages(4);
     let mut f = Message::Config(page1).encode().unwrap();
     f.data[6..8].copy_from_slice(&19u16.to_le_bytes());
     b.frame(f);
@@ -495,7 +497,7 @@ fn config_only_in_pre_operational_and_never_looser_than_the_ceiling() {
 #[test]
 fn a_partial_config_is_never_applied() {
     let mut b = Bench::new();
-    let [page0, _] = StimLimits {
+    let [page0, _, _] = StimLimits {
         max_amplitude_100ua: 10,
         ..settings().ceiling
     }
@@ -503,8 +505,9 @@ fn a_partial_config_is_never_applied() {
     b.send(Message::Config(page0));
     b.operational();
     b.nmt(NmtCommand::EnterPreOperational);
-    let [_, page1] = settings().ceiling.to_pages(5);
+    let [_, page1, page2] = settings().ceiling.to_pages(5);
     b.send(Message::Config(page1));
+    b.send(Message::Config(page2));
     assert_eq!(
         b.stim.config_id(),
         0,
@@ -978,4 +981,90 @@ fn a_pulse_that_arrived_after_the_heartbeat_expired_is_refused_in_the_catch_up()
     );
     assert_eq!(report.caught_up_pulses, 0);
     assert_eq!(b.plant.pulses(), 0);
+}
+
+#[test]
+fn the_charge_ceiling_is_enforced_per_phase() {
+    // The prescription's 4 uC per phase (20 mA x 200 us), under 100 mA and 500 us ceilings.
+    let mut b = Bench::new();
+    let dose = StimLimits {
+        max_charge_10nc: 400,
+        ..settings().ceiling
+    };
+    b.configure(dose, 3);
+    assert_eq!((b.stim.config_id(), *b.stim.limits()), (3, dose));
+    b.operational();
+    // 20.1 mA x 200 us = 4.02 uC: each within its own ceiling, the product above.
+    b.pulse(201, 200);
+    assert_eq!(
+        (b.last_emcy().code, b.last_emcy().detail),
+        (ErrorCode::ChargeCeiling, 402)
+    );
+    // 40 mA x 101 us = 4.04 uC.
+    b.pulse(400, 101);
+    assert_eq!(b.last_emcy().code, ErrorCode::ChargeCeiling);
+    b.run(3, true);
+    assert_eq!(b.plant.pulses(), 0);
+    // Exactly the dose passes.
+    b.pulse(200, 200);
+    b.run(3, true);
+    assert_eq!(b.plant.pulses(), 1);
+    // A CONFIG may not loosen the stimulator's own charge ceiling (index 6).
+    let mut c = Bench::new();
+    c.configure(
+        StimLimits {
+            max_charge_10nc: 5001,
+            ..settings().ceiling
+        },
+        4,
+    );
+    assert_eq!(
+        (c.last_emcy().code, c.last_emcy().detail),
+        (ErrorCode::ConfigInvalid, 6)
+    );
+}
+
+fn applied_pages(b: &Bench) -> Vec<fes_can::Config> {
+    b.sent
+        .iter()
+        .filter_map(|m| match m {
+            Message::ConfigApplied(c) => Some(*c),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn config_applied_reports_the_limits_in_force() {
+    let strict = StimLimits {
+        max_amplitude_100ua: 200,
+        max_width_us: 200,
+        max_charge_10nc: 400,
+        ..settings().ceiling
+    };
+    let mut b = Bench::new();
+    b.configure(strict, 7);
+    assert_eq!(applied_pages(&b), strict.to_pages(7).to_vec());
+    // A refused CONFIG is not reported as applied.
+    let mut c = Bench::new();
+    c.configure(
+        StimLimits {
+            max_amplitude_100ua: 1001,
+            ..settings().ceiling
+        },
+        8,
+    );
+    assert!(applied_pages(&c).is_empty());
+    // The test fault: the stimulator keeps its own amplitude ceiling and says so.
+    let mut f = Bench::with(Settings {
+        test_fault_loose_config: true,
+        ..settings()
+    });
+    f.configure(strict, 9);
+    let looser = StimLimits {
+        max_amplitude_100ua: 1000,
+        ..strict
+    };
+    assert_eq!(*f.stim.limits(), looser);
+    assert_eq!(applied_pages(&f), looser.to_pages(9).to_vec());
 }

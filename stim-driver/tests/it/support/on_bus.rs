@@ -316,12 +316,25 @@ impl Timing {
     }
 }
 
+/// The prescription of these scenarios: the driver's default limits (100 mA, 500 us, 50 uC
+/// per phase, 2 ms, 100 pulses/s), so that what they exercise is the driver, not a dose.
+const PRESCRIPTION: &str = r#"format = "fes-prescription/1"
+label = "stim-driver on-bus scenarios: the driver's default limits"
+max_amplitude_ua = 100000
+max_phase_width_us = 500
+max_charge_per_phase_nc = 50000
+min_ipi_us = 2000
+max_pulses_per_s = 100
+"#;
+
 fn write_config(dir: &Path, iface: &str, prefix: &str, t: &Timing) -> PathBuf {
     let path = dir.join("stim-driver.toml");
+    std::fs::write(dir.join("prescription.toml"), PRESCRIPTION).expect("write the prescription");
     std::fs::write(
         &path,
         format!(
             r#"schema = "fes-stim-driver/1"
+prescription = "prescription.toml"
 [can]
 iface = "{iface}"
 [stimulator]
@@ -380,6 +393,8 @@ impl Stimulator {
             max_pulses: 100,
             rate_window_ms: 1000,
             watchdog_ms: watchdog_ms as u16,
+            max_charge_uc: 50.0,
+            test_fault_loose_config: false,
             heartbeat_ms: 100,
             host_heartbeat_ms: 10,
             record: None,

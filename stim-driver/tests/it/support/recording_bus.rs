@@ -77,6 +77,15 @@ impl Bus {
     }
 }
 
+/// The CONFIG_APPLIED pages a conforming stimulator answers a complete CONFIG with.
+pub fn applied(limits: &fes_can::StimLimits, config_id: u8) -> Vec<BusEvent> {
+    limits
+        .to_pages(config_id)
+        .into_iter()
+        .map(BusEvent::ConfigApplied)
+        .collect()
+}
+
 /// A STATUS event from the stimulator: `state`, confirming configuration `config_id`,
 /// no pulse applied yet.
 pub fn status(state: StimState, config_id: u8) -> BusEvent {
