@@ -99,7 +99,7 @@ pub enum PrescriptionError {
     /// Not TOML of this format.
     #[error("prescription{at}: {message}")]
     Parse {
-        /// " <path>" or "".
+        /// `" <path>"` or `""`.
         at: String,
         /// The parser's message.
         message: String,
@@ -107,7 +107,7 @@ pub enum PrescriptionError {
     /// Another `format`.
     #[error("prescription{at}: format = {found:?}, this version reads {FORMAT:?}")]
     Format {
-        /// " <path>" or "".
+        /// `" <path>"` or `""`.
         at: String,
         /// What the file says.
         found: String,
@@ -115,7 +115,7 @@ pub enum PrescriptionError {
     /// A value outside its range or inconsistent with another.
     #[error("prescription{at}: {field} = {value}: {why}")]
     Invalid {
-        /// " <path>" or "".
+        /// `" <path>"` or `""`.
         at: String,
         /// The key.
         field: &'static str,
