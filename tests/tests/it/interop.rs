@@ -70,7 +70,6 @@ fn wait_for_file(path: &Path, needle: &str, timeout: Duration) -> bool {
 fn interop(can: &CanEnv) {
     let t0 = Instant::now();
     let phase = |what: &str| println!("[{:6.2} s] {what}", t0.elapsed().as_secs_f64());
-    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fes-can/dbc/fes.dbc");
     require_in_path("candump", "install can-utils (scripts/setup)");
     require_in_path("cansend", "install can-utils (scripts/setup)");
     let dir = std::env::temp_dir().join(format!("fes-interop-{}", std::process::id()));
@@ -196,33 +195,9 @@ fn interop(can: &CanEnv) {
 
     phase("candump log checked");
     // cantools decodes every logged frame with the project's DBC.
-    let out = Command::new("python3")
-        .args(["-m", "cantools", "decode", "--single-line"])
-        .arg(&dbc)
-        .stdin(File::open(&log).unwrap())
-        .output()
-        .expect("run cantools");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !stderr.contains("No module named cantools"),
-        "python3 lacks cantools: python3 -m pip install cantools (scripts/setup does)"
-    );
-    assert!(out.status.success(), "cantools: {stderr}");
+    let lines = fes_tests::cantools::decode_log(&log);
     phase("cantools finished");
-    let decoded = String::from_utf8_lossy(&out.stdout);
-    let lines: Vec<&str> = decoded.lines().collect();
     assert_eq!(lines.len(), logged.len(), "one decoded line per frame");
-    let names: Vec<&str> = MessageKind::ALL.iter().map(|k| k.name()).collect();
-    for l in &lines {
-        let (_, msg) = l
-            .split_once(" :: ")
-            .unwrap_or_else(|| panic!("no decode separator: {l}"));
-        let name = msg.split('(').next().unwrap_or("");
-        assert!(
-            names.contains(&name) && msg.ends_with(')'),
-            "cantools could not decode: {l}"
-        );
-    }
     // And reads the same values as the Rust decoder (the last STATUS of the run).
     let last = lines
         .iter()
