@@ -69,28 +69,13 @@ fn dataset() -> DataSet {
     }
 }
 
+/// Tick k of the recording: quiet, with a 20 mA x 200 us pulse every 20th tick from 5.
 fn tick(k: u64) -> StimTick {
-    let t = T0 + k * MS;
-    let pulse = k % 20 == 5;
-    StimTick {
-        seq: k + 1,
-        t_ns: t,
-        t_wake_ns: t + 20_000,
-        t_publish_ns: t + 30_000,
-        ref_seq: 1,
-        reference: 0.3,
-        u_cont: 0.1,
-        energy: 0.2,
-        model_force: 0.25,
-        predicted_force: 0.3,
-        phi: 0.4,
-        amplitude_ua: if pulse { 20_000 } else { 0 },
-        missed_periods: 0,
-        width_us: if pulse { 200 } else { 0 },
-        flags: 0,
-        pulse: u8::from(pulse),
-        channel: 0,
-        reserved: [0; 2],
+    let t = StimTick::quiet(k + 1, T0 + k * MS);
+    if k % 20 == 5 {
+        t.firing(0, 20_000, 200)
+    } else {
+        t
     }
 }
 
