@@ -448,9 +448,9 @@ impl Recorder {
     }
 
     /// The driver's outcome for tick `seq` has arrived, or cannot arrive any more (an
-    /// outcome of a later tick is in).
+    /// outcome of a later tick is in). Outcomes arrive in tick order: the newest decides.
     fn outcome_known(&self, seq: u64) -> bool {
-        self.pending_outcomes.iter().any(|&(s, _)| s >= seq)
+        self.pending_outcomes.back().is_some_and(|&(s, _)| s >= seq)
     }
 
     /// Whether the pulse of tick `seq` was delivered: its outcome says sent. Forgets the
