@@ -66,14 +66,10 @@ pub fn resid(records: &[(&[f64], &[f64])], lags: usize) -> Option<Resid> {
     if n == 0 || records.iter().any(|(e, u)| e.len() != u.len()) {
         return None;
     }
-    let mean = |i: usize| -> f64 {
-        records
-            .iter()
-            .map(|r| if i == 0 { r.0 } else { r.1 }.iter().sum::<f64>())
-            .sum::<f64>()
-            / n as f64
-    };
-    let (me, mu) = (mean(0), mean(1));
+    let (se, su) = records.iter().fold((0.0, 0.0), |(se, su), (e, u)| {
+        (se + e.iter().sum::<f64>(), su + u.iter().sum::<f64>())
+    });
+    let (me, mu) = (se / n as f64, su / n as f64);
     let centred: Vec<(Vec<f64>, Vec<f64>)> = records
         .iter()
         .map(|(e, u)| {
