@@ -487,5 +487,19 @@ mod timing {
         );
         let md = std::fs::read_to_string(slow_dir.join("report.md")).expect("report.md");
         assert!(md.contains("TEST SLOWDOWN ON"), "the report says so");
+        // The regression was confirmed by a second measurement (`--confirm`, default 1):
+        // the first is kept aside and named, the second is the one judged.
+        assert!(
+            out.contains("no_load: attempt 1 failed") && md.contains("no_load attempt 1 failed"),
+            "the first failed measurement is reported:\n{out}"
+        );
+        assert!(slow_dir.join("no_load-attempt-1/rt-core-0.hlog").is_file());
+        assert!(slow_dir.join("no_load/rt-core-0.hlog").is_file());
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(slow_dir.join("summary.json")).expect("summary.json"),
+        )
+        .expect("summary JSON");
+        assert_eq!(summary["unconfirmed"][0]["condition"], "no_load");
+        assert_eq!(summary["unconfirmed"].as_array().map(Vec::len), Some(1));
     }
 }

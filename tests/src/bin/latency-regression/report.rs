@@ -5,7 +5,7 @@ use std::path::Path;
 
 use crate::check_line;
 use crate::gate::Check;
-use crate::summary::{ConditionSummary, Percentiles, Summary};
+use crate::summary::{ConditionSummary, Percentiles, Summary, Unconfirmed};
 
 /// The rows of one condition's table.
 fn rows(s: &ConditionSummary) -> Vec<(&'static str, Option<Percentiles>)> {
@@ -68,6 +68,20 @@ pub fn print_table(summary: &Summary) {
     if let Some(note) = &summary.driver_forward_note {
         println!("driver forward path: {note}");
     }
+    for u in &summary.unconfirmed {
+        println!("{}", unconfirmed_line(u));
+    }
+}
+
+/// A measurement measured again, in one line.
+fn unconfirmed_line(u: &Unconfirmed) -> String {
+    format!(
+        "{} attempt {} failed {} and was measured again (kept in {})",
+        u.condition.key(),
+        u.attempt,
+        u.failed.join(", "),
+        u.dir
+    )
 }
 
 /// The driver's counters in one line.
@@ -199,6 +213,17 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
     match checks {
         Some(checks) => {
             let _ = writeln!(md, "## Gate against `{}`\n", baseline.display());
+            if !summary.unconfirmed.is_empty() {
+                let _ = writeln!(
+                    md,
+                    "The figures above are each condition's last measurement. Measured \
+                     again after failing the gate (`--confirm`):\n"
+                );
+                for u in &summary.unconfirmed {
+                    let _ = writeln!(md, "- {}", unconfirmed_line(u));
+                }
+                let _ = writeln!(md);
+            }
             let _ = writeln!(md, "| condition | check | value | limit | result |");
             let _ = writeln!(md, "|---|---|---|---|---|");
             for c in checks {

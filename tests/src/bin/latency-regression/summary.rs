@@ -120,6 +120,20 @@ impl ConditionSummary {
     }
 }
 
+/// A measurement that failed the gate and was not confirmed by the next one (or was,
+/// when the condition's last measurement fails too).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Unconfirmed {
+    /// The condition.
+    pub condition: Condition,
+    /// Which measurement of it (1 = the first).
+    pub attempt: u32,
+    /// The checks it failed.
+    pub failed: Vec<String>,
+    /// Where its files were kept.
+    pub dir: String,
+}
+
 /// The whole summary.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
@@ -133,6 +147,10 @@ pub struct Summary {
     pub ratio_p999: Option<f64>,
     /// How `driver_forward_us` was measured ([`DRIVER_FORWARD_METHOD`]).
     pub driver_forward_note: Option<String>,
+    /// Measurements that failed the gate and were measured again (`--confirm`); the
+    /// conditions above are the last measurement of each, the one judged.
+    #[serde(default)]
+    pub unconfirmed: Vec<Unconfirmed>,
     /// `FES_TEST_TICK_BUSY_US` when the test-only slowdown was on.
     pub test_slowdown_us: Option<u64>,
     /// Kernel release.
