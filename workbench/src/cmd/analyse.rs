@@ -12,11 +12,16 @@ use fes_ident::analysis::force_frequency::{ForceFrequencyPoint, force_frequency}
 use fes_ident::analysis::static_analysis::{StaticReport, analyse};
 use fes_ident::analysis::trace::phi_range;
 use fes_ident::analysis::validation::{RecordFit, fit_record, msse};
+use fes_ident::ident::validation::{
+    RESID_LAGS, Trace, Validation as FieldValidation, fit_and_rrse, resid,
+};
 use rt_core::model::lmn::UnitStability;
 use rt_core::model::{Lmn, Network, Scheduler};
 use sim_muscle::pattern::constant_train;
 
-use super::inputs::{Data, OpenedModel, md_table, open_data, open_model, out_dir, sci, write_csv};
+use super::inputs::{
+    Data, OpenedModel, Series, md_table, open_data, open_model, out_dir, sci, write_csv,
+};
 use super::plots::{self, Band, Figure, Line, Panel, color};
 
 /// Arguments of `fes analyse`.
@@ -692,27 +697,72 @@ fn ff_markdown(md: &mut String, args: &Args, ff: &ForceFrequency) {
     md.push_str("\n\n");
 }
 
-/// The model against the data set's records (Fig. 5.24).
+/// The model against the data set's records (Fig. 5.24), with the field's figures.
 struct Validation {
     /// Each test record simulated from rest, in the data set's order.
     fits: Vec<RecordFit>,
     /// MSSE over all training / test samples (eq. B.8).
     train: f64,
     test: f64,
+    /// NRMSE fit, RRSE and residual tests, as `identify` reports them.
+    field: FieldValidation,
 }
 
+/// Simulates every record from rest and scores it: MSSE (eq. B.8), NRMSE fit and RRSE,
+/// and the residual tests of the test records (`fes_ident::ident::validation`).
 fn validate(net: &Network<f64>, d: &Data) -> Result<Validation> {
-    let fits = d
+    let simulate = |records: &[Series]| {
+        records
+            .iter()
+            .map(|s| fit_record(net, &s.u, &s.y).with_context(|| format!("simulating {}", s.name)))
+            .collect::<Result<Vec<_>>>()
+    };
+    let fits = simulate(&d.test)?;
+    let train_fits = simulate(&d.train)?;
+    let traces = |records: &[Series], fits: &[RecordFit]| -> Vec<Trace> {
+        records
+            .iter()
+            .zip(fits)
+            .map(|(s, f)| Trace {
+                measured: s.y.clone(),
+                simulated: f.simulated.clone(),
+            })
+            .collect()
+    };
+    let train_traces = traces(&d.train, &train_fits);
+    let test_traces = traces(&d.test, &fits);
+    let (train_fit_percent, _) = fit_and_rrse(&train_traces);
+    let (test_fit_percent, test_rrse) = fit_and_rrse(&test_traces);
+    let residuals: Vec<(Vec<f64>, &[f64])> = d
         .test
         .iter()
-        .map(|s| fit_record(net, &s.u, &s.y).with_context(|| format!("simulating {}", s.name)))
-        .collect::<Result<Vec<_>>>()?;
+        .zip(&test_traces)
+        .map(|(s, t)| {
+            let e = t.measured.iter().zip(&t.simulated).map(|(y, yh)| y - yh);
+            (e.collect(), s.u.as_slice())
+        })
+        .collect();
+    let pairs: Vec<(&[f64], &[f64])> = residuals.iter().map(|(e, u)| (e.as_slice(), *u)).collect();
+    let field = FieldValidation {
+        train_fit_percent,
+        test_fit_percent,
+        test_rrse,
+        resid: resid(&pairs, RESID_LAGS),
+        train: train_traces,
+        test: test_traces,
+    };
     let train = msse(net, d.train_pairs()).context("training MSSE")?;
     let test = msse(net, d.test_pairs()).context("test MSSE")?;
-    Ok(Validation { fits, train, test })
+    Ok(Validation {
+        fits,
+        train,
+        test,
+        field,
+    })
 }
 
-/// `validation.png`, `validation.csv` and the report's section.
+/// `validation.png`, `validation.csv`, the field's validation files and the report's
+/// section.
 fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data) -> Result<()> {
     let v = validate(net, d)?;
     let shown = d.test.len().min(args.plot_records.max(1));
@@ -722,17 +772,38 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
         &args.format.file(&args.out, "validation"),
         (1100, 600),
     )?;
+    let per_record: Vec<(Option<f64>, Option<f64>)> = v
+        .field
+        .test
+        .iter()
+        .map(|t| fit_and_rrse(std::slice::from_ref(t)))
+        .collect();
+    let opt = |x: Option<f64>, digits: usize| x.map_or(String::new(), |v| format!("{v:.digits$}"));
     let rows: Vec<Vec<String>> = d
         .test
         .iter()
         .zip(&v.fits)
-        .map(|(s, f)| vec![s.name.clone(), s.kind.clone(), format!("{}", f.msse)])
+        .zip(&per_record)
+        .map(|((s, f), (fit, rrse))| {
+            vec![
+                s.name.clone(),
+                s.kind.clone(),
+                format!("{}", f.msse),
+                fit.map_or(String::new(), |v| v.to_string()),
+                rrse.map_or(String::new(), |v| v.to_string()),
+            ]
+        })
         .collect();
     write_csv(
         &args.out.join("validation.csv"),
-        &["record", "kind", "msse"],
+        &["record", "kind", "msse", "fit_percent", "rrse"],
         &rows,
     )?;
+    let name = args.model.file_name().map_or_else(
+        || args.model.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    super::validation::write(&args.out, &v.field, net.ts(), &name, args.format)?;
     let _ = writeln!(md, "## Validation on the test records (Fig. 5.24)\n");
     let _ = writeln!(
         md,
@@ -741,14 +812,52 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
         sci(v.train),
         sci(v.test)
     );
-    let _ = writeln!(md, "![validation](validation.png)\n");
+    let pct = |x: Option<f64>| x.map_or("-".to_owned(), |v| format!("{v:.1} %"));
+    let _ = writeln!(
+        md,
+        "As the field reports it (MATLAB `compare`, sysidentpy): NRMSE fit {} on the training \
+         records, {} on the test records; test RRSE {}.\n",
+        pct(v.field.train_fit_percent),
+        pct(v.field.test_fit_percent),
+        v.field
+            .test_rrse
+            .map_or("-".to_owned(), |x| format!("{x:.4}"))
+    );
+    if let Some(r) = &v.field.resid {
+        let _ = writeln!(
+            md,
+            "Residual tests (MATLAB `resid`, {} samples, 99 % band ±{:.4}): {} of {RESID_LAGS} \
+             autocorrelation lags and {} of {} input cross-correlation lags outside the band \
+             (`resid.csv`); the traces are in `traces_train.csv` and `traces_test.csv`.\n\n\
+             ![resid](resid.{ext})\n",
+            r.samples,
+            r.band,
+            r.autocorr_outside,
+            r.xcorr_outside,
+            2 * RESID_LAGS + 1,
+            ext = args.format.ext()
+        );
+    }
+    let _ = writeln!(md, "![validation](validation.{})\n", args.format.ext());
     let md_rows: Vec<Vec<String>> = d
         .test
         .iter()
         .zip(&v.fits)
-        .map(|(s, f)| vec![s.name.clone(), s.kind.clone(), sci(f.msse)])
+        .zip(&per_record)
+        .map(|((s, f), (fit, rrse))| {
+            vec![
+                s.name.clone(),
+                s.kind.clone(),
+                sci(f.msse),
+                opt(*fit, 1),
+                opt(*rrse, 4),
+            ]
+        })
         .collect();
-    md.push_str(&md_table(&["test record", "kind", "MSSE"], &md_rows));
+    md.push_str(&md_table(
+        &["test record", "kind", "MSSE", "fit %", "RRSE"],
+        &md_rows,
+    ));
     md.push('\n');
     Ok(())
 }

@@ -27,7 +27,7 @@ fn figures_are_svg_when_asked() {
         "svg",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for name in ["static", "force_frequency", "validation"] {
+    for name in ["static", "force_frequency", "validation", "resid"] {
         let text = std::fs::read_to_string(out.join(format!("{name}.svg")))
             .unwrap_or_else(|e| panic!("{name}.svg: {e}"));
         assert!(
@@ -92,8 +92,10 @@ fn unstable_model_report() {
     let net = fixtures::unstable().network().unwrap();
     let (h, rows) = csv(&out.join("validation.csv"));
     let got = column(&h, &rows, "msse");
+    let fits = column(&h, &rows, "fit_percent");
+    let rrses = column(&h, &rows, "rrse");
     assert_eq!(got.len(), 4);
-    for (rec, g) in ds.test().zip(got) {
+    for (((rec, g), fit), rrse) in ds.test().zip(got).zip(fits).zip(rrses) {
         let u: Vec<f64> = rec
             .pulse
             .iter()
@@ -106,7 +108,29 @@ fn unstable_model_report() {
             (g - want).abs() <= 1e-12 * want.max(1e-300),
             "{g} vs {want}"
         );
+        // MATLAB's NRMSE fit and sysidentpy's RRSE, from their definitions.
+        let mean = rec.force.iter().sum::<f64>() / rec.force.len() as f64;
+        let err: f64 = rec.force.iter().zip(&y).map(|(a, b)| (a - b).powi(2)).sum();
+        let spread: f64 = rec.force.iter().map(|a| (a - mean).powi(2)).sum();
+        let want_rrse = (err / spread).sqrt();
+        assert!(
+            (rrse - want_rrse).abs() <= 1e-9 * want_rrse,
+            "{rrse} vs {want_rrse}"
+        );
+        let want_fit = 100.0 * (1.0 - want_rrse);
+        assert!((fit - want_fit).abs() <= 1e-7, "{fit} vs {want_fit}");
     }
+    for needle in ["NRMSE fit", "test RRSE", "Residual tests", "(resid.png)"] {
+        assert!(md.contains(needle), "report lacks {needle:?}");
+    }
+    assert!(is_png(&out.join("resid.png")));
+    let (h, rows) = csv(&out.join("resid.csv"));
+    assert_eq!(rows.len(), 51, "lags -25..=25");
+    assert_eq!(h[0], "lag");
+    let (h, rows) = csv(&out.join("traces_test.csv"));
+    assert_eq!(h, ["record", "t_ms", "measured", "simulated"]);
+    let samples: usize = ds.test().map(|r| r.force.len()).sum();
+    assert_eq!(rows.len(), samples);
 }
 
 /// A common-eigenvector model with stable units: the report says the network is stable

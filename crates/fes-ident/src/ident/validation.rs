@@ -153,7 +153,9 @@ fn traces(net: &crate::model::network::Network<f64>, data: &ModelData) -> Option
         .collect()
 }
 
-fn fit_of(traces: &[Trace]) -> (Option<f64>, Option<f64>) {
+/// NRMSE fit (%) and RRSE of the records laid end to end (one ȳ over all of them, as
+/// MATLAB's `compare` on a multi-experiment data set).
+pub fn fit_and_rrse(traces: &[Trace]) -> (Option<f64>, Option<f64>) {
     let y: Vec<f64> = traces
         .iter()
         .flat_map(|t| t.measured.iter().copied())
@@ -180,8 +182,8 @@ pub fn validate(lmn: &Lmn, train: &ModelData, test: &ModelData) -> Validation {
     };
     let train_traces = traces(&net, train).unwrap_or_default();
     let test_traces = traces(&net, test).unwrap_or_default();
-    let (train_fit_percent, _) = fit_of(&train_traces);
-    let (test_fit_percent, test_rrse) = fit_of(&test_traces);
+    let (train_fit_percent, _) = fit_and_rrse(&train_traces);
+    let (test_fit_percent, test_rrse) = fit_and_rrse(&test_traces);
     let residuals: Option<Vec<(Vec<f64>, &[f64])>> = test
         .records
         .iter()
