@@ -532,7 +532,14 @@ impl<T: CanTx> ForwardPath<T> {
                 });
             }
             Ok(DriverCommandKind::SafeStop) => {
-                self.trip(Fault::SafeStopCommand, now_ns, ev);
+                if let Mode::Safe(_) = self.mode {
+                    // Already safe (the supervisor re-sends a SafeStop until it reads the
+                    // acknowledgement): the stop again, idempotent, but no new trip, so
+                    // the fault that made it safe stays the named one.
+                    self.send_stop(now_ns, ev);
+                } else {
+                    self.trip(Fault::SafeStopCommand, now_ns, ev);
+                }
                 self.acknowledge(command.seq, None);
             }
             // validate() above decoded the kind already.

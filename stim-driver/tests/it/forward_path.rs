@@ -922,6 +922,40 @@ fn commands_disarm_and_safe_stop() {
     assert_eq!(r.fault(), Some(Fault::SafeStopCommand));
 }
 
+/// The supervisor re-sends SafeStop every 50 ms until it reads the acknowledgement: each
+/// repeat while safe writes NMT stop again and is acknowledged, but is not a new trip, and
+/// the fault that made the driver safe stays the named one (the boot test's starved guest
+/// logged a dozen "SAFE STATE" errors for one stop).
+#[test]
+fn a_repeated_safe_stop_keeps_the_first_fault() {
+    let mut r = Rig::armed(settings());
+    r.bus_event(BusEvent::Intrusion {
+        cob_id: 0x000,
+        kind: fes_can::MessageKind::Nmt,
+    });
+    let fault = r.fault().expect("tripped");
+    assert!(matches!(fault, Fault::Intrusion { .. }));
+    let trips = r.fp.counters().trips;
+    for _ in 0..3 {
+        r.bus.clear();
+        r.advance(50 * MS);
+        r.command(DriverCommandKind::SafeStop);
+        assert_eq!(
+            r.bus.nmt(),
+            vec![(r.now, NmtCommand::Stop)],
+            "stopped again"
+        );
+        let c = r.fp.counters();
+        assert_eq!(
+            (c.command_seq, c.command_result),
+            (r.cmd_seq, CommandResult::Accepted as u8),
+            "acknowledged"
+        );
+    }
+    assert_eq!(r.fp.counters().trips, trips, "no new trip");
+    assert_eq!(r.fault(), Some(fault));
+}
+
 #[test]
 fn a_stimulator_still_operational_while_disarmed_is_stopped_again() {
     let mut r = Rig::armed(settings());

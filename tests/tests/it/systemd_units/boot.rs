@@ -234,7 +234,10 @@ fn booted_units_start_in_order_and_stop_safely() {
     let console = boot(&run_dir);
     let took = started.elapsed();
     let r = Report::parse(&console);
-    eprintln!("boot test: guest ran {took:.0?}");
+    eprintln!("boot test: guest ran {took:.0?}; the stack's journal:");
+    for line in &r.journal {
+        eprintln!("[journal] {line}");
+    }
     assert!(
         r.values.contains_key("done"),
         "the check did not finish: {r:#?}"
