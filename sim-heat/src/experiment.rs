@@ -22,6 +22,8 @@
 use crate::plant::{
     HeatParamError, HeatParams, HeatPlant, MAX_ANGLE_DEG, MIN_ANGLE_DEG, TEST_ANGLES_DEG,
 };
+use fes_dataset::Split;
+use fes_dataset::signals::{Channel, SignalHeader, SignalRecord, SignalSet};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -258,4 +260,56 @@ pub fn all_records(p: &HeatParams, seed: u64) -> Result<Vec<HeatRecord>, HeatPar
 /// every kind of excitation.
 pub fn split() -> (Vec<usize>, Vec<usize>) {
     (vec![0, 1, 3, 5, 7], vec![2, 4, 6, 8])
+}
+
+/// Every record of [`all_records`] as a `fes-dataset/2` data set: inputs `alpha` and `u`,
+/// output `y`, all normalised (each channel's `range` gives the physical values of 0 and 1),
+/// Ts = 50 ms, the split of [`split`]; the plant's parameters and the seed in the header.
+pub fn dataset(p: &HeatParams, seed: u64) -> Result<SignalSet, HeatParamError> {
+    let norm = Normalisation::of(p);
+    let records = all_records(p, seed)?
+        .into_iter()
+        .map(|r| SignalRecord {
+            file: format!("{}.csv", r.name),
+            kind: r.experiment.name().into(),
+            t0_s: 0.0,
+            inputs: vec![r.alpha, r.u],
+            outputs: vec![r.y],
+        })
+        .collect();
+    let (train, test) = split();
+    let parameters = [
+        ("ambient_c", p.ambient_c),
+        ("u_max_v", p.u_max_v),
+        ("gain_k", p.gain_k),
+        ("flow_ratio", p.flow_ratio),
+        ("tau_heater_s", p.tau_heater_s),
+        ("conduction_delay_s", p.conduction_delay_s),
+        ("transport_s", p.transport_s),
+        ("valve_beta_deg", p.valve_beta_deg),
+        ("sensor_tau_s", p.sensor_tau_s),
+        ("noise_std_k", p.noise_std_k),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    Ok(SignalSet {
+        header: SignalHeader {
+            source: format!("sim-heat {}", env!("CARGO_PKG_VERSION")),
+            seed: Some(seed),
+            parameters,
+            protocol: serde_json::json!({
+                "experiments": "thesis App. E.2: fast / slow pseudo-random, test-angle, test-voltage",
+                "filter": "2nd-order FIR mean filter on y",
+            }),
+            ts_s: p.ts_s,
+            inputs: vec![
+                Channel::new("alpha", "normalised").with_range(norm.alpha_deg.0, norm.alpha_deg.1),
+                Channel::new("u", "normalised").with_range(norm.u_v.0, norm.u_v.1),
+            ],
+            outputs: vec![Channel::new("y", "normalised").with_range(norm.y_c.0, norm.y_c.1)],
+            split: Split { train, test },
+        },
+        records,
+    })
 }

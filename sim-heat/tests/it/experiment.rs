@@ -1,7 +1,9 @@
 //! The experiments of E.2: counts and lengths, the test-voltage structure, the mean filter
 //! and the normalisation, reproducibility from the seed.
 
-use sim_heat::experiment::{Experiment, all_records, mean_filter, split};
+use fes_dataset::WriteMode;
+use fes_dataset::signals::{AnyDataSet, SignalSet, read_any};
+use sim_heat::experiment::{Experiment, all_records, dataset, mean_filter, split};
 use sim_heat::plant::HeatParams;
 
 #[test]
@@ -60,4 +62,22 @@ fn records_are_reproducible_from_the_seed() {
 fn mean_filter_is_the_three_sample_average() {
     let y = [3.0, 6.0, 9.0, 0.0];
     assert_eq!(mean_filter(&y), vec![3.0, 4.5, 6.0, 5.0]);
+}
+
+/// The experiments written as a `fes-dataset/2` data set read back exactly.
+#[test]
+fn experiments_round_trip_through_the_data_set_format() {
+    let dir = std::env::temp_dir().join(format!("sim-heat-ds-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let set = dataset(&HeatParams::default(), 1).unwrap();
+    set.write(&dir, WriteMode::CreateNew).unwrap();
+    let back = read_any(&dir).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    let AnyDataSet::Signals(back) = back else {
+        panic!("not read as signals")
+    };
+    assert_eq!(back, set);
+    assert_eq!(back.header.ts_s, 0.05);
+    assert_eq!(back.input_index("u"), Some(1));
+    assert_eq!(SignalSet::clone(&back).records.len(), 9);
 }
