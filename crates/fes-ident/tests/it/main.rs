@@ -19,6 +19,7 @@ mod dataset_import;
 mod dataset_signals;
 mod ident_estimation;
 mod ident_jacobian;
+mod ident_miso;
 mod ident_resample;
 mod ident_validation;
 mod model_analysis;
