@@ -11,6 +11,7 @@ mod json_mutation;
 
 mod control_design;
 mod control_file;
+mod control_io_design;
 mod control_measured;
 mod control_no_alloc;
 mod control_shaper;
