@@ -1,0 +1,288 @@
+//! Example E.4.7: a Local Controller Network for the heat-transfer process against one
+//! linear controller (Fig. E.8).
+//!
+//! - **Design model**: 5 uniformly distributed B-splines over phi = alpha(t-3), local
+//!   1st-order ARX models with the voltage only, psi_i = \[u(t - T_d,i), y(t-1)\] and an
+//!   offset (eq. E.5; T_d,i is Table E.1's delay at unit i's angle), global learning in
+//!   simulation mode.
+//! - **LCN**: per unit, the input-output pole placement with integral action of C.1
+//!   ([`fes_ident::control::io_design`]) for a rise time scheduled from 1000 ms nearly
+//!   closed (phi = 0) to 700 ms fully open (phi = 1) at the unit's peak, damping 1.2 (no
+//!   overshoot, as 6.5.3), interpolated by the same validity functions.
+//! - **Linear controller**: the same design for the interpolated model at alpha = 0.5 with
+//!   900 ms.
+//! - Both run against the design model (Fig. E.8a) and against the 5-unit model of E.4.4,
+//!   which also has alpha in its data vector (Fig. E.8b), at alpha = 0.1, 0.5, 0.9: the
+//!   output settled at 0.1, the reference stepped to 0.2; the input is clamped to
+//!   \[0, 1\] (the voltage cannot go negative), with the applied input fed back
+//!   (anti-reset-windup).
+
+use fes_ident::control::io_design::{IoDesignError, PolyController, PolyLcn, design};
+use fes_ident::ident::Learning;
+use fes_ident::ident::miso::MisoRecord;
+use fes_ident::model::miso::{MisoArx, MisoStructure};
+use fes_ident::model::validity::{KnotLayout, ValidityFunctions};
+use serde::Serialize;
+
+use crate::{DELAY_ALPHA, DELAY_U, StudyError};
+use sim_heat::plant::{TABLE_E1_DELAY_U, TEST_ANGLES_DEG};
+
+/// Rise time at the smallest valve angle (phi = 0), s (E.4.7).
+pub const RISE_CLOSED_S: f64 = 1.0;
+/// Rise time fully open (phi = 1), s (E.4.7).
+pub const RISE_OPEN_S: f64 = 0.7;
+/// Rise time of the linear controller designed at alpha = 0.5, s (E.4.7).
+pub const RISE_LINEAR_S: f64 = 0.9;
+/// Damping of every design (no overshoot, 6.5.3).
+pub const DAMPING: f64 = 1.2;
+/// The reference step: settled at `STEP.0`, stepped to `STEP.1`.
+pub const STEP: (f64, f64) = (0.1, 0.2);
+
+/// The scheduled rise time at phi (linear from 1000 ms at 0 to 700 ms at 1).
+pub fn scheduled_rise(phi: f64) -> f64 {
+    RISE_CLOSED_S + (RISE_OPEN_S - RISE_CLOSED_S) * phi.clamp(0.0, 1.0)
+}
+
+/// The u -> y delay of Table E.1 at a normalised angle (linear between the table's
+/// angles, rounded to a sample).
+pub fn table_e1_delay(phi: f64) -> usize {
+    let deg = 20.0 + 100.0 * phi.clamp(0.0, 1.0);
+    let (a, d) = (TEST_ANGLES_DEG, TABLE_E1_DELAY_U);
+    let k = (0..a.len() - 1)
+        .find(|&k| deg <= a[k + 1])
+        .unwrap_or(a.len() - 2);
+    let f = (deg - a[k]) / (a[k + 1] - a[k]);
+    (d[k] as f64 + f * (d[k + 1] as f64 - d[k] as f64)).round() as usize
+}
+
+/// E.4.7's design model structure: channels (u, alpha), psi_i = \[u(t - T_d,i), y(t-1), 1\]
+/// with T_d,i Table E.1's delay at unit i's peak angle, scheduled on alpha(t-3), 5 uniform
+/// B-splines.
+pub fn design_template() -> Result<MisoArx, StudyError> {
+    let v = ValidityFunctions::with_layout(KnotLayout::Uniform, 5, 0.0, 1.0)?;
+    let st = MisoStructure {
+        order: 1,
+        delays: vec![DELAY_U],
+        unit_delays: (0..5).map(|i| vec![table_e1_delay(peak(&v, i))]).collect(),
+        scheduling_input: 1,
+        scheduling_delay: DELAY_ALPHA,
+        offset: true,
+    };
+    let r = st.regressors();
+    Ok(MisoArx::new(
+        sim_heat::plant::TS_S,
+        st,
+        v,
+        vec![0.0; 5 * r],
+    )?)
+}
+
+/// Where unit i's validity function peaks (grid search over the valid range).
+pub fn peak(v: &ValidityFunctions<f64>, i: usize) -> f64 {
+    let (lo, hi) = v.valid_range();
+    (0..=200)
+        .map(|g| lo + (hi - lo) * g as f64 / 200.0)
+        .fold((lo, -1.0), |best, phi| {
+            let r = v.eval(phi).get(i);
+            if r > best.1 { (phi, r) } else { best }
+        })
+        .0
+}
+
+/// The LCN's local controllers for a design model (module docs), each for its unit's
+/// delay.
+pub fn design_lcn(model: &MisoArx) -> Result<Vec<PolyController>, IoDesignError> {
+    (0..model.units())
+        .map(|i| {
+            let rise = scheduled_rise(peak(&model.validity, i));
+            let l = model.local(i);
+            let d = model.structure.delay(i, 0);
+            design(&l.a, &l.b[0], d, rise, DAMPING, model.ts).map_err(|e| match e {
+                IoDesignError::Singular { .. } => IoDesignError::Singular { unit: i },
+                other => other,
+            })
+        })
+        .collect()
+}
+
+/// The linear controller: designed for the model frozen at alpha = 0.5 (its B over the
+/// units' delays), 900 ms.
+pub fn design_linear(model: &MisoArx) -> Result<PolyController, IoDesignError> {
+    let (d, taps) = model.frozen_input_taps(0.5, 0);
+    design(
+        &model.frozen(0.5).a,
+        &taps,
+        d,
+        RISE_LINEAR_S,
+        DAMPING,
+        model.ts,
+    )
+}
+
+/// What one step response showed.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepResult {
+    /// Normalised valve angle.
+    pub alpha: f64,
+    /// Overshoot above the new reference, % of the step.
+    pub overshoot_pct: f64,
+    /// 10-90 % rise time, s.
+    pub rise_s: f64,
+    /// The specified rise time, s.
+    pub rise_target_s: f64,
+    /// |mean output over the last second - reference|.
+    pub steady_error: f64,
+}
+
+/// Which plant a controller runs against.
+#[derive(Debug, Clone, Copy)]
+pub enum PlantModel<'a> {
+    /// The design model: channels (u, alpha).
+    Design(&'a MisoArx),
+    /// E.4.4's model: channels (alpha, u).
+    WithAlpha(&'a MisoArx),
+}
+
+/// Runs the loop at a constant angle: settled at [`STEP`]`.0` (input found by bisection
+/// on the plant's steady state), reference stepped to `STEP.1` after 2 s, 30 s in all.
+pub fn step_response(
+    plant: PlantModel<'_>,
+    ctl: &mut PolyLcn,
+    alpha: f64,
+    rise_target_s: f64,
+) -> (StepResult, Vec<f64>, Vec<f64>) {
+    let (model, u_ch) = match plant {
+        PlantModel::Design(m) => (m, 0usize),
+        PlantModel::WithAlpha(m) => (m, 1usize),
+    };
+    let ts = model.ts;
+    let n = (30.0 / ts) as usize;
+    let k0 = (2.0 / ts) as usize;
+    let (r0, r1) = STEP;
+    // Steady input for r0 at this angle: the model's static map is monotone in u.
+    let steady = |u: f64| {
+        let f = model.frozen(alpha);
+        let num: f64 = (0..model.structure.inputs())
+            .map(|j| {
+                let v = if j == u_ch { u } else { alpha };
+                f.b[j].iter().sum::<f64>() * v
+            })
+            .sum::<f64>()
+            + f.c;
+        num / (1.0 + f.a.iter().sum::<f64>())
+    };
+    let (mut lo, mut hi) = (-2.0, 3.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if steady(mid) < r0 { lo = mid } else { hi = mid }
+    }
+    let u0 = 0.5 * (lo + hi);
+    let mut chans = vec![vec![0.0; n], vec![alpha; n]];
+    chans[u_ch].iter_mut().for_each(|v| *v = u0);
+    let mut y = vec![r0; n];
+    ctl.settle(u0, r0);
+    for k in 0..n {
+        let refs: Vec<&[f64]> = chans.iter().map(Vec::as_slice).collect();
+        let past = [if k > 0 { y[k - 1] } else { r0 }];
+        y[k] = model.output_at(&refs, &past, k);
+        let r = if k >= k0 { r1 } else { r0 };
+        let y_prev = if k > 0 { y[k - 1] } else { r0 };
+        chans[u_ch][k] = ctl.step(alpha, y_prev, r);
+    }
+    let after = &y[k0..];
+    let step = r1 - r0;
+    let cross = |level: f64| {
+        after
+            .iter()
+            .position(|&v| v >= r0 + level * step)
+            .map_or(f64::INFINITY, |k| k as f64 * ts)
+    };
+    let max = after.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
+    let last = (1.0 / ts) as usize;
+    let tail = &y[n - last..];
+    let result = StepResult {
+        alpha,
+        overshoot_pct: ((max - r1) / step * 100.0).max(0.0),
+        rise_s: cross(0.9) - cross(0.1),
+        rise_target_s,
+        steady_error: (tail.iter().sum::<f64>() / last as f64 - r1).abs(),
+    };
+    let u = chans.swap_remove(u_ch);
+    (result, y, u)
+}
+
+/// One controller's results at the three angles.
+#[derive(Debug, Clone, Serialize)]
+pub struct ControllerResults {
+    /// alpha = 0.1 (nearly closed).
+    pub small: StepResult,
+    /// alpha = 0.5.
+    pub mid: StepResult,
+    /// alpha = 0.9 (nearly open).
+    pub large: StepResult,
+}
+
+/// The E.4.7 results on one plant.
+#[derive(Debug, Clone, Serialize)]
+pub struct ControlResults {
+    /// The LCN.
+    pub lcn: ControllerResults,
+    /// The linear controller.
+    pub linear: ControllerResults,
+}
+
+/// Both controllers against one plant at alpha 0.1, 0.5, 0.9.
+pub fn compare(
+    plant: PlantModel<'_>,
+    lcn: &[PolyController],
+    validity: ValidityFunctions<f64>,
+    linear: &PolyController,
+) -> Result<ControlResults, IoDesignError> {
+    let limits = (0.0, 1.0);
+    let run = |ctl: &mut PolyLcn, a: f64, target: f64| step_response(plant, ctl, a, target).0;
+    let mut l = PolyLcn::new(validity, lcn.to_vec(), limits)?;
+    let mut s = PolyLcn::single(linear.clone(), limits)?;
+    let mut lcn_at = |a| run(&mut l, a, scheduled_rise(a));
+    let lcn = ControllerResults {
+        small: lcn_at(0.1),
+        mid: lcn_at(0.5),
+        large: lcn_at(0.9),
+    };
+    let mut lin_at = |a| run(&mut s, a, RISE_LINEAR_S);
+    let linear = ControllerResults {
+        small: lin_at(0.1),
+        mid: lin_at(0.5),
+        large: lin_at(0.9),
+    };
+    Ok(ControlResults { lcn, linear })
+}
+
+/// E.4.7 in full: the design model fitted (global, simulation mode) on records with
+/// channels (u, alpha), the controllers designed, and both plants: (design model, E.4.4
+/// model).
+pub fn study(
+    train_u_alpha: &[MisoRecord],
+    e44_model: &MisoArx,
+) -> Result<(ControlResults, ControlResults), StudyError> {
+    let pred = fes_ident::ident::miso::fit_prediction(
+        &design_template()?,
+        train_u_alpha,
+        Learning::Global,
+    )?;
+    let model = fes_ident::ident::miso::fit_simulation(
+        &pred,
+        train_u_alpha,
+        Learning::Global,
+        &fes_ident::ident::lm::LmOptions::default(),
+    )?;
+    let lcn = design_lcn(&model)?;
+    let linear = design_linear(&model)?;
+    let a = compare(PlantModel::Design(&model), &lcn, model.validity, &linear)?;
+    let b = compare(
+        PlantModel::WithAlpha(e44_model),
+        &lcn,
+        model.validity,
+        &linear,
+    )?;
+    Ok((a, b))
+}

@@ -1,0 +1,167 @@
+//! `heat-transfer [--seed N] [--json FILE]`: thesis App. E on the simulated air heater,
+//! each table printed beside the thesis's; `--json` writes the numbers (issue 21's keys).
+
+use anyhow::{Context, bail};
+use heat_transfer::{Report, study};
+
+fn main() -> anyhow::Result<()> {
+    let mut seed = 1;
+    let mut json = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--seed" => seed = args.next().context("--seed needs a value")?.parse()?,
+            "--json" => json = Some(args.next().context("--json needs a file")?),
+            "-h" | "--help" => {
+                println!("usage: heat-transfer [--seed N] [--json FILE]");
+                return Ok(());
+            }
+            other => {
+                bail!("unknown argument `{other}` (usage: heat-transfer [--seed N] [--json FILE])")
+            }
+        }
+    }
+    let t0 = std::time::Instant::now();
+    let report = study(seed)?;
+    print_tables(&report);
+    println!("\n(wall time {:.1} s)", t0.elapsed().as_secs_f64());
+    if let Some(path) = json {
+        let mut text = serde_json::to_string_pretty(&report)?;
+        text.push('\n');
+        std::fs::write(&path, text).with_context(|| format!("writing {path}"))?;
+    }
+    Ok(())
+}
+
+fn print_tables(r: &Report) {
+    println!("## Table E.1: delays (samples of 50 ms), from the step responses\n");
+    println!("| angle (deg) | u->y here | u->y thesis | alpha->y here | alpha->y thesis |");
+    println!("|---:|---:|---:|---:|---:|");
+    let thesis_alpha = ["4", "3", "3", "2", "< 1"];
+    for (i, a) in ["20", "40", "60", "90", "120"].iter().enumerate() {
+        println!(
+            "| {a} | {} | {} | {} | {} |",
+            r.delays_u_samples.get(*a).copied().unwrap_or_default(),
+            r.delays_u_table_e1.get(*a).copied().unwrap_or_default(),
+            r.delays_alpha_samples.get(*a).copied().unwrap_or_default(),
+            thesis_alpha[i]
+        );
+    }
+    let (p, s) = (&r.arx1.prediction, &r.arx1.simulation);
+    println!("\n## Table E.2: 1st-order ARX, psi = [alpha(t-3), u(t-5), y(t-1)]\n");
+    println!("| | prediction here | prediction thesis | simulation here | simulation thesis |");
+    println!("|---|---:|---:|---:|---:|");
+    println!(
+        "| train MSE | {:.2e} | 5.30e-3 | {:.2e} | 4.35e-3 |",
+        p.train_mse, s.train_mse
+    );
+    println!(
+        "| test MSE | {:.2e} | 6.69e-3 | {:.2e} | 5.32e-3 |",
+        p.test_mse, s.test_mse
+    );
+    println!(
+        "| b alpha(t-3) | {:.4} | -0.0458 | {:.4} | -0.0697 |",
+        p.b_alpha, s.b_alpha
+    );
+    println!(
+        "| b u(t-5) | {:.4} | 0.0365 | {:.4} | 0.0537 |",
+        p.b_u, s.b_u
+    );
+    println!("| pole | {:.3} | 0.945 | {:.3} | 0.911 |", p.pole, s.pole);
+    println!("| d | {:.4} | 0.0292 | {:.4} | 0.0481 |", p.d, s.d);
+    println!(
+        "| G_alpha | {:.3} | -0.837 | {:.3} | -0.785 |",
+        p.g_alpha, s.g_alpha
+    );
+    println!("| G_u | {:.3} | 0.667 | {:.3} | 0.605 |", p.g_u, s.g_u);
+    let thesis_e3 = [
+        ("4.96e-5", "1.80e-3", "1.79e-3", "1.28e-3", "1.27e-3"),
+        ("5.34e-5", "1.87e-3", "1.91e-3", "2.17e-3", "1.78e-3"),
+        ("4.88e-5", "1.74e-3", "1.88e-3", "1.10e-3", "1.50e-3"),
+        ("5.12e-5", "1.77e-3", "1.82e-3", "1.29e-3", "1.54e-3"),
+    ];
+    println!(
+        "\n## Tables E.3 (prediction-mode model) and E.4 (simulation-mode model); thesis in brackets\n"
+    );
+    println!(
+        "| units | learning | train MSPE | train MSSE | test MSSE | sim. model train MSSE | sim. model test MSSE |"
+    );
+    println!("|---:|---|---:|---:|---:|---:|---:|");
+    for (row, t) in r.learning.iter().zip(thesis_e3) {
+        println!(
+            "| {} | {} | {:.2e} ({}) | {:.2e} ({}) | {:.2e} ({}) | {:.2e} ({}) | {:.2e} ({}) |",
+            row.units,
+            row.learning,
+            row.pred_train_mspe,
+            t.0,
+            row.pred_train_msse,
+            t.1,
+            row.pred_test_msse,
+            t.2,
+            row.sim_train_msse,
+            t.3,
+            row.sim_test_msse,
+            t.4
+        );
+    }
+    println!("\n## Orderings\n");
+    let o = &r.orderings;
+    for (k, v) in [
+        (
+            "simulation_beats_prediction",
+            Some(o.simulation_beats_prediction),
+        ),
+        (
+            "global_beats_local_in_simulation",
+            Some(o.global_beats_local_in_simulation),
+        ),
+        (
+            "global_beats_local_in_simulation_test_10",
+            Some(o.global_beats_local_in_simulation_test_10),
+        ),
+        (
+            "prediction_local_bias_and_regularisation",
+            Some(o.prediction_local_bias_and_regularisation),
+        ),
+        (
+            "ten_units_generalise_worse",
+            Some(o.ten_units_generalise_worse),
+        ),
+        ("restricted_close_to_general", o.restricted_close_to_general),
+    ] {
+        println!(
+            "- {k}: {}",
+            v.map_or("not computed".to_string(), |b| b.to_string())
+        );
+    }
+    for (title, c) in [
+        ("Fig. E.8(a): control of the design model", &r.control),
+        (
+            "Fig. E.8(b): control of the E.4.4 model (alpha also an input)",
+            &r.control_changed_plant,
+        ),
+    ] {
+        println!("\n## {title}: reference 0.1 -> 0.2\n");
+        println!(
+            "| controller | alpha | overshoot % | rise (s) | rise target (s) | steady error |"
+        );
+        println!("|---|---:|---:|---:|---:|---:|");
+        for (name, ctl) in [("LCN", &c.lcn), ("linear (alpha = 0.5)", &c.linear)] {
+            for s in [&ctl.small, &ctl.mid, &ctl.large] {
+                println!(
+                    "| {name} | {:.1} | {:.1} | {:.2} | {:.2} | {:.1e} |",
+                    s.alpha, s.overshoot_pct, s.rise_s, s.rise_target_s, s.steady_error
+                );
+            }
+        }
+    }
+    println!("\n## Fig. E.7: networks frozen over phi (global learning, simulation mode)\n");
+    println!("| phi | G_u (5) | G_alpha (5) | pole (5) | G_u (10) | G_alpha (10) | pole (10) |");
+    println!("|---:|---:|---:|---:|---:|---:|---:|");
+    for (a, b) in r.static_5.iter().zip(&r.static_10).step_by(2) {
+        println!(
+            "| {:.1} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            a.phi, a.g_u, a.g_alpha, a.pole, b.g_u, b.g_alpha, b.pole
+        );
+    }
+}
