@@ -3,8 +3,8 @@
 //!
 //! - **Design model**: 5 uniformly distributed B-splines over phi = alpha(t-3), local
 //!   1st-order ARX models with the voltage only, psi_i = \[u(t - T_d,i), y(t-1)\] and an
-//!   offset (eq. E.5; T_d,i is Table E.1's delay at unit i's angle), global learning in
-//!   simulation mode.
+//!   offset (eq. E.5; T_d,i is the plant's u -> y delay at unit i's angle, read off its
+//!   step responses as Table E.1), global learning in simulation mode.
 //! - **LCN**: per unit, the input-output pole placement with integral action of C.1
 //!   ([`fes_ident::control::io_design`]) for a rise time scheduled from 1000 ms nearly
 //!   closed (phi = 0) to 700 ms fully open (phi = 1) at the unit's peak, damping 1.2 (no
@@ -12,7 +12,8 @@
 //! - **Linear controller**: the same design for the interpolated model at alpha = 0.5 with
 //!   900 ms.
 //! - Both run against the design model (Fig. E.8a) and against the 5-unit model of E.4.4,
-//!   which also has alpha in its data vector (Fig. E.8b), at alpha = 0.1, 0.5, 0.9: the
+//!   which also has alpha in its data vector (Fig. E.8b), and against the simulated
+//!   process itself (noise-free), at alpha = 0.1, 0.5, 0.9: the
 //!   output settled at 0.1, the reference stepped to 0.2; the input is clamped to
 //!   \[0, 1\] (the voltage cannot go negative), with the applied input fed back
 //!   (anti-reset-windup).
@@ -24,8 +25,9 @@ use fes_ident::model::miso::{MisoArx, MisoStructure};
 use fes_ident::model::validity::{KnotLayout, ValidityFunctions};
 use serde::Serialize;
 
-use crate::{DELAY_ALPHA, DELAY_U, StudyError};
-use sim_heat::plant::{TABLE_E1_DELAY_U, TEST_ANGLES_DEG};
+use crate::{DELAY_ALPHA, DELAY_U, DelayTable, StudyError};
+use sim_heat::experiment::Normalisation;
+use sim_heat::plant::{HeatParams, HeatPlant};
 
 /// Rise time at the smallest valve angle (phi = 0), s (E.4.7).
 pub const RISE_CLOSED_S: f64 = 1.0;
@@ -43,27 +45,41 @@ pub fn scheduled_rise(phi: f64) -> f64 {
     RISE_CLOSED_S + (RISE_OPEN_S - RISE_CLOSED_S) * phi.clamp(0.0, 1.0)
 }
 
-/// The u -> y delay of Table E.1 at a normalised angle (linear between the table's
-/// angles, rounded to a sample).
-pub fn table_e1_delay(phi: f64) -> usize {
+/// The u -> y delay at a normalised angle from a delay table (angle in degrees as a string
+/// -> samples, as [`crate::delays`] reads them off the plant), linear between the table's
+/// angles and rounded to a sample.
+pub fn delay_at(table: &DelayTable, phi: f64) -> usize {
     let deg = 20.0 + 100.0 * phi.clamp(0.0, 1.0);
-    let (a, d) = (TEST_ANGLES_DEG, TABLE_E1_DELAY_U);
-    let k = (0..a.len() - 1)
-        .find(|&k| deg <= a[k + 1])
-        .unwrap_or(a.len() - 2);
-    let f = (deg - a[k]) / (a[k + 1] - a[k]);
-    (d[k] as f64 + f * (d[k + 1] as f64 - d[k] as f64)).round() as usize
+    let mut pts: Vec<(f64, f64)> = table
+        .iter()
+        .filter_map(|(a, d)| a.parse::<f64>().ok().map(|a| (a, *d as f64)))
+        .collect();
+    pts.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let Some(&(a_first, d_first)) = pts.first() else {
+        return DELAY_U;
+    };
+    if pts.len() == 1 || deg <= a_first {
+        return d_first.round() as usize;
+    }
+    let k = (0..pts.len() - 1)
+        .find(|&k| deg <= pts[k + 1].0)
+        .unwrap_or(pts.len() - 2);
+    let ((a0, d0), (a1, d1)) = (pts[k], pts[k + 1]);
+    let f = ((deg - a0) / (a1 - a0)).clamp(0.0, 1.0);
+    (d0 + f * (d1 - d0)).round() as usize
 }
 
 /// E.4.7's design model structure: channels (u, alpha), psi_i = \[u(t - T_d,i), y(t-1), 1\]
-/// with T_d,i Table E.1's delay at unit i's peak angle, scheduled on alpha(t-3), 5 uniform
-/// B-splines.
-pub fn design_template() -> Result<MisoArx, StudyError> {
+/// with T_d,i the u -> y delay of `delays` (the plant's Table E.1) at unit i's peak angle,
+/// scheduled on alpha(t-3), 5 uniform B-splines.
+pub fn design_template(delays: &DelayTable) -> Result<MisoArx, StudyError> {
     let v = ValidityFunctions::with_layout(KnotLayout::Uniform, 5, 0.0, 1.0)?;
     let st = MisoStructure {
         order: 1,
         delays: vec![DELAY_U],
-        unit_delays: (0..5).map(|i| vec![table_e1_delay(peak(&v, i))]).collect(),
+        unit_delays: (0..5)
+            .map(|i| vec![delay_at(delays, peak(&v, i))])
+            .collect(),
         scheduling_input: 1,
         scheduling_delay: DELAY_ALPHA,
         offset: true,
@@ -141,53 +157,81 @@ pub enum PlantModel<'a> {
     Design(&'a MisoArx),
     /// E.4.4's model: channels (alpha, u).
     WithAlpha(&'a MisoArx),
+    /// The simulated process itself (noise-free), through E.2's normalisation.
+    Process(&'a HeatParams),
+}
+
+/// The input at which a monotone static map `f` reaches `target`, by bisection on
+/// \[lo, hi\].
+fn bisect(f: impl Fn(f64) -> f64, target: f64, lo: f64, hi: f64) -> f64 {
+    let (mut lo, mut hi) = (lo, hi);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if f(mid) < target { lo = mid } else { hi = mid }
+    }
+    0.5 * (lo + hi)
 }
 
 /// Runs the loop at a constant angle: settled at [`STEP`]`.0` (input found by bisection
 /// on the plant's steady state), reference stepped to `STEP.1` after 2 s, 30 s in all.
+/// Returns the measures, the output and the input.
 pub fn step_response(
     plant: PlantModel<'_>,
     ctl: &mut PolyLcn,
     alpha: f64,
     rise_target_s: f64,
-) -> (StepResult, Vec<f64>, Vec<f64>) {
-    let (model, u_ch) = match plant {
-        PlantModel::Design(m) => (m, 0usize),
-        PlantModel::WithAlpha(m) => (m, 1usize),
-    };
-    let ts = model.ts;
+) -> Result<(StepResult, Vec<f64>, Vec<f64>), StudyError> {
+    let ts = sim_heat::plant::TS_S;
     let n = (30.0 / ts) as usize;
     let k0 = (2.0 / ts) as usize;
     let (r0, r1) = STEP;
-    // Steady input for r0 at this angle: the model's static map is monotone in u.
-    let steady = |u: f64| {
-        let f = model.frozen(alpha);
-        let num: f64 = (0..model.structure.inputs())
-            .map(|j| {
-                let v = if j == u_ch { u } else { alpha };
-                f.b[j].iter().sum::<f64>() * v
-            })
-            .sum::<f64>()
-            + f.c;
-        num / (1.0 + f.a.iter().sum::<f64>())
-    };
-    let (mut lo, mut hi) = (-2.0, 3.0);
-    for _ in 0..100 {
-        let mid = 0.5 * (lo + hi);
-        if steady(mid) < r0 { lo = mid } else { hi = mid }
-    }
-    let u0 = 0.5 * (lo + hi);
-    let mut chans = vec![vec![0.0; n], vec![alpha; n]];
-    chans[u_ch].iter_mut().for_each(|v| *v = u0);
+    let reference = |k: usize| if k >= k0 { r1 } else { r0 };
     let mut y = vec![r0; n];
-    ctl.settle(u0, r0);
-    for k in 0..n {
-        let refs: Vec<&[f64]> = chans.iter().map(Vec::as_slice).collect();
-        let past = [if k > 0 { y[k - 1] } else { r0 }];
-        y[k] = model.output_at(&refs, &past, k);
-        let r = if k >= k0 { r1 } else { r0 };
-        let y_prev = if k > 0 { y[k - 1] } else { r0 };
-        chans[u_ch][k] = ctl.step(alpha, y_prev, r);
+    let mut u = vec![0.0; n];
+    match plant {
+        PlantModel::Design(model) | PlantModel::WithAlpha(model) => {
+            let u_ch = usize::from(matches!(plant, PlantModel::WithAlpha(_)));
+            // Steady input for r0 at this angle: the static map is monotone in u.
+            let steady = |v: f64| {
+                let f = model.frozen(alpha);
+                let num: f64 = (0..model.structure.inputs())
+                    .map(|j| f.b[j].iter().sum::<f64>() * if j == u_ch { v } else { alpha })
+                    .sum::<f64>()
+                    + f.c;
+                num / (1.0 + f.a.iter().sum::<f64>())
+            };
+            let u0 = bisect(steady, r0, -2.0, 3.0);
+            let mut chans = vec![vec![alpha; n]; 2];
+            chans[u_ch].iter_mut().for_each(|v| *v = u0);
+            ctl.settle(u0, r0);
+            for k in 0..n {
+                let refs: Vec<&[f64]> = chans.iter().map(Vec::as_slice).collect();
+                let past = [if k > 0 { y[k - 1] } else { r0 }];
+                y[k] = model.output_at(&refs, &past, k);
+                let y_prev = if k > 0 { y[k - 1] } else { r0 };
+                chans[u_ch][k] = ctl.step(alpha, y_prev, reference(k));
+            }
+            u = chans.swap_remove(u_ch);
+        }
+        PlantModel::Process(params) => {
+            let p = HeatParams {
+                noise_std_k: 0.0,
+                ..*params
+            };
+            let norm = Normalisation::of(&p);
+            let deg = norm.alpha_deg(alpha);
+            let steady = |v: f64| norm.y(p.steady_output(deg, norm.u_v(v)));
+            let u0 = bisect(steady, r0, 0.0, 1.0);
+            let mut process = HeatPlant::new(p, 0, deg)?;
+            process.settle(deg, norm.u_v(u0));
+            ctl.settle(u0, r0);
+            for k in 0..n {
+                y[k] = norm.y(process.clean_output());
+                let y_prev = if k > 0 { y[k - 1] } else { r0 };
+                u[k] = ctl.step(alpha, y_prev, reference(k));
+                process.advance(deg, norm.u_v(u[k]));
+            }
+        }
     }
     let after = &y[k0..];
     let step = r1 - r0;
@@ -207,8 +251,7 @@ pub fn step_response(
         rise_target_s,
         steady_error: (tail.iter().sum::<f64>() / last as f64 - r1).abs(),
     };
-    let u = chans.swap_remove(u_ch);
-    (result, y, u)
+    Ok((result, y, u))
 }
 
 /// One controller's results at the three angles.
@@ -237,35 +280,36 @@ pub fn compare(
     lcn: &[PolyController],
     validity: ValidityFunctions<f64>,
     linear: &PolyController,
-) -> Result<ControlResults, IoDesignError> {
+) -> Result<ControlResults, StudyError> {
     let limits = (0.0, 1.0);
-    let run = |ctl: &mut PolyLcn, a: f64, target: f64| step_response(plant, ctl, a, target).0;
     let mut l = PolyLcn::new(validity, lcn.to_vec(), limits)?;
     let mut s = PolyLcn::single(linear.clone(), limits)?;
-    let mut lcn_at = |a| run(&mut l, a, scheduled_rise(a));
-    let lcn = ControllerResults {
-        small: lcn_at(0.1),
-        mid: lcn_at(0.5),
-        large: lcn_at(0.9),
-    };
-    let mut lin_at = |a| run(&mut s, a, RISE_LINEAR_S);
-    let linear = ControllerResults {
-        small: lin_at(0.1),
-        mid: lin_at(0.5),
-        large: lin_at(0.9),
-    };
-    Ok(ControlResults { lcn, linear })
+    let at =
+        |ctl: &mut PolyLcn, a: f64, target: f64| step_response(plant, ctl, a, target).map(|r| r.0);
+    Ok(ControlResults {
+        lcn: ControllerResults {
+            small: at(&mut l, 0.1, scheduled_rise(0.1))?,
+            mid: at(&mut l, 0.5, scheduled_rise(0.5))?,
+            large: at(&mut l, 0.9, scheduled_rise(0.9))?,
+        },
+        linear: ControllerResults {
+            small: at(&mut s, 0.1, RISE_LINEAR_S)?,
+            mid: at(&mut s, 0.5, RISE_LINEAR_S)?,
+            large: at(&mut s, 0.9, RISE_LINEAR_S)?,
+        },
+    })
 }
 
 /// E.4.7 in full: the design model fitted (global, simulation mode) on records with
 /// channels (u, alpha), the controllers designed, and both plants: (design model, E.4.4
 /// model).
 pub fn study(
+    delays: &DelayTable,
     train_u_alpha: &[MisoRecord],
     e44_model: &MisoArx,
-) -> Result<(ControlResults, ControlResults), StudyError> {
+) -> Result<(ControlResults, ControlResults, ControlResults), StudyError> {
     let pred = fes_ident::ident::miso::fit_prediction(
-        &design_template()?,
+        &design_template(delays)?,
         train_u_alpha,
         Learning::Global,
     )?;
@@ -284,5 +328,11 @@ pub fn study(
         model.validity,
         &linear,
     )?;
-    Ok((a, b))
+    let c = compare(
+        PlantModel::Process(&HeatParams::default()),
+        &lcn,
+        model.validity,
+        &linear,
+    )?;
+    Ok((a, b, c))
 }

@@ -200,6 +200,8 @@ pub struct Report {
     pub control: control::ControlResults,
     /// Fig. E.8(b): the same controllers on the 5-unit model of E.4.4 (alpha also an input).
     pub control_changed_plant: control::ControlResults,
+    /// The same controllers on the simulated process itself (noise-free).
+    pub control_process: control::ControlResults,
 }
 
 fn angle_key(a: f64) -> String {
@@ -345,7 +347,8 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         Some(m) => m.clone(),
         None => fit_pair(5, Learning::Global, &train)?.1,
     };
-    let (control, control_changed_plant) = control::study(&swapped, &e44)?;
+    let (control, control_changed_plant, control_process) =
+        control::study(&delays_u, &swapped, &e44)?;
     Ok(Report {
         seed,
         delays_u_samples: delays_u,
@@ -362,6 +365,7 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         static_10: static_of(10),
         control,
         control_changed_plant,
+        control_process,
     })
 }
 

@@ -140,6 +140,10 @@ fn print_tables(r: &Report) {
             "Fig. E.8(b): control of the E.4.4 model (alpha also an input)",
             &r.control_changed_plant,
         ),
+        (
+            "Control of the simulated process itself (noise-free)",
+            &r.control_process,
+        ),
     ] {
         println!("\n## {title}: reference 0.1 -> 0.2\n");
         println!(

@@ -1,27 +1,49 @@
-//! Acceptance of issue 21 for E.4.7 (Fig. E.8a) on seed 1: the LCN has no steady-state
+//! Acceptance of issue 21 for E.4.7 (Fig. E.8) on seed 1: the LCN has no steady-state
 //! error, overshoots by at most 2 % and rises within 15 % of the scheduled rise time at
-//! alpha = 0.1, 0.5, 0.9. (The linear controller's overshoot at the small angle that the
-//! issue also asks for does not happen on this plant: see docs/heat-transfer.md.)
+//! alpha = 0.1, 0.5, 0.9, on its design model and on the simulated process itself; the
+//! linear controller designed at alpha = 0.5 meets its specification there only. (Its
+//! overshoot of more than 5 % at the small angle that the issue also asks for does not
+//! happen on this plant: it is too fast there instead, see docs/heat-transfer.md.)
 
 use super::identification::report;
+use heat_transfer::control::ControllerResults;
 
-#[test]
-fn lcn_meets_the_specification_and_the_linear_controller_does_not() {
-    let c = &report().control;
-    println!("{c:#?}");
-    for s in [&c.lcn.small, &c.lcn.mid, &c.lcn.large] {
+fn meets_spec(c: &ControllerResults) {
+    for s in [&c.small, &c.mid, &c.large] {
         assert!(s.steady_error < 1e-3, "{s:?}");
         assert!(s.overshoot_pct <= 2.0, "{s:?}");
         assert!((s.rise_s / s.rise_target_s - 1.0).abs() <= 0.15, "{s:?}");
     }
-    // The linear controller meets its own specification where it was designed.
-    let m = &c.linear.mid;
-    assert!(
-        m.overshoot_pct <= 2.0 && (m.rise_s / m.rise_target_s - 1.0).abs() <= 0.15,
-        "{m:?}"
-    );
-    // Issue 21 asks for > 5 % overshoot of the linear controller at the small angle (Fig.
-    // E.8); on this plant it is faster there but does not overshoot (docs/heat-transfer.md).
-    println!("linear at the small angle: {:?}", c.linear.small);
-    println!("{:#?}", report().control_changed_plant);
+}
+
+#[test]
+fn lcn_meets_the_specification_at_every_angle() {
+    let r = report();
+    println!("{:#?}\n{:#?}", r.control, r.control_process);
+    meets_spec(&r.control.lcn);
+    meets_spec(&r.control_process.lcn);
+}
+
+#[test]
+fn linear_controller_meets_it_only_where_it_was_designed() {
+    for c in [&report().control, &report().control_process] {
+        let l = &c.linear;
+        let off = |s: &heat_transfer::control::StepResult| (s.rise_s / s.rise_target_s - 1.0).abs();
+        assert!(
+            off(&l.mid) <= 0.15 && l.mid.overshoot_pct <= 2.0,
+            "{:?}",
+            l.mid
+        );
+        assert!(
+            l.small.rise_s < 0.85 * l.small.rise_target_s,
+            "{:?}",
+            l.small
+        );
+        assert!(
+            l.large.rise_s > 1.15 * l.large.rise_target_s,
+            "{:?}",
+            l.large
+        );
+        assert!(l.small.steady_error < 1e-3 && l.large.steady_error < 1e-3);
+    }
 }
