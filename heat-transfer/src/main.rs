@@ -4,7 +4,10 @@
 use anyhow::{Context, bail};
 use heat_transfer::{Report, study};
 
-fn main() -> anyhow::Result<()> {
+const USAGE: &str = "usage: heat-transfer [--seed N] [--json FILE]";
+
+/// The command line: `None` for `--help`, else (seed, JSON file).
+fn parse() -> anyhow::Result<Option<(u64, Option<String>)>> {
     let mut seed = 1;
     let mut json = None;
     let mut args = std::env::args().skip(1);
@@ -12,15 +15,26 @@ fn main() -> anyhow::Result<()> {
         match a.as_str() {
             "--seed" => seed = args.next().context("--seed needs a value")?.parse()?,
             "--json" => json = Some(args.next().context("--json needs a file")?),
-            "-h" | "--help" => {
-                println!("usage: heat-transfer [--seed N] [--json FILE]");
-                return Ok(());
-            }
-            other => {
-                bail!("unknown argument `{other}` (usage: heat-transfer [--seed N] [--json FILE])")
-            }
+            "-h" | "--help" => return Ok(None),
+            other => bail!("unknown argument `{other}`"),
         }
     }
+    Ok(Some((seed, json)))
+}
+
+fn main() -> anyhow::Result<()> {
+    // Exit codes as every binary of the project: 2 for a command line not understood.
+    let (seed, json) = match parse() {
+        Ok(Some(a)) => a,
+        Ok(None) => {
+            println!("{USAGE}");
+            return Ok(());
+        }
+        Err(e) => {
+            eprintln!("heat-transfer: {e}\n{USAGE}");
+            std::process::exit(2);
+        }
+    };
     let t0 = std::time::Instant::now();
     let report = study(seed)?;
     print_tables(&report);
