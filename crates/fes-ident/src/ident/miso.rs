@@ -21,9 +21,10 @@ use super::lsq::{self, DEFAULT_RCOND};
 use super::problem::{DUAL_WIDTH, Horizon, Normal, ProblemError};
 use super::regression::Learning;
 use crate::dataset::signals::SignalSet;
-use crate::model::miso::{MisoArx, MisoLocal};
+use crate::model::miso::{MisoArx, MisoError, MisoLocal};
+use crate::model::miso_ss::MisoSs;
 use crate::model::validity::ValidityFunctions;
-use crate::num::Dual;
+use crate::num::{Dual, Scalar};
 use nalgebra::{Complex, DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -173,29 +174,117 @@ pub fn fit_prediction(
     Ok(out)
 }
 
+/// A multi-input network that the simulation-mode search can run with any scalar type:
+/// the ARX networks ([`MisoArx`]) and the state-space ones ([`MisoSs`], E.4.5).
+pub trait FreeRun: Clone + Sync {
+    /// The parameters.
+    fn theta(&self) -> &[f64];
+    /// The same network with other parameters.
+    fn with_theta(&self, p: &[f64]) -> Self;
+    /// Free run over a record with parameters `theta` in `S`.
+    fn run<S: Scalar>(&self, theta: &[S], rec: &MisoRecord, out: &mut [S])
+    -> Result<(), MisoError>;
+}
+
+impl FreeRun for MisoArx {
+    fn theta(&self) -> &[f64] {
+        &self.theta
+    }
+    fn with_theta(&self, p: &[f64]) -> Self {
+        let mut m = self.clone();
+        m.theta = p.to_vec();
+        m
+    }
+    fn run<S: Scalar>(
+        &self,
+        theta: &[S],
+        rec: &MisoRecord,
+        out: &mut [S],
+    ) -> Result<(), MisoError> {
+        let net = MisoArx {
+            ts: self.ts,
+            structure: self.structure.clone(),
+            validity: self.validity,
+            theta: theta.to_vec(),
+        };
+        net.simulate(&rec.inputs(), rec.y[0], out)
+    }
+}
+
+impl FreeRun for MisoSs {
+    fn theta(&self) -> &[f64] {
+        &self.theta
+    }
+    fn with_theta(&self, p: &[f64]) -> Self {
+        let mut m = self.clone();
+        m.theta = p.to_vec();
+        m
+    }
+    fn run<S: Scalar>(
+        &self,
+        theta: &[S],
+        rec: &MisoRecord,
+        out: &mut [S],
+    ) -> Result<(), MisoError> {
+        let net = MisoSs {
+            ts: self.ts,
+            delays: self.delays.clone(),
+            scheduling_input: self.scheduling_input,
+            scheduling_delay: self.scheduling_delay,
+            validity: self.validity,
+            eigenvectors: self.eigenvectors,
+            theta: theta.to_vec(),
+        };
+        net.simulate(&rec.inputs(), out)
+    }
+}
+
+/// Simulation MSE (eq. B.8) of any [`FreeRun`] network; infinite if it diverges or
+/// cannot be run.
+pub fn msse<M: FreeRun>(model: &M, recs: &[MisoRecord]) -> f64 {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for r in recs {
+        let mut yh = vec![0.0; r.y.len()];
+        if model.run(model.theta(), r, &mut yh).is_err() {
+            return f64::INFINITY;
+        }
+        sum += yh
+            .iter()
+            .zip(&r.y)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>();
+        n += r.y.len();
+    }
+    let m = sum / n.max(1) as f64;
+    if m.is_finite() { m } else { f64::INFINITY }
+}
+
 /// One record's weighted residuals and their derivatives with respect to a block of `N`
 /// parameters.
 type RecordJacobian<const N: usize> = (Vec<f64>, Vec<[f64; N]>);
 
 /// The simulation-mode criterion of [`fit_simulation`] as a [`LeastSquares`] problem.
-pub struct SimulationProblem<'a> {
-    model: MisoArx,
+pub struct SimulationProblem<'a, M: FreeRun = MisoArx> {
+    model: M,
     recs: &'a [MisoRecord],
     /// Local learning of one unit: the unit's activations per record, as residual weights
     /// (square roots).
     weights: Option<Vec<Vec<f64>>>,
 }
 
-impl<'a> SimulationProblem<'a> {
-    /// Global learning: the network's simulation error over every theta.
-    pub fn global(template: &MisoArx, recs: &'a [MisoRecord]) -> Self {
+impl<'a, M: FreeRun> SimulationProblem<'a, M> {
+    /// Global learning: the network's simulation error over every parameter.
+    pub fn global(template: &M, recs: &'a [MisoRecord]) -> Self {
         Self {
             model: template.clone(),
             recs,
             weights: None,
         }
     }
+}
 
+impl<'a> SimulationProblem<'a, MisoArx> {
     /// Local learning of unit `i`: its local model simulated alone, its errors weighted by
     /// rho_i(phi_k) of the template's validity functions. The parameters are theta_i.
     pub fn local(template: &MisoArx, i: usize, recs: &'a [MisoRecord]) -> Result<Self, IdentError> {
@@ -223,7 +312,9 @@ impl<'a> SimulationProblem<'a> {
             weights: Some(weights),
         })
     }
+}
 
+impl<M: FreeRun> SimulationProblem<'_, M> {
     fn weight(&self, rec: usize, k: usize) -> f64 {
         self.weights.as_ref().map_or(1.0, |w| w[rec][k])
     }
@@ -241,18 +332,13 @@ impl<'a> SimulationProblem<'a> {
                 None => Dual::constant(v),
             })
             .collect();
-        let net = MisoArx {
-            ts: self.model.ts,
-            structure: self.model.structure.clone(),
-            validity: self.model.validity,
-            theta,
-        };
         self.recs
             .par_iter()
             .enumerate()
             .map(|(ri, r)| {
                 let mut yh = vec![Dual::<N>::constant(0.0); r.y.len()];
-                net.simulate(&r.inputs(), r.y[0], &mut yh)
+                self.model
+                    .run(&theta, r, &mut yh)
                     .map_err(|_| ProblemError::NonFinite)?;
                 let mut res = Vec::with_capacity(yh.len());
                 let mut jac = Vec::with_capacity(yh.len());
@@ -270,26 +356,19 @@ impl<'a> SimulationProblem<'a> {
             })
             .collect()
     }
-
-    /// The model with parameters p (theta, or theta_i for local learning).
-    fn with(&self, p: &[f64]) -> MisoArx {
-        let mut m = self.model.clone();
-        m.theta = p.to_vec();
-        m
-    }
 }
 
-impl LeastSquares for SimulationProblem<'_> {
+impl<M: FreeRun> LeastSquares for SimulationProblem<'_, M> {
     fn bounds(&self) -> Vec<(f64, f64)> {
-        vec![(f64::NEG_INFINITY, f64::INFINITY); self.model.theta.len()]
+        vec![(f64::NEG_INFINITY, f64::INFINITY); self.model.theta().len()]
     }
 
     fn cost(&self, p: &[f64]) -> Result<f64, ProblemError> {
-        let m = self.with(p);
         let mut cost = 0.0;
         for (ri, r) in self.recs.iter().enumerate() {
             let mut yh = vec![0.0; r.y.len()];
-            m.simulate(&r.inputs(), r.y[0], &mut yh)
+            self.model
+                .run(p, r, &mut yh)
                 .map_err(|_| ProblemError::NonFinite)?;
             for (k, (a, b)) in yh.iter().zip(&r.y).enumerate() {
                 let e = self.weight(ri, k) * (a - b);
@@ -305,9 +384,6 @@ impl LeastSquares for SimulationProblem<'_> {
 
     fn normal(&self, p: &[f64], cols: &[usize]) -> Result<Normal, ProblemError> {
         let n = cols.len();
-        let mut g = DVector::zeros(n);
-        let mut h = DMatrix::zeros(n, n);
-        let mut cost = 0.0;
         let rows: usize = self.recs.iter().map(|r| r.y.len()).sum();
         let mut jac = DMatrix::zeros(rows, n);
         let mut res = DVector::zeros(rows);
@@ -324,11 +400,25 @@ impl LeastSquares for SimulationProblem<'_> {
                 at += r.len();
             }
         }
-        cost += res.iter().map(|v| v * v).sum::<f64>();
-        g += jac.tr_mul(&res);
-        h += jac.tr_mul(&jac);
-        Ok(Normal { cost, g, h })
+        Ok(Normal {
+            cost: res.iter().map(|v| v * v).sum::<f64>(),
+            g: jac.tr_mul(&res),
+            h: jac.tr_mul(&jac),
+        })
     }
+}
+
+/// Global simulation-mode fit of any [`FreeRun`] network from its current parameters
+/// (E.4.5's state-space networks; [`fit_simulation`] for the ARX ones).
+pub fn fit_free_run<M: FreeRun>(
+    start: &M,
+    recs: &[MisoRecord],
+    opts: &LmOptions,
+) -> Result<M, IdentError> {
+    let problem = SimulationProblem::global(start, recs);
+    let free: Vec<usize> = (0..start.theta().len()).collect();
+    let rep = levenberg_marquardt(&problem, start.theta(), &free, opts, &mut |_, _| {})?;
+    Ok(start.with_theta(&rep.p))
 }
 
 /// Simulation-mode fit (module docs) from the parameters of `start` (typically the

@@ -17,6 +17,7 @@ mod control_no_alloc;
 mod control_shaper;
 mod model_file;
 mod model_forms;
+mod model_miso_ss;
 mod model_network;
 mod model_no_alloc;
 mod model_params;
