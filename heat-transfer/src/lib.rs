@@ -158,7 +158,8 @@ pub struct Orderings {
     /// Table E.6: the 10-unit network (global, simulation mode) has the smaller training
     /// and the larger test error than the 5-unit one.
     pub ten_units_generalise_worse: bool,
-    /// Table E.5 (general vs common-eigenvector state-space LMN): not computed yet.
+    /// Table E.5: the common-eigenvector (restricted) state-space network's training and
+    /// test MSSE within 25 % of the general one's.
     pub restricted_close_to_general: Option<bool>,
 }
 
@@ -192,6 +193,8 @@ pub struct Report {
     pub learning: Vec<LearningRow>,
     /// The orderings.
     pub orderings: Orderings,
+    /// Table E.5 and Fig. E.6: general and restricted state-space networks.
+    pub state_space: Vec<SsRow>,
     /// Fig. E.7: the 5-unit network (global, simulation mode) over phi.
     pub static_5: Vec<FrozenRow>,
     /// Fig. E.7: the 10-unit network.
@@ -269,6 +272,98 @@ pub fn records(
     Ok(miso::records(&set, &["alpha", "u"], "y")?)
 }
 
+/// Table E.5 and Fig. E.6: one state-space network's errors and eigenvectors.
+#[derive(Debug, Clone, Serialize)]
+pub struct SsRow {
+    /// `general` or `restricted`.
+    pub model: String,
+    /// Training MSSE.
+    pub train_mse: f64,
+    /// Test MSSE.
+    pub test_mse: f64,
+    /// Eigenvector angles (rad) per unit (the same for every unit when restricted).
+    pub angles_rad: Vec<[f64; 2]>,
+    /// Eigenvalues (delta domain, 1/s) per unit.
+    pub eigenvalues: Vec<[f64; 2]>,
+}
+
+/// E.4.5: a 2nd-order delta-domain state-space network over the E.4.4 structure, started
+/// from the E.4.4 ARX network (its pole as the slow eigenvalue, a fast one at -1/0.15 s),
+/// inputs alpha(t-2), u(t-4) (the ARX's 3 and 5: the state-space output sees the input one
+/// sample later), fitted globally in simulation mode with general and with common
+/// eigenvectors.
+pub fn state_space_study(
+    arx: &MisoArx,
+    train: &[MisoRecord],
+    test: &[MisoRecord],
+) -> Result<Vec<SsRow>, StudyError> {
+    use fes_ident::model::local_model::{eigenvalue_from_eta, eta_from_eigenvalue};
+    use fes_ident::model::miso_ss::{Eigenvectors, MisoSs};
+    let ts = arx.ts;
+    let fast = -1.0 / 0.15;
+    let eta = |e: f64| eta_from_eigenvalue(e, ts).unwrap_or(0.0);
+    let mut rows = Vec::new();
+    for ev in [Eigenvectors::Local, Eigenvectors::Common] {
+        let mut theta = Vec::new();
+        if ev == Eigenvectors::Common {
+            theta.extend([0.0, std::f64::consts::FRAC_PI_2]);
+        }
+        for i in 0..arx.units() {
+            let l = arx.local(i);
+            let pole = (-l.a[0]).clamp(0.5, 0.999);
+            theta.extend([eta((pole - 1.0) / ts), eta(fast)]);
+            if ev == Eigenvectors::Local {
+                theta.extend([0.0, std::f64::consts::FRAC_PI_2]);
+            }
+            theta.extend([l.b[0][0] / ts, 0.0, l.b[1][0] / ts, 0.0]);
+            theta.extend([1.0, 0.1, l.c / ts, 0.0, 0.0]);
+        }
+        let start = MisoSs {
+            ts,
+            delays: vec![DELAY_ALPHA - 1, DELAY_U - 1],
+            scheduling_input: 0,
+            scheduling_delay: DELAY_ALPHA,
+            validity: arx.validity,
+            eigenvectors: ev,
+            theta,
+        };
+        start.validate()?;
+        let fit = miso::fit_free_run(&start, train, &LmOptions::default())?;
+        let units: Vec<_> = (0..arx.units()).collect();
+        let off = |i: usize| {
+            (if ev == Eigenvectors::Common { 2 } else { 0 })
+                + i * fes_ident::model::miso_ss::unit_params(2, ev)
+        };
+        rows.push(SsRow {
+            model: if ev == Eigenvectors::Local {
+                "general"
+            } else {
+                "restricted"
+            }
+            .into(),
+            train_mse: miso::msse(&fit, train),
+            test_mse: miso::msse(&fit, test),
+            angles_rad: units
+                .iter()
+                .map(|&i| match ev {
+                    Eigenvectors::Local => [fit.theta[off(i) + 2], fit.theta[off(i) + 3]],
+                    Eigenvectors::Common => [fit.theta[0], fit.theta[1]],
+                })
+                .collect(),
+            eigenvalues: units
+                .iter()
+                .map(|&i| {
+                    [
+                        eigenvalue_from_eta(fit.theta[off(i)], ts),
+                        eigenvalue_from_eta(fit.theta[off(i) + 1], ts),
+                    ]
+                })
+                .collect(),
+        });
+    }
+    Ok(rows)
+}
+
 /// Runs the identification part of App. E for one seed (module docs).
 pub fn study(seed: u64) -> Result<Report, StudyError> {
     let p = HeatParams::default();
@@ -312,7 +407,7 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
     }
     // Rows in the order pushed: 5 global, 5 local, 10 global, 10 local.
     let [g5, l5, g10, l10] = [0, 1, 2, 3].map(|i| learning[i].clone());
-    let orderings = Orderings {
+    let mut orderings = Orderings {
         simulation_beats_prediction: cs.train_mse < cp.train_mse
             && cs.test_mse < cp.test_mse
             && learning
@@ -347,6 +442,12 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         Some(m) => m.clone(),
         None => fit_pair(5, Learning::Global, &train)?.1,
     };
+    let state_space = state_space_study(&e44, &train, &test)?;
+    let close = |a: f64, b: f64| (a / b - 1.0).abs() <= 0.25;
+    orderings.restricted_close_to_general = match state_space.as_slice() {
+        [g, r] => Some(close(r.train_mse, g.train_mse) && close(r.test_mse, g.test_mse)),
+        _ => None,
+    };
     let (control, control_changed_plant, control_process) =
         control::study(&delays_u, &swapped, &e44)?;
     Ok(Report {
@@ -361,6 +462,7 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         arx1,
         learning,
         orderings,
+        state_space,
         static_5: static_of(5),
         static_10: static_of(10),
         control,

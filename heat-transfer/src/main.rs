@@ -118,6 +118,34 @@ fn print_tables(r: &Report) {
             t.4
         );
     }
+    println!("\n## Table E.5: state-space networks (5 units, global learning, simulation mode)\n");
+    println!("| model | train MSE | thesis | test MSE | thesis |");
+    println!("|---|---:|---:|---:|---:|");
+    for (row, t) in r
+        .state_space
+        .iter()
+        .zip([("0.93e-3", "1.04e-3"), ("0.99e-3", "1.08e-3")])
+    {
+        println!(
+            "| {} | {:.2e} | {} | {:.2e} | {} |",
+            row.model, row.train_mse, t.0, row.test_mse, t.1
+        );
+    }
+    println!("\n## Fig. E.6: eigenvector angles (deg) and eigenvalues (1/s) per unit\n");
+    println!("| model | unit | angle 1 | angle 2 | e1 | e2 |");
+    println!("|---|---:|---:|---:|---:|---:|");
+    for row in &r.state_space {
+        for (i, (a, e)) in row.angles_rad.iter().zip(&row.eigenvalues).enumerate() {
+            println!(
+                "| {} | {i} | {:.1} | {:.1} | {:.2} | {:.2} |",
+                row.model,
+                a[0].to_degrees(),
+                a[1].to_degrees(),
+                e[0],
+                e[1]
+            );
+        }
+    }
     println!("\n## Orderings\n");
     let o = &r.orderings;
     for (k, v) in [

@@ -46,6 +46,24 @@ fn orderings_of_tables_e3_to_e6_on_seed_1() {
     assert!(o.ten_units_generalise_worse);
 }
 
+/// Table E.5: the common-eigenvector network is close to the general one (the thesis:
+/// "only slightly inferior"); both have real, stable eigenvalues by construction.
+#[test]
+fn table_e5_restricted_close_to_general() {
+    let r = report();
+    let [g, c] = [&r.state_space[0], &r.state_space[1]];
+    println!("{g:?}\n{c:?}");
+    assert_eq!(r.orderings.restricted_close_to_general, Some(true));
+    assert!(
+        c.train_mse >= 0.98 * g.train_mse,
+        "the restriction cannot fit much better"
+    );
+    for e in g.eigenvalues.iter().chain(&c.eigenvalues).flatten() {
+        assert!(*e < 0.0 && *e > -1.0 / 0.05, "{e}");
+    }
+    assert!(c.angles_rad.windows(2).all(|w| w[0] == w[1]));
+}
+
 #[test]
 fn fig_e7_gain_falls_and_plant_speeds_up_as_the_valve_opens() {
     let s = &report().static_5;
