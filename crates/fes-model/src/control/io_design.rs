@@ -269,6 +269,7 @@ pub struct PolyLcn {
     y_past: Vec<f64>,
     r_past: f64,
     limits: (f64, f64),
+    anti_windup: bool,
 }
 
 impl PolyLcn {
@@ -303,7 +304,15 @@ impl PolyLcn {
             y_past: vec![0.0; np],
             r_past: 0.0,
             limits,
+            anti_windup: true,
         })
+    }
+
+    /// The same network keeping the *computed* input in its history instead of the
+    /// applied one: no anti-reset-windup (for comparison, Fig. E.8's overshoot at 37 s).
+    pub fn without_anti_windup(mut self) -> Self {
+        self.anti_windup = false;
+        self
     }
 
     /// One linear controller (a one-unit network).
@@ -324,7 +333,8 @@ impl PolyLcn {
 
     /// The input for this sample, from the scheduling value `phi`, the output measured
     /// last sample `y_prev` and the reference `r` (used from the next sample on); the
-    /// applied (clamped) input enters the history.
+    /// applied (clamped) input enters the history unless built
+    /// [`Self::without_anti_windup`].
     pub fn step(&mut self, phi: f64, y_prev: f64, r: f64) -> f64 {
         self.y_past.rotate_right(1);
         self.y_past[0] = y_prev;
@@ -339,10 +349,10 @@ impl PolyLcn {
             }
             u += rho * ui;
         }
-        let u = u.clamp(self.limits.0, self.limits.1);
+        let applied = u.clamp(self.limits.0, self.limits.1);
         self.u_past.rotate_right(1);
-        self.u_past[0] = u;
+        self.u_past[0] = if self.anti_windup { applied } else { u };
         self.r_past = r;
-        u
+        applied
     }
 }

@@ -99,3 +99,45 @@ fn closed_loop_is_the_designed_servo_response() {
         assert!(y.iter().all(|&v| v <= r1 + 1e-9), "xi = 1.2: no overshoot");
     }
 }
+
+/// Anti-reset-windup: a reference the clamped input cannot reach, then a reachable one. With
+/// the applied input fed back the output settles at the new reference within the designed
+/// response; with the computed input the history winds up and the output stays high.
+#[test]
+fn applied_input_feedback_prevents_windup() {
+    let ts = 0.05;
+    let plant = ArxUnit {
+        a: [-0.93, 0.0, 0.0],
+        b: [0.045, 0.0, 0.0],
+        d: 0.0,
+    };
+    let (n, d) = (1, 5);
+    let c = design_arx(&plant, n, d, 0.9, 1.2, ts).unwrap();
+    let run = |mut ctl: PolyLcn| {
+        // y_ss = 0.045 / 0.07 u: u in [0, 1] reaches at most 0.643.
+        ctl.settle(0.3 * 0.07 / 0.045, 0.3);
+        let len = 1200;
+        let (mut u, mut y) = (vec![0.3 * 0.07 / 0.045; len + 8], vec![0.3; len + 8]);
+        for k in 8..len + 8 {
+            y[k] = plant.b[0] * u[k - d] - plant.a[0] * y[k - 1];
+            let r = if k < 408 { 0.9 } else { 0.3 };
+            u[k] = ctl.step(0.5, y[k - 1], r);
+        }
+        // Time (s) from the reference's drop until the output stays within 0.01 of it.
+        let last_out = (408..len + 8)
+            .rev()
+            .find(|&k| (y[k] - 0.3).abs() >= 0.01)
+            .unwrap();
+        (last_out + 1 - 408) as f64 * ts
+    };
+    let with = run(PolyLcn::single(c.clone(), (0.0, 1.0)).unwrap());
+    let without = run(PolyLcn::single(c, (0.0, 1.0))
+        .unwrap()
+        .without_anti_windup());
+    println!("settling after the drop: {with:.2} s with, {without:.2} s without anti-windup");
+    assert!(with < 2.5, "{with}");
+    assert!(
+        without > with + 2.0,
+        "wind-up delays the return: {without} vs {with}"
+    );
+}
