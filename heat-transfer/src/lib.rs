@@ -205,6 +205,8 @@ pub struct Report {
     pub control_changed_plant: control::ControlResults,
     /// The same controllers on the simulated process itself (noise-free).
     pub control_process: control::ControlResults,
+    /// Anti-reset-windup on the design model (Fig. E.8 at 37 s).
+    pub windup: control::Windup,
 }
 
 fn angle_key(a: f64) -> String {
@@ -448,7 +450,7 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         [g, r] => Some(close(r.train_mse, g.train_mse) && close(r.test_mse, g.test_mse)),
         _ => None,
     };
-    let (control, control_changed_plant, control_process) =
+    let (control, control_changed_plant, control_process, windup) =
         control::study(&delays_u, &swapped, &e44)?;
     Ok(Report {
         seed,
@@ -468,6 +470,7 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         control,
         control_changed_plant,
         control_process,
+        windup,
     })
 }
 

@@ -201,6 +201,13 @@ fn print_tables(r: &Report) {
             }
         }
     }
+    println!(
+        "\n## Anti-reset-windup (LCN, design model, alpha = 0.9): reference 0.2 -> 0.6 (unreachable) -> 0.3\n"
+    );
+    println!(
+        "settling within 0.01 after the return to 0.3: {:.2} s with, {:.2} s without",
+        r.windup.with_s, r.windup.without_s
+    );
     println!("\n## Fig. E.7: networks frozen over phi (global learning, simulation mode)\n");
     println!("| phi | G_u (5) | G_alpha (5) | pole (5) | G_u (10) | G_alpha (10) | pole (10) |");
     println!("|---:|---:|---:|---:|---:|---:|---:|");
