@@ -353,14 +353,33 @@ pub fn windup(model: &MisoArx, lcn: &[PolyController]) -> Result<Windup, StudyEr
     })
 }
 
+/// E.4.7 in full: the design model, its controllers and their results.
+#[derive(Debug, Clone)]
+pub struct ControlStudy {
+    /// The design model (channels u, alpha).
+    pub model: MisoArx,
+    /// The LCN's local controllers.
+    pub lcn: Vec<PolyController>,
+    /// The linear controller.
+    pub linear: PolyController,
+    /// On the design model (Fig. E.8a).
+    pub design: ControlResults,
+    /// On the E.4.4 model (Fig. E.8b).
+    pub changed: ControlResults,
+    /// On the simulated process.
+    pub process: ControlResults,
+    /// Anti-reset-windup.
+    pub windup: Windup,
+}
+
 /// E.4.7 in full: the design model fitted (global, simulation mode) on records with
-/// channels (u, alpha), the controllers designed, and both plants: (design model, E.4.4
-/// model).
+/// channels (u, alpha) and per-unit delays from `delays`, the controllers designed, and
+/// the three plants.
 pub fn study(
     delays: &DelayTable,
     train_u_alpha: &[MisoRecord],
     e44_model: &MisoArx,
-) -> Result<(ControlResults, ControlResults, ControlResults, Windup), StudyError> {
+) -> Result<ControlStudy, StudyError> {
     let pred = fes_ident::ident::miso::fit_prediction(
         &design_template(delays)?,
         train_u_alpha,
@@ -374,19 +393,23 @@ pub fn study(
     )?;
     let lcn = design_lcn(&model)?;
     let linear = design_linear(&model)?;
-    let a = compare(PlantModel::Design(&model), &lcn, model.validity, &linear)?;
-    let b = compare(
-        PlantModel::WithAlpha(e44_model),
-        &lcn,
-        model.validity,
-        &linear,
-    )?;
-    let c = compare(
+    let v = model.validity;
+    let design = compare(PlantModel::Design(&model), &lcn, v, &linear)?;
+    let changed = compare(PlantModel::WithAlpha(e44_model), &lcn, v, &linear)?;
+    let process = compare(
         PlantModel::Process(&HeatParams::default()),
         &lcn,
-        model.validity,
+        v,
         &linear,
     )?;
-    let w = windup(&model, &lcn)?;
-    Ok((a, b, c, w))
+    let windup = windup(&model, &lcn)?;
+    Ok(ControlStudy {
+        model,
+        lcn,
+        linear,
+        design,
+        changed,
+        process,
+        windup,
+    })
 }

@@ -48,9 +48,18 @@ pub enum StudyError {
     /// A controller design.
     #[error(transparent)]
     Control(#[from] fes_ident::control::io_design::IoDesignError),
+    /// A figure could not be drawn or written.
+    #[error("{path}: drawing failed: {message}")]
+    Figure {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
 }
 
 pub mod control;
+pub mod figures;
 
 /// The u -> y delay of eq. E.3 in samples (Table E.1 at mid angles).
 pub const DELAY_U: usize = 5;
@@ -366,8 +375,16 @@ pub fn state_space_study(
     Ok(rows)
 }
 
-/// Runs the identification part of App. E for one seed (module docs).
+/// Runs App. E for one seed (module docs).
 pub fn study(seed: u64) -> Result<Report, StudyError> {
+    study_with_figures(seed, None)
+}
+
+/// [`study`], drawing the figures (PNG) into `figures_dir` when given ([`figures`]).
+pub fn study_with_figures(
+    seed: u64,
+    figures_dir: Option<&std::path::Path>,
+) -> Result<Report, StudyError> {
     let p = HeatParams::default();
     let (delays_u, delays_a) = delays(&p)?;
     let (train, test) = records(&p, seed)?;
@@ -450,8 +467,10 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         [g, r] => Some(close(r.train_mse, g.train_mse) && close(r.test_mse, g.test_mse)),
         _ => None,
     };
-    let (control, control_changed_plant, control_process, windup) =
-        control::study(&delays_u, &swapped, &e44)?;
+    let cs = control::study(&delays_u, &swapped, &e44)?;
+    if let Some(dir) = figures_dir {
+        figures::draw_all(dir, &p, seed, &sims, &e44, &cs)?;
+    }
     Ok(Report {
         seed,
         delays_u_samples: delays_u,
@@ -467,10 +486,10 @@ pub fn study(seed: u64) -> Result<Report, StudyError> {
         state_space,
         static_5: static_of(5),
         static_10: static_of(10),
-        control,
-        control_changed_plant,
-        control_process,
-        windup,
+        control: cs.design,
+        control_changed_plant: cs.changed,
+        control_process: cs.process,
+        windup: cs.windup,
     })
 }
 

@@ -1,30 +1,48 @@
-//! `heat-transfer [--seed N] [--json FILE]`: thesis App. E on the simulated air heater,
-//! each table printed beside the thesis's; `--json` writes the numbers (issue 21's keys).
+//! `heat-transfer [--seed N] [--json FILE] [--figures DIR]`: thesis App. E on the simulated
+//! air heater, each table printed beside the thesis's; `--json` writes the numbers (issue
+//! 21's keys), `--figures` the figures (PNG).
 
 use anyhow::{Context, bail};
-use heat_transfer::{Report, study};
+use heat_transfer::{Report, study_with_figures};
 
-const USAGE: &str = "usage: heat-transfer [--seed N] [--json FILE]";
+const USAGE: &str = "usage: heat-transfer [--seed N] [--json FILE] [--figures DIR]";
 
-/// The command line: `None` for `--help`, else (seed, JSON file).
-fn parse() -> anyhow::Result<Option<(u64, Option<String>)>> {
+/// The command line.
+struct Args {
+    seed: u64,
+    json: Option<String>,
+    figures: Option<String>,
+}
+
+/// The command line: `None` for `--help`.
+fn parse() -> anyhow::Result<Option<Args>> {
     let mut seed = 1;
     let mut json = None;
+    let mut figures = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--seed" => seed = args.next().context("--seed needs a value")?.parse()?,
             "--json" => json = Some(args.next().context("--json needs a file")?),
+            "--figures" => figures = Some(args.next().context("--figures needs a directory")?),
             "-h" | "--help" => return Ok(None),
             other => bail!("unknown argument `{other}`"),
         }
     }
-    Ok(Some((seed, json)))
+    Ok(Some(Args {
+        seed,
+        json,
+        figures,
+    }))
 }
 
 fn main() -> anyhow::Result<()> {
     // Exit codes as every binary of the project: 2 for a command line not understood.
-    let (seed, json) = match parse() {
+    let Args {
+        seed,
+        json,
+        figures,
+    } = match parse() {
         Ok(Some(a)) => a,
         Ok(None) => {
             println!("{USAGE}");
@@ -36,7 +54,7 @@ fn main() -> anyhow::Result<()> {
         }
     };
     let t0 = std::time::Instant::now();
-    let report = study(seed)?;
+    let report = study_with_figures(seed, figures.as_deref().map(std::path::Path::new))?;
     print_tables(&report);
     println!("\n(wall time {:.1} s)", t0.elapsed().as_secs_f64());
     if let Some(path) = json {
