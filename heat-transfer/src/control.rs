@@ -14,7 +14,9 @@
 //! - Both run against the design model (Fig. E.8a) and against the 5-unit model of E.4.4,
 //!   which also has alpha in its data vector (Fig. E.8b), and against the simulated
 //!   process itself (noise-free), at alpha = 0.1, 0.5, 0.9: the
-//!   output settled at 0.1, the reference stepped to 0.2; the input is clamped to
+//!   output settled at 0.05, the reference stepped to 0.12 ([`STEP`]: reachable with
+//!   headroom at every angle, the open valve's gain being a fifth of the closed one's);
+//!   the input is clamped to
 //!   \[0, 1\] (the voltage cannot go negative), with the applied input fed back
 //!   (anti-reset-windup).
 
@@ -38,7 +40,9 @@ pub const RISE_LINEAR_S: f64 = 0.9;
 /// Damping of every design (no overshoot, 6.5.3).
 pub const DAMPING: f64 = 1.2;
 /// The reference step: settled at `STEP.0`, stepped to `STEP.1`.
-pub const STEP: (f64, f64) = (0.1, 0.2);
+pub const STEP: (f64, f64) = (0.05, 0.12);
+/// The windup run's references: settled, unreachable at alpha = 0.9, returned.
+pub const WINDUP: (f64, f64, f64) = (0.05, 0.4, 0.12);
 
 /// The scheduled rise time at phi (linear from 1000 ms at 0 to 700 ms at 1).
 pub fn scheduled_rise(phi: f64) -> f64 {
@@ -301,10 +305,10 @@ pub fn compare(
 }
 
 /// Anti-reset-windup on the design model (the thesis's remedy for Fig. E.8's overshoot at
-/// 37 s): at alpha = 0.9 the reference goes from 0.2 to 0.6, which the clamped input
-/// cannot reach (the output saturates near 0.43), at 2 s and back to 0.3 at 20 s; the
-/// time the output takes from then to stay within 0.01 of 0.3, with the applied input
-/// fed back and without.
+/// 37 s): at alpha = 0.9 the reference goes from 0.05 to 0.4 ([`WINDUP`]), which the
+/// clamped input cannot reach (the output saturates near 0.22), at 2 s and back to 0.12 at
+/// 20 s; the time the output takes from then to stay within 0.01 of 0.12, with the applied
+/// input fed back and without (20 s: not settled by the end of the run).
 #[derive(Debug, Clone, Serialize)]
 pub struct Windup {
     /// Settling time after the reference's return, with anti-reset-windup, s.
@@ -324,26 +328,26 @@ pub fn windup(model: &MisoArx, lcn: &[PolyController]) -> Result<Windup, StudyEr
     let alpha = 0.9;
     let f = model.frozen(alpha);
     let steady = |v: f64| (f.b[0].iter().sum::<f64>() * v + f.c) / (1.0 + f.a[0]);
-    let u0 = bisect(steady, 0.2, -2.0, 3.0);
+    let u0 = bisect(steady, WINDUP.0, -2.0, 3.0);
     let run = |mut ctl: PolyLcn| -> f64 {
         let mut chans = [vec![u0; n], vec![alpha; n]];
-        let mut y = vec![0.2; n];
-        ctl.settle(u0, 0.2);
+        let mut y = vec![WINDUP.0; n];
+        ctl.settle(u0, WINDUP.0);
         for k in 0..n {
             let refs: Vec<&[f64]> = chans.iter().map(Vec::as_slice).collect();
-            let past = [if k > 0 { y[k - 1] } else { 0.2 }];
+            let past = [if k > 0 { y[k - 1] } else { WINDUP.0 }];
             y[k] = model.output_at(&refs, &past, k);
             let r = if k < k_up {
-                0.2
+                WINDUP.0
             } else if k < k_down {
-                0.6
+                WINDUP.1
             } else {
-                0.3
+                WINDUP.2
             };
-            let y_prev = if k > 0 { y[k - 1] } else { 0.2 };
+            let y_prev = if k > 0 { y[k - 1] } else { WINDUP.0 };
             chans[0][k] = ctl.step(alpha, y_prev, r);
         }
-        let last_out = (k_down..n).rev().find(|&k| (y[k] - 0.3).abs() >= 0.01);
+        let last_out = (k_down..n).rev().find(|&k| (y[k] - WINDUP.2).abs() >= 0.01);
         last_out.map_or(0.0, |k| (k + 1 - k_down) as f64 * ts)
     };
     let make = || PolyLcn::new(model.validity, lcn.to_vec(), (0.0, 1.0));
@@ -376,6 +380,7 @@ pub struct ControlStudy {
 /// channels (u, alpha) and per-unit delays from `delays`, the controllers designed, and
 /// the three plants.
 pub fn study(
+    params: &HeatParams,
     delays: &DelayTable,
     train_u_alpha: &[MisoRecord],
     e44_model: &MisoArx,
@@ -396,12 +401,7 @@ pub fn study(
     let v = model.validity;
     let design = compare(PlantModel::Design(&model), &lcn, v, &linear)?;
     let changed = compare(PlantModel::WithAlpha(e44_model), &lcn, v, &linear)?;
-    let process = compare(
-        PlantModel::Process(&HeatParams::default()),
-        &lcn,
-        v,
-        &linear,
-    )?;
+    let process = compare(PlantModel::Process(params), &lcn, v, &linear)?;
     let windup = windup(&model, &lcn)?;
     Ok(ControlStudy {
         model,

@@ -385,7 +385,16 @@ pub fn study_with_figures(
     seed: u64,
     figures_dir: Option<&std::path::Path>,
 ) -> Result<Report, StudyError> {
-    let p = HeatParams::default();
+    study_with(&HeatParams::default(), seed, figures_dir)
+}
+
+/// [`study_with_figures`] on a plant with other parameters.
+pub fn study_with(
+    params: &HeatParams,
+    seed: u64,
+    figures_dir: Option<&std::path::Path>,
+) -> Result<Report, StudyError> {
+    let p = *params;
     let (delays_u, delays_a) = delays(&p)?;
     let (train, test) = records(&p, seed)?;
 
@@ -467,7 +476,7 @@ pub fn study_with_figures(
         [g, r] => Some(close(r.train_mse, g.train_mse) && close(r.test_mse, g.test_mse)),
         _ => None,
     };
-    let cs = control::study(&delays_u, &swapped, &e44)?;
+    let cs = control::study(&p, &delays_u, &swapped, &e44)?;
     if let Some(dir) = figures_dir {
         figures::draw_all(dir, &p, seed, &sims, &e44, &cs)?;
     }

@@ -3,6 +3,7 @@
 //! 21's keys), `--figures` the figures (PNG).
 
 use anyhow::{Context, bail};
+use heat_transfer::control::{STEP, WINDUP};
 use heat_transfer::{Report, study_with_figures};
 
 const USAGE: &str = "usage: heat-transfer [--seed N] [--json FILE] [--figures DIR]";
@@ -205,7 +206,7 @@ fn print_tables(r: &Report) {
             &r.control_process,
         ),
     ] {
-        println!("\n## {title}: reference 0.1 -> 0.2\n");
+        println!("\n## {title}: reference {} -> {}\n", STEP.0, STEP.1);
         println!(
             "| controller | alpha | overshoot % | rise (s) | rise target (s) | steady error |"
         );
@@ -220,11 +221,12 @@ fn print_tables(r: &Report) {
         }
     }
     println!(
-        "\n## Anti-reset-windup (LCN, design model, alpha = 0.9): reference 0.2 -> 0.6 (unreachable) -> 0.3\n"
+        "\n## Anti-reset-windup (LCN, design model, alpha = 0.9): reference {} -> {} (unreachable) -> {}\n",
+        WINDUP.0, WINDUP.1, WINDUP.2
     );
     println!(
-        "settling within 0.01 after the return to 0.3: {:.2} s with, {:.2} s without",
-        r.windup.with_s, r.windup.without_s
+        "settling within 0.01 after the return to {}: {:.2} s with, {:.2} s without",
+        WINDUP.2, r.windup.with_s, r.windup.without_s
     );
     println!("\n## Fig. E.7: networks frozen over phi (global learning, simulation mode)\n");
     println!("| phi | G_u (5) | G_alpha (5) | pole (5) | G_u (10) | G_alpha (10) | pole (10) |");
