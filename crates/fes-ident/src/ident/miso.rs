@@ -137,7 +137,8 @@ pub fn fit_prediction(
                     p[(at, c)] = *v;
                 }
             }
-            for (i, w) in template.validity.eval(st.phi(&u, k)).iter() {
+            let (act, n) = template.activations(&u, k);
+            for &(i, w) in &act[..n] {
                 rho[(at, i)] = w;
             }
             y[at] = rec.y[k];
@@ -205,6 +206,7 @@ impl FreeRun for MisoArx {
             ts: self.ts,
             structure: self.structure.clone(),
             validity: self.validity,
+            validity2: self.validity2,
             theta: theta.to_vec(),
         };
         net.simulate(&rec.inputs(), rec.y[0], out)
@@ -294,13 +296,20 @@ impl<'a> SimulationProblem<'a, MisoArx> {
             .map(|r| {
                 let u = r.inputs();
                 (0..r.y.len())
-                    .map(|k| template.validity.eval(st.phi(&u, k)).get(i).max(0.0).sqrt())
+                    .map(|k| {
+                        let (act, n) = template.activations(&u, k);
+                        act[..n]
+                            .iter()
+                            .find(|(j, _)| *j == i)
+                            .map_or(0.0, |(_, w)| w.max(0.0).sqrt())
+                    })
                     .collect()
             })
             .collect();
         let one = ValidityFunctions::uniform(1, 0.0, 1.0)
             .map_err(crate::model::params::ParamError::from)?;
         let mut st1 = st.clone();
+        st1.scheduling2 = None;
         if let Some(d) = st.unit_delays.get(i) {
             st1.unit_delays = vec![d.clone()];
         }

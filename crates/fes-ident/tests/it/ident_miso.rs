@@ -20,6 +20,7 @@ fn truth() -> MisoArx {
         unit_delays: vec![],
         scheduling_input: 0,
         scheduling_delay: 2,
+        scheduling2: None,
         offset: true,
     };
     // theta_i = [b_alpha, b_u, -a_1, c]
@@ -47,7 +48,7 @@ fn records(model: &MisoArx, seed: u64) -> Vec<MisoRecord> {
             };
             let u = vec![level(25, &mut rng), level(3, &mut rng)];
             // Start in the steady state of the first inputs (the records' convention).
-            let f = model.frozen(u[0][0]);
+            let f = model.frozen_at(u[0][0], model.structure.scheduling2.map(|(c, _)| u[c][0]));
             let y0 = (f.b[0][0] * u[0][0] + f.b[1][0] * u[1][0] + f.c) / (1.0 + f.a[0]);
             let mut y = vec![0.0; n];
             let refs: Vec<&[f64]> = u.iter().map(Vec::as_slice).collect();
@@ -118,4 +119,39 @@ fn frozen_model_gains_and_poles() {
     assert!((p[0].gains[0] - (-0.05 / 0.10)).abs() < 1e-12);
     assert!((p[0].gains[1] - (0.10 / 0.10)).abs() < 1e-12);
     assert!((p[2].poles[0].re - 0.80).abs() < 1e-12);
+}
+
+/// Two scheduling variables (eq. E.1): the tensor-product weights sum to one, and a known
+/// 2 x 3-unit network is recovered from its own output by prediction-mode least squares.
+#[test]
+fn tensor_product_scheduling_recovers_a_known_network() {
+    let mut st = truth().structure;
+    st.scheduling2 = Some((1, 1));
+    let v1 = ValidityFunctions::uniform(2, 0.0, 1.0).unwrap();
+    let v2 = ValidityFunctions::uniform(3, 0.0, 1.0).unwrap();
+    let theta: Vec<f64> = (0..6)
+        .flat_map(|i| {
+            let s = i as f64;
+            [-0.05 + 0.01 * s, 0.1 - 0.01 * s, 0.9 - 0.02 * s, 0.01]
+        })
+        .collect();
+    let t = MisoArx::tensor(0.05, st.clone(), v1, v2, theta).unwrap();
+    assert_eq!(t.units(), 6);
+    for (a, b) in [(0.1, 0.2), (0.5, 0.77), (0.9, 0.0)] {
+        let (act, n) = t.activation_at(a, Some(b));
+        let sum: f64 = act[..n].iter().map(|x| x.1).sum();
+        assert!((sum - 1.0).abs() < 1e-12, "{sum}");
+    }
+    // A one-dimensional constructor refuses a second scheduling variable.
+    assert!(MisoArx::new(0.05, st, v1, vec![0.0; 8]).is_err());
+    let recs = records(&t, 3);
+    let mut start = t.clone();
+    start.theta.iter_mut().for_each(|v| *v = 0.0);
+    let fit = miso::fit_prediction(&start, &recs, Learning::Global).unwrap();
+    assert!(miso::mse(&fit, &recs, Horizon::Prediction).unwrap() < 1e-20);
+    // Both inputs now schedule at their regressors' delays: only the a_1 are
+    // identifiable one by one (see assert_identifiable_close).
+    for i in 0..t.units() {
+        assert!((fit.unit(i)[2] - t.unit(i)[2]).abs() < 1e-6, "unit {i}");
+    }
 }

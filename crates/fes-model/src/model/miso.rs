@@ -76,6 +76,10 @@ pub struct MisoStructure {
     pub scheduling_input: usize,
     /// Delay of the scheduling variable, samples.
     pub scheduling_delay: usize,
+    /// A second scheduling variable (channel, delay): the scheduling vector
+    /// phi = \[u_s(k - d_s), u_s2(k - d_s2)\] of eq. E.1 over tensor-product B-splines
+    /// ([`MisoArx::tensor`]); `None`: one-dimensional scheduling (eq. E.2).
+    pub scheduling2: Option<(usize, usize)>,
     /// Whether each local model has an offset c_i (eq. 2.24's d).
     pub offset: bool,
 }
@@ -127,6 +131,13 @@ impl MisoStructure {
         if k <= 0 { u[0] } else { u[k as usize] }
     }
 
+    /// The second scheduling variable, if any.
+    #[inline]
+    pub fn phi2(&self, u: &[&[f64]], k: usize) -> Option<f64> {
+        self.scheduling2
+            .map(|(c, d)| Self::input(u[c], k as isize - d as isize))
+    }
+
     /// The scheduling variable phi_k = u_s(k - d_s).
     #[inline]
     pub fn phi(&self, u: &[&[f64]], k: usize) -> f64 {
@@ -175,7 +186,8 @@ impl MisoStructure {
     /// Checks that a record's channels fit: one per input of the data vector (and the
     /// scheduling channel), all as long as the output and not empty.
     pub fn check_record(&self, u: &[&[f64]], y_len: usize) -> Result<(), MisoError> {
-        if u.len() < self.inputs() || u.len() <= self.scheduling_input {
+        let second = self.scheduling2.map_or(0, |(c, _)| c);
+        if u.len() < self.inputs() || u.len() <= self.scheduling_input || u.len() <= second {
             return Err(MisoError::Record(
                 "a channel per input of the data vector and the scheduling channel are needed",
             ));
@@ -199,8 +211,12 @@ pub struct MisoArx<S = f64> {
     pub ts: f64,
     /// The data vector.
     pub structure: MisoStructure,
-    /// The validity functions over phi.
+    /// The validity functions over phi (the first scheduling variable).
     pub validity: ValidityFunctions<f64>,
+    /// The validity functions over the second scheduling variable (eq. E.1): unit
+    /// i = i_1 M_2 + i_2 has rho_i = rho_{i_1}(phi_1) rho_{i_2}(phi_2), a partition of unity
+    /// again (tensor-product B-splines, Johansen and Foss 1995).
+    pub validity2: Option<ValidityFunctions<f64>>,
     /// theta_0, theta_1, ... concatenated (units x regressors).
     pub theta: Vec<S>,
 }
@@ -246,14 +262,47 @@ impl<S: Scalar> MisoArx<S> {
         validity: ValidityFunctions<f64>,
         theta: Vec<S>,
     ) -> Result<Self, MisoError> {
+        if structure.scheduling2.is_some() {
+            return Err(MisoError::Record(
+                "a second scheduling variable needs its validity functions (MisoArx::tensor)",
+            ));
+        }
+        Self::build(ts, structure, validity, None, theta)
+    }
+
+    /// A network scheduled on two variables (eq. E.1) over the tensor product of
+    /// `validity` (first) and `validity2` (second, `structure.scheduling2`).
+    pub fn tensor(
+        ts: f64,
+        structure: MisoStructure,
+        validity: ValidityFunctions<f64>,
+        validity2: ValidityFunctions<f64>,
+        theta: Vec<S>,
+    ) -> Result<Self, MisoError> {
+        if structure.scheduling2.is_none() {
+            return Err(MisoError::Record(
+                "tensor-product validity functions need a second scheduling variable",
+            ));
+        }
+        Self::build(ts, structure, validity, Some(validity2), theta)
+    }
+
+    fn build(
+        ts: f64,
+        structure: MisoStructure,
+        validity: ValidityFunctions<f64>,
+        validity2: Option<ValidityFunctions<f64>>,
+        theta: Vec<S>,
+    ) -> Result<Self, MisoError> {
         structure.validate()?;
         if !(ts.is_finite() && ts > 0.0) {
             return Err(MisoError::SamplingPeriod(ts));
         }
-        if !structure.unit_delays.is_empty() && structure.unit_delays.len() != validity.units() {
+        let units = validity.units() * validity2.map_or(1, |v| v.units());
+        if !structure.unit_delays.is_empty() && structure.unit_delays.len() != units {
             return Err(MisoError::Record("unit_delays needs one entry per unit"));
         }
-        let expected = validity.units() * structure.regressors();
+        let expected = units * structure.regressors();
         if theta.len() != expected {
             return Err(MisoError::Theta {
                 got: theta.len(),
@@ -264,13 +313,49 @@ impl<S: Scalar> MisoArx<S> {
             ts,
             structure,
             validity,
+            validity2,
             theta,
         })
     }
 
-    /// Number of units M.
+    /// Number of units M (M_1 M_2 with two scheduling variables).
     pub fn units(&self) -> usize {
-        self.validity.units()
+        self.validity.units() * self.validity2.map_or(1, |v| v.units())
+    }
+
+    /// The active units and their weights at (phi_1, phi_2): at most 3 x 3 (units,
+    /// count). With one scheduling variable `phi2` is ignored; with two and `phi2` `None`
+    /// the second is taken at the middle of its range.
+    pub fn activation_at(&self, phi: f64, phi2: Option<f64>) -> ([(usize, f64); 9], usize) {
+        let mut out = [(0, 0.0); 9];
+        let mut n = 0;
+        let a1 = self.validity.eval(phi);
+        match &self.validity2 {
+            None => {
+                for (i, r) in a1.iter() {
+                    out[n] = (i, r);
+                    n += 1;
+                }
+            }
+            Some(v2) => {
+                let (lo, hi) = v2.valid_range();
+                let a2 = v2.eval(phi2.unwrap_or(0.5 * (lo + hi)));
+                let m2 = v2.units();
+                for (i1, r1) in a1.iter() {
+                    for (i2, r2) in a2.iter() {
+                        out[n] = (i1 * m2 + i2, r1 * r2);
+                        n += 1;
+                    }
+                }
+            }
+        }
+        (out, n)
+    }
+
+    /// The active units and their weights at sample k of a record.
+    pub fn activations(&self, u: &[&[f64]], k: usize) -> ([(usize, f64); 9], usize) {
+        let st = &self.structure;
+        self.activation_at(st.phi(u, k), st.phi2(u, k))
     }
 
     /// theta_i.
@@ -287,9 +372,9 @@ impl<S: Scalar> MisoArx<S> {
         for l in 1..=st.order {
             psi[st.a_index(l)] = past[l - 1];
         }
-        let act = self.validity.eval(st.phi(u, k));
+        let (act, n) = self.activations(u, k);
         let mut y = S::zero();
-        for (i, rho) in act.iter() {
+        for &(i, rho) in &act[..n] {
             st.fill_inputs(u, k, i, psi);
             let mut yi = S::zero();
             for (p, t) in psi.iter().zip(self.unit(i)) {
@@ -351,12 +436,18 @@ impl MisoArx<f64> {
         self.polynomials(self.unit(i))
     }
 
-    /// The interpolated model frozen at phi (eq. 2.26): sum_i rho_i(phi) theta_i.
+    /// The interpolated model frozen at phi (eq. 2.26): sum_i rho_i(phi) theta_i (a second
+    /// scheduling variable at the middle of its range, [`Self::activation_at`]).
     pub fn frozen(&self, phi: f64) -> MisoLocal {
+        self.frozen_at(phi, None)
+    }
+
+    /// The interpolated model frozen at (phi_1, phi_2).
+    pub fn frozen_at(&self, phi: f64, phi2: Option<f64>) -> MisoLocal {
         let r = self.structure.regressors();
-        let act = self.validity.eval(phi);
+        let (act, n) = self.activation_at(phi, phi2);
         let mut t = alloc::vec![0.0; r];
-        for (i, rho) in act.iter() {
+        for &(i, rho) in &act[..n] {
             for (a, b) in t.iter_mut().zip(self.unit(i)) {
                 *a += rho * b;
             }
@@ -369,11 +460,11 @@ impl MisoArx<f64> {
     /// make the interpolated model's B span several delays).
     pub fn frozen_input_taps(&self, phi: f64, j: usize) -> (usize, Vec<f64>) {
         let st = &self.structure;
-        let act = self.validity.eval(phi);
+        let (act, n) = self.activation_at(phi, None);
         let d_min = (0..self.units()).map(|i| st.delay(i, j)).min().unwrap_or(0);
         let d_max = (0..self.units()).map(|i| st.delay(i, j)).max().unwrap_or(0);
         let mut taps = alloc::vec![0.0; d_max - d_min + st.order];
-        for (i, rho) in act.iter() {
+        for &(i, rho) in &act[..n] {
             let off = st.delay(i, j) - d_min;
             for l in 0..st.order {
                 taps[off + l] += rho * self.unit(i)[st.b_index(j, l)];
