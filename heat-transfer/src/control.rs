@@ -86,6 +86,7 @@ pub fn design_template(delays: &DelayTable) -> Result<MisoArx, StudyError> {
             .collect(),
         scheduling_input: 1,
         scheduling_delay: DELAY_ALPHA,
+        scheduling2: None,
         offset: true,
     };
     let r = st.regressors();

@@ -77,6 +77,7 @@ pub fn template(units: usize) -> Result<MisoArx, StudyError> {
         unit_delays: vec![],
         scheduling_input: 0,
         scheduling_delay: DELAY_ALPHA,
+        scheduling2: None,
         offset: true,
     };
     let v = if units == 1 {
@@ -204,6 +205,8 @@ pub struct Report {
     pub orderings: Orderings,
     /// Table E.5 and Fig. E.6: general and restricted state-space networks.
     pub state_space: Vec<SsRow>,
+    /// E.4.1, eq. E.1: two-dimensional scheduling.
+    pub scheduling_2d: Scheduling2d,
     /// Fig. E.7: the 5-unit network (global, simulation mode) over phi.
     pub static_5: Vec<FrozenRow>,
     /// Fig. E.7: the 10-unit network.
@@ -281,6 +284,37 @@ pub fn records(
 ) -> Result<(Vec<MisoRecord>, Vec<MisoRecord>), StudyError> {
     let set = sim_heat::experiment::dataset(p, seed)?;
     Ok(miso::records(&set, &["alpha", "u"], "y")?)
+}
+
+/// E.4.1, eq. E.1: the scheduling vector phi = \[alpha(t-3), u(t-5)\] over 3 x 3
+/// tensor-product B-splines, local models as E.4.2, global learning in simulation mode.
+#[derive(Debug, Clone, Serialize)]
+pub struct Scheduling2d {
+    /// Units M = 9.
+    pub units: usize,
+    /// Training MSSE.
+    pub train_mse: f64,
+    /// Test MSSE.
+    pub test_mse: f64,
+}
+
+/// Fits [`Scheduling2d`]'s network.
+pub fn scheduling_2d(
+    train: &[MisoRecord],
+    test: &[MisoRecord],
+) -> Result<Scheduling2d, StudyError> {
+    let mut st = template(1)?.structure;
+    st.scheduling2 = Some((1, DELAY_U));
+    let v = ValidityFunctions::with_layout(KnotLayout::Uniform, 3, 0.0, 1.0)?;
+    let r = st.regressors();
+    let t = MisoArx::tensor(sim_heat::plant::TS_S, st, v, v, vec![0.0; 9 * r])?;
+    let pred = miso::fit_prediction(&t, train, Learning::Global)?;
+    let sim = miso::fit_simulation(&pred, train, Learning::Global, &LmOptions::default())?;
+    Ok(Scheduling2d {
+        units: sim.units(),
+        train_mse: miso::mse(&sim, train, Horizon::Simulation)?,
+        test_mse: miso::mse(&sim, test, Horizon::Simulation)?,
+    })
 }
 
 /// Table E.5 and Fig. E.6: one state-space network's errors and eigenvectors.
@@ -471,6 +505,7 @@ pub fn study_with(
         None => fit_pair(5, Learning::Global, &train)?.1,
     };
     let state_space = state_space_study(&e44, &train, &test)?;
+    let scheduling_2d = scheduling_2d(&train, &test)?;
     let close = |a: f64, b: f64| (a / b - 1.0).abs() <= 0.25;
     orderings.restricted_close_to_general = match state_space.as_slice() {
         [g, r] => Some(close(r.train_mse, g.train_mse) && close(r.test_mse, g.test_mse)),
@@ -493,6 +528,7 @@ pub fn study_with(
         learning,
         orderings,
         state_space,
+        scheduling_2d,
         static_5: static_of(5),
         static_10: static_of(10),
         control: cs.design,

@@ -165,6 +165,20 @@ fn print_tables(r: &Report) {
             );
         }
     }
+    let t = &r.scheduling_2d;
+    println!("\n## E.4.1, eq. E.1: phi = [alpha(t-3), u(t-5)], 3 x 3 tensor-product B-splines\n");
+    println!("| network | train MSSE | test MSSE |");
+    println!("|---|---:|---:|");
+    if let Some(g5) = r.learning.first() {
+        println!(
+            "| 5 units over alpha (E.2) | {:.2e} | {:.2e} |",
+            g5.sim_train_msse, g5.sim_test_msse
+        );
+    }
+    println!(
+        "| {} units over [alpha, u] (E.1) | {:.2e} | {:.2e} |",
+        t.units, t.train_mse, t.test_mse
+    );
     println!("\n## Orderings\n");
     let o = &r.orderings;
     for (k, v) in [

@@ -79,3 +79,14 @@ fn fig_e7_gain_falls_and_plant_speeds_up_as_the_valve_opens() {
     // determined: b_alpha and the offsets trade off, docs/heat-transfer.md).
     assert!(first.g_alpha < 0.0 && first.g_alpha.abs() > 5.0 * last.g_alpha.abs());
 }
+
+/// E.4.1: scheduling on [alpha, u] (eq. E.1) captures the voltage's non-linearity (Joule
+/// heating) that scheduling on alpha alone (eq. E.2) cannot.
+#[test]
+fn e41_two_dimensional_scheduling_beats_alpha_alone() {
+    let r = report();
+    let (t, g5) = (&r.scheduling_2d, &r.learning[0]);
+    println!("{t:?}");
+    assert_eq!(t.units, 9);
+    assert!(t.train_mse < g5.sim_train_msse && t.test_mse < g5.sim_test_msse);
+}
