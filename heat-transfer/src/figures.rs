@@ -3,6 +3,8 @@
 //! - `fig-e2-e3-<experiment>.png`: one record of each E.2 experiment (alpha, u, y).
 //! - `fig-e4.png`: responses to the 4 V step at the five test angles, (a) 15 s, (b) the
 //!   first second (the delays of Table E.1).
+//! - `fig-e5.png`: responses to steps of the valve angle.
+//! - `fig-e6.png`: the state-space networks' eigenvector directions per unit.
 //! - `fig-e7-5.png`, `fig-e7-10.png`: the networks frozen over phi: activations, G_u and
 //!   G_alpha, the pole.
 //! - `fig-e8a.png`, `fig-e8b.png`, `fig-e8-process.png`: the LCN and the linear controller
@@ -18,8 +20,8 @@ use plotters::prelude::*;
 use sim_heat::experiment::{Experiment, Normalisation, all_records};
 use sim_heat::plant::{HeatParams, HeatPlant, TEST_ANGLES_DEG};
 
-use crate::StudyError;
 use crate::control::{ControlStudy, PlantModel, RISE_LINEAR_S, scheduled_rise, step_response};
+use crate::{SsRow, StudyError};
 
 /// One line of a panel.
 struct Series {
@@ -102,10 +104,12 @@ fn draw(path: &Path, title: &str, panels: &[Panel]) -> Result<(), StudyError> {
                 chart.draw_series(LineSeries::new(s.points.iter().copied(), style))
             }
             .map_err(|e| draw_error(path, e))?;
-            let c = s.color;
-            drawn
-                .label(s.label.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+            if !s.label.is_empty() {
+                let c = s.color;
+                drawn
+                    .label(s.label.as_str())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+            }
         }
         if panel.series.iter().any(|s| !s.label.is_empty()) {
             chart
@@ -143,6 +147,7 @@ pub fn draw_all(
     sims: &BTreeMap<(usize, &str), MisoArx>,
     e44: &MisoArx,
     cs: &ControlStudy,
+    state_space: &[SsRow],
 ) -> Result<(), StudyError> {
     std::fs::create_dir_all(dir).map_err(|e| draw_error(dir, e))?;
     let ts = p.ts_s;
@@ -196,6 +201,53 @@ pub fn draw_all(
                 series: short,
             },
         ],
+    )?;
+    // Fig. E.5: steps of the valve angle at 6 V.
+    let mut steps = Vec::new();
+    for (i, (from, to)) in [(60.0, 90.0), (90.0, 40.0)].into_iter().enumerate() {
+        let mut plant = HeatPlant::new(clean, 0, from)?;
+        plant.settle(from, 6.0);
+        let y: Vec<f64> = (0..160).map(|_| norm.y(plant.step(to, 6.0))).collect();
+        steps.push(line(
+            format!("{from} -> {to} deg at t = 0"),
+            timed(&y, ts),
+            i,
+            false,
+        ));
+    }
+    draw(
+        &dir.join("fig-e5.png"),
+        "Fig. E.5: responses to steps of the valve angle (6 V)",
+        &[Panel {
+            y_label: "y (normalised)".into(),
+            x_label: "t (s)".into(),
+            series: steps,
+        }],
+    )?;
+    // Fig. E.6: eigenvector directions per unit (first solid, second dashed).
+    let panels: Vec<Panel> = state_space
+        .iter()
+        .map(|row| Panel {
+            y_label: format!("{} model", row.model),
+            x_label: "x_1".into(),
+            series: row
+                .angles_rad
+                .iter()
+                .enumerate()
+                .flat_map(|(i, a)| {
+                    let seg = |t: f64| vec![(-t.cos(), -t.sin()), (t.cos(), t.sin())];
+                    [
+                        line(format!("unit {i}"), seg(a[0]), i, false),
+                        line("", seg(a[1]), i, true),
+                    ]
+                })
+                .collect(),
+        })
+        .collect();
+    draw(
+        &dir.join("fig-e6.png"),
+        "Fig. E.6: eigenvector directions (first eigenvector solid, second dashed)",
+        &panels,
     )?;
     // Fig. E.7.
     for units in [5, 10] {

@@ -513,7 +513,7 @@ pub fn study_with(
     };
     let cs = control::study(&p, &delays_u, &swapped, &e44)?;
     if let Some(dir) = figures_dir {
-        figures::draw_all(dir, &p, seed, &sims, &e44, &cs)?;
+        figures::draw_all(dir, &p, seed, &sims, &e44, &cs, &state_space)?;
     }
     Ok(Report {
         seed,

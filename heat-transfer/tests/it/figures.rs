@@ -15,5 +15,5 @@ fn every_figure_is_drawn() {
         assert!(bytes.starts_with(b"\x89PNG"), "{n}");
     }
     let _ = std::fs::remove_dir_all(&dir);
-    assert_eq!(names.len(), 10, "{names:?}");
+    assert_eq!(names.len(), 12, "{names:?}");
 }
