@@ -14,6 +14,11 @@
 //! violation is reported with the file, line and field. Tables recorded elsewhere (any
 //! rate, columns, units and record layout) become data sets through [`import`]
 //! (`fes dataset import`).
+//!
+//! Plants other than muscle (several continuous-valued inputs and outputs, any sample
+//! period: the heat-transfer process of App. E) use version 2, `fes-dataset/2`, in
+//! [`signals`]; version-1 files and this reader are unchanged, and [`signals::read_any`]
+//! opens either.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
@@ -24,6 +29,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 pub mod import;
+pub mod signals;
 
 /// Value of the `schema` field this module reads and writes.
 pub const SCHEMA: &str = "fes-dataset/1";
@@ -509,21 +515,7 @@ impl DataSet {
             let path = path.to_path_buf();
             move |source| WriteError::Io { path, source }
         };
-        if dir.exists() {
-            let mut entries = fs::read_dir(dir).map_err(io(dir))?;
-            if entries.next().is_some() {
-                match mode {
-                    WriteMode::CreateNew => {
-                        return Err(WriteError::DirNotEmpty {
-                            path: dir.to_path_buf(),
-                        });
-                    }
-                    WriteMode::Overwrite => remove_previous(dir)?,
-                }
-            }
-        } else {
-            fs::create_dir_all(dir).map_err(io(dir))?;
-        }
+        prepare_dir(dir, mode)?;
         for r in &self.records {
             let path = dir.join(&r.file);
             fs::write(&path, record_csv(r)).map_err(io(&path))?;
@@ -562,6 +554,31 @@ impl DataSet {
         fs::write(&meta_path, text).map_err(io(&meta_path))?;
         Ok(())
     }
+}
+
+/// Makes `dir` ready for a data set: created if missing; if it is not empty, refused
+/// ([`WriteMode::CreateNew`]) or the previous data set removed ([`WriteMode::Overwrite`]).
+fn prepare_dir(dir: &Path, mode: WriteMode) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    if dir.exists() {
+        let mut entries = fs::read_dir(dir).map_err(io)?;
+        if entries.next().is_some() {
+            match mode {
+                WriteMode::CreateNew => {
+                    return Err(WriteError::DirNotEmpty {
+                        path: dir.to_path_buf(),
+                    });
+                }
+                WriteMode::Overwrite => remove_previous(dir)?,
+            }
+        }
+    } else {
+        fs::create_dir_all(dir).map_err(io)?;
+    }
+    Ok(())
 }
 
 /// Removes a previous data set's `dataset.json` and the record files it lists.
@@ -699,13 +716,24 @@ fn check_header(path: &Path, h: &Header, n_records: usize) -> Result<(), FormatE
             ));
         }
     }
+    check_split(path, &h.split, n_records)
+}
+
+/// At least two records, both halves of the split non-empty, in range, without repeats and
+/// disjoint (shared by both format versions).
+fn check_split(path: &Path, split: &Split, n_records: usize) -> Result<(), FormatError> {
+    let field = |field: &str, problem: String| FormatError::Field {
+        path: path.to_path_buf(),
+        field: field.to_string(),
+        problem,
+    };
     if n_records < 2 {
         return Err(FormatError::TooFewRecords {
             path: path.to_path_buf(),
             count: n_records,
         });
     }
-    for (which, list) in [("train", &h.split.train), ("test", &h.split.test)] {
+    for (which, list) in [("train", &split.train), ("test", &split.test)] {
         if list.is_empty() {
             return Err(FormatError::EmptySplit {
                 path: path.to_path_buf(),
@@ -728,7 +756,7 @@ fn check_header(path: &Path, h: &Header, n_records: usize) -> Result<(), FormatE
             }
         }
     }
-    if let Some(i) = h.split.train.iter().find(|i| h.split.test.contains(i)) {
+    if let Some(i) = split.train.iter().find(|i| split.test.contains(i)) {
         return Err(field(
             "split",
             format!("record {i} is in both train and test"),

@@ -1,4 +1,5 @@
-//! Levenberg-Marquardt (thesis B.3.2, eq. B.29-B.30) on a [`Problem`].
+//! Levenberg-Marquardt (thesis B.3.2, eq. B.29-B.30) on any [`LeastSquares`] problem (a
+//! network's [`Problem`], or the multi-input ARX problems of [`super::miso`]).
 //!
 //! At p the (exact) Jacobian J gives g = J' r and the Gauss-Newton Hessian H = J' J
 //! (eq. B.21-B.24; the factors 2 cancel). The step solves (H + lambda D) delta = -g with D
@@ -33,6 +34,31 @@
 
 use super::problem::{Normal, ParamMap, Problem, ProblemError};
 use nalgebra::{Cholesky, DMatrix, DVector};
+
+/// A sum-of-squares problem the search can minimise: its cost, its normal equations over
+/// chosen columns and the box its parameters stay in. The muscle network's [`Problem`]
+/// is one; the multi-input ARX networks of App. E ([`super::miso`]) are another, so both
+/// share this one implementation of B.3.2.
+pub trait LeastSquares: Sync {
+    /// Box bounds (lo, hi) per parameter.
+    fn bounds(&self) -> Vec<(f64, f64)>;
+    /// Sum of squared residuals at p (plus any prior).
+    fn cost(&self, p: &[f64]) -> Result<f64, ProblemError>;
+    /// cost, J' r and J' J at p over the columns `cols`.
+    fn normal(&self, p: &[f64], cols: &[usize]) -> Result<Normal, ProblemError>;
+}
+
+impl<M: ParamMap> LeastSquares for Problem<'_, M> {
+    fn bounds(&self) -> Vec<(f64, f64)> {
+        self.map.bounds()
+    }
+    fn cost(&self, p: &[f64]) -> Result<f64, ProblemError> {
+        Problem::cost(self, p)
+    }
+    fn normal(&self, p: &[f64], cols: &[usize]) -> Result<Normal, ProblemError> {
+        Problem::normal(self, p, cols)
+    }
+}
 
 /// Settings of [`levenberg_marquardt`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -109,14 +135,14 @@ pub struct LmReport {
 /// Minimises the problem's sum of squared residuals over the parameters `free` (the others
 /// stay at their value in `p0`), starting from `p0` (projected into the bounds). `on_step(iteration, cost)` is called
 /// after every accepted step. Fails only if the starting point cannot be evaluated.
-pub fn levenberg_marquardt<M: ParamMap>(
-    problem: &Problem<'_, M>,
+pub fn levenberg_marquardt<P: LeastSquares>(
+    problem: &P,
     p0: &[f64],
     free: &[usize],
     opts: &LmOptions,
     on_step: &mut dyn FnMut(usize, f64),
 ) -> Result<LmReport, ProblemError> {
-    let bounds = problem.map.bounds();
+    let bounds = problem.bounds();
     let mut p: Vec<f64> = p0
         .iter()
         .zip(&bounds)

@@ -20,6 +20,9 @@
 //!   weight.
 //! - [`identify`](mod@identify): one run with options, stages and provenance.
 //! - [`validation`]: the field's figures: NRMSE fit %, RRSE, residual tests (`resid`).
+//! - [`miso`]: multi-input ARX networks scheduled on a measured input (App. E, the
+//!   heat-transfer process): prediction- and simulation-mode fits, global and local
+//!   learning, static analysis.
 //! - [`sweep`]: network sizes swept (Figs. 5.13-5.21) and the comparison of Tables 5.1/5.2.
 //!
 //! Method, options and pitfalls: `docs/identification.md`.
@@ -30,6 +33,7 @@ pub mod knots;
 pub mod lm;
 pub mod lsq;
 pub mod metrics;
+pub mod miso;
 pub mod problem;
 pub mod records;
 pub mod regression;

@@ -3,6 +3,8 @@
 //! - [`poles`]: desired closed-loop poles from rise time and damping (6.5.3).
 //! - [`design`]: pole placement with integral action and the state estimator, per local
 //!   model, in the delta domain (C.2.1-C.2.3).
+//! - [`io_design`]: input-output pole placement with integral action for ARX local models
+//!   and its LCN (C.1; App. E.4.7).
 //! - [`lcn_design`]: the design of every unit of an LCN from an LMN (3.3, 6.5.3).
 //! - [`lcn`]: the Local Controller Network at run time: interpolated gains, control law,
 //!   anti-windup (3.3, C.2.3).
@@ -16,6 +18,7 @@
 pub mod design;
 pub mod estimator;
 pub mod file;
+pub mod io_design;
 pub mod lcn;
 pub mod lcn_design;
 pub mod pattern_generator;

@@ -5,6 +5,10 @@
 //! - [`local_model`]: second-order delta-domain state-space local models and their
 //!   parameterisations (2.2.2, eq. 2.13; 5.4.2, eq. 5.5-5.6).
 //! - [`arx`]: local ARX models in shift and delta form (eq. 2.20-2.24, App. A.2, D.2).
+//! - [`miso`]: ARX local models with several inputs, a delay per input and scheduling on
+//!   a measured input (App. E: the heat-transfer process).
+//! - [`miso_ss`]: state-space local models with several inputs in their eigensystem,
+//!   general or with common eigenvectors (App. E.4.5).
 //! - [`network`]: the undelayed LPV core (eq. 2.14-2.16, 2.24), generic over
 //!   [`crate::num::Scalar`].
 //! - [`forms`]: the thesis form (input delay line) and the advanced form (core state
@@ -21,6 +25,8 @@ pub mod file;
 pub mod forms;
 pub mod lmn;
 pub mod local_model;
+pub mod miso;
+pub mod miso_ss;
 pub mod network;
 pub mod params;
 pub mod scheduling;

@@ -11,11 +11,13 @@ mod json_mutation;
 
 mod control_design;
 mod control_file;
+mod control_io_design;
 mod control_measured;
 mod control_no_alloc;
 mod control_shaper;
 mod model_file;
 mod model_forms;
+mod model_miso_ss;
 mod model_network;
 mod model_no_alloc;
 mod model_params;
