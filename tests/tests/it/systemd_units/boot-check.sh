@@ -1,7 +1,7 @@
 #!/bin/sh
 # The boot test's check, run as a oneshot unit by a real systemd (PID 1 of a User-Mode Linux
-# guest; see tests/tests/it/systemd_units/boot.rs). It installs the bench stack with the real
-# installer, starts fes.target, and exercises ordering, the watchdog, BindsTo and the
+# guest; see tests/tests/it/systemd_units/boot.rs). It installs the bench package
+# (fes-stack-bench, $FES_DEB) with dpkg as an operator would, starts fes.target, and exercises ordering, the watchdog, BindsTo and the
 # driver's ExecStopPost safe stop. Every result is a line "@@SD <key> <value...>" on the
 # console; the host asserts on them. Always ends by powering the guest off.
 exec > /dev/console 2>&1
@@ -29,10 +29,16 @@ if [ -n "$FES_BOOT_DEBUG" ]; then
   chrt -f 99 sh -c 'while sleep 5; do echo "== ps"; ps -eLo pid,tid,cls,rtprio,pcpu,stat,comm --sort=-pcpu | head -12; done' &
 fi
 cd "$FES_REPO" || { say fail "no repository at $FES_REPO"; finish; }
-scripts/install --bench --no-build --from "$FES_BIN_DIR" --no-start --rt-cpus 0 \
-  --housekeeping-cpus 0 > /run/install.log 2>&1
+# The package: postinst makes the user and runtime paths, reloads systemd (which runs the
+# package's placement generator: one CPU here, so CPU 0 for everything) and enables
+# fes.target without starting it.
+dpkg -i "$FES_DEB" > /run/install.log 2>&1
 say install $? "$(tail -n 1 /run/install.log)"
+sed 's/^/install-log: /' /run/install.log
 say enabled "$(systemctl is-enabled fes.target)"
+say active-after-install "$(systemctl is-active fes.target)"
+say rt-core-dropins "$(systemctl show -p DropInPaths --value fes-rt-core.service)"
+say rt-core-cpus "$(systemctl show -p CPUAffinity --value fes-rt-core.service)"
 # The guest's one emulated CPU, shared with rt-core's and the driver's SCHED_FIFO 1 kHz
 # loops, leaves the normal-priority supervisor too little time to reach READY within the
 # rig's TimeoutStartSec=15 (it timed out three times and hit StartLimitBurst on an idle
