@@ -324,10 +324,14 @@ fn maintainer_scripts_enable_but_never_start_or_arm() {
         let prerm_cmds = commands(&prerm);
         assert_eq!(systemctl_verbs(&prerm_cmds), ["stop"], "{}: prerm", v.name);
         assert!(prerm_cmds.iter().any(|l| l == "remove | deconfigure)"));
+        // Every unit by name, so that the stop waits for the driver's safe stop.
         assert!(
-            prerm_cmds.contains(&"systemctl stop fes.target || true".to_owned()),
+            prerm_cmds.contains(&"systemctl stop $units || true".to_owned()),
             "{prerm}"
         );
+        for unit in v.units() {
+            assert!(prerm.contains(unit), "{}: prerm stops {unit}", v.name);
+        }
         let postrm = commands(&v.control_file("postrm").unwrap());
         let verbs = systemctl_verbs(&postrm);
         assert!(
