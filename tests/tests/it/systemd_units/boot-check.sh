@@ -65,7 +65,8 @@ say netns-ids "$(ns_of fes-stim-driver) $(ns_of fes-sim-muscle) $(ns_of fes-rt-c
 
 # Watchdog: stop rt-core's process; systemd must kill it (WatchdogSec=2) and restart it.
 pid=$(prop fes-rt-core MainPID)
-kill -STOP "$pid"
+# MainPID 0 (rt-core not running): `kill 0` would signal this script's own process group.
+[ "${pid:-0}" -gt 0 ] && kill -STOP "$pid" || say fail "rt-core not running before the watchdog check"
 say stopped-rt-core "$pid"
 end=$(($(now) + 30)); while [ "$(prop fes-rt-core NRestarts)" = 0 ] && [ "$(now)" -lt "$end" ]; do sleep 1; done
 wait_for fes-rt-core ActiveState active 30
@@ -86,7 +87,7 @@ say safe-stop-log "$n1"
 systemctl start fes.target
 wait_for fes-rt-core ActiveState active 60 || say fail "rt-core not back within 60 s"
 dpid=$(prop fes-stim-driver MainPID)
-kill -KILL "$dpid"
+[ "${dpid:-0}" -gt 0 ] && kill -KILL "$dpid" || say fail "the driver not running before its SIGKILL"
 say killed-driver "$dpid"
 end=$(($(now) + 30))
 while [ "$(prop fes-stim-driver MainPID)" = "$dpid" ] || [ "$(prop fes-stim-driver ActiveState)" != active ]; do
@@ -94,7 +95,34 @@ while [ "$(prop fes-stim-driver MainPID)" = "$dpid" ] || [ "$(prop fes-stim-driv
 state after-driver-kill
 end=$(($(now) + 30)); while [ "$(safe_stops)" -le "$n1" ] && [ "$(now)" -lt "$end" ]; do sleep 1; done
 say safe-stop-log-2 "$(safe_stops)"
+
+# The package's life cycle. Reinstall (dpkg's upgrade path): the operator's choices stay -
+# fes.target disabled, an edited prescription (the new default goes beside it).
+systemctl disable --quiet fes.target
+echo "# operator's edit" >> /etc/fes/prescription.toml
+dpkg -i "$FES_DEB" > /run/reinstall.log 2>&1
+say reinstall $?
+sed 's/^/reinstall-log: /' /run/reinstall.log
+say enabled-after-reinstall "$(systemctl is-enabled fes.target)"
+say prescription-kept "$(grep -c "operator's edit" /etc/fes/prescription.toml) $(test -f /etc/fes/prescription.toml.dist && echo dist)"
+# Purge: prerm stops the stack (the driver's safe stop runs again), postrm removes the
+# enablement links and runtime directories, keeps the recordings' /var/lib/fes.
+n2=$(safe_stops)
+dpkg --purge fes-stack-bench > /run/purge.log 2>&1
+say purge $?
+sed 's/^/purge-log: /' /run/purge.log
+say after-purge-driver "$(systemctl is-active fes-stim-driver.service)"
+end=$(($(now) + 30)); while [ "$(safe_stops)" -le "$n2" ] && [ "$(now)" -lt "$end" ]; do sleep 1; done
+say safe-stop-log-3 "$(safe_stops)"
+left=""
+for f in /run/fes /etc/fes/rt-core.toml /etc/fes/prescription.toml /usr/bin/rt-core \
+         /usr/lib/systemd/system/fes.target /etc/systemd/system/fes.target.wants; do
+  if [ -e "$f" ]; then left="$left $f"; fi
+done
+say purge-left "${left:-none}"
+say purge-kept "$(test -d /var/lib/fes && echo /var/lib/fes) $(getent passwd fes >/dev/null && echo user-fes)"
 say journal-begin
 journalctl -b --no-pager -o short-monotonic -u fes-rt-core.service -u fes-stim-driver.service | tail -n 60
+cat /run/purge.log
 say journal-end
 finish

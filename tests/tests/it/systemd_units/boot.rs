@@ -244,6 +244,10 @@ fn booted_units_start_in_order_and_stop_safely() {
     let started = Instant::now();
     let console = boot(&run_dir);
     let took = started.elapsed();
+    // FES_BOOT_CONSOLE=FILE keeps the guest's whole console (boot, journal, install logs).
+    if let Some(path) = std::env::var_os("FES_BOOT_CONSOLE") {
+        std::fs::write(path, console.join("\n")).unwrap();
+    }
     let r = Report::parse(&console);
     eprintln!("boot test: guest ran {took:.0?}");
     assert!(
@@ -365,5 +369,21 @@ fn booted_units_start_in_order_and_stop_safely() {
         r.prop("after-driver-kill", "fes-rt-core.service", "ActiveState"),
         "active"
     );
+
+    // The package's life cycle: a reinstall keeps the operator's choices (disabled, an
+    // edited prescription with the new default beside it); a purge stops the stack (the
+    // safe stop runs once more), removes it, keeps the recordings and the user.
+    assert_eq!(r.value("reinstall"), "0", "{r:#?}");
+    assert_eq!(r.value("enabled-after-reinstall"), "disabled", "{r:#?}");
+    assert_eq!(r.value("prescription-kept"), "1 dist", "{r:#?}");
+    assert_eq!(r.value("purge"), "0", "{r:#?}");
+    assert_ne!(r.value("after-purge-driver"), "active", "{r:#?}");
+    let safe_stops_3: u32 = r.value("safe-stop-log-3").trim().parse().unwrap();
+    assert!(
+        safe_stops_3 > safe_stops_2,
+        "no safe stop when the purge stopped the stack: {r:#?}"
+    );
+    assert_eq!(r.value("purge-left"), "none", "{r:#?}");
+    assert_eq!(r.value("purge-kept"), "/var/lib/fes user-fes", "{r:#?}");
     std::fs::remove_dir_all(&run_dir).ok();
 }
