@@ -1,7 +1,7 @@
 //! The system tests, one binary: the test harness itself, interop with python-can and
 //! cantools, the virtual stimulator on vcan and its allocation-free tick, the systemd
-//! units (static checks, and the boot test in a VM), and the latency regression against
-//! the checked-in baseline.
+//! units (static checks, and the boot test in a VM), the Debian packages, and the latency
+//! regression against the checked-in baseline.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod common;
@@ -12,6 +12,7 @@ mod harness;
 mod hostbus;
 mod interop;
 mod latency_regression;
+mod package;
 mod safety_traceability;
 mod stimulator_no_alloc;
 mod stimulator_vcan;

@@ -69,7 +69,7 @@ fn read_units(dir: &Path) -> BTreeMap<String, UnitFile> {
 
 /// Runs `systemd-analyze verify` on every unit in `dir` (the unit search path starts
 /// there); returns (exit status ok, all output).
-fn analyze_verify(dir: &Path) -> (bool, String) {
+pub(crate) fn analyze_verify(dir: &Path) -> (bool, String) {
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .expect("unit directory")
         .map(|e| e.expect("dir entry").path())

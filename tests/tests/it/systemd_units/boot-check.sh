@@ -1,7 +1,7 @@
 #!/bin/sh
 # The boot test's check, run as a oneshot unit by a real systemd (PID 1 of a User-Mode Linux
-# guest; see tests/tests/it/systemd_units/boot.rs). It installs the bench stack with the real
-# installer, starts fes.target, and exercises ordering, the watchdog, BindsTo and the
+# guest; see tests/tests/it/systemd_units/boot.rs). It installs the bench package
+# (fes-stack-bench, $FES_DEB) with dpkg as an operator would, starts fes.target, and exercises ordering, the watchdog, BindsTo and the
 # driver's ExecStopPost safe stop. Every result is a line "@@SD <key> <value...>" on the
 # console; the host asserts on them. Always ends by powering the guest off.
 exec > /dev/console 2>&1
@@ -37,10 +37,16 @@ if [ -n "$FES_BOOT_DEBUG" ]; then
   chrt -f 99 sh -c 'while sleep 5; do echo "== ps"; ps -eLo pid,tid,cls,rtprio,pcpu,stat,comm --sort=-pcpu | head -12; done' &
 fi
 cd "$FES_REPO" || { say fail "no repository at $FES_REPO"; finish; }
-scripts/install --bench --no-build --from "$FES_BIN_DIR" --no-start --rt-cpus 0 \
-  --housekeeping-cpus 0 > /run/install.log 2>&1
+# The package: postinst makes the user and runtime paths, reloads systemd (which runs the
+# package's placement generator: one CPU here, so CPU 0 for everything) and enables
+# fes.target without starting it.
+dpkg -i "$FES_DEB" > /run/install.log 2>&1
 say install $? "$(tail -n 1 /run/install.log)"
+sed 's/^/install-log: /' /run/install.log
 say enabled "$(systemctl is-enabled fes.target)"
+say active-after-install "$(systemctl is-active fes.target)"
+say rt-core-dropins "$(systemctl show -p DropInPaths --value fes-rt-core.service)"
+say rt-core-cpus "$(systemctl show -p CPUAffinity --value fes-rt-core.service)"
 # The guest's one emulated CPU, shared with rt-core's and the driver's SCHED_FIFO 1 kHz
 # loops, starves every normal-priority thread for seconds at a time: the supervisor missed
 # READY within the rig's TimeoutStartSec=15 (three times, then StartLimitBurst), and its
@@ -80,7 +86,8 @@ say netns-ids "$(ns_of fes-stim-driver) $(ns_of fes-sim-muscle) $(ns_of fes-rt-c
 
 # Watchdog: stop rt-core's process; systemd must kill it (WatchdogSec=2) and restart it.
 pid=$(prop fes-rt-core MainPID)
-kill -STOP "$pid"
+# MainPID 0 (rt-core not running): `kill 0` would signal this script's own process group.
+[ "${pid:-0}" -gt 0 ] && kill -STOP "$pid" || say fail "rt-core not running before the watchdog check"
 say stopped-rt-core "$pid"
 end=$(($(now) + 30)); while [ "$(prop fes-rt-core NRestarts)" = 0 ] && [ "$(now)" -lt "$end" ]; do sleep 1; done
 wait_for fes-rt-core ActiveState active 30
@@ -113,5 +120,31 @@ while [ "$(prop fes-stim-driver MainPID)" = "$dpid" ] || [ "$(prop fes-stim-driv
 state after-driver-kill
 end=$(($(now) + 60)); while [ "$(safe_stops)" -le "$n1" ] && [ "$(now)" -lt "$end" ]; do sleep 1; done
 say safe-stop-log-2 "$(safe_stops)"
+
+# The package's life cycle. Reinstall (dpkg's upgrade path): the operator's choices stay -
+# fes.target disabled, an edited prescription (the new default goes beside it).
+systemctl disable --quiet fes.target
+echo "# operator's edit" >> /etc/fes/prescription.toml
+dpkg -i "$FES_DEB" > /run/reinstall.log 2>&1
+say reinstall $?
+sed 's/^/reinstall-log: /' /run/reinstall.log
+say enabled-after-reinstall "$(systemctl is-enabled fes.target)"
+say prescription-kept "$(grep -c "operator's edit" /etc/fes/prescription.toml) $(test -f /etc/fes/prescription.toml.dist && echo dist)"
+# Purge: prerm stops the stack (the driver's safe stop runs again), postrm removes the
+# enablement links and runtime directories, keeps the recordings' /var/lib/fes.
+n2=$(safe_stops)
+dpkg --purge fes-stack-bench > /run/purge.log 2>&1
+say purge $?
+sed 's/^/purge-log: /' /run/purge.log
+say after-purge-driver "$(systemctl is-active fes-stim-driver.service)"
+end=$(($(now) + 30)); while [ "$(safe_stops)" -le "$n2" ] && [ "$(now)" -lt "$end" ]; do sleep 1; done
+say safe-stop-log-3 "$(safe_stops)"
+left=""
+for f in /run/fes /etc/fes/rt-core.toml /etc/fes/prescription.toml /usr/bin/rt-core \
+         /usr/lib/systemd/system/fes.target /etc/systemd/system/fes.target.wants; do
+  if [ -e "$f" ]; then left="$left $f"; fi
+done
+say purge-left "${left:-none}"
+say purge-kept "$(test -d /var/lib/fes && echo /var/lib/fes) $(getent passwd fes >/dev/null && echo user-fes)"
 dump_journal
 finish

@@ -1,10 +1,12 @@
 //! The units booted by a real systemd: PID 1 of a User-Mode Linux guest whose root is the
 //! host's filesystem, mounted **read-only** (hostfs `ro`), with tmpfs over everything the
-//! guest writes (`/run`, `/tmp`, `/var/*`, `/usr/local`, `/home`, `/root`) and a writable
+//! guest writes (`/run`, `/tmp`, `/var/*`, `/usr/local`, `/home`, `/root`), a writable
 //! copy of `/etc` (empty `fstab`, our test target as the only unit in
-//! `/etc/systemd/system`). The check script (`boot-check.sh`, a oneshot unit) runs the
-//! real installer (`scripts/install --bench --no-build`), starts `fes.target` and exercises
-//! ordering, the private bus (the CAN interface only in the namespace the driver and the
+//! `/etc/systemd/system`), and overlays with a tmpfs upper layer over `/usr` and
+//! `/var/lib/dpkg` so that dpkg can install (the host's files stay untouched). The check
+//! script (`boot-check.sh`, a oneshot unit) installs the bench package as an operator
+//! would (`dpkg -i fes-stack-bench_*.deb`, built by [`crate::package::packages`]), starts
+//! `fes.target` and exercises ordering, the private bus (the CAN interface only in the namespace the driver and the
 //! virtual stimulator join), the watchdog, `BindsTo=` and the driver's `ExecStopPost=`
 //! safe stop; it prints
 //! `@@SD` lines that [`booted_units_start_in_order_and_stop_safely`] asserts on.
@@ -21,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::systemd_support::{build_stack, target_dir, workspace_root};
+use crate::systemd_support::{target_dir, workspace_root};
 
 /// Longest a boot may take before the test gives up (the guest is killed).
 const BOOT_TIMEOUT: Duration = Duration::from_secs(900);
@@ -114,8 +116,8 @@ fn uml_kernel() -> PathBuf {
         .expect("linux.uml not in PATH (apt-get install user-mode-linux; scripts/setup does)")
 }
 
-/// The guest's init: read-only host root, tmpfs where the guest writes, CAN modules, then
-/// systemd with the test target as the default unit.
+/// The guest's init: read-only host root, tmpfs where the guest writes, overlays where dpkg
+/// writes, CAN modules, then systemd with the test target as the default unit.
 fn init_script(run_dir: &Path) -> String {
     let modules: Vec<&str> = fes_testkit::vcan::UML_CAN_MODULES.to_vec();
     format!(
@@ -128,12 +130,20 @@ mount -t tmpfs -o mode=755 tmpfs /run
 mkdir -p /run/etc && cp -a /etc/. /run/etc/ && mount --bind /run/etc /etc
 : > /etc/fstab
 rm -rf /etc/systemd/system/* && cp {dir}/fes-boot-test.* /etc/systemd/system/
+# dpkg -i of the package writes /usr (binaries, units, generator) and its database: overlays
+# of the read-only host's with a tmpfs upper layer (hostfs works as a lower layer).
+M={root}/$(uname -r)/kernel
+insmod "$M/fs/overlayfs/overlay.ko"
+mkdir -p /run/ovl/usr/upper /run/ovl/usr/work /run/ovl/dpkg/upper /run/ovl/dpkg/work /run/ovl/dpkg/lower
+mount --bind /var/lib/dpkg /run/ovl/dpkg/lower
+mount -t overlay overlay -o lowerdir=/usr,upperdir=/run/ovl/usr/upper,workdir=/run/ovl/usr/work /usr
 for d in /usr/local /var/lib /var/log /var/tmp /var/cache /tmp /home /root /srv; do
   mount -t tmpfs tmpfs "$d"
 done
+mkdir -p /var/lib/dpkg
+mount -t overlay overlay -o lowerdir=/run/ovl/dpkg/lower,upperdir=/run/ovl/dpkg/upper,workdir=/run/ovl/dpkg/work /var/lib/dpkg
 chmod 1777 /tmp /var/tmp
 mkdir -p /dev/shm && mount -t tmpfs -o mode=1777 shm /dev/shm
-M={root}/$(uname -r)/kernel
 for m in {modules}; do insmod "$M/$m"; done
 exec /lib/systemd/systemd systemd.unit=fes-boot-test.target
 "#,
@@ -143,7 +153,7 @@ exec /lib/systemd/systemd systemd.unit=fes-boot-test.target
     )
 }
 
-fn write_guest_files(run_dir: &Path, bin_dir: &Path) {
+fn write_guest_files(run_dir: &Path, deb: &Path) {
     let repo = workspace_root();
     let check = repo.join("tests/tests/it/systemd_units/boot-check.sh");
     std::fs::create_dir_all(run_dir).unwrap();
@@ -152,9 +162,9 @@ fn write_guest_files(run_dir: &Path, bin_dir: &Path) {
         format!(
             "[Unit]\nDescription=FES boot test (install, start, watchdog, binding)\n\
              After=basic.target\n\n[Service]\nType=oneshot\n\
-             Environment=FES_REPO={} FES_BIN_DIR={}\nExecStart={}\n",
+             Environment=FES_REPO={} FES_DEB={}\nExecStart={}\n",
             repo.display(),
-            bin_dir.display(),
+            deb.display(),
             check.display()
         ),
     )
@@ -220,19 +230,24 @@ fn boot(run_dir: &Path) -> Vec<String> {
     lines
 }
 
-/// Installs with the real installer and boots the bench stack under systemd; asserts the
+/// Installs the bench package with dpkg and boots the stack under systemd; asserts that
+/// the package enabled but did not start it and that its generator placed the units, the
 /// start order, that the watchdog ends a stalled rt-core, that stopping the driver stops
 /// rt-core and the virtual stimulator and sends the safe stop, and that a SIGKILLed driver
 /// gets the safe stop and is restarted (disarmed) while rt-core stays stopped.
 #[test]
 #[ignore = "boots systemd in a UML guest: 3-6 minutes; run explicitly (docs/deployment.md)"]
 fn booted_units_start_in_order_and_stop_safely() {
-    let bins = build_stack();
+    let deb = &crate::package::packages().bench;
     let run_dir = target_dir().join(format!("tmp/systemd-boot-{}", std::process::id()));
-    write_guest_files(&run_dir, &bins);
+    write_guest_files(&run_dir, deb);
     let started = Instant::now();
     let console = boot(&run_dir);
     let took = started.elapsed();
+    // FES_BOOT_CONSOLE=FILE keeps the guest's whole console (boot, journal, install logs).
+    if let Some(path) = std::env::var_os("FES_BOOT_CONSOLE") {
+        std::fs::write(path, console.join("\n")).unwrap();
+    }
     let r = Report::parse(&console);
     eprintln!("boot test: guest ran {took:.0?}; the stack's journal:");
     for line in &r.journal {
@@ -254,6 +269,15 @@ fn booted_units_start_in_order_and_stop_safely() {
         r.value("install")
     );
     assert_eq!(r.value("enabled"), "enabled");
+    // postinst enables, never starts: nothing ran before the check started fes.target.
+    assert_eq!(r.value("active-after-install"), "inactive", "{r:#?}");
+    // The package's generator placed rt-core (the guest has one CPU: CPU 0) in a drop-in.
+    assert!(
+        r.value("rt-core-dropins")
+            .contains("/run/systemd/generator/fes-rt-core.service.d/50-fes-placement.conf"),
+        "{r:#?}"
+    );
+    assert_eq!(r.value("rt-core-cpus"), "0", "{r:#?}");
     // The private bus (issue 19, item 1): the interface only in /run/netns/fes, joined by
     // the driver and the virtual stimulator, not by rt-core (nor the host).
     assert_eq!(r.value("netns-host-iface"), "absent", "{r:#?}");
@@ -348,5 +372,21 @@ fn booted_units_start_in_order_and_stop_safely() {
         r.prop("after-driver-kill", "fes-rt-core.service", "ActiveState"),
         "active"
     );
+
+    // The package's life cycle: a reinstall keeps the operator's choices (disabled, an
+    // edited prescription with the new default beside it); a purge stops the stack (the
+    // safe stop runs once more), removes it, keeps the recordings and the user.
+    assert_eq!(r.value("reinstall"), "0", "{r:#?}");
+    assert_eq!(r.value("enabled-after-reinstall"), "disabled", "{r:#?}");
+    assert_eq!(r.value("prescription-kept"), "1 dist", "{r:#?}");
+    assert_eq!(r.value("purge"), "0", "{r:#?}");
+    assert_ne!(r.value("after-purge-driver"), "active", "{r:#?}");
+    let safe_stops_3: u32 = r.value("safe-stop-log-3").trim().parse().unwrap();
+    assert!(
+        safe_stops_3 > safe_stops_2,
+        "no safe stop when the purge stopped the stack: {r:#?}"
+    );
+    assert_eq!(r.value("purge-left"), "none", "{r:#?}");
+    assert_eq!(r.value("purge-kept"), "/var/lib/fes user-fes", "{r:#?}");
     std::fs::remove_dir_all(&run_dir).ok();
 }
