@@ -229,6 +229,16 @@ pub struct Split {
 }
 
 impl Split {
+    /// The training records of `records`, in split order (indices past the end skipped).
+    pub fn train_of<'a, T>(&'a self, records: &'a [T]) -> impl Iterator<Item = &'a T> {
+        self.train.iter().filter_map(|&i| records.get(i))
+    }
+
+    /// The test records of `records`, in split order (indices past the end skipped).
+    pub fn test_of<'a, T>(&'a self, records: &'a [T]) -> impl Iterator<Item = &'a T> {
+        self.test.iter().filter_map(|&i| records.get(i))
+    }
+
     /// The first `n_train` of `n` records train, the rest test.
     pub fn first(n_train: usize, n: usize) -> Split {
         Split {
@@ -388,20 +398,12 @@ impl DataSet {
 impl DataSet {
     /// The training records, in split order.
     pub fn train(&self) -> impl Iterator<Item = &Record> {
-        self.header
-            .split
-            .train
-            .iter()
-            .filter_map(|&i| self.records.get(i))
+        self.header.split.train_of(&self.records)
     }
 
     /// The test records, in split order.
     pub fn test(&self) -> impl Iterator<Item = &Record> {
-        self.header
-            .split
-            .test
-            .iter()
-            .filter_map(|&i| self.records.get(i))
+        self.header.split.test_of(&self.records)
     }
 
     /// Reads and validates the data set in `dir`.

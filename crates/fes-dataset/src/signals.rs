@@ -224,20 +224,12 @@ impl SignalSet {
 
     /// The training records, in split order.
     pub fn train(&self) -> impl Iterator<Item = &SignalRecord> {
-        self.header
-            .split
-            .train
-            .iter()
-            .filter_map(|&i| self.records.get(i))
+        self.header.split.train_of(&self.records)
     }
 
     /// The test records, in split order.
     pub fn test(&self) -> impl Iterator<Item = &SignalRecord> {
-        self.header
-            .split
-            .test
-            .iter()
-            .filter_map(|&i| self.records.get(i))
+        self.header.split.test_of(&self.records)
     }
 
     /// Index of the input channel `name`.
