@@ -15,7 +15,8 @@
 //!   configuration, starts it over; an EMCY `config_invalid` ends it (refused). The
 //!   stimulator reads back the limits it applied (CONFIG_APPLIED, all pages): limits that
 //!   differ in any field end it too (refused), and no Arm is accepted until the read-back
-//!   equals what was sent (issue 19, item 4).
+//!   equals what was sent (issue 19, item 4). A read-back still incomplete the retry time
+//!   after the confirmation (a lost page) starts the configuration over.
 //! * **mode**: disarmed, armed, or the safe state. Only an Arm command arms (after checking
 //!   its preconditions: see [`crate::fault::ArmRefusal`]); every fault while armed sends NMT
 //!   stop and enters the safe state, which only an Arm command leaves. The driver never
@@ -107,8 +108,8 @@ enum ConfigState {
     Probing { sent_ns: u64 },
     /// CONFIG `id` sent at `sent_ns`; waiting for STATUS to show it.
     Configuring { id: u8, sent_ns: u64 },
-    /// Applied and confirmed.
-    Confirmed { id: u8 },
+    /// Applied and confirmed by STATUS at `at_ns`.
+    Confirmed { id: u8, at_ns: u64 },
     /// Refused by the stimulator.
     Refused,
 }
@@ -248,7 +249,7 @@ impl<T: CanTx> ForwardPath<T> {
     /// The confirmed configuration id, if any.
     pub fn config_id(&self) -> Option<u8> {
         match self.config {
-            ConfigState::Confirmed { id } => Some(id),
+            ConfigState::Confirmed { id, .. } => Some(id),
             _ => None,
         }
     }
@@ -824,12 +825,12 @@ impl<T: CanTx> ForwardPath<T> {
             ConfigState::Configuring { id, .. }
                 if status.config_id == id && status.state == StimState::PreOperational =>
             {
-                self.config = ConfigState::Confirmed { id };
+                self.config = ConfigState::Confirmed { id, at_ns: now_ns };
                 ev.emit(DriverEvent::BringUp(BringUp::ConfigConfirmed {
                     config_id: id,
                 }));
             }
-            ConfigState::Confirmed { id } if status.config_id != id => {
+            ConfigState::Confirmed { id, .. } if status.config_id != id => {
                 self.stimulator_lost(now_ns, ev);
             }
             _ => {}
@@ -840,7 +841,7 @@ impl<T: CanTx> ForwardPath<T> {
     /// differ from the ones sent refuse the configuration.
     fn on_config_applied(&mut self, page: &fes_can::Config, ev: &mut impl EventSink) {
         let id = match self.config {
-            ConfigState::Configuring { id, .. } | ConfigState::Confirmed { id } => id,
+            ConfigState::Configuring { id, .. } | ConfigState::Confirmed { id, .. } => id,
             _ => return,
         };
         if page.config_id != id {
@@ -976,6 +977,17 @@ impl<T: CanTx> ForwardPath<T> {
             match self.config {
                 ConfigState::Probing { sent_ns } | ConfigState::Configuring { sent_ns, .. }
                     if now_ns.saturating_sub(sent_ns) > s.bringup_retry_ns =>
+                {
+                    ev.emit(DriverEvent::BringUp(BringUp::Retry));
+                    self.probe(now_ns, ev);
+                }
+                // Confirmed, but the read-back of the applied limits (CONFIG_APPLIED) is
+                // incomplete: a lost page would otherwise refuse every Arm until a restart.
+                // The configuration starts over with a fresh id, so the stimulator reads
+                // back again.
+                ConfigState::Confirmed { at_ns, .. }
+                    if self.applied.is_none()
+                        && now_ns.saturating_sub(at_ns) > s.bringup_retry_ns =>
                 {
                     ev.emit(DriverEvent::BringUp(BringUp::Retry));
                     self.probe(now_ns, ev);

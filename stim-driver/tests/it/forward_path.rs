@@ -1502,6 +1502,66 @@ fn a_stimulator_that_applies_a_looser_limit_is_refused_at_arm() {
     assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Start)]);
 }
 
+/// A lost CONFIG_APPLIED page must not refuse every Arm until a restart: the retry time
+/// after a confirmation whose read-back is incomplete, the configuration starts over with a
+/// fresh id (NMT enter pre-operational, new CONFIG pages), and a complete read-back of that
+/// attempt arms. Not before the retry time, and not when the read-back was complete.
+#[test]
+fn an_incomplete_read_back_starts_the_configuration_over() {
+    let s = settings();
+    let mut r = Rig::new(s);
+    r.auto_readback = false;
+    r.fp.start(r.now, &mut r.ev);
+    r.advance(MS);
+    r.bus_event(status(StimState::PreOperational, 7));
+    // Only the first CONFIG_APPLIED page arrives.
+    let pages = recording_bus::applied(&s.stim_limits, 8);
+    assert!(pages.len() > 1, "{pages:?}");
+    r.bus_event(pages[0]);
+    r.advance(MS);
+    r.bus_event(status(StimState::PreOperational, 8));
+    assert_eq!(r.fp.config_id(), Some(8));
+    let confirmed_at = r.now;
+    r.bus.clear();
+    r.at(confirmed_at + s.bringup_retry_ns);
+    r.poll();
+    assert!(r.bus.nmt().is_empty(), "not before the retry time");
+    r.at(confirmed_at + s.bringup_retry_ns + 1);
+    r.poll();
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::EnterPreOperational)]);
+    // The second attempt: a fresh id, read back completely this time, arms.
+    r.auto_readback = true;
+    r.advance(MS);
+    r.bus_event(status(StimState::PreOperational, 8));
+    r.advance(MS);
+    r.bus_event(status(StimState::PreOperational, 9));
+    assert_eq!(r.fp.config_id(), Some(9));
+    r.config_id = 9;
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+    // A complete read-back is never retried: disarmed long after, no new probe.
+    r.command(DriverCommandKind::Disarm);
+    r.bus.clear();
+    for _ in 0..3 {
+        r.advance(s.bringup_retry_ns);
+        r.poll();
+    }
+    assert!(
+        !r.bus
+            .nmt()
+            .iter()
+            .any(|(_, c)| *c == NmtCommand::EnterPreOperational),
+        "{:?}",
+        r.bus.nmt()
+    );
+}
+
 /// The driver's interlocks and the limits it would send in CONFIG may not exceed the
 /// prescription (issue 19, item 4): a configuration with any looser limit, or no readable
 /// prescription, is refused at start (`run --check` and a real `run`, exit 1, naming the
