@@ -11,7 +11,8 @@
 //! - the installer keeps the operator's configuration and rejects bad options;
 //! - `notify`: the real rt-core binary against a fake service manager (READY, watchdog
 //!   feeding only while the loop ticks, STOPPING), in one test binary with the above;
-//! - `boot` (`#[ignore]`d, minutes): the units booted by a real systemd in a UML guest.
+//! - `boot` (minutes; its own phase of `scripts/test`): the units booted by a real systemd
+//!   in a UML guest.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod boot;
@@ -578,6 +579,9 @@ fn safety_iceoryx2_and_hardening_settings() {
         }
     }
     assert!(u("fes-rt-core.service").has_word("Service", "RestartPreventExitStatus", "2"));
+    // The rig's watchdog on the pattern generator: a stalled loop is killed within 2 s
+    // (docs/deployment.md). The boot test's guest lengthens it in a test-only drop-in.
+    assert!(u("fes-rt-core.service").is("Service", "WatchdogSec", "2"));
     for s in SERVICES.iter().filter(|s| **s != "fes-can.service") {
         let unit = u(s);
         assert!(unit.is("Service", "User", "fes"), "{s}: User=fes");
