@@ -30,6 +30,10 @@
 //! whitespace. A channel's optional `range` records the physical values that the
 //! normalised 0 and 1 stand for (E.2's normalisation); values themselves must only be
 //! finite.
+//!
+//! Readers for other languages: `python/fes_io.py` (`read_dataset` gives a `SignalSet`)
+//! and `matlab/load_fes_dataset.m`, both dispatching on `schema` and making the same
+//! checks as this reader.
 
 use std::fmt::Write as _;
 use std::fs;
