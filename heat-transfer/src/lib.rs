@@ -48,6 +48,9 @@ pub enum StudyError {
     /// A controller design.
     #[error(transparent)]
     Control(#[from] fes_ident::control::io_design::IoDesignError),
+    /// The experiments' data set could not be written.
+    #[error("writing the data set: {0}")]
+    Dataset(#[from] fes_ident::dataset::WriteError),
     /// A figure could not be drawn or written.
     #[error("{path}: drawing failed: {message}")]
     Figure {
@@ -284,6 +287,16 @@ pub fn records(
 ) -> Result<(Vec<MisoRecord>, Vec<MisoRecord>), StudyError> {
     let set = sim_heat::experiment::dataset(p, seed)?;
     Ok(miso::records(&set, &["alpha", "u"], "y")?)
+}
+
+/// Writes the E.2 experiments for `seed` into `dir` as the `fes-dataset/2` data set the
+/// study identifies from (`sim_heat::experiment::dataset`: inputs `alpha`, `u`, output
+/// `y`, Ts = 50 ms); `dir` must be new or empty. Readers: `fes_dataset::signals`,
+/// `python/fes_io.py`, `matlab/load_fes_dataset.m`; `fes dataset inspect` describes it.
+pub fn write_dataset(p: &HeatParams, seed: u64, dir: &std::path::Path) -> Result<(), StudyError> {
+    let set = sim_heat::experiment::dataset(p, seed)?;
+    set.write(dir, fes_ident::dataset::WriteMode::CreateNew)?;
+    Ok(())
 }
 
 /// E.4.1, eq. E.1: the scheduling vector phi = \[alpha(t-3), u(t-5)\] over 3 x 3
