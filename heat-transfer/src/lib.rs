@@ -63,6 +63,7 @@ pub enum StudyError {
 
 pub mod control;
 pub mod figures;
+pub mod rig;
 
 /// The u -> y delay of eq. E.3 in samples (Table E.1 at mid angles).
 pub const DELAY_U: usize = 5;
