@@ -223,6 +223,9 @@ pub struct Report {
     pub control_process: control::ControlResults,
     /// Anti-reset-windup on the design model (Fig. E.8 at 37 s).
     pub windup: control::Windup,
+    /// E.4.7's design model's gain from the heater power against the process's at
+    /// alpha = 0.1, 0.5, 0.9.
+    pub control_gains: Vec<control::GainCheck>,
 }
 
 fn angle_key(a: f64) -> String {
@@ -505,12 +508,15 @@ pub fn study_with(
             .map(frozen_rows)
             .unwrap_or_default()
     };
-    // E.4.7: the design model sees the channels (u, alpha).
+    // E.4.7: the design model sees the channels (w, alpha), w = u^2 the heater power.
     let swapped: Vec<MisoRecord> = train
         .iter()
         .map(|r| MisoRecord {
             name: r.name.clone(),
-            u: vec![r.u[1].clone(), r.u[0].clone()],
+            u: vec![
+                r.u[1].iter().map(|&v| control::power(v)).collect(),
+                r.u[0].clone(),
+            ],
             y: r.y.clone(),
         })
         .collect();
@@ -549,6 +555,7 @@ pub fn study_with(
         control_changed_plant: cs.changed,
         control_process: cs.process,
         windup: cs.windup,
+        control_gains: cs.gains,
     })
 }
 

@@ -246,6 +246,18 @@ fn print_tables(r: &Report) {
         }
     }
     println!(
+        "\n## E.4.7's design model against the process: steady-state gain over the step {} -> {}\n",
+        STEP.0, STEP.1
+    );
+    println!("| alpha | model dy/dw | process dy/dw | process dy/du |");
+    println!("|---:|---:|---:|---:|");
+    for g in &r.control_gains {
+        println!(
+            "| {:.1} | {:.3} | {:.3} | {:.3} |",
+            g.alpha, g.model, g.process, g.process_voltage
+        );
+    }
+    println!(
         "\n## Anti-reset-windup (LCN, design model, alpha = 0.9): reference {} -> {} (unreachable) -> {}\n",
         WINDUP.0, WINDUP.1, WINDUP.2
     );
