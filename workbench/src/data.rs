@@ -30,7 +30,7 @@ pub enum DataVersionError {
         dir.display(),
         inputs.join(", "),
         outputs.join(", "),
-        ts_s * 1e3,
+        num(ts_s * 1e3),
         dir.display()
     )]
     Signals {
