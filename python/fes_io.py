@@ -36,6 +36,7 @@ import base64
 import json
 import math
 import os
+import re
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -328,6 +329,9 @@ META_V2_REQUIRED = ("schema", "source", "ts_s", "inputs", "outputs", "split", "r
 META_V2_OPTIONAL = ("seed", "parameters", "protocol")
 CHANNEL_FIELDS = ("name", "unit", "range")
 ENTRY_V2_FIELDS = ("file", "kind", "samples")
+# Rust's f64 syntax (what the Rust reader parses): ASCII digits, no `_` separators.
+NUMBER_V2 = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)",
+                       re.IGNORECASE)
 
 
 def _is_number(v):
@@ -459,10 +463,9 @@ def _read_signal_record(path, ts_s, names):
             _fail(path, i, f"{len(fields)} field(s), expected {width} (as the header)")
         values = []
         for name, text in zip(expected, fields):
-            try:
-                v = float(text)
-            except ValueError:
+            if not NUMBER_V2.fullmatch(text):
                 _fail(path, i, f"field `{name}`: `{text}` is not a number")
+            v = float(text)
             if not math.isfinite(v):
                 _fail(path, i, f"field `{name}`: {text} is not finite")
             values.append(v)

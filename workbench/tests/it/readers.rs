@@ -427,6 +427,12 @@ fn violations(root: &Path) -> Vec<(PathBuf, Violation)> {
             true,
         ),
         (
+            "underscore",
+            line(4, |f| f[3] = "1_0".into()),
+            vec![at(4, "field `y`: `1_0` is not a number")],
+            true,
+        ),
+        (
             "not-finite",
             line(4, |f| f[1] = "inf".into()),
             vec![at(4, "field `alpha`: inf is not finite")],
@@ -824,5 +830,5 @@ fn octave_refuses_what_the_rust_reader_refuses() {
         );
         checked += 1;
     }
-    assert_eq!(checked, 24);
+    assert_eq!(checked, 25);
 }
