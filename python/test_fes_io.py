@@ -66,12 +66,79 @@ class DataSetTest(unittest.TestCase):
             meta = os.path.join(d, "dataset.json")
             with open(meta) as f:
                 m = json.load(f)
+            m["schema"] = "fes-dataset/3"
+            with open(meta, "w") as f:
+                json.dump(m, f)
+            with self.assertRaises(fes_io.FormatError) as cm:
+                fes_io.read_dataset(d)
+            self.assertIn('field `schema` is "fes-dataset/3", expected one of "fes-dataset/1", "fes-dataset/2"',
+                          str(cm.exception))
+            # A version-1 data set relabelled as version 2 is read as version 2: refused.
             m["schema"] = "fes-dataset/2"
             with open(meta, "w") as f:
                 json.dump(m, f)
             with self.assertRaises(fes_io.FormatError) as cm:
                 fes_io.read_dataset(d)
-            self.assertIn('field `schema` is "fes-dataset/2", expected "fes-dataset/1"', str(cm.exception))
+            self.assertEqual(str(cm.exception), f"{meta}: missing field `inputs`")
+
+
+class SignalSetTest(unittest.TestCase):
+    """fes-dataset/2: the heat-transfer experiments as sim-heat wrote them."""
+
+    def test_channels_by_name_with_their_time_base(self):
+        e = EXPECT["signals"]
+        ds = fes_io.read_dataset(e["dir"])
+        self.assertIsInstance(ds, fes_io.SignalSet)
+        self.assertEqual(ds.meta["schema"], "fes-dataset/2")
+        self.assertEqual(ds.meta["source"], e["source"])
+        self.assertEqual(ds.meta["seed"], e["seed"])
+        self.assertEqual(ds.meta["split"], e["split"])
+        self.assertEqual(ds.ts_s, e["ts_s"])
+        for frame, channels in ((ds.inputs, e["inputs"]), (ds.outputs, e["outputs"])):
+            self.assertEqual(list(frame["name"]), [c["name"] for c in channels])
+            self.assertEqual(list(frame["unit"]), [c["unit"] for c in channels])
+            self.assertEqual([[lo, hi] for lo, hi in zip(frame["range_lo"], frame["range_hi"])],
+                             [c["range"] for c in channels])
+        names = [c["name"] for c in e["inputs"] + e["outputs"]]
+        self.assertEqual(ds.channels, names)
+        self.assertEqual(list(ds.samples.columns), ["record", "t_s"] + names)
+        self.assertEqual(list(ds.records["file"]), [r["file"] for r in e["records"]])
+        self.assertEqual(list(ds.records["kind"]), [r["kind"] for r in e["records"]])
+        self.assertEqual(list(ds.records["split"]),
+                         ["train" if i in e["split"]["train"] else "test" if i in e["split"]["test"] else ""
+                          for i in range(len(e["records"]))])
+        ranges = {c["name"]: c["range"] for c in e["inputs"] + e["outputs"]}
+        for i, r in enumerate(e["records"]):
+            rec = ds.record(i)
+            self.assertEqual(len(rec), r["samples"])
+            self.assertEqual(ds.records["samples"][i], r["samples"])
+            self.assertEqual(ds.records["t0_s"][i], r["t0_s"])
+            # The writer's times, t0 + k * ts, exactly (shortest round-trip numbers).
+            self.assertEqual(list(rec["t_s"]), [r["t0_s"] + k * e["ts_s"] for k in range(r["samples"])])
+            for name in names:
+                self.assertEqual(list(rec[name]), r["values"][name], f"{r['file']} {name}: exact")
+                lo, hi = ranges[name]
+                phys = ds.physical(name, rec)
+                for v, p in zip(r["values"][name][:50], phys[:50]):
+                    self.assertAlmostEqual(p, lo + v * (hi - lo), places=9)
+        train_records = set(ds.train()["record"])
+        self.assertEqual(train_records, set(e["split"]["train"]))
+        self.assertEqual(set(ds.test()["record"]), set(e["split"]["test"]))
+        self.assertEqual(len(ds.train()) + len(ds.test()), len(ds.samples))
+        with self.assertRaises(KeyError):
+            ds.physical("force")
+
+    def test_every_violation_the_rust_reader_refuses(self):
+        cases = EXPECT["violations"]
+        self.assertEqual(len(cases), 27)
+        for case in cases:
+            with self.subTest(case["name"]):
+                with self.assertRaises(fes_io.FormatError) as cm:
+                    fes_io.read_dataset(case["dir"])
+                message = str(cm.exception)
+                self.assertIn(case["dir"], message)
+                for text in case["expect"]:
+                    self.assertIn(text, message)
 
 
 class RecordingTest(unittest.TestCase):

@@ -1,5 +1,6 @@
 //! The thesis's App. E figures redrawn (PNG), from the same study the tables come from:
 //!
+//! - `fig-e1.png`, `fig-e1.svg`: the rig's sketch ([`crate::rig`]).
 //! - `fig-e2-e3-<experiment>.png`: one record of each E.2 experiment (alpha, u, y).
 //! - `fig-e4.png`: responses to the 4 V step at the five test angles, (a) 15 s, (b) the
 //!   first second (the delays of Table E.1).
@@ -150,6 +151,7 @@ pub fn draw_all(
     state_space: &[SsRow],
 ) -> Result<(), StudyError> {
     std::fs::create_dir_all(dir).map_err(|e| draw_error(dir, e))?;
+    crate::rig::fig_e1(dir)?;
     let ts = p.ts_s;
     // Figs. E.2-E.3: the first record of each experiment.
     let recs = all_records(p, seed)?;

@@ -48,6 +48,9 @@ pub enum StudyError {
     /// A controller design.
     #[error(transparent)]
     Control(#[from] fes_ident::control::io_design::IoDesignError),
+    /// The experiments' data set could not be written.
+    #[error("writing the data set: {0}")]
+    Dataset(#[from] fes_ident::dataset::WriteError),
     /// A figure could not be drawn or written.
     #[error("{path}: drawing failed: {message}")]
     Figure {
@@ -60,6 +63,7 @@ pub enum StudyError {
 
 pub mod control;
 pub mod figures;
+pub mod rig;
 
 /// The u -> y delay of eq. E.3 in samples (Table E.1 at mid angles).
 pub const DELAY_U: usize = 5;
@@ -219,6 +223,9 @@ pub struct Report {
     pub control_process: control::ControlResults,
     /// Anti-reset-windup on the design model (Fig. E.8 at 37 s).
     pub windup: control::Windup,
+    /// E.4.7's design model's gain from the heater power against the process's at
+    /// alpha = 0.1, 0.5, 0.9.
+    pub control_gains: Vec<control::GainCheck>,
 }
 
 fn angle_key(a: f64) -> String {
@@ -284,6 +291,16 @@ pub fn records(
 ) -> Result<(Vec<MisoRecord>, Vec<MisoRecord>), StudyError> {
     let set = sim_heat::experiment::dataset(p, seed)?;
     Ok(miso::records(&set, &["alpha", "u"], "y")?)
+}
+
+/// Writes the E.2 experiments for `seed` into `dir` as the `fes-dataset/2` data set the
+/// study identifies from (`sim_heat::experiment::dataset`: inputs `alpha`, `u`, output
+/// `y`, Ts = 50 ms); `dir` must be new or empty. Readers: `fes_dataset::signals`,
+/// `python/fes_io.py`, `matlab/load_fes_dataset.m`; `fes dataset inspect` describes it.
+pub fn write_dataset(p: &HeatParams, seed: u64, dir: &std::path::Path) -> Result<(), StudyError> {
+    let set = sim_heat::experiment::dataset(p, seed)?;
+    set.write(dir, fes_ident::dataset::WriteMode::CreateNew)?;
+    Ok(())
 }
 
 /// E.4.1, eq. E.1: the scheduling vector phi = \[alpha(t-3), u(t-5)\] over 3 x 3
@@ -491,12 +508,15 @@ pub fn study_with(
             .map(frozen_rows)
             .unwrap_or_default()
     };
-    // E.4.7: the design model sees the channels (u, alpha).
+    // E.4.7: the design model sees the channels (w, alpha), w = u^2 the heater power.
     let swapped: Vec<MisoRecord> = train
         .iter()
         .map(|r| MisoRecord {
             name: r.name.clone(),
-            u: vec![r.u[1].clone(), r.u[0].clone()],
+            u: vec![
+                r.u[1].iter().map(|&v| control::power(v)).collect(),
+                r.u[0].clone(),
+            ],
             y: r.y.clone(),
         })
         .collect();
@@ -535,6 +555,7 @@ pub fn study_with(
         control_changed_plant: cs.changed,
         control_process: cs.process,
         windup: cs.windup,
+        control_gains: cs.gains,
     })
 }
 

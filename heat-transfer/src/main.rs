@@ -1,18 +1,20 @@
-//! `heat-transfer [--seed N] [--json FILE] [--figures DIR]`: thesis App. E on the simulated
-//! air heater, each table printed beside the thesis's; `--json` writes the numbers (issue
-//! 21's keys), `--figures` the figures (PNG).
+//! `heat-transfer [--seed N] [--json FILE] [--figures DIR] [--data DIR]`: thesis App. E on
+//! the simulated air heater, each table printed beside the thesis's; `--json` writes the
+//! numbers (issue 21's keys), `--figures` the figures (PNG), `--data` the E.2 experiments
+//! as a `fes-dataset/2` data set.
 
 use anyhow::{Context, bail};
 use heat_transfer::control::{STEP, WINDUP};
 use heat_transfer::{Report, study_with_figures};
 
-const USAGE: &str = "usage: heat-transfer [--seed N] [--json FILE] [--figures DIR]";
+const USAGE: &str = "usage: heat-transfer [--seed N] [--json FILE] [--figures DIR] [--data DIR]";
 
 /// The command line.
 struct Args {
     seed: u64,
     json: Option<String>,
     figures: Option<String>,
+    data: Option<String>,
 }
 
 /// The command line: `None` for `--help`.
@@ -20,12 +22,14 @@ fn parse() -> anyhow::Result<Option<Args>> {
     let mut seed = 1;
     let mut json = None;
     let mut figures = None;
+    let mut data = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--seed" => seed = args.next().context("--seed needs a value")?.parse()?,
             "--json" => json = Some(args.next().context("--json needs a file")?),
             "--figures" => figures = Some(args.next().context("--figures needs a directory")?),
+            "--data" => data = Some(args.next().context("--data needs a directory")?),
             "-h" | "--help" => return Ok(None),
             other => bail!("unknown argument `{other}`"),
         }
@@ -34,6 +38,7 @@ fn parse() -> anyhow::Result<Option<Args>> {
         seed,
         json,
         figures,
+        data,
     }))
 }
 
@@ -43,6 +48,7 @@ fn main() -> anyhow::Result<()> {
         seed,
         json,
         figures,
+        data,
     } = match parse() {
         Ok(Some(a)) => a,
         Ok(None) => {
@@ -54,6 +60,11 @@ fn main() -> anyhow::Result<()> {
             std::process::exit(2);
         }
     };
+    if let Some(dir) = &data {
+        heat_transfer::write_dataset(&sim_heat::HeatParams::default(), seed, dir.as_ref())
+            .with_context(|| format!("--data {dir}"))?;
+        println!("wrote the E.2 experiments (fes-dataset/2, seed {seed}) to {dir}");
+    }
     let t0 = std::time::Instant::now();
     let report = study_with_figures(seed, figures.as_deref().map(std::path::Path::new))?;
     print_tables(&report);
@@ -233,6 +244,18 @@ fn print_tables(r: &Report) {
                 );
             }
         }
+    }
+    println!(
+        "\n## E.4.7's design model against the process: steady-state gain over the step {} -> {}\n",
+        STEP.0, STEP.1
+    );
+    println!("| alpha | model dy/dw | process dy/dw | process dy/du |");
+    println!("|---:|---:|---:|---:|");
+    for g in &r.control_gains {
+        println!(
+            "| {:.1} | {:.3} | {:.3} | {:.3} |",
+            g.alpha, g.model, g.process, g.process_voltage
+        );
     }
     println!(
         "\n## Anti-reset-windup (LCN, design model, alpha = 0.9): reference {} -> {} (unreachable) -> {}\n",

@@ -9,6 +9,7 @@ pub mod baseline;
 pub mod bench;
 pub mod canlog;
 pub mod cft;
+pub mod data;
 pub mod plots;
 pub mod simulation;
 pub mod summary;

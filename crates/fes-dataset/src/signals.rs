@@ -25,10 +25,15 @@
 //! ```
 //!
 //! Each record file's header is `t_s` followed by the input names and then the output
-//! names, in the order of `inputs` and `outputs`; times are uniform steps of `ts_s` from
-//! any start. Channel names are unique, non-empty and free of `,` and whitespace. A
-//! channel's optional `range` records the physical values that the normalised 0 and 1
-//! stand for (E.2's normalisation); values themselves must only be finite.
+//! names, in the order of `inputs` and `outputs`; times are finite, uniform steps of
+//! `ts_s` from any start. Channel names are unique, non-empty and free of `,` and
+//! whitespace. A channel's optional `range` records the physical values that the
+//! normalised 0 and 1 stand for (E.2's normalisation); values themselves must only be
+//! finite.
+//!
+//! Readers for other languages: `python/fes_io.py` (`read_dataset` gives a `SignalSet`)
+//! and `matlab/load_fes_dataset.m`, both dispatching on `schema` and making the same
+//! checks as this reader.
 
 use std::fmt::Write as _;
 use std::fs;
@@ -554,6 +559,14 @@ fn parse_csv(
             values.push(v);
         }
         let t = values[0];
+        if !t.is_finite() {
+            return Err(FormatError::Value {
+                path: path.to_path_buf(),
+                line,
+                field: "t_s",
+                problem: format!("{t} is not finite"),
+            });
+        }
         if let Some(p) = previous {
             let step = t - p;
             if (step - h.ts_s).abs() > crate::TIME_STEP_TOLERANCE * h.ts_s {

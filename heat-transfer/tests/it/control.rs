@@ -1,6 +1,6 @@
 //! Acceptance of issue 21 for E.4.7 (Fig. E.8a) on seed 1: the LCN has no steady-state
 //! error, overshoots by at most 2 % and rises within 15 % of the scheduled rise time at
-//! alpha = 0.1, 0.5, 0.9 on its design model (and within 25 % on the simulated process);
+//! alpha = 0.1, 0.5, 0.9 on its design model and on the simulated process;
 //! the linear controller designed at alpha = 0.5 meets its specification there only and
 //! overshoots by more than 5 % at the small valve angle.
 
@@ -23,14 +23,16 @@ fn lcn_meets_the_specification_at_every_angle() {
     let r = report();
     println!("{:#?}\n{:#?}", r.control, r.control_process);
     meets_spec(&r.control.lcn, 0.15);
-    // On the process the model's error shows: the rise times are within 25 %.
-    meets_spec(&r.control_process.lcn, 0.25);
+    // On the process too: the controllers invert the heater's u^2, so the model's gain is
+    // the process's at every voltage (with the voltage as the model's input it rose 24 %
+    // slow nearly closed).
+    meets_spec(&r.control_process.lcn, 0.15);
 }
 
 #[test]
 fn linear_controller_meets_it_only_where_it_was_designed() {
-    // Tolerances as for the LCN: 15 % on the design model, 25 % on the process.
-    for (c, tol) in [(&report().control, 0.15), (&report().control_process, 0.25)] {
+    // Tolerances as for the LCN: 15 % on the design model and on the process.
+    for (c, tol) in [(&report().control, 0.15), (&report().control_process, 0.15)] {
         let l = &c.linear;
         let off = |s: &heat_transfer::control::StepResult| (s.rise_s / s.rise_target_s - 1.0).abs();
         assert!(
@@ -50,8 +52,11 @@ fn linear_controller_meets_it_only_where_it_was_designed() {
         );
         assert!(l.small.steady_error < 1e-3 && l.large.steady_error < 1e-3);
     }
-    // Fig. E.8(a): the linear controller overshoots at the small valve angle.
+    // Fig. E.8(a): the linear controller overshoots at the small valve angle, on the
+    // design model and on the process.
     let small = &report().control.linear.small;
+    assert!(small.overshoot_pct > 5.0, "{small:?}");
+    let small = &report().control_process.linear.small;
     assert!(small.overshoot_pct > 5.0, "{small:?}");
 }
 
@@ -64,4 +69,17 @@ fn anti_reset_windup_removes_the_wind_up() {
     println!("{w:?}");
     assert!(w.with_s < 2.0, "{w:?}");
     assert!(w.without_s > 5.0 * w.with_s, "{w:?}");
+}
+
+/// Why the LCN meets its specification on the process: the design model's gain from the
+/// heater power is the process's at every angle (within 5 %). (A model in the voltage had
+/// 0.776 nearly closed against the process's 0.482 over the same step.)
+#[test]
+fn design_model_gain_is_the_process_gain_at_every_angle() {
+    let g = &report().control_gains;
+    println!("{g:#?}");
+    assert_eq!(g.len(), 3);
+    for c in g {
+        assert!((c.model / c.process - 1.0).abs() < 0.05, "{c:?}");
+    }
 }

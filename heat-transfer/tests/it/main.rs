@@ -2,5 +2,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod control;
+mod dataset;
 mod figures;
 mod identification;

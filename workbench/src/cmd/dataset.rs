@@ -1,7 +1,8 @@
 //! `fes dataset`: data sets from elsewhere. `fes dataset import` turns a table of force and
 //! stimulation recorded on another rig (any rate, units, column names and record layout)
 //! into a `fes-dataset/1` directory (`fes_dataset::import` does the work; this is its
-//! command line).
+//! command line). `fes dataset inspect` describes a data set of either version
+//! (`workbench::data::describe`).
 
 use std::path::PathBuf;
 
@@ -25,7 +26,17 @@ pub enum Command {
     /// Import a CSV (or whitespace-separated) table of force and stimulation into a data
     /// set: columns mapped, force scaled, resampled to the 1 ms grid, records and split.
     #[command(after_long_help = IMPORT_HELP)]
-    Import(ImportArgs),
+    Import(Box<ImportArgs>),
+    /// Describe a data set of either version (fes-dataset/1: pulses and force;
+    /// fes-dataset/2: named continuous channels): period, records, split, channels.
+    Inspect(InspectArgs),
+}
+
+/// `fes dataset inspect` arguments.
+#[derive(Debug, clap::Args)]
+pub struct InspectArgs {
+    /// The data-set directory.
+    pub dir: PathBuf,
 }
 
 const IMPORT_HELP: &str = "\
@@ -253,7 +264,13 @@ impl ImportArgs {
 /// Runs `fes dataset`.
 pub fn run(args: Args) -> Result<()> {
     match args.command {
-        Command::Import(a) => run_import(a),
+        Command::Import(a) => run_import(*a),
+        Command::Inspect(a) => {
+            let text = workbench::data::describe(&a.dir)
+                .with_context(|| format!("cannot read data set {}", a.dir.display()))?;
+            print!("{text}");
+            Ok(())
+        }
     }
 }
 

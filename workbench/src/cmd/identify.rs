@@ -192,8 +192,10 @@ impl FitArgs {
     }
 }
 
-/// Loads a data set with a message naming the directory.
+/// Loads a data set with a message naming the directory; a `fes-dataset/2` data set is
+/// refused saying what reads it ([`workbench::data::require_pulses`]).
 pub fn load_records(dir: &Path) -> Result<RecordSet> {
+    workbench::data::require_pulses(dir)?;
     RecordSet::load(dir).with_context(|| format!("cannot use data set {}", dir.display()))
 }
 

@@ -88,8 +88,10 @@ impl Data {
 
 /// Reads and validates a data set (`fes_dataset`: every record finite, at least two
 /// records, a non-empty train and test split) and checks its sampling period against the
-/// model's.
+/// model's; a `fes-dataset/2` data set is refused saying what reads it
+/// ([`workbench::data::require_pulses`]).
 pub fn open_data(dir: &Path, model_ts: f64) -> Result<Data> {
+    workbench::data::require_pulses(dir)?;
     let ds = DataSet::read(dir).with_context(|| format!("data set {}", dir.display()))?;
     let ts = ds.header.ts_s;
     if ((ts - model_ts) / model_ts).abs() > 1e-9 {

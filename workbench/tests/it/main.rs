@@ -13,6 +13,7 @@ mod analysis_design;
 mod analysis_modify;
 mod analysis_osp;
 mod dataset_import_cli;
+mod dataset_v2_cli;
 mod fault_injection;
 mod ident_cli;
 mod lcn_targets;

@@ -114,3 +114,32 @@ fn signal_files_are_checked_against_the_header() {
         .to_string();
     assert!(e.contains("outputs[0].name"), "{e}");
 }
+
+#[test]
+fn a_time_that_is_not_finite_is_refused() {
+    // `NaN` parses as a number and fails every comparison, so the step check alone let a
+    // time of NaN (and every time after it) through.
+    let dir = Scratch::new("signals-nan-time");
+    let set = heat_like();
+    set.write(dir.path(), WriteMode::CreateNew).unwrap();
+    let path = dir.join("r0.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, text.replacen("\n0.1,", "\nNaN,", 1)).unwrap();
+    let e = SignalSet::read(dir.path()).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ReadError::Format(FormatError::Value {
+                line: 4,
+                field: "t_s",
+                ..
+            })
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .ends_with("r0.csv:4: field `t_s`: NaN is not finite"),
+        "{e}"
+    );
+}
