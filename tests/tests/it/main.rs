@@ -1,6 +1,7 @@
 //! The system tests, one binary: the test harness itself, interop with python-can and
-//! cantools, the virtual stimulator on vcan and its allocation-free tick, the systemd
-//! units (static checks, and the boot test in a VM), the Debian packages, and the latency
+//! cantools, pyScienceMode as a peer of the ScienceMode 2 codec, the virtual stimulator on
+//! vcan and its allocation-free tick, the systemd units (static checks, and the boot test
+//! in a VM), the Debian packages, and the latency
 //! regression against the checked-in baseline.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
@@ -14,6 +15,7 @@ mod interop;
 mod latency_regression;
 mod package;
 mod safety_traceability;
+mod sciencemode_peer;
 mod stimulator_no_alloc;
 mod stimulator_vcan;
 mod systemd_units;
