@@ -144,8 +144,9 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
 }
 
 /// Checks the channel list pulses: channel 1 every 50 ms (in multiples: a paused cycle has
-/// no pulse), each followed by channel 2's doublet 2 ms and 4 ms later; channel 1's with
-/// `width`, currents as given, applied to the muscle; channel 2's logged only.
+/// no pulse), each followed by channel 2's doublet 2 ms and 4 ms later (the last cycle's
+/// may be cut short by the stop or the watchdog); channel 1's 200 us, applied to the
+/// muscle, channel 2's 100 us at 10 mA, logged only. Returns channel 1's currents.
 fn check_channel_list(rows: &[&Row]) -> Vec<u8> {
     let ch1: Vec<&&Row> = rows.iter().filter(|r| r.channel == 1).collect();
     assert!(!ch1.is_empty(), "no channel 1 pulse: {rows:#?}");
@@ -158,22 +159,31 @@ fn check_channel_list(rows: &[&Row]) -> Vec<u8> {
             w[1].t_ms
         );
     }
-    for r in &ch1 {
+    let doublet_pulse = |r: &Row, dt: u64| {
+        rows.iter().any(|q| {
+            q.channel == 2 && q.t_ms == r.t_ms + dt && q.width_us == 100 && q.current_ma == 10
+        })
+    };
+    for (i, r) in ch1.iter().enumerate() {
         assert_eq!((r.width_us, r.applied), (200, true), "{r:?}");
-        for dt in [2, 4] {
-            assert!(
-                rows.iter().any(|q| q.channel == 2
-                    && q.t_ms == r.t_ms + dt
-                    && q.width_us == 100
-                    && q.current_ma == 10
-                    && !q.applied),
-                "no channel 2 pulse {dt} ms after {r:?}"
-            );
-        }
+        let last = i + 1 == ch1.len();
+        let first = doublet_pulse(r, 2);
+        let second = doublet_pulse(r, 4);
+        let whole_or_cut = match (first, second) {
+            (true, true) => true,
+            // The stop or the watchdog came during the last cycle: a prefix of the doublet.
+            (true, false) | (false, false) => last,
+            (false, true) => false,
+        };
+        assert!(
+            whole_or_cut,
+            "channel 2's doublet after {r:?}: {first} {second}"
+        );
     }
-    assert_eq!(
-        rows.iter().filter(|r| r.channel == 2).count(),
-        2 * ch1.len(),
+    let ch2: Vec<&&Row> = rows.iter().filter(|r| r.channel == 2).collect();
+    assert!(ch2.iter().all(|r| !r.applied), "{ch2:#?}");
+    assert!(
+        ch2.len() <= 2 * ch1.len() && ch2.len() >= 2 * ch1.len() - 2,
         "{rows:#?}"
     );
     ch1.iter().map(|r| r.current_ma).collect()
@@ -188,10 +198,12 @@ fn pysciencemode_drives_the_virtual_rehastim2_through_its_pty() {
         run.client,
         run.stdout
     );
+    // pyScienceMode prints "thread started" (no newline) from its ack thread, which may
+    // land in front of a step's line.
     let steps: Vec<serde_json::Value> = run
         .stdout
         .lines()
-        .filter(|l| l.starts_with('{'))
+        .filter_map(|l| l.find('{').map(|i| &l[i..]))
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     let names: Vec<&str> = steps.iter().map(|v| v["what"].as_str().unwrap()).collect();
@@ -250,7 +262,8 @@ fn pysciencemode_drives_the_virtual_rehastim2_through_its_pty() {
     let n20 = currents.iter().filter(|&&c| c == 20).count();
     let n30 = currents.iter().filter(|&&c| c == 30).count();
     assert_eq!(n20 + n30, currents.len(), "{currents:?}");
-    assert!(n20 >= 5 && n30 >= 3, "{currents:?}");
+    // (At least a few of each: the device's ticks may fall behind a loaded host's clock.)
+    assert!(n20 >= 3 && n30 >= 2, "{currents:?}");
     assert!(currents.is_sorted(), "{currents:?}");
     // Then stop: the three single pulses come after the last channel list pulse.
     assert_eq!(singles.len(), 3, "{singles:#?}");
@@ -286,7 +299,7 @@ fn the_device_watchdog_stops_stimulation_when_the_pysciencemode_host_dies() {
     // It stimulated (at 20 mA) until the watchdog, and not after.
     let currents = check_channel_list(&pulses);
     assert!(
-        currents.iter().all(|&c| c == 20) && currents.len() >= 5,
+        currents.iter().all(|&c| c == 20) && currents.len() >= 3,
         "{currents:?}"
     );
     let last = pulses.iter().map(|r| r.t_ms).max().unwrap();
@@ -294,10 +307,10 @@ fn the_device_watchdog_stops_stimulation_when_the_pysciencemode_host_dies() {
         last < watchdog[0].t_ms,
         "pulse at {last} ms after the watchdog"
     );
-    // The silence began at the host's last packet: between 1.0 s and 1.1 s before the
-    // watchdog fired, so the last pulse lies within 1.1 s of it.
+    // Channel list mode ran on through the silence, right up to the watchdog: the last
+    // pulse is at most one 50 ms interval before it.
     assert!(
-        watchdog[0].t_ms - last <= 1100,
+        watchdog[0].t_ms - last <= 50,
         "{last} .. {}",
         watchdog[0].t_ms
     );
