@@ -76,8 +76,19 @@ pub fn peer_python() -> PathBuf {
             }
             // Built beside, then moved into place: a run killed half-way leaves no venv that
             // looks finished. (`python -m pip` works from the moved venv; its scripts would not.)
-            let building = dir.with_extension(format!("building-{}", std::process::id()));
+            let building = dir.with_file_name(format!(
+                "pysciencemode-{PYSCIENCEMODE_VERSION}-venv.building-{}",
+                std::process::id()
+            ));
             let _ = std::fs::remove_dir_all(&building);
+            // A failed build leaves nothing behind.
+            struct Remove<'a>(&'a Path);
+            impl Drop for Remove<'_> {
+                fn drop(&mut self) {
+                    let _ = std::fs::remove_dir_all(self.0);
+                }
+            }
+            let _cleanup = Remove(&building);
             run(
                 Command::new("python3").args(["-m", "venv"]).arg(&building),
                 "creating a Python virtual environment (python3 -m venv)",
