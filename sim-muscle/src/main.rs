@@ -60,7 +60,23 @@ enum Command {
     /// Run the virtual stimulator with this muscle on a CAN bus (FORCE every 1 ms).
     #[command(long_about = STIMULATOR_HELP, allow_negative_numbers = true)]
     Stimulator(StimulatorCmd),
+    /// Run a virtual Hasomed RehaStim 2 (ScienceMode 2) with this muscle on a pseudo-terminal.
+    #[command(long_about = REHASTIM2_HELP)]
+    Rehastim2(Rehastim2Cmd),
 }
+
+const REHASTIM2_HELP: &str = "\
+Run a virtual Hasomed RehaStim 2 on a pseudo-terminal: the device side of ScienceMode 2
+(docs/sciencemode.md) driving this muscle on one channel. Announces itself with Init until
+the host answers, then serves GetStimulationMode, channel list mode (init, start / update,
+stop) and single pulses within the device's limits (current 0..=126 mA, pulse width 0 or
+20..=500 us, main interval 8..=1025 ms), answering out-of-range values with a parameter
+error. Its watchdog stops channel list mode when the host sends nothing for --watchdog-ms.
+Stops on SIGINT/SIGTERM.
+
+The host opens the --pty-link path as it would /dev/ttyUSB0, e.g. with pyScienceMode:
+  sim-muscle rehastim2 --pty-link /tmp/rehastim2 --pulse-log /tmp/pulses.csv --preset fast
+  python3 -c 'from pysciencemode import Rehastim2; Rehastim2(\"/tmp/rehastim2\")'";
 
 const STIMULATOR_HELP: &str = "\
 Run the virtual stimulator on a CAN interface: the stimulator side of the FES protocol
@@ -642,6 +658,20 @@ fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
     sim_muscle::stimulator::run(args.stimulator, plant)
 }
 
+#[derive(Args)]
+struct Rehastim2Cmd {
+    #[command(flatten)]
+    muscle: MuscleArgs,
+    #[command(flatten)]
+    device: sim_muscle::stimulator::rehastim2_pty::Rehastim2Args,
+}
+
+fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
+    rt_core::rt::panic::install("sim-muscle rehastim2");
+    let chosen = choose_plant(&args.muscle, 1e-3, |_| Ok(()))?;
+    sim_muscle::stimulator::run_rehastim2(args.device, chosen.plant)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -649,6 +679,7 @@ fn main() -> ExitCode {
         Command::Record(a) => record_cmd(a),
         Command::Plot(a) => plot_cmd(a),
         Command::Stimulator(a) => stimulator_cmd(a),
+        Command::Rehastim2(a) => rehastim2_cmd(a),
     };
     match result {
         Ok(()) => Exit::Done.into(),

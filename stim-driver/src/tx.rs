@@ -135,7 +135,7 @@ impl CanTx for SocketTx {
 
 /// Calls `write` (one attempt; `Err(errno)` on failure) until it succeeds, retrying a full
 /// transmit queue (`ENOBUFS`, `EAGAIN`) every `retry.interval_ns` within `retry.budget_ns`.
-fn write_with_retry(
+pub(crate) fn write_with_retry(
     retry: &RetryPolicy,
     mut write: impl FnMut() -> Result<(), i32>,
 ) -> Result<TxDone, TxError> {

@@ -7,10 +7,13 @@
 //! * [`interlock`], [`watchdog`], [`outbox`]: its parts;
 //! * `socket_loop`: the SocketCAN adapter on a 1 ms absolute-time loop;
 //! * `clock`: the loop's only timing primitives;
-//! * [`test_plant`]: a deterministic plant for protocol tests.
+//! * [`test_plant`]: a deterministic plant for protocol tests;
+//! * [`rehastim2`], [`rehastim2_pty`]: a virtual Hasomed RehaStim 2 speaking ScienceMode 2
+//!   on a pseudo-terminal (`docs/sciencemode.md`), on the same plant, watchdog and clock.
 //!
 //! Entry points: [`run`] (what `sim-muscle stimulator` calls; SIGINT/SIGTERM stop it) and
-//! [`run_until`] (the same with a caller-owned stop flag, for tests and embedding).
+//! [`run_until`] (the same with a caller-owned stop flag, for tests and embedding);
+//! [`run_rehastim2`] and [`rehastim2_pty::run_rehastim2_until`] for the RehaStim 2.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -26,6 +29,8 @@ pub mod machine;
 pub mod outbox;
 pub mod pending;
 mod record;
+pub mod rehastim2;
+pub mod rehastim2_pty;
 mod socket_loop;
 pub mod test_plant;
 pub mod watchdog;
@@ -190,6 +195,26 @@ fn install_signal_handlers() -> anyhow::Result<()> {
 pub fn run(args: StimulatorArgs, plant: Box<dyn MusclePlant>) -> anyhow::Result<()> {
     install_signal_handlers()?;
     run_until(args, plant, &SIGNALLED).map(|_| ())
+}
+
+/// Runs the virtual RehaStim 2 on a pseudo-terminal until SIGINT or SIGTERM (or
+/// `--duration-s`), with `plant` as the muscle under its muscle channel.
+pub fn run_rehastim2(
+    args: rehastim2_pty::Rehastim2Args,
+    mut plant: Box<dyn MusclePlant>,
+) -> anyhow::Result<()> {
+    install_signal_handlers()?;
+    rt_core::rt::logging::init("sim-muscle");
+    let summary = rehastim2_pty::run_rehastim2_until(&args, plant.as_mut(), &SIGNALLED)?;
+    tracing::info!(
+        "virtual RehaStim 2 stopped: {} ticks, {} packets, {} bad, {} pulses, {} answer bytes dropped",
+        summary.ticks,
+        summary.packets_rx,
+        summary.bad_packets,
+        summary.pulses,
+        summary.tx_dropped
+    );
+    Ok(())
 }
 
 /// [`run`] with a caller-owned stop flag instead of signal handlers.

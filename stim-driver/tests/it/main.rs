@@ -1,6 +1,7 @@
 //! stim-driver's integration tests, one binary: the forward path against a recording bus
 //! and on the host bus (interlocks, watchdog, arming, trips), and the property tests of the
-//! forward path and the interlocks.
+//! forward path and the interlocks; the ScienceMode transmit side against the virtual
+//! RehaStim 2.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 #[path = "support/on_bus.rs"]
@@ -11,3 +12,4 @@ mod recording_bus;
 mod forward_path;
 mod forward_props;
 mod interlock_props;
+mod serial_device;

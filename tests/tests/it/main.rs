@@ -1,7 +1,8 @@
 //! The system tests, one binary: the test harness itself, interop with python-can and
-//! cantools, the virtual stimulator on vcan and its allocation-free tick, the systemd
-//! units (static checks, and the boot test in a VM), the Debian packages, and the latency
-//! regression against the checked-in baseline.
+//! cantools, pyScienceMode as a peer of the ScienceMode 2 codec and as the host of the
+//! virtual RehaStim 2 on a pty, the virtual stimulator on vcan and its allocation-free
+//! tick, the systemd units (static checks, and the boot test in a VM), the Debian
+//! packages, and the latency regression against the checked-in baseline.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod common;
@@ -13,7 +14,9 @@ mod hostbus;
 mod interop;
 mod latency_regression;
 mod package;
+mod rehastim2_pty;
 mod safety_traceability;
+mod sciencemode_peer;
 mod stimulator_no_alloc;
 mod stimulator_vcan;
 mod systemd_units;

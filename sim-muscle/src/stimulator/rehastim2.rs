@@ -1,0 +1,692 @@
+//! A virtual Hasomed RehaStim 2: the device side of ScienceMode 2 (`fes-sciencemode`,
+//! `docs/sciencemode.md`) as a pure state machine, driven by a 1 ms tick like the CAN
+//! stimulator ([`super::machine`]) and applying its pulses to the same [`MusclePlant`].
+//!
+//! What it does, as the device does:
+//!
+//! * announces itself with Init (protocol version 1) every [`Rehastim2Settings::init_period_ms`]
+//!   until the host answers InitAck; before that it ignores every other command;
+//! * answers GetStimulationMode, InitChannelListMode, StartChannelListMode (start or update),
+//!   StopChannelListMode and SinglePulse with their acknowledgements, refusing values
+//!   outside the device's range (`fes_sciencemode::limits`) with a parameter error and
+//!   commands in the wrong mode with a wrong-mode error;
+//! * in channel list mode, fires each active channel's pulse (or doublet, triplet) every
+//!   main interval, low-frequency channels every (factor + 1)-th interval, channels and
+//!   repeated pulses the inter-pulse interval apart;
+//! * its watchdog: when the host sends nothing for [`Rehastim2Settings::watchdog_ms`],
+//!   channel list mode stops (back to start mode, the list discarded).
+//!
+//! Every delivered pulse and every watchdog expiry goes to the [`Event`] log. The plant is
+//! the muscle under one channel ([`Rehastim2Settings::muscle_channel`]); pulses on the
+//! others are logged only. At most one pulse per 1 ms step reaches the plant; a second one
+//! due in the same step waits for the next.
+
+use std::collections::VecDeque;
+
+use fes_sciencemode::limits::{self, effective_width_us};
+use fes_sciencemode::{
+    AckResult, ChannelListInit, ChannelListUpdate, DecodeError, MAX_PACKET_LEN, Message,
+    PROTOCOL_VERSION, Packet, StimulationMode,
+};
+
+use super::watchdog::HeartbeatWatchdog;
+use crate::plant::{self, MusclePlant};
+
+/// The tick period, ns.
+pub const TICK_NS: u64 = 1_000_000;
+
+/// The virtual device's settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rehastim2Settings {
+    /// Silence from the host after which channel list mode stops, ms.
+    pub watchdog_ms: u16,
+    /// Period of the Init announcement until the host answers, ms.
+    pub init_period_ms: u16,
+    /// The channel (1..=8) whose muscle the plant models.
+    pub muscle_channel: u8,
+}
+
+impl Rehastim2Settings {
+    /// The device's defaults: 1 s watchdog, Init every 100 ms, the muscle on channel 1.
+    pub const DEFAULT: Rehastim2Settings = Rehastim2Settings {
+        watchdog_ms: 1000,
+        init_period_ms: 100,
+        muscle_channel: 1,
+    };
+}
+
+/// Why a pulse was fired.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PulseSource {
+    /// A SinglePulse command.
+    Single,
+    /// Channel list mode.
+    ChannelList,
+}
+
+/// What the device did, for its log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    /// A pulse left the device.
+    Pulse {
+        /// Tick of delivery (ms since the device started).
+        tick: u64,
+        /// Channel, 1..=8.
+        channel: u8,
+        /// Width as generated, us.
+        width_us: u16,
+        /// Current, mA.
+        current_ma: u8,
+        /// Why.
+        source: PulseSource,
+        /// Whether it reached the plant (the muscle's channel).
+        applied: bool,
+    },
+    /// The host fell silent: channel list mode stopped.
+    WatchdogExpired {
+        /// Tick of expiry.
+        tick: u64,
+        /// Silence, ms.
+        silent_ms: u64,
+    },
+    /// A packet from the host could not be decoded.
+    BadPacket {
+        /// Tick of arrival.
+        tick: u64,
+        /// Why.
+        error: DecodeError,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Scheduled {
+    tick: u64,
+    channel: u8,
+    width_us: u16,
+    current_ma: u8,
+    source: PulseSource,
+}
+
+/// The virtual RehaStim 2.
+#[derive(Debug)]
+pub struct Rehastim2 {
+    settings: Rehastim2Settings,
+    connected: bool,
+    mode: StimulationMode,
+    init: Option<ChannelListInit>,
+    list: Option<ChannelListUpdate>,
+    /// Tick of the next main-interval cycle (channel list mode running).
+    next_cycle_tick: u64,
+    /// Index of the next cycle, for the low-frequency channels.
+    cycle: u64,
+    /// Sub-millisecond remainder of the cycle start, us (intervals are multiples of 0.5 ms).
+    cycle_phase_us: u64,
+    scheduled: VecDeque<Scheduled>,
+    watchdog: HeartbeatWatchdog,
+    next_init_tick: u64,
+    init_number: u8,
+    tick: u64,
+    events: Vec<Event>,
+    force_n: f64,
+}
+
+impl Rehastim2 {
+    /// A device just switched on at tick 0.
+    pub fn new(settings: Rehastim2Settings) -> Self {
+        Rehastim2 {
+            settings,
+            connected: false,
+            mode: StimulationMode::Start,
+            init: None,
+            list: None,
+            next_cycle_tick: 0,
+            cycle: 0,
+            cycle_phase_us: 0,
+            scheduled: VecDeque::with_capacity(64),
+            watchdog: HeartbeatWatchdog::new(settings.watchdog_ms, 0),
+            next_init_tick: 0,
+            init_number: 0,
+            tick: 0,
+            events: Vec::with_capacity(1024),
+            force_n: 0.0,
+        }
+    }
+
+    /// Whether the host has answered Init.
+    pub const fn connected(&self) -> bool {
+        self.connected
+    }
+
+    /// The stimulation mode.
+    pub const fn mode(&self) -> StimulationMode {
+        self.mode
+    }
+
+    /// The force at the end of the last tick, N.
+    pub const fn force_n(&self) -> f64 {
+        self.force_n
+    }
+
+    /// Takes the events logged since the last call.
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, Event> {
+        self.events.drain(..)
+    }
+
+    fn now_ns(&self) -> u64 {
+        self.tick * TICK_NS
+    }
+
+    /// A decode error on the line: logged (the device cannot tell what the packet was).
+    pub fn on_decode_error(&mut self, error: DecodeError) {
+        self.events.push(Event::BadPacket {
+            tick: self.tick,
+            error,
+        });
+    }
+
+    /// A packet from the host, received during the current tick; the device's answer, if
+    /// any, is appended to `out` as bytes on the line.
+    pub fn on_packet(&mut self, packet: Packet, out: &mut Vec<u8>) {
+        // Any packet is a sign of life.
+        self.watchdog.feed(self.now_ns());
+        let number = packet.number;
+        let reply = match packet.message {
+            Message::InitAck { result } => {
+                if result.is_ok() {
+                    self.connected = true;
+                }
+                None
+            }
+            _ if !self.connected => None,
+            Message::Watchdog => None,
+            Message::GetStimulationMode => Some(Message::GetStimulationModeAck {
+                result: AckResult::Ok,
+                mode: self.mode,
+            }),
+            Message::InitChannelListMode(init) => Some(Message::InitChannelListModeAck {
+                result: self.init_channel_list(init),
+            }),
+            Message::StartChannelListMode(list) => Some(Message::StartChannelListModeAck {
+                result: self.start_channel_list(list),
+            }),
+            Message::StopChannelListMode => {
+                self.stop_channel_list();
+                Some(Message::StopChannelListModeAck {
+                    result: AckResult::Ok,
+                })
+            }
+            Message::SinglePulse(p) => {
+                let result = if self.mode == StimulationMode::Started {
+                    AckResult::WrongModeError
+                } else if !p.in_range() {
+                    AckResult::ParameterError
+                } else {
+                    self.schedule(Scheduled {
+                        tick: self.tick + 1,
+                        channel: p.channel + 1,
+                        width_us: effective_width_us(p.pulse_width_us),
+                        current_ma: p.current_ma,
+                        source: PulseSource::Single,
+                    });
+                    AckResult::Ok
+                };
+                Some(Message::SinglePulseAck { result })
+            }
+            // The device's own messages, sent to it: not commands it knows.
+            Message::Init { .. }
+            | Message::UnknownCommand { .. }
+            | Message::GetStimulationModeAck { .. }
+            | Message::InitChannelListModeAck { .. }
+            | Message::StartChannelListModeAck { .. }
+            | Message::StopChannelListModeAck { .. }
+            | Message::SinglePulseAck { .. }
+            | Message::StimulationError { .. } => Some(Message::UnknownCommand { code: -1 }),
+        };
+        if let Some(message) = reply {
+            send(Packet::new(number, message), out);
+        }
+    }
+
+    /// A packet whose command the device does not know (the decoder's
+    /// [`DecodeError::UnknownCommand`]): answered with UnknownCommand.
+    pub fn on_unknown_command(&mut self, out: &mut Vec<u8>) {
+        self.watchdog.feed(self.now_ns());
+        if self.connected {
+            send(Packet::new(0, Message::UnknownCommand { code: -1 }), out);
+        }
+    }
+
+    fn init_channel_list(&mut self, init: ChannelListInit) -> AckResult {
+        if self.mode == StimulationMode::Started {
+            return AckResult::WrongModeError;
+        }
+        if !init.in_range() {
+            return AckResult::ParameterError;
+        }
+        self.init = Some(init);
+        self.list = None;
+        self.mode = StimulationMode::Initialised;
+        AckResult::Ok
+    }
+
+    fn start_channel_list(&mut self, list: ChannelListUpdate) -> AckResult {
+        let Some(init) = self.init else {
+            return AckResult::WrongModeError;
+        };
+        if list.entries().len() != init.active_channels.count_ones() as usize
+            || !list.entries().iter().all(|e| e.in_range())
+        {
+            return AckResult::ParameterError;
+        }
+        self.list = Some(list);
+        if self.mode == StimulationMode::Initialised {
+            self.mode = StimulationMode::Started;
+            self.next_cycle_tick = self.tick + 1;
+            self.cycle_phase_us = 0;
+            self.cycle = 0;
+        }
+        AckResult::Ok
+    }
+
+    fn stop_channel_list(&mut self) {
+        self.mode = StimulationMode::Start;
+        self.init = None;
+        self.list = None;
+        self.scheduled
+            .retain(|s| s.source != PulseSource::ChannelList);
+    }
+
+    fn schedule(&mut self, s: Scheduled) {
+        let at = self
+            .scheduled
+            .iter()
+            .position(|q| q.tick > s.tick)
+            .unwrap_or(self.scheduled.len());
+        self.scheduled.insert(at, s);
+    }
+
+    /// Plans the pulses of one main-interval cycle starting at `start_us` (us since tick 0).
+    fn plan_cycle(&mut self, start_us: u64) {
+        let (Some(init), Some(list)) = (self.init, self.list) else {
+            return;
+        };
+        let ipi_us = u64::from(init.inter_pulse_interval_us());
+        let low_due = self
+            .cycle
+            .is_multiple_of(u64::from(init.low_frequency_factor) + 1);
+        let mut offset_us = 0;
+        let mut entries = list.entries().iter();
+        for channel in 1..=limits::CHANNELS {
+            let bit = 1u8 << (channel - 1);
+            if init.active_channels & bit == 0 {
+                continue;
+            }
+            let Some(e) = entries.next() else { break };
+            if init.low_frequency_channels & bit != 0 && !low_due {
+                continue;
+            }
+            for _ in 0..e.mode.pulses() {
+                let width_us = effective_width_us(e.pulse_width_us);
+                if width_us > 0 && e.current_ma > 0 {
+                    self.schedule(Scheduled {
+                        tick: (start_us + offset_us).div_ceil(1000),
+                        channel,
+                        width_us,
+                        current_ma: e.current_ma,
+                        source: PulseSource::ChannelList,
+                    });
+                }
+                offset_us += ipi_us;
+            }
+        }
+    }
+
+    /// Runs one 1 ms tick: Init announcements, the watchdog, channel list cycles, and one
+    /// plant step with the pulse due (if any). Answers go to `out`.
+    pub fn tick(&mut self, plant: &mut dyn MusclePlant, out: &mut Vec<u8>) {
+        if !self.connected && self.tick >= self.next_init_tick {
+            send(
+                Packet::new(
+                    self.init_number,
+                    Message::Init {
+                        version: PROTOCOL_VERSION,
+                    },
+                ),
+                out,
+            );
+            self.init_number = self.init_number.wrapping_add(1);
+            self.next_init_tick = self.tick + u64::from(self.settings.init_period_ms);
+        }
+        if self.connected
+            && let Some(silent_ns) = self.watchdog.expired(self.now_ns())
+        {
+            if self.mode != StimulationMode::Start {
+                self.events.push(Event::WatchdogExpired {
+                    tick: self.tick,
+                    silent_ms: silent_ns / 1_000_000,
+                });
+                self.stop_channel_list();
+            }
+            // Re-armed: one expiry per silence.
+            self.watchdog.feed(self.now_ns());
+        }
+        if self.mode == StimulationMode::Started {
+            while self.next_cycle_tick <= self.tick {
+                let start_us = self.next_cycle_tick * 1000 + self.cycle_phase_us;
+                self.plan_cycle(start_us);
+                let interval_us = self
+                    .init
+                    .map_or(1_000_000, |i| u64::from(i.main_interval_us()));
+                let next_us = start_us + interval_us;
+                self.next_cycle_tick = next_us / 1000;
+                self.cycle_phase_us = next_us % 1000;
+                self.cycle += 1;
+            }
+        }
+        let mut applied = None;
+        while self.scheduled.front().is_some_and(|s| s.tick <= self.tick) {
+            let Some(s) = self.scheduled.front().copied() else {
+                break;
+            };
+            let to_plant = s.channel == self.settings.muscle_channel;
+            if to_plant && applied.is_some() {
+                // The plant takes one pulse per step: this one waits for the next tick.
+                break;
+            }
+            self.scheduled.pop_front();
+            if to_plant {
+                applied = Some(plant::Pulse {
+                    amplitude_ma: f64::from(s.current_ma),
+                    width_us: f64::from(s.width_us),
+                });
+            }
+            self.events.push(Event::Pulse {
+                tick: self.tick,
+                channel: s.channel,
+                width_us: s.width_us,
+                current_ma: s.current_ma,
+                source: s.source,
+                applied: to_plant,
+            });
+        }
+        self.force_n = plant.step(applied);
+        self.tick += 1;
+    }
+}
+
+fn send(packet: Packet, out: &mut Vec<u8>) {
+    let mut buf = [0u8; MAX_PACKET_LEN];
+    // Every device message fits a packet (one or two data bytes).
+    if let Ok(n) = packet.encode(&mut buf) {
+        out.extend_from_slice(&buf[..n]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stimulator::test_plant::ChargeIntegrator;
+    use fes_sciencemode::{ChannelPulse, Decoder, PulseMode, SinglePulse};
+
+    fn decode(bytes: &[u8]) -> Vec<Packet> {
+        Decoder::new().feed(bytes).map(Result::unwrap).collect()
+    }
+
+    fn connected() -> (Rehastim2, ChargeIntegrator) {
+        let mut d = Rehastim2::new(Rehastim2Settings::DEFAULT);
+        let mut plant = ChargeIntegrator::new();
+        let mut out = Vec::new();
+        d.tick(&mut plant, &mut out);
+        assert_eq!(decode(&out), [Packet::new(0, Message::Init { version: 1 })]);
+        out.clear();
+        // Commands before InitAck are ignored.
+        d.on_packet(Packet::new(0, Message::GetStimulationMode), &mut out);
+        assert!(out.is_empty());
+        d.on_packet(
+            Packet::new(
+                0,
+                Message::InitAck {
+                    result: AckResult::Ok,
+                },
+            ),
+            &mut out,
+        );
+        assert!(d.connected() && out.is_empty());
+        (d, plant)
+    }
+
+    fn pulses(d: &mut Rehastim2) -> Vec<(u64, u8, u16, u8)> {
+        d.drain_events()
+            .filter_map(|e| match e {
+                Event::Pulse {
+                    tick,
+                    channel,
+                    width_us,
+                    current_ma,
+                    ..
+                } => Some((tick, channel, width_us, current_ma)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn init(active: u8, lf: u8, factor: u8, main_ms: u16) -> ChannelListInit {
+        ChannelListInit {
+            low_frequency_factor: factor,
+            active_channels: active,
+            low_frequency_channels: lf,
+            inter_pulse_interval_code: 1, // 2 ms
+            main_interval_code: (main_ms - 1) * 2,
+            channel_execution: 0,
+        }
+    }
+
+    fn ack_of(out: &[u8]) -> AckResult {
+        let p = decode(out);
+        assert_eq!(p.len(), 1, "{p:?}");
+        p[0].message.ack_result().unwrap()
+    }
+
+    #[test]
+    fn announces_init_until_acknowledged() {
+        let mut d = Rehastim2::new(Rehastim2Settings::DEFAULT);
+        let mut plant = ChargeIntegrator::new();
+        let mut out = Vec::new();
+        for _ in 0..250 {
+            d.tick(&mut plant, &mut out);
+        }
+        assert_eq!(
+            decode(&out),
+            (0..3)
+                .map(|n| Packet::new(n, Message::Init { version: 1 }))
+                .collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn single_pulses_reach_the_muscle_within_limits() {
+        let (mut d, mut plant) = connected();
+        let mut out = Vec::new();
+        let pulse = |channel, w, c| {
+            Packet::new(
+                5,
+                Message::SinglePulse(SinglePulse {
+                    channel,
+                    pulse_width_us: w,
+                    current_ma: c,
+                }),
+            )
+        };
+        d.on_packet(pulse(0, 200, 20), &mut out);
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        out.clear();
+        d.tick(&mut plant, &mut out);
+        d.tick(&mut plant, &mut out);
+        assert_eq!(pulses(&mut d), [(2, 1, 200, 20)]);
+        assert_eq!(plant.pulses(), 1);
+        assert!((d.force_n() - 4.0).abs() < 1e-9);
+        // Out of range: refused, nothing fires.
+        for bad in [pulse(0, 501, 20), pulse(0, 200, 127), pulse(8, 200, 20)] {
+            out.clear();
+            d.on_packet(bad, &mut out);
+            assert_eq!(ack_of(&out), AckResult::ParameterError, "{bad:?}");
+        }
+        // 1..=19 us is raised to 20 us; another channel is logged, not applied.
+        out.clear();
+        d.on_packet(pulse(0, 5, 10), &mut out);
+        d.on_packet(pulse(3, 300, 10), &mut out);
+        d.tick(&mut plant, &mut out);
+        d.tick(&mut plant, &mut out);
+        assert_eq!(pulses(&mut d), [(4, 1, 20, 10), (4, 4, 300, 10)]);
+        assert_eq!(plant.pulses(), 2);
+    }
+
+    #[test]
+    fn channel_list_mode_fires_each_interval_and_obeys_the_modes() {
+        let (mut d, mut plant) = connected();
+        let mut out = Vec::new();
+        // Start before init: wrong mode.
+        let list = ChannelListUpdate::new(&[ChannelPulse {
+            mode: PulseMode::Single,
+            pulse_width_us: 200,
+            current_ma: 20,
+        }])
+        .unwrap();
+        d.on_packet(
+            Packet::new(1, Message::StartChannelListMode(list)),
+            &mut out,
+        );
+        assert_eq!(ack_of(&out), AckResult::WrongModeError);
+        out.clear();
+        // An 8 ms main interval is the shortest; 7 ms is a parameter error.
+        d.on_packet(
+            Packet::new(2, Message::InitChannelListMode(init(0b1, 0, 0, 7))),
+            &mut out,
+        );
+        assert_eq!(ack_of(&out), AckResult::ParameterError);
+        out.clear();
+        // Channels 1 (single) and 2 (doublet, low frequency, every 2nd), 20 ms.
+        d.on_packet(
+            Packet::new(3, Message::InitChannelListMode(init(0b11, 0b10, 1, 20))),
+            &mut out,
+        );
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        out.clear();
+        // One entry for two active channels: parameter error.
+        d.on_packet(
+            Packet::new(4, Message::StartChannelListMode(list)),
+            &mut out,
+        );
+        assert_eq!(ack_of(&out), AckResult::ParameterError);
+        out.clear();
+        let two = ChannelListUpdate::new(&[
+            ChannelPulse {
+                mode: PulseMode::Single,
+                pulse_width_us: 200,
+                current_ma: 20,
+            },
+            ChannelPulse {
+                mode: PulseMode::Doublet,
+                pulse_width_us: 100,
+                current_ma: 10,
+            },
+        ])
+        .unwrap();
+        d.on_packet(Packet::new(5, Message::StartChannelListMode(two)), &mut out);
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        assert_eq!(d.mode(), StimulationMode::Started);
+        for _ in 0..60 {
+            d.tick(&mut plant, &mut out);
+        }
+        // Started at tick 1: cycles at ticks 2, 22, 42; channel 2's doublet (2 ms and 4 ms
+        // after channel 1) in cycles 0 and 2 only.
+        assert_eq!(
+            pulses(&mut d),
+            [
+                (2, 1, 200, 20),
+                (4, 2, 100, 10),
+                (6, 2, 100, 10),
+                (22, 1, 200, 20),
+                (42, 1, 200, 20),
+                (44, 2, 100, 10),
+                (46, 2, 100, 10),
+            ]
+        );
+        assert_eq!(plant.pulses(), 3);
+        // SinglePulse while the list runs: wrong mode. Stop: back to start mode.
+        out.clear();
+        d.on_packet(
+            Packet::new(
+                6,
+                Message::SinglePulse(SinglePulse {
+                    channel: 0,
+                    pulse_width_us: 100,
+                    current_ma: 10,
+                }),
+            ),
+            &mut out,
+        );
+        assert_eq!(ack_of(&out), AckResult::WrongModeError);
+        out.clear();
+        d.on_packet(Packet::new(7, Message::StopChannelListMode), &mut out);
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        for _ in 0..50 {
+            d.tick(&mut plant, &mut out);
+        }
+        assert_eq!(pulses(&mut d), []);
+        assert_eq!(d.mode(), StimulationMode::Start);
+    }
+
+    #[test]
+    fn the_watchdog_stops_channel_list_mode_when_the_host_falls_silent() {
+        let (mut d, mut plant) = connected();
+        let mut out = Vec::new();
+        d.on_packet(
+            Packet::new(1, Message::InitChannelListMode(init(0b1, 0, 0, 50))),
+            &mut out,
+        );
+        let list = ChannelListUpdate::new(&[ChannelPulse {
+            mode: PulseMode::Single,
+            pulse_width_us: 200,
+            current_ma: 20,
+        }])
+        .unwrap();
+        d.on_packet(
+            Packet::new(2, Message::StartChannelListMode(list)),
+            &mut out,
+        );
+        // Watchdogs every 500 ms keep it going for 3 s.
+        for t in 0..3000 {
+            if t % 500 == 0 {
+                d.on_packet(Packet::new(3, Message::Watchdog), &mut out);
+            }
+            d.tick(&mut plant, &mut out);
+        }
+        let before = pulses(&mut d).len();
+        assert_eq!(before, 60);
+        // Silence: the last packet came at tick 2501; the list stops when more than 1 s has
+        // passed, at tick 3502.
+        for _ in 0..2000 {
+            d.tick(&mut plant, &mut out);
+        }
+        let events: Vec<_> = d.drain_events().collect();
+        let expiry = events
+            .iter()
+            .find_map(|e| match e {
+                Event::WatchdogExpired { tick, .. } => Some(*tick),
+                _ => None,
+            })
+            .expect("watchdog expired");
+        assert_eq!(expiry, 3502);
+        let last_pulse = events
+            .iter()
+            .filter_map(|e| match e {
+                Event::Pulse { tick, .. } => Some(*tick),
+                _ => None,
+            })
+            .max()
+            .unwrap();
+        assert!(last_pulse < expiry, "pulse at {last_pulse} after {expiry}");
+        assert_eq!(d.mode(), StimulationMode::Start);
+    }
+}

@@ -1,0 +1,435 @@
+//! The ScienceMode 2 side of the write seam (issue 22): [`ScienceModeTx`] implements
+//! [`CanTx`], so the forward path, its interlocks and the arming typestate drive a Hasomed
+//! RehaStim 2 on a serial line exactly as they drive the CAN stimulator. Each frame the
+//! driver writes is translated into the ScienceMode 2 command with the same effect
+//! (`docs/sciencemode.md`):
+//!
+//! | Driver frame | ScienceMode 2 |
+//! |--------------|---------------|
+//! | PULSE (channel, amplitude, width) | SinglePulse (channel, current, width) |
+//! | host heartbeat | Watchdog (the device's keep-alive) |
+//! | NMT stop, enter pre-operational, resets | StopChannelListMode (nothing runs without a command; the stop makes it explicit) |
+//! | NMT start | nothing (the device has no armed state: a pulse is a command) |
+//! | CONFIG | nothing (the device's limits are fixed; the driver's interlocks apply the configured ones before a PULSE exists) |
+//!
+//! A pulse the device cannot carry exactly (a channel above 8, an amplitude that is not a
+//! whole mA or above 126 mA, a width above 500 us) is never rounded: the write fails with
+//! `EINVAL`, which trips an armed driver ([`crate::forward`]). Writes are allocation-free
+//! (a stack buffer), non-blocking with the same bounded retry as the CAN socket, and
+//! complete: a packet the line only partly took is finished within the retry budget (a
+//! packet torn by a drop is discarded by the device at the next start byte).
+//!
+//! Not yet here (issue 22, item 1): the receive side (acknowledgements, StimulationError
+//! and the Init handshake standing in for STATUS, EMCY, the stimulator heartbeat and the
+//! CONFIG read-back the arming sequence waits for) and the choice of transport in
+//! `stim-driver.toml`. Until then nothing constructs a [`ScienceModeTx`] outside tests.
+
+use std::fs::File;
+use std::io::{self, Write};
+use std::os::unix::fs::OpenOptionsExt as _;
+use std::path::Path;
+
+use fes_can::{Frame, Message as CanMessage, NmtCommand, Nodes};
+use fes_sciencemode::limits::{CHANNELS, MAX_CURRENT_MA, MAX_PULSE_WIDTH_US};
+use fes_sciencemode::{MAX_PACKET_LEN, Message, Packet, SinglePulse};
+use nix::sys::termios::{
+    BaudRate, ControlFlags, InputFlags, SetArg, Termios, cfmakeraw, cfsetspeed, tcgetattr,
+    tcsetattr,
+};
+
+use crate::tx::{CanTx, RetryPolicy, TxDone, TxError, write_with_retry};
+
+/// The ScienceMode 2 command for a driver frame (see the module table); `Ok(None)` when
+/// the frame has no ScienceMode counterpart, `Err(EINVAL)` when it cannot be carried
+/// exactly or is not the driver's to send.
+pub fn translate(nodes: &Nodes, frame: &Frame) -> Result<Option<Message>, TxError> {
+    const INVALID: TxError = TxError::Failed {
+        errno: libc::EINVAL,
+    };
+    let message = nodes
+        .decode(u32::from(frame.id), frame.payload())
+        .map_err(|_| INVALID)?;
+    Ok(match message {
+        CanMessage::Pulse(p) => {
+            let current_ma = p.amplitude_100ua / 10;
+            if p.channel >= CHANNELS
+                || !p.amplitude_100ua.is_multiple_of(10)
+                || current_ma > u16::from(MAX_CURRENT_MA)
+                || p.width_us > MAX_PULSE_WIDTH_US
+            {
+                return Err(INVALID);
+            }
+            Some(Message::SinglePulse(SinglePulse {
+                channel: p.channel,
+                pulse_width_us: p.width_us,
+                // current_ma <= MAX_CURRENT_MA (126) fits a byte.
+                current_ma: current_ma as u8,
+            }))
+        }
+        CanMessage::HostHeartbeat(_) => Some(Message::Watchdog),
+        CanMessage::Nmt(n) => match n.command {
+            NmtCommand::Start => None,
+            NmtCommand::Stop
+            | NmtCommand::EnterPreOperational
+            | NmtCommand::ResetNode
+            | NmtCommand::ResetCommunication => Some(Message::StopChannelListMode),
+        },
+        CanMessage::Config(_) => None,
+        // The stimulator's own messages: never written by the driver.
+        CanMessage::Emcy(_)
+        | CanMessage::Force(_)
+        | CanMessage::Status(_)
+        | CanMessage::ConfigApplied(_)
+        | CanMessage::StimHeartbeat(_) => return Err(INVALID),
+    })
+}
+
+/// The ScienceMode 2 transmit side over a serial port `W` (see the module documentation).
+#[derive(Debug)]
+pub struct ScienceModeTx<W> {
+    port: W,
+    nodes: Nodes,
+    retry: RetryPolicy,
+    number: u8,
+}
+
+impl<W: Write> ScienceModeTx<W> {
+    /// Writes to `port`, reading the driver's frames with `nodes`' identifiers.
+    pub fn new(port: W, nodes: Nodes, retry: RetryPolicy) -> Self {
+        Self {
+            port,
+            nodes,
+            retry,
+            number: 0,
+        }
+    }
+
+    /// The number the next packet carries (0, 1, ... 255, 0, ...).
+    pub const fn next_number(&self) -> u8 {
+        self.number
+    }
+
+    /// The port.
+    pub fn port(&self) -> &W {
+        &self.port
+    }
+}
+
+impl<W: Write> CanTx for ScienceModeTx<W> {
+    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        let Some(message) = translate(&self.nodes, frame)? else {
+            let now = fes_rt::rt::clock::monotonic_ns();
+            return Ok(TxDone {
+                retries: 0,
+                written_ns: now,
+                write_ns: 0,
+            });
+        };
+        let mut buf = [0u8; MAX_PACKET_LEN];
+        let len = Packet::new(self.number, message)
+            .encode(&mut buf)
+            .map_err(|_| TxError::Failed {
+                errno: libc::EINVAL,
+            })?;
+        let mut written = 0;
+        let port = &mut self.port;
+        let done = write_with_retry(&self.retry, || {
+            while written < len {
+                match port.write(&buf[written..len]) {
+                    Ok(0) => return Err(libc::EIO),
+                    Ok(n) => written += n,
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                    Err(e) => return Err(e.raw_os_error().unwrap_or(libc::EIO)),
+                }
+            }
+            Ok(())
+        })?;
+        self.number = self.number.wrapping_add(1);
+        Ok(done)
+    }
+}
+
+/// Sets `t` to ScienceMode 2's line settings: raw, 460 800 baud, 8 data bits, even parity,
+/// one stop bit, no flow control (neither RTS/CTS nor XON/XOFF), modem lines ignored.
+pub fn line_settings(t: &mut Termios) -> nix::Result<()> {
+    cfmakeraw(t);
+    cfsetspeed(t, BaudRate::B460800)?;
+    t.control_flags |=
+        ControlFlags::CS8 | ControlFlags::PARENB | ControlFlags::CLOCAL | ControlFlags::CREAD;
+    t.control_flags &= !(ControlFlags::CSTOPB | ControlFlags::CRTSCTS | ControlFlags::PARODD);
+    t.input_flags &= !(InputFlags::IXON | InputFlags::IXOFF | InputFlags::IXANY);
+    Ok(())
+}
+
+/// Opens a serial device (`/dev/ttyUSB0`) for ScienceMode 2: read and write, no controlling
+/// terminal, non-blocking, with [`line_settings`].
+pub fn open_serial(path: &Path) -> io::Result<File> {
+    let port = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
+        .open(path)?;
+    let mut t = tcgetattr(&port)?;
+    line_settings(&mut t)?;
+    match tcsetattr(&port, SetArg::TCSANOW, &t) {
+        Ok(()) => {}
+        // A pseudo-terminal (the virtual RehaStim 2, tests) has no parity: Linux refuses a
+        // request whose only change is PARENB. Everything else is set without it.
+        Err(nix::errno::Errno::EINVAL) if is_pty(&port) => {
+            t.control_flags.remove(ControlFlags::PARENB);
+            tcsetattr(&port, SetArg::TCSANOW, &t)?;
+        }
+        Err(e) => return Err(e.into()),
+    }
+    Ok(port)
+}
+
+/// Whether `port` is a pseudo-terminal's slave (`/dev/pts/N`).
+fn is_pty(port: &File) -> bool {
+    nix::unistd::ttyname(port).is_ok_and(|p| p.starts_with("/dev/pts/"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fes_can::{Config, Heartbeat, Nmt, NmtState, Pulse};
+    use fes_sciencemode::{DecodeError, Decoder};
+    use nix::sys::termios::{LocalFlags, cfgetispeed, cfgetospeed};
+
+    const RETRY: RetryPolicy = RetryPolicy {
+        budget_ns: 0,
+        interval_ns: 0,
+    };
+
+    fn frame(m: CanMessage) -> Frame {
+        m.encode_for(&Nodes::DEFAULT).unwrap()
+    }
+
+    fn pulse(channel: u8, amplitude_100ua: u16, width_us: u16) -> Frame {
+        frame(CanMessage::Pulse(Pulse {
+            seq: 1,
+            alive_counter: 0,
+            channel,
+            amplitude_100ua,
+            width_us,
+        }))
+    }
+
+    fn written(tx: &ScienceModeTx<Vec<u8>>) -> Vec<Result<Packet, DecodeError>> {
+        Decoder::new().feed(tx.port()).collect()
+    }
+
+    #[test]
+    fn driver_frames_become_the_sciencemode_commands_with_the_same_effect() {
+        let mut tx = ScienceModeTx::new(Vec::new(), Nodes::DEFAULT, RETRY);
+        let stop = frame(CanMessage::Nmt(Nmt {
+            command: NmtCommand::Stop,
+            node: Nodes::DEFAULT.stim(),
+        }));
+        let start = frame(CanMessage::Nmt(Nmt {
+            command: NmtCommand::Start,
+            node: Nodes::DEFAULT.stim(),
+        }));
+        let heartbeat = frame(CanMessage::HostHeartbeat(Heartbeat {
+            state: NmtState::Operational,
+        }));
+        for f in [
+            heartbeat,
+            start,
+            pulse(0, 200, 200),
+            pulse(7, 1260, 500),
+            stop,
+        ] {
+            tx.send(&f).unwrap();
+        }
+        assert_eq!(
+            written(&tx),
+            [
+                Ok(Packet::new(0, Message::Watchdog)),
+                // NMT start: nothing on the line, no packet number used.
+                Ok(Packet::new(
+                    1,
+                    Message::SinglePulse(SinglePulse {
+                        channel: 0,
+                        pulse_width_us: 200,
+                        current_ma: 20
+                    })
+                )),
+                Ok(Packet::new(
+                    2,
+                    Message::SinglePulse(SinglePulse {
+                        channel: 7,
+                        pulse_width_us: 500,
+                        current_ma: 126
+                    })
+                )),
+                Ok(Packet::new(3, Message::StopChannelListMode)),
+            ]
+        );
+        assert_eq!(tx.next_number(), 4);
+    }
+
+    #[test]
+    fn a_pulse_the_device_cannot_carry_exactly_is_refused_not_rounded() {
+        let mut tx = ScienceModeTx::new(Vec::new(), Nodes::DEFAULT, RETRY);
+        let invalid = Err(TxError::Failed {
+            errno: libc::EINVAL,
+        });
+        // 20.5 mA (not a whole mA), 127 mA, 501 us, channel 9 (index 8).
+        for f in [
+            pulse(0, 205, 200),
+            pulse(0, 1270, 200),
+            pulse(0, 200, 501),
+            pulse(8, 200, 200),
+        ] {
+            assert_eq!(tx.send(&f), invalid, "{f}");
+        }
+        // CONFIG has no counterpart: accepted, nothing written.
+        let config = frame(CanMessage::Config(Config {
+            config_id: 1,
+            page: fes_can::ConfigPage::OutputLimits {
+                max_amplitude_100ua: 300,
+                max_width_us: 400,
+                min_ipi_ms: 10,
+            },
+        }));
+        assert!(tx.send(&config).is_ok());
+        assert!(tx.port().is_empty());
+    }
+
+    /// A writer that takes at most `chunk` bytes per call and fails with `EAGAIN` on every
+    /// other call.
+    struct Stingy {
+        out: Vec<u8>,
+        chunk: usize,
+        calls: u32,
+        errno: Option<i32>,
+    }
+
+    impl Write for Stingy {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            self.calls += 1;
+            if let Some(e) = self.errno {
+                return Err(io::Error::from_raw_os_error(e));
+            }
+            if self.calls.is_multiple_of(2) {
+                return Err(io::Error::from_raw_os_error(libc::EAGAIN));
+            }
+            let n = buf.len().min(self.chunk);
+            self.out.extend_from_slice(&buf[..n]);
+            Ok(n)
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn short_writes_and_a_full_line_are_finished_within_the_budget_and_a_dead_port_reported() {
+        let retry = RetryPolicy {
+            budget_ns: 50_000_000,
+            interval_ns: 10_000,
+        };
+        let stingy = Stingy {
+            out: Vec::new(),
+            chunk: 3,
+            calls: 0,
+            errno: None,
+        };
+        let mut tx = ScienceModeTx::new(stingy, Nodes::DEFAULT, retry);
+        let done = tx.send(&pulse(1, 300, 250)).unwrap();
+        assert!(done.retries >= 3, "{done:?}");
+        let out: Vec<_> = Decoder::new().feed(&tx.port().out).collect();
+        assert_eq!(
+            out,
+            [Ok(Packet::new(
+                0,
+                Message::SinglePulse(SinglePulse {
+                    channel: 1,
+                    pulse_width_us: 250,
+                    current_ma: 30
+                })
+            ))]
+        );
+        // The USB adapter unplugged: ENODEV is a link down, EIO a failure (both trip).
+        for (errno, expected) in [
+            (
+                libc::ENODEV,
+                TxError::LinkDown {
+                    errno: libc::ENODEV,
+                },
+            ),
+            (libc::EIO, TxError::Failed { errno: libc::EIO }),
+        ] {
+            let dead = Stingy {
+                out: Vec::new(),
+                chunk: 64,
+                calls: 0,
+                errno: Some(errno),
+            };
+            let mut tx = ScienceModeTx::new(dead, Nodes::DEFAULT, retry);
+            assert_eq!(tx.send(&pulse(0, 200, 200)), Err(expected));
+            // A failed packet does not use up a number.
+            assert_eq!(tx.next_number(), 0);
+        }
+    }
+
+    #[test]
+    fn open_serial_sets_the_protocols_line_settings() {
+        // A pseudo-terminal stands in for /dev/ttyUSB0.
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let path = nix::unistd::ttyname(&pty.slave).unwrap();
+        // What is requested: 8E1, no flow control, raw.
+        let mut t = tcgetattr(&pty.slave).unwrap();
+        line_settings(&mut t).unwrap();
+        assert!(
+            t.control_flags
+                .contains(ControlFlags::CS8 | ControlFlags::PARENB)
+        );
+        assert!(
+            !t.control_flags
+                .intersects(ControlFlags::CSTOPB | ControlFlags::CRTSCTS | ControlFlags::PARODD)
+        );
+        assert!(
+            !t.input_flags
+                .intersects(InputFlags::IXON | InputFlags::IXOFF)
+        );
+        // What the device file holds after open_serial (a pty has no parity and always
+        // reads back CS8 without PARENB, so only speed, size and raw mode are checked).
+        let port = open_serial(&path).unwrap();
+        let t = tcgetattr(&port).unwrap();
+        assert_eq!(cfgetispeed(&t), BaudRate::B460800);
+        assert_eq!(cfgetospeed(&t), BaudRate::B460800);
+        assert!(t.control_flags.contains(ControlFlags::CS8));
+        assert!(
+            !t.control_flags
+                .intersects(ControlFlags::CSTOPB | ControlFlags::CRTSCTS)
+        );
+        assert!(
+            !t.input_flags
+                .intersects(InputFlags::IXON | InputFlags::IXOFF)
+        );
+        assert!(
+            !t.local_flags
+                .intersects(LocalFlags::ICANON | LocalFlags::ECHO)
+        );
+        // And a packet written there arrives on the other side unchanged.
+        let mut tx = ScienceModeTx::new(port, Nodes::DEFAULT, RETRY);
+        tx.send(&pulse(2, 400, 300)).unwrap();
+        let mut master = File::from(pty.master);
+        let mut buf = [0u8; MAX_PACKET_LEN];
+        let n = std::io::Read::read(&mut master, &mut buf).unwrap();
+        let out: Vec<_> = Decoder::new().feed(&buf[..n]).collect();
+        assert_eq!(
+            out,
+            [Ok(Packet::new(
+                0,
+                Message::SinglePulse(SinglePulse {
+                    channel: 2,
+                    pulse_width_us: 300,
+                    current_ma: 40
+                })
+            ))]
+        );
+    }
+}
