@@ -1,18 +1,27 @@
 //! Scratch directories.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
-/// A fresh, empty directory for one test, made with `tempfile`: removed on drop when the
-/// test passed; kept, and its path printed, when the test is panicking or `FES_TEST_KEEP`
-/// is set in the environment.
+/// A fresh, empty directory for one test: removed on drop when the test passed; kept, and
+/// its path printed, when the test is panicking or `FES_TEST_KEEP` is set in the
+/// environment.
+///
+/// Made with `mkdir(2)`, which fails on an existing name, so two scratch directories never
+/// share one. Not the `tempfile` crate: through rustix it turned on `bitflags/std` and
+/// more `linux-raw-sys` features, so every release tool built with this crate in the
+/// graph (`scripts/latency-regression`) recompiled nix, iceoryx2 and their dependents
+/// apart from the shipped binaries' build (docs/architecture.md, "Tests").
 #[derive(Debug)]
 pub struct Scratch {
-    dir: Option<tempfile::TempDir>,
     path: PathBuf,
 }
 
+/// Distinguishes the directories one process makes.
+static NEXT: AtomicU64 = AtomicU64::new(0);
+
 impl Scratch {
-    /// A new directory `fes-<tag>-XXXXXX` under the system's temporary directory.
+    /// A new directory `fes-<tag>-<pid>-<n>-<t>` under the system's temporary directory.
     ///
     /// # Panics
     /// When the directory cannot be made (a test cannot go on without it).
@@ -20,7 +29,7 @@ impl Scratch {
         Self::new_in(&std::env::temp_dir(), tag)
     }
 
-    /// A new directory `fes-<tag>-XXXXXX` under `base` (created if missing): tests that
+    /// A new directory `fes-<tag>-<pid>-<n>-<t>` under `base` (created if missing): tests that
     /// run a User-Mode Linux guest use the target directory, since the guest has its own
     /// `/tmp`.
     ///
@@ -30,14 +39,18 @@ impl Scratch {
         if let Err(e) = std::fs::create_dir_all(base) {
             panic!("scratch base {}: {e}", base.display());
         }
-        let dir = tempfile::Builder::new()
-            .prefix(&format!("fes-{tag}-"))
-            .tempdir_in(base)
-            .unwrap_or_else(|e| panic!("scratch directory in {}: {e}", base.display()));
-        let path = dir.path().to_path_buf();
-        Self {
-            dir: Some(dir),
-            path,
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        loop {
+            let n = NEXT.fetch_add(1, Ordering::Relaxed);
+            let path = base.join(format!("fes-{tag}-{}-{n}-{nanos:x}", std::process::id()));
+            match std::fs::create_dir(&path) {
+                Ok(()) => return Self { path },
+                // A directory left by an earlier process with the same pid: take the next.
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+                Err(e) => panic!("scratch directory in {}: {e}", base.display()),
+            }
         }
     }
 
@@ -70,8 +83,10 @@ impl AsRef<Path> for Scratch {
 impl Drop for Scratch {
     fn drop(&mut self) {
         let keep = std::thread::panicking() || std::env::var_os("FES_TEST_KEEP").is_some();
-        if keep && let Some(dir) = self.dir.take() {
-            eprintln!("kept scratch directory {}", dir.keep().display());
+        if keep {
+            eprintln!("kept scratch directory {}", self.path.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&self.path);
         }
     }
 }
