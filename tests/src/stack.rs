@@ -12,9 +12,16 @@ pub fn workspace_root() -> PathBuf {
         .to_path_buf()
 }
 
-/// Builds the four binaries of the stack (debug; a no-op when fresh) on the host side
-/// and returns their directory (inside a UML guest, `FES_VCAN_IFACE` set, the host's
-/// build is reused).
+/// The four binaries of the stack, as the workspace's test build made them, on the host
+/// side (`cargo test --workspace --no-run`: a no-op under the README's test command, which
+/// has just built exactly that), and their directory (inside a UML guest,
+/// `FES_VCAN_IFACE` set, the host's build is reused).
+///
+/// Not `cargo build -p rt-core -p stim-driver ...`: features are unified over the packages
+/// a build selects, and the test build's (dev-dependencies included: `libc/extra_traits`,
+/// `bitflags/std`, ...) differ from those four's, so that build recompiled nix, iceoryx2
+/// and everything on them a second time, minutes of a cold CI run (docs/architecture.md,
+/// "Tests").
 pub fn stack_binaries() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
@@ -30,15 +37,27 @@ pub fn stack_binaries() -> PathBuf {
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
         let ok = Command::new(cargo)
             .current_dir(workspace_root())
-            .args(["build", "--quiet", "--bins"])
-            .args(["-p", "rt-core", "-p", "stim-driver"])
-            .args(["-p", "supervisor", "-p", "sim-muscle"])
+            .args(["test", "--workspace", "--no-run", "--quiet"])
             .status()
             .is_ok_and(|s| s.success());
-        assert!(ok, "cargo build of the stack failed");
+        assert!(
+            ok,
+            "cargo test --workspace --no-run (the stack's binaries) failed"
+        );
     }
-    target.join("debug")
+    let dir = target.join("debug");
+    for b in STACK_BINARIES {
+        assert!(
+            dir.join(b).is_file(),
+            "{} was not built",
+            dir.join(b).display()
+        );
+    }
+    dir
 }
+
+/// The stack's binaries, in `scripts/install`'s order.
+pub const STACK_BINARIES: [&str; 4] = ["rt-core", "stim-driver", "supervisor", "sim-muscle"];
 
 /// One row of the virtual stimulator's record (`sim-muscle stimulator --record`).
 #[derive(Debug, Clone, PartialEq)]

@@ -28,40 +28,10 @@ pub fn target_dir() -> PathBuf {
     }
 }
 
-/// The stack's binaries, in `scripts/install`'s order.
-pub const STACK_BINARIES: [&str; 4] = ["rt-core", "stim-driver", "supervisor", "sim-muscle"];
-
-/// Builds the stack's binaries (debug profile; a no-op when they are fresh) and returns
-/// the directory that holds them.
+/// The stack's binaries (the workspace's test build; a no-op when it is fresh) and their
+/// directory: [`fes_tests::stack::stack_binaries`].
 pub fn build_stack() -> PathBuf {
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(workspace_root())
-        .args([
-            "build",
-            "--quiet",
-            "-p",
-            "rt-core",
-            "-p",
-            "stim-driver",
-            "-p",
-            "supervisor",
-            "-p",
-            "sim-muscle",
-            "--bins",
-        ])
-        .status()
-        .expect("run cargo build");
-    assert!(status.success(), "cargo build of the stack failed");
-    let dir = target_dir().join("debug");
-    for b in STACK_BINARIES {
-        assert!(
-            dir.join(b).is_file(),
-            "{} was not built",
-            dir.join(b).display()
-        );
-    }
-    dir
+    fes_tests::stack::stack_binaries()
 }
 
 /// A scratch directory inside the target directory (not /tmp: a UML guest hides the host's
