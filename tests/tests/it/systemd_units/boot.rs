@@ -19,6 +19,7 @@
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -137,7 +138,7 @@ insmod "$M/fs/overlayfs/overlay.ko"
 mkdir -p /run/ovl/usr/upper /run/ovl/usr/work /run/ovl/dpkg/upper /run/ovl/dpkg/work /run/ovl/dpkg/lower
 mount --bind /var/lib/dpkg /run/ovl/dpkg/lower
 mount -t overlay overlay -o lowerdir=/usr,upperdir=/run/ovl/usr/upper,workdir=/run/ovl/usr/work /usr
-for d in /usr/local /var/lib /var/log /var/tmp /var/cache /tmp /home /root /srv; do
+for d in {tmpfs}; do
   mount -t tmpfs tmpfs "$d"
 done
 mkdir -p /var/lib/dpkg
@@ -150,11 +151,43 @@ exec /lib/systemd/systemd systemd.unit=fes-boot-test.target
         dir = run_dir.display(),
         root = fes_testkit::vcan::UML_MODULES_ROOT,
         modules = modules.join(" "),
+        tmpfs = GUEST_TMPFS.join(" "),
     )
 }
 
+/// Where the guest mounts a tmpfs over the host's tree ([`init_script`]): a path under one
+/// of them is not the host's inside the guest.
+const GUEST_TMPFS: [&str; 9] = [
+    "/usr/local",
+    "/var/lib",
+    "/var/log",
+    "/var/tmp",
+    "/var/cache",
+    "/tmp",
+    "/home",
+    "/root",
+    "/srv",
+];
+
+/// The tmpfs mount that hides `path` in the guest, if one does.
+fn hidden_in_guest(path: &Path) -> Option<&'static str> {
+    GUEST_TMPFS.into_iter().find(|m| path.starts_with(m))
+}
+
 fn write_guest_files(run_dir: &Path, deb: &Path) {
+    // The check script, the package and the run directory must be the host's in the guest:
+    // under a hidden path the check unit cannot start and the guest idles until
+    // BOOT_TIMEOUT (seen with a checkout in /tmp), so say so at once.
     let repo = workspace_root();
+    for p in [repo.as_path(), deb, run_dir] {
+        if let Some(m) = hidden_in_guest(p) {
+            panic!(
+                "{} is under {m}, which the boot test's guest covers with a tmpfs: run the \
+                 test from a checkout and target directory outside {GUEST_TMPFS:?}",
+                p.display()
+            );
+        }
+    }
     let check = repo.join("tests/tests/it/systemd_units/boot-check.sh");
     std::fs::create_dir_all(run_dir).unwrap();
     std::fs::write(
@@ -198,6 +231,10 @@ fn boot(run_dir: &Path) -> Vec<String> {
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
+        // Its own process group: UML's helper processes hold the console pipe too, and
+        // survive a SIGKILL of the kernel process; the timeout kills the whole group, or
+        // the read below would never see the end of the console.
+        .process_group(0)
         .spawn()
         .expect("start linux.uml");
     let pid = child.id();
@@ -210,8 +247,8 @@ fn boot(run_dir: &Path) -> Vec<String> {
                 return false;
             }
         }
-        // SAFETY: kill(2) on our own child's pid; no memory is touched.
-        unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+        // SAFETY: kill(2) on the process group our own child leads; no memory is touched.
+        unsafe { libc::kill(-(pid as i32), libc::SIGKILL) };
         true
     });
     let mut lines = Vec::new();
