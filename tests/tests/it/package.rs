@@ -1,5 +1,6 @@
 //! The Debian packages `fes-stack` (rig) and `fes-stack-bench` (issue 20, item 7), built
-//! once per test run with `scripts/package --fast` (cargo-deb, release binaries) and read
+//! once per test run with `scripts/package --fast` (cargo-deb, release binaries; under the
+//! README's test command, by `scripts/test` before the tests: [`PACKAGES_ENV`]) and read
 //! with `dpkg-deb`:
 //!
 //! - control fields, dependencies and the two variants' conflict;
@@ -32,23 +33,42 @@ pub struct Packages {
     pub bench: PathBuf,
 }
 
-/// Builds both packages (once per test binary): `scripts/package --fast`, which builds the
-/// release binaries first (a no-op when they are fresh).
+/// Names the packages `scripts/test` built before the tests (one path a line), so that the
+/// package tests and the boot test, which run at the same time in separate processes,
+/// read them instead of each running `scripts/package` over the same staging directory.
+pub const PACKAGES_ENV: &str = "FES_TEST_PACKAGES";
+
+/// Both packages (once per test binary): the files [`PACKAGES_ENV`] names, else
+/// `scripts/package --fast`, which builds the release binaries first (a no-op when they are
+/// fresh).
 pub fn packages() -> &'static Packages {
     static PACKAGES: OnceLock<Packages> = OnceLock::new();
     PACKAGES.get_or_init(|| {
-        let out = Command::new(workspace_root().join("scripts/package"))
-            .arg("--fast")
-            .env("CARGO_TARGET_DIR", target_dir())
-            .output()
-            .expect("run scripts/package");
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "scripts/package failed (cargo-deb: scripts/setup installs it):\n{stdout}\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let debs: Vec<PathBuf> = stdout.lines().map(PathBuf::from).collect();
+        let debs: Vec<PathBuf> = if let Some(list) = std::env::var_os(PACKAGES_ENV) {
+            let list = list.into_string().expect("UTF-8 package paths");
+            let debs: Vec<PathBuf> = list.lines().map(PathBuf::from).collect();
+            for d in &debs {
+                assert!(
+                    d.is_file(),
+                    "{PACKAGES_ENV} names {}, not a file",
+                    d.display()
+                );
+            }
+            debs
+        } else {
+            let out = Command::new(workspace_root().join("scripts/package"))
+                .arg("--fast")
+                .env("CARGO_TARGET_DIR", target_dir())
+                .output()
+                .expect("run scripts/package");
+            let stdout = String::from_utf8_lossy(&out.stdout);
+            assert!(
+                out.status.success(),
+                "scripts/package failed (cargo-deb: scripts/setup installs it):\n{stdout}\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            stdout.lines().map(PathBuf::from).collect()
+        };
         let find = |prefix: &str| {
             debs.iter()
                 .find(|p| {
