@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use fes_sciencemode::{DecodeError, Decoder};
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use nix::fcntl::{FcntlArg, FdFlag, OFlag, fcntl};
 use nix::pty::openpty;
 use nix::sys::termios::{
     BaudRate, ControlFlags, SetArg, cfmakeraw, cfsetspeed, tcgetattr, tcsetattr,
@@ -160,6 +160,12 @@ fn open_pty() -> Result<Pty, PtyError> {
         FcntlArg::F_SETFL(OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK),
     )
     .map_err(pty_err("fcntl O_NONBLOCK"))?;
+    // Close-on-exec: a process this one starts (a host under test, run from the same test
+    // process) must not inherit the device's end, or the device switched off would leave
+    // its pty open and the host would never see the hang-up.
+    for fd in [&pair.master, &pair.slave] {
+        fcntl(fd, FcntlArg::F_SETFD(FdFlag::FD_CLOEXEC)).map_err(pty_err("fcntl FD_CLOEXEC"))?;
+    }
     Ok(Pty {
         master: File::from(pair.master),
         _slave: pair.slave,
