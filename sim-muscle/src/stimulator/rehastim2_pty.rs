@@ -22,7 +22,7 @@ use nix::sys::termios::{
 };
 
 use super::clock::{monotonic_ns, sleep_until};
-use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS};
+use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS, TestFault};
 use crate::plant::MusclePlant;
 
 /// Command-line options of the virtual RehaStim 2 (`sim-muscle rehastim2 ...`).
@@ -48,6 +48,11 @@ pub struct Rehastim2Args {
     /// Stop by itself after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// Inject a fault for tests of a host: `electrode:N` (StimulationError instead of the
+    /// (N+1)-th single pulse), `parameter-error:N` (that pulse acknowledged with a parameter
+    /// error), `silent:N` (nothing answered from that pulse on).
+    #[arg(long, value_name = "KIND:N")]
+    pub test_fault: Option<TestFault>,
 }
 
 /// Why the virtual RehaStim 2 could not run.
@@ -105,6 +110,7 @@ impl Rehastim2Args {
             watchdog_ms: self.watchdog_ms,
             init_period_ms: self.init_period_ms,
             muscle_channel: self.muscle_channel,
+            test_fault: self.test_fault,
         })
     }
 
@@ -361,6 +367,7 @@ mod tests {
             init_period_ms: 50,
             muscle_channel: 1,
             duration_s: Some(20.0),
+            test_fault: None,
         };
         let stop = AtomicBool::new(false);
         std::thread::scope(|s| {

@@ -52,6 +52,7 @@ impl Device {
             init_period_ms: Rehastim2Settings::DEFAULT.init_period_ms,
             muscle_channel: 1,
             duration_s: None,
+            test_fault: None,
         };
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
