@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use fes_rt::msg::{DeviceState, DriverStatus};
-use sim_muscle::stimulator::rehastim2::Rehastim2Settings;
+use sim_muscle::stimulator::rehastim2::{Rehastim2Settings, TestFault};
 use sim_muscle::stimulator::rehastim2_pty::{PtyRunSummary, Rehastim2Args, run_rehastim2_until};
 use sim_muscle::stimulator::test_plant::ChargeIntegrator;
 
@@ -42,7 +42,7 @@ pub struct Device {
 }
 
 impl Device {
-    pub fn start(dir: &Path) -> Self {
+    pub fn start(dir: &Path, test_fault: Option<TestFault>) -> Self {
         let link = dir.join("ttyUSB0");
         let log = dir.join("pulses.csv");
         let args = Rehastim2Args {
@@ -52,7 +52,7 @@ impl Device {
             init_period_ms: Rehastim2Settings::DEFAULT.init_period_ms,
             muscle_channel: 1,
             duration_s: None,
-            test_fault: None,
+            test_fault,
         };
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
@@ -162,12 +162,17 @@ pub struct Rig {
 
 impl Rig {
     pub fn start(name: &str) -> Self {
+        Self::start_with(name, None)
+    }
+
+    /// [`Rig::start`] with a device that injects `fault`.
+    pub fn start_with(name: &str, fault: Option<TestFault>) -> Self {
         let pid = std::process::id();
         let prefix = format!("sds{pid}{name}");
         let dir = std::env::temp_dir().join(format!("stim-driver-serial-{name}-{pid}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let device = Device::start(&dir);
+        let device = Device::start(&dir, fault);
         let config = write_config(&dir, &device.link, &prefix);
         let log = dir.join("driver.log");
         let log_file = std::fs::File::create(&log).unwrap();
@@ -246,6 +251,13 @@ impl Drop for Rig {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
     }
+}
+
+/// Sends `signal` to the driver process.
+pub fn signal_driver(rig: &Rig, signal: i32) {
+    // SAFETY: kill(2) on the driver's pid, a child of this process not yet reaped.
+    let rc = unsafe { libc::kill(rig.driver.id() as i32, signal) };
+    assert_eq!(rc, 0, "kill({signal})");
 }
 
 /// Matches the device's pulses to the decisions, in order, by current: the decision
