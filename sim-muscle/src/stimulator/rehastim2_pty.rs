@@ -24,6 +24,7 @@ use nix::sys::termios::{
 use super::clock::{monotonic_ns, sleep_until};
 use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS, TestFault};
 use crate::plant::MusclePlant;
+use rt_core::msg::{Contract as _, ForceSample};
 
 /// Command-line options of the virtual RehaStim 2 (`sim-muscle rehastim2 ...`).
 #[derive(Debug, Clone, clap::Args)]
@@ -53,6 +54,15 @@ pub struct Rehastim2Args {
     /// error), `silent:N` (nothing answered from that pulse on).
     #[arg(long, value_name = "KIND:N")]
     pub test_fault: Option<TestFault>,
+    /// Publish the muscle's force every tick as iceoryx2 ForceSamples under this service
+    /// prefix, as the rig's separate force sensor would (a RehaStim 2 measures no force;
+    /// on CAN the driver publishes the stimulator's FORCE frames). Needs `--force-max-n`.
+    #[arg(long, value_name = "PREFIX", requires = "force_max_n")]
+    pub force_prefix: Option<String>,
+    /// The muscle's maximal force, N: `ForceSample.force = force_n / max_n` (the driver's
+    /// `[force] max_n` on CAN).
+    #[arg(long, value_name = "N", requires = "force_prefix")]
+    pub force_max_n: Option<f64>,
 }
 
 /// Why the virtual RehaStim 2 could not run.
@@ -69,6 +79,15 @@ pub enum PtyError {
         /// The system's error.
         #[source]
         source: nix::Error,
+    },
+    /// The ForceSample publisher (`--force-prefix`) could not be made.
+    #[error("{what}")]
+    Ipc {
+        /// What was being made.
+        what: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// A file (the link, the log, the pty) could not be used.
     #[error("{what} {}", path.display())]
@@ -121,6 +140,60 @@ impl Rehastim2Args {
             Some(d) => Err(PtyError::Options(format!(
                 "--duration-s {d} must be a positive number of seconds"
             ))),
+        }
+    }
+}
+
+/// The force sensor's stand-in: ForceSamples on iceoryx2 (`--force-prefix`).
+struct ForceOut {
+    /// Sends one sample (the node and the publisher live in the closure).
+    send: Box<dyn FnMut(ForceSample) -> bool>,
+    max_n: f64,
+    seq: u64,
+}
+
+impl ForceOut {
+    fn open(prefix: &str, max_n: f64) -> Result<Self, PtyError> {
+        if !(max_n.is_finite() && max_n > 0.0) {
+            return Err(PtyError::Options(format!(
+                "--force-max-n {max_n} must be a positive number of newtons"
+            )));
+        }
+        let node =
+            rt_core::rt::node::create_node("sim-muscle-rehastim2").map_err(|e| PtyError::Ipc {
+                what: "the iceoryx2 node for ForceSample",
+                source: Box::new(e),
+            })?;
+        let publisher =
+            rt_core::msg::port::publisher::<ForceSample>(&node, prefix).map_err(|e| {
+                PtyError::Ipc {
+                    what: "the ForceSample publisher",
+                    source: Box::new(e),
+                }
+            })?;
+        Ok(Self {
+            send: Box::new(move |sample| {
+                let _node = &node;
+                publisher.send_copy(sample).is_ok()
+            }),
+            max_n,
+            seq: 0,
+        })
+    }
+
+    /// Publishes `force_n` now; a value ForceSample cannot carry is skipped, as the
+    /// driver skips such a FORCE frame.
+    fn publish(&mut self, force_n: f64) {
+        let sample = ForceSample {
+            seq: self.seq + 1,
+            t_ns: monotonic_ns(),
+            // The pulse that caused it is the driver's to know; no driver publishes here.
+            stim_seq: 0,
+            force_n,
+            force: force_n / self.max_n,
+        };
+        if sample.validate().is_ok() && (self.send)(sample) {
+            self.seq += 1;
         }
     }
 }
@@ -249,6 +322,10 @@ pub fn run_rehastim2_until(
         args.pty_link.display()
     );
 
+    let mut force_out = match (&args.force_prefix, args.force_max_n) {
+        (Some(prefix), Some(max_n)) => Some(ForceOut::open(prefix, max_n)?),
+        _ => None,
+    };
     let mut device = Rehastim2::new(settings);
     let mut decoder = Decoder::new();
     let mut out = Vec::with_capacity(4096);
@@ -287,6 +364,9 @@ pub fn run_rehastim2_until(
         }
         device.tick(plant, &mut out);
         summary.ticks += 1;
+        if let Some(f) = force_out.as_mut() {
+            f.publish(device.force_n());
+        }
         if !out.is_empty() {
             match pty.master.write(&out) {
                 Ok(n) => summary.tx_dropped += (out.len() - n) as u64,
@@ -368,6 +448,8 @@ mod tests {
             muscle_channel: 1,
             duration_s: Some(20.0),
             test_fault: None,
+            force_prefix: None,
+            force_max_n: None,
         };
         let stop = AtomicBool::new(false);
         std::thread::scope(|s| {

@@ -85,6 +85,8 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
         muscle_channel: 1,
         duration_s: Some(120.0),
         test_fault: None,
+        force_prefix: None,
+        force_max_n: None,
     };
     let stop = AtomicBool::new(false);
     let (client, stdout, plant, summary) = std::thread::scope(|s| {

@@ -53,6 +53,8 @@ impl Device {
             muscle_channel: 1,
             duration_s: None,
             test_fault,
+            force_prefix: None,
+            force_max_n: None,
         };
         let stop = Arc::new(AtomicBool::new(false));
         let s = stop.clone();
