@@ -46,6 +46,10 @@ pub struct Rehastim2Settings {
     pub muscle_channel: u8,
     /// A fault to inject, for tests of a host (none on a real device's behalf).
     pub test_fault: Option<TestFault>,
+    /// The device's latency in executing a command, ms: a packet is acted on (and
+    /// answered) this long after it arrived (0: in the next tick). Hasomed gives 10-24 ms
+    /// for the real device (`docs/sciencemode.md`).
+    pub latency_ms: u16,
 }
 
 /// What [`TestFault`] makes the device do.
@@ -101,6 +105,7 @@ impl Rehastim2Settings {
         init_period_ms: 100,
         muscle_channel: 1,
         test_fault: None,
+        latency_ms: 0,
     };
 }
 
@@ -181,6 +186,8 @@ pub struct Rehastim2 {
     single_pulses: u64,
     /// A [`TestFaultKind::Silent`] fault happened: nothing is answered any more.
     silent: bool,
+    /// Packets waiting out the latency: (tick due, packet).
+    pending: VecDeque<(u64, Packet)>,
 }
 
 impl Rehastim2 {
@@ -204,6 +211,7 @@ impl Rehastim2 {
             force_n: 0.0,
             single_pulses: 0,
             silent: false,
+            pending: VecDeque::with_capacity(256),
         }
     }
 
@@ -242,8 +250,18 @@ impl Rehastim2 {
     /// A packet from the host, received during the current tick; the device's answer, if
     /// any, is appended to `out` as bytes on the line.
     pub fn on_packet(&mut self, packet: Packet, out: &mut Vec<u8>) {
-        // Any packet is a sign of life.
+        // Any packet is a sign of life, at once.
         self.watchdog.feed(self.now_ns());
+        if self.settings.latency_ms > 0 {
+            let due = self.tick + u64::from(self.settings.latency_ms);
+            self.pending.push_back((due, packet));
+            return;
+        }
+        self.execute(packet, out);
+    }
+
+    /// Acts on `packet` and answers it.
+    fn execute(&mut self, packet: Packet, out: &mut Vec<u8>) {
         let number = packet.number;
         let fault = match packet.message {
             Message::SinglePulse(_) if self.connected => {
@@ -427,6 +445,12 @@ impl Rehastim2 {
     /// Runs one 1 ms tick: Init announcements, the watchdog, channel list cycles, and one
     /// plant step with the pulse due (if any). Answers go to `out`.
     pub fn tick(&mut self, plant: &mut dyn MusclePlant, out: &mut Vec<u8>) {
+        while let Some(&(due, packet)) = self.pending.front()
+            && due <= self.tick
+        {
+            self.pending.pop_front();
+            self.execute(packet, out);
+        }
         if !self.connected && self.tick >= self.next_init_tick {
             send(
                 Packet::new(
@@ -584,6 +608,37 @@ mod tests {
                 .map(|n| Packet::new(n, Message::Init { version: 1 }))
                 .collect::<Vec<_>>()
         );
+    }
+
+    #[test]
+    fn with_a_latency_a_command_is_executed_and_answered_that_much_later() {
+        let (mut d, mut plant) = connected();
+        d.settings.latency_ms = 5;
+        let mut out = Vec::new();
+        let pulse = Packet::new(
+            7,
+            Message::SinglePulse(SinglePulse {
+                channel: 0,
+                pulse_width_us: 200,
+                current_ma: 20,
+            }),
+        );
+        let arrived = d.tick;
+        d.on_packet(pulse, &mut out);
+        assert!(out.is_empty(), "not answered on arrival");
+        let mut answered = None;
+        for _ in 0..10 {
+            d.tick(&mut plant, &mut out);
+            if answered.is_none() && !out.is_empty() {
+                answered = Some(d.tick);
+                assert_eq!(ack_of(&out), AckResult::Ok);
+            }
+        }
+        // Answered in the tick `arrived + 5` (the tick counter has advanced past it).
+        assert_eq!(answered, Some(arrived + 5 + 1));
+        let fired: Vec<u64> = pulses(&mut d).iter().map(|p| p.0).collect();
+        assert_eq!(fired, [arrived + 5 + 1]);
+        assert_eq!(plant.pulses(), 1);
     }
 
     #[test]

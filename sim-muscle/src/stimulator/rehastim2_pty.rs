@@ -49,6 +49,10 @@ pub struct Rehastim2Args {
     /// Stop by itself after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// The device's latency in executing a command, ms (0: the next 1 ms tick; a real
+    /// RehaStim 2 takes 10-24 ms): each packet is acted on and answered this much later.
+    #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.latency_ms)]
+    pub latency_ms: u16,
     /// Inject a fault for tests of a host: `electrode:N` (StimulationError instead of the
     /// (N+1)-th single pulse), `parameter-error:N` (that pulse acknowledged with a parameter
     /// error), `silent:N` (nothing answered from that pulse on).
@@ -120,6 +124,12 @@ impl Rehastim2Args {
                 self.muscle_channel
             )));
         }
+        if self.latency_ms > 1000 {
+            return Err(PtyError::Options(format!(
+                "--latency-ms {} must be at most 1000",
+                self.latency_ms
+            )));
+        }
         if self.watchdog_ms == 0 || self.init_period_ms == 0 {
             return Err(PtyError::Options(
                 "--watchdog-ms and --init-period-ms must be positive".into(),
@@ -130,6 +140,7 @@ impl Rehastim2Args {
             init_period_ms: self.init_period_ms,
             muscle_channel: self.muscle_channel,
             test_fault: self.test_fault,
+            latency_ms: self.latency_ms,
         })
     }
 
@@ -448,6 +459,7 @@ mod tests {
             muscle_channel: 1,
             duration_s: Some(20.0),
             test_fault: None,
+            latency_ms: 0,
             force_prefix: None,
             force_max_n: None,
         };

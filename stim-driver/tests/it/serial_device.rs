@@ -65,6 +65,7 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
         muscle_channel: 1,
         duration_s: Some(60.0),
         test_fault: None,
+        latency_ms: 0,
         force_prefix: None,
         force_max_n: None,
     };

@@ -85,6 +85,7 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
         muscle_channel: 1,
         duration_s: Some(120.0),
         test_fault: None,
+        latency_ms: 0,
         force_prefix: None,
         force_max_n: None,
     };

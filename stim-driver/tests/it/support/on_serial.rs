@@ -53,6 +53,7 @@ impl Device {
             muscle_channel: 1,
             duration_s: None,
             test_fault,
+            latency_ms: 0,
             force_prefix: None,
             force_max_n: None,
         };
