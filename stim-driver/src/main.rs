@@ -597,14 +597,16 @@ fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
     let us = |ns: u64| ns as f64 / 1000.0;
     let c = shared.status.load();
     info!(
-        "final: {} StimTicks ({} missing, {} refused), {} pulses sent, {} refused by \
-         the interlocks, {} while not armed, {} CAN write errors, {} trips ({} \
+        "final: {} StimTicks ({} missing, {} refused), {} pulses sent ({} applied by the \
+         stimulator since its reset, its last STATUS), {} refused by the interlocks, {} \
+         while not armed, {} CAN write errors, {} trips ({} \
          watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
          stamps; hot-path heap allocations {}",
         c.ticks_received,
         c.ticks_lost,
         c.ticks_refused,
         c.pulses_sent,
+        c.stimulator_pulses,
         c.pulses_rejected,
         c.pulses_not_armed,
         c.can_tx_errors,

@@ -42,7 +42,7 @@ pub struct Device {
 }
 
 impl Device {
-    pub fn start(dir: &Path, test_fault: Option<TestFault>) -> Self {
+    pub fn start(dir: &Path, test_fault: Option<TestFault>, latency_ms: u16) -> Self {
         let link = dir.join("ttyUSB0");
         let log = dir.join("pulses.csv");
         let args = Rehastim2Args {
@@ -53,7 +53,7 @@ impl Device {
             muscle_channel: 1,
             duration_s: None,
             test_fault,
-            latency_ms: 0,
+            latency_ms,
             force_prefix: None,
             force_max_n: None,
         };
@@ -165,17 +165,18 @@ pub struct Rig {
 
 impl Rig {
     pub fn start(name: &str) -> Self {
-        Self::start_with(name, None)
+        Self::start_with(name, None, 0)
     }
 
-    /// [`Rig::start`] with a device that injects `fault`.
-    pub fn start_with(name: &str, fault: Option<TestFault>) -> Self {
+    /// [`Rig::start`] with a device that injects `fault` and takes `latency_ms` to execute
+    /// a command.
+    pub fn start_with(name: &str, fault: Option<TestFault>, latency_ms: u16) -> Self {
         let pid = std::process::id();
         let prefix = format!("sds{pid}{name}");
         let dir = std::env::temp_dir().join(format!("stim-driver-serial-{name}-{pid}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let device = Device::start(&dir, fault);
+        let device = Device::start(&dir, fault, latency_ms);
         let config = write_config(&dir, &device.link, &prefix);
         let log = dir.join("driver.log");
         let log_file = std::fs::File::create(&log).unwrap();
@@ -223,13 +224,25 @@ impl Rig {
         std::fs::read_to_string(&self.log).unwrap_or_default()
     }
 
-    /// The last count of acknowledged pulses the driver logged ("... N pulses applied").
-    pub fn applied_logged(&self) -> Option<u64> {
+    /// Stops the driver (SIGTERM) and returns the count of acknowledged pulses its final
+    /// line reports ("N pulses sent (M applied by the stimulator ...": M, the delivered
+    /// count of its last STATUS).
+    pub fn stop_driver_applied(&mut self) -> Option<u64> {
+        // SAFETY: kill(2) on the driver's pid, a child of this process not yet reaped.
+        unsafe { libc::kill(self.driver.id() as i32, libc::SIGTERM) };
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.driver.try_wait() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
         self.log_text()
             .lines()
+            .filter(|l| l.contains("final: "))
             .filter_map(|l| {
-                let (head, _) = l.split_once(" pulses applied")?;
-                head.rsplit('(').next()?.parse().ok()
+                let (_, tail) = l.split_once(" pulses sent (")?;
+                tail.split_whitespace().next()?.parse().ok()
             })
             .next_back()
     }
