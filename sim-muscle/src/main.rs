@@ -662,14 +662,38 @@ fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
 struct Rehastim2Cmd {
     #[command(flatten)]
     muscle: MuscleArgs,
+    /// Measure the force as a force sensor does (offset, noise, low-pass) for
+    /// `--force-prefix` instead of the exact model force.
+    #[arg(long)]
+    measured: bool,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     #[command(flatten)]
     device: sim_muscle::stimulator::rehastim2_pty::Rehastim2Args,
 }
 
 fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
     rt_core::rt::panic::install("sim-muscle rehastim2");
-    let chosen = choose_plant(&args.muscle, 1e-3, |_| Ok(()))?;
-    sim_muscle::stimulator::run_rehastim2(args.device, chosen.plant)
+    let s = &args.sensor;
+    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
+    {
+        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
+    }
+    let ts_s = 1e-3;
+    let mut chosen = choose_plant(&args.muscle, ts_s, |_| Ok(()))?;
+    let plant: Box<dyn MusclePlant> = if args.measured {
+        let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
+        Box::new(Measured::new(
+            chosen.plant,
+            ForceSensor::new(sensor, ts_s).context("sensor settings")?,
+        ))
+    } else {
+        chosen.plant
+    };
+    sim_muscle::stimulator::run_rehastim2(args.device, plant)
 }
 
 fn main() -> ExitCode {

@@ -6,8 +6,15 @@
 //! prescription = "/etc/fes/prescription.toml"  # the dose (fes-prescription/1, root-owned);
 //!                                # relative: to this file. Nothing below may exceed it.
 //!
+//! [transport]                    # optional: what carries the driver's commands
+//! kind = "can"                   # "can" (default) or "sciencemode" (a RehaStim 2 on a
+//!                                # serial line, docs/sciencemode.md), which then needs:
+//! # device = "/dev/ttyUSB0"      # the serial device (sciencemode only)
+//! # poll_ms = 20                 # liveness query period (sciencemode only), 5..=1000
+//!
 //! [can]
-//! iface = "can0"                 # required; "hostbus:<dir>" for the host bus (docs/vcan.md)
+//! iface = "can0"                 # required with kind "can", absent with "sciencemode";
+//!                                # "hostbus:<dir>" for the host bus (docs/vcan.md)
 //! host_node = 1                  # our CANopen node id (1..=127)
 //! stim_node = 16                 # the stimulator's (0x10)
 //! heartbeat_ms = 10              # host heartbeat period
@@ -95,7 +102,12 @@ pub struct DriverConfig {
     /// file. Default `/etc/fes/prescription.toml`.
     #[serde(default = "default_prescription")]
     pub prescription: PathBuf,
-    /// The CAN side.
+    /// What carries the driver's commands (absent: CAN).
+    #[serde(default, skip_serializing_if = "TransportConfig::is_default")]
+    pub transport: TransportConfig,
+    /// The CAN side (with the ScienceMode transport: node ids, heartbeat and retry
+    /// settings of the driver's frames, which the transport translates; no interface).
+    #[serde(default)]
     pub can: CanConfig,
     /// Limits sent to the stimulator.
     #[serde(default)]
@@ -141,7 +153,8 @@ fn default_rt() -> RtConfig {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CanConfig {
-    /// SocketCAN interface (required).
+    /// SocketCAN interface (required with the CAN transport, absent with ScienceMode).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub iface: String,
     /// The host's node id.
     #[serde(default = "default_host_node")]
@@ -163,6 +176,21 @@ pub struct CanConfig {
     pub bringup_retry_ms: u32,
 }
 
+impl Default for CanConfig {
+    /// No interface (required with the CAN transport), every other key's default.
+    fn default() -> Self {
+        Self {
+            iface: String::new(),
+            host_node: default_host_node(),
+            stim_node: default_stim_node(),
+            heartbeat_ms: default_heartbeat_ms(),
+            tx_retry_budget_us: default_retry_budget_us(),
+            tx_retry_interval_us: default_retry_interval_us(),
+            bringup_retry_ms: default_bringup_retry_ms(),
+        }
+    }
+}
+
 fn default_host_node() -> u8 {
     Nodes::DEFAULT.host()
 }
@@ -180,6 +208,47 @@ fn default_retry_interval_us() -> u32 {
 }
 fn default_bringup_retry_ms() -> u32 {
     500
+}
+
+/// Which transport `[transport] kind` names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TransportKind {
+    /// SocketCAN or the host bus (`[can] iface`).
+    #[default]
+    Can,
+    /// ScienceMode 2 to a Hasomed RehaStim 2 on a serial line (`docs/sciencemode.md`).
+    Sciencemode,
+}
+
+/// `[transport]`. Default: CAN.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransportConfig {
+    /// `"can"` or `"sciencemode"`.
+    #[serde(default)]
+    pub kind: TransportKind,
+    /// The serial device, e.g. `/dev/ttyUSB0` (ScienceMode only, required there).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<PathBuf>,
+    /// Period of the liveness query (GetStimulationMode), whose answer stands for STATUS,
+    /// ms (ScienceMode only; 5..=1000, default [`DEFAULT_POLL_MS`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub poll_ms: Option<u32>,
+}
+
+/// Default `[transport] poll_ms`.
+pub const DEFAULT_POLL_MS: u32 = 20;
+
+impl TransportConfig {
+    fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The liveness query period, ms (ScienceMode).
+    pub fn poll_ms(&self) -> u32 {
+        self.poll_ms.unwrap_or(DEFAULT_POLL_MS)
+    }
 }
 
 /// `[stimulator]`: the run's limits sent in CONFIG. Defaults: the protocol's
@@ -386,6 +455,7 @@ impl DriverConfig {
         Self {
             schema: SCHEMA.to_owned(),
             prescription: default_prescription(),
+            transport: TransportConfig::default(),
             can: CanConfig {
                 iface: iface.to_owned(),
                 host_node: default_host_node(),
@@ -586,7 +656,9 @@ impl DriverConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         config_file::check_schema(&self.schema, SCHEMA)?;
         let c = &self.can;
+        self.validate_transport()?;
         match fes_hostbus::bus_dir(&c.iface) {
+            _ if self.transport.kind == TransportKind::Sciencemode => {}
             Some(dir) => config_file::range(
                 fes_hostbus::validate_dir(dir).is_ok(),
                 "can.iface",
@@ -716,6 +788,94 @@ impl DriverConfig {
         Ok(())
     }
 
+    /// `[transport]`: the keys of the other transport are refused, not ignored; with
+    /// ScienceMode the limits must lie within the RehaStim 2's fixed ones and the
+    /// stimulator timeout must cover the device's latency (`docs/sciencemode.md`).
+    fn validate_transport(&self) -> Result<(), ConfigError> {
+        let t = &self.transport;
+        match t.kind {
+            TransportKind::Can => {
+                config_file::range(
+                    t.device.is_none(),
+                    "transport.device",
+                    t.device
+                        .as_deref()
+                        .map_or(String::new(), |d| d.display().to_string()),
+                    "absent with kind = \"can\" (a serial device is for kind = \"sciencemode\")",
+                )?;
+                config_file::range(
+                    t.poll_ms.is_none(),
+                    "transport.poll_ms",
+                    t.poll_ms.unwrap_or(0),
+                    "absent with kind = \"can\" (the stimulator sends STATUS by itself)",
+                )?;
+                config_file::range(
+                    !self.can.iface.is_empty(),
+                    "can.iface",
+                    "",
+                    "required with transport kind \"can\" (the default)",
+                )?;
+            }
+            TransportKind::Sciencemode => {
+                let device = t.device.as_deref().unwrap_or(Path::new(""));
+                config_file::range(
+                    device.is_absolute(),
+                    "transport.device",
+                    device.display(),
+                    "required with kind = \"sciencemode\": the serial device's absolute path (/dev/ttyUSB0)",
+                )?;
+                config_file::range(
+                    self.can.iface.is_empty(),
+                    "can.iface",
+                    &self.can.iface,
+                    "absent with transport kind \"sciencemode\" (no CAN interface is used)",
+                )?;
+                let poll_ms = t.poll_ms();
+                config_file::range(
+                    (5..=1000).contains(&poll_ms),
+                    "transport.poll_ms",
+                    poll_ms,
+                    "5..=1000",
+                )?;
+                config_file::range(
+                    self.watchdog.stimulator_timeout_ms
+                        >= crate::serial_rx::DEVICE_LATENCY_MS + 2 * poll_ms,
+                    "watchdog.stimulator_timeout_ms",
+                    self.watchdog.stimulator_timeout_ms,
+                    ">= 24 ms (the RehaStim 2's latency) + 2 x transport.poll_ms with kind = \"sciencemode\"",
+                )?;
+                let limits = self.stim_limits()?;
+                if let Err(field) = crate::serial_rx::limits_within_device(&limits) {
+                    let (name, value) = match field {
+                        "max_amplitude_ua" => (
+                            "stimulator.max_amplitude_ua",
+                            self.stimulator.max_amplitude_ua,
+                        ),
+                        _ => (
+                            "stimulator.max_width_us",
+                            u32::from(self.stimulator.max_width_us),
+                        ),
+                    };
+                    config_file::range(
+                        false,
+                        name,
+                        value,
+                        "within the RehaStim 2's fixed limits (126000 uA, 500 us) with kind = \"sciencemode\"",
+                    )?;
+                }
+                for &ch in &self.interlocks.channels {
+                    config_file::range(
+                        ch < fes_sciencemode::limits::CHANNELS,
+                        "interlocks.channels",
+                        ch,
+                        "0..=7 (the RehaStim 2's 8 channels) with kind = \"sciencemode\"",
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The forward path's settings (call after [`Self::validate`]).
     pub fn forward_settings(&self) -> Result<ForwardSettings, ConfigError> {
         let w = &self.watchdog;
@@ -842,6 +1002,78 @@ prefix = "bench-1"
     fn the_printed_example_parses_back() {
         let c = DriverConfig::with_defaults("can0", 12.5);
         assert_eq!(DriverConfig::parse(&c.to_toml()).unwrap(), c);
+    }
+
+    const SM: &str = "schema = \"fes-stim-driver/1\"\n[transport]\nkind = \"sciencemode\"\ndevice = \"/dev/ttyUSB0\"\n[force]\nmax_n = 40.0\n";
+
+    fn sm_err(extra: &str) -> String {
+        DriverConfig::parse(&format!("{SM}{extra}"))
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn the_transport_is_can_by_default_and_sciencemode_needs_a_device_and_no_can_iface() {
+        assert_eq!(
+            DriverConfig::parse(MIN).unwrap().transport.kind,
+            TransportKind::Can
+        );
+        let c = DriverConfig::parse(SM).unwrap();
+        assert_eq!(c.transport.kind, TransportKind::Sciencemode);
+        assert_eq!(c.transport.poll_ms(), DEFAULT_POLL_MS);
+        assert_eq!(DriverConfig::parse(&c.to_toml()).unwrap(), c);
+        // An unknown kind, a missing or relative device, CAN-only and serial-only keys.
+        let e = err("[transport]\nkind = \"usb\"\n");
+        assert!(e.contains("usb") && e.contains("sciencemode"), "{e}");
+        let e = DriverConfig::parse(&SM.replace("device = \"/dev/ttyUSB0\"\n", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("transport.device") && e.contains("required"),
+            "{e}"
+        );
+        let e = DriverConfig::parse(&SM.replace("/dev/ttyUSB0", "ttyUSB0"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("transport.device"), "{e}");
+        let e = sm_err("[can]\niface = \"can0\"\n");
+        assert!(e.contains("can.iface") && e.contains("sciencemode"), "{e}");
+        let e = err("[transport]\ndevice = \"/dev/ttyUSB0\"\n");
+        assert!(
+            e.contains("transport.device") && e.contains("\"can\""),
+            "{e}"
+        );
+        assert!(err("[transport]\npoll_ms = 20\n").contains("transport.poll_ms"));
+        let e = DriverConfig::parse("schema = \"fes-stim-driver/1\"\n[force]\nmax_n = 40.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("can.iface") && e.contains("required"), "{e}");
+        // Limits beyond the RehaStim 2's fixed ones are refused at start-up.
+        let e = sm_err(
+            "[stimulator]\nmax_amplitude_ua = 130000\n[interlocks]\nmax_amplitude_ua = 100000\n",
+        );
+        assert!(
+            e.contains("stimulator.max_amplitude_ua") && e.contains("126000"),
+            "{e}"
+        );
+        assert!(sm_err("[interlocks]\nchannels = [8]\n").contains("interlocks.channels"));
+        // The stimulator timeout must cover the device's latency and two queries.
+        let slow = SM.replace(
+            "device = \"/dev/ttyUSB0\"\n",
+            "device = \"/dev/ttyUSB0\"\npoll_ms = 50\n",
+        );
+        let e = DriverConfig::parse(&slow).unwrap_err().to_string();
+        assert!(e.contains("watchdog.stimulator_timeout_ms"), "{e}");
+        assert!(
+            DriverConfig::parse(&format!("{slow}[watchdog]\nstimulator_timeout_ms = 124\n"))
+                .is_ok()
+        );
+        assert!(
+            DriverConfig::parse(&slow.replace("poll_ms = 50", "poll_ms = 2"))
+                .unwrap_err()
+                .to_string()
+                .contains("transport.poll_ms")
+        );
     }
 
     fn err(extra: &str) -> String {

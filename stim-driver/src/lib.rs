@@ -12,7 +12,7 @@
 //! - [`forward`]: the whole decision logic ([`forward::ForwardPath`]) without threads or clocks.
 //! - [`tx`]: the write seam ([`tx::CanTx`]): SocketCAN, or a counting sink;
 //!   [`serial_tx`]: its ScienceMode 2 implementation for a RehaStim 2 on a serial line
-//!   (issue 22; the receive side and the configuration switch are still to come).
+//!   (issue 22), [`serial_rx`] its receive side (the device's answers as the bus events).
 //! - [`event`], [`fault`]: what the threads exchange, and the fault and refusal reasons.
 //! - [`config`]: the TOML configuration file.
 //! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state, and frames
@@ -38,6 +38,7 @@ pub mod reconcile;
 pub mod report;
 pub mod runner;
 pub mod safe_stop;
+pub mod serial_rx;
 pub mod serial_tx;
 pub mod telemetry;
 pub mod tx;

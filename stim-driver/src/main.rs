@@ -25,10 +25,12 @@ use fes_rt::rt::notify::{NotifierSettings, ServiceManager, run_progress_notifier
 use fes_rt::rt::realtime::{RtError, enter_realtime};
 use fes_rt::rt::signals::install_stop_handler;
 use stim_driver::bus::{BusSettings, run_bus};
-use stim_driver::config::DriverConfig;
+use stim_driver::config::{DriverConfig, TransportKind};
 use stim_driver::report::{ReportOutcome, run_report};
 use stim_driver::runner::{ForwardOutcome, Shared, run_forward};
 use stim_driver::safe_stop::safe_stop;
+use stim_driver::serial_rx::{SerialRxSettings, run_serial_rx};
+use stim_driver::serial_tx::{ScienceModeTx, open_serial};
 use stim_driver::tx::BusTx;
 use stim_driver::txstamp::{self, TxStampReader};
 use tracing::{error, info, warn};
@@ -55,6 +57,8 @@ the link going down: NMT stop, SAFE STATE, and nothing until an explicit re-arm.
 
 CONFIGURATION (TOML, schema \"fes-stim-driver/1\"; `example-config` prints every key; only
 [can] iface and [force] max_n are required; docs/stim-driver.md documents each key):
+  [transport]   kind = \"can\" (default) or \"sciencemode\" (a RehaStim 2 on a serial line:
+                device = \"/dev/ttyUSB0\", poll_ms; no [can] iface; docs/sciencemode.md)
   [can]         iface, host_node, stim_node, heartbeat_ms, tx_retry_budget_us, ...
   [stimulator]  the limits sent in CONFIG: max_amplitude_ua, max_width_us, min_ipi_ms,
                 max_pulses, rate_window_ms, watchdog_ms
@@ -188,8 +192,11 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
         return Ok(());
     }
     // A panicking thread: NMT stop on the bus before the process aborts (the stimulator's
-    // own watchdog would stop it too, later).
-    if let Ok(nodes) = config.nodes() {
+    // own watchdog would stop it too, later). On ScienceMode nothing to do: a pulse is a
+    // command, and a process that sends none delivers none.
+    if config.transport.kind == TransportKind::Can
+        && let Ok(nodes) = config.nodes()
+    {
         let iface = config.can.iface.clone();
         fes_rt::rt::panic::set_safe_move(move || match safe_stop(&iface, &nodes) {
             Ok(n) => eprintln!("stim-driver: NMT stop written on {iface} ({n} of 2 frames)"),
@@ -202,38 +209,56 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
     let stop = install_stop_handler()
         .context("installing SIGINT/SIGTERM handlers")
         .map_err(Failure::Run)?;
-    let outputs = Outputs::open(&config)?;
+    let shared = Shared::new(&config);
+    let (outputs, rx_port) = Outputs::open(&config, &shared)?;
     let nodes = config
         .nodes()
         .context("configuration")
         .map_err(Failure::Config)?;
-    let bus_settings = BusSettings {
-        iface: config.can.iface.clone(),
-        nodes,
-        max_force_n: config.force.max_n,
-        prefix: config.ipc.prefix.clone(),
+    let receive = match rx_port {
+        None => Receive::Can(BusSettings {
+            iface: config.can.iface.clone(),
+            nodes,
+            max_force_n: config.force.max_n,
+            prefix: config.ipc.prefix.clone(),
+        }),
+        Some(port) => Receive::Serial(
+            port,
+            SerialRxSettings {
+                limits: config
+                    .stim_limits()
+                    .context("configuration")
+                    .map_err(Failure::Config)?,
+            },
+        ),
     };
-    let shared = Shared::new(&config);
     std::thread::scope(|scope| {
-        run_threads(
-            scope,
-            &config,
-            &shared,
-            &manager,
-            stop,
-            outputs,
-            bus_settings,
-        )
+        run_threads(scope, &config, &shared, &manager, stop, outputs, receive)
     })
+}
+
+/// What the receive thread reads: the CAN bus, or the ScienceMode serial port.
+enum Receive {
+    Can(BusSettings),
+    Serial(std::fs::File, SerialRxSettings),
 }
 
 /// Loads and validates the configuration; `iface` (`--iface`, or `FES_CAN_IFACE` from the
 /// unit's can.env, which ExecStopPost's safe-stop also uses) overrides `[can] iface`.
 fn load_config(path: &std::path::Path, iface: Option<String>) -> Result<DriverConfig, Failure> {
-    let iface = iface.or_else(|| std::env::var(ENV_CAN_IFACE).ok().filter(|s| !s.is_empty()));
     let mut config = DriverConfig::load(path)
         .context("configuration")
         .map_err(Failure::Config)?;
+    let iface = if config.transport.kind == TransportKind::Sciencemode {
+        if let Some(iface) = iface {
+            return Err(Failure::Config(anyhow!(
+                "--iface {iface}: no CAN interface with transport kind \"sciencemode\""
+            )));
+        }
+        None
+    } else {
+        iface.or_else(|| std::env::var(ENV_CAN_IFACE).ok().filter(|s| !s.is_empty()))
+    };
     if let Some(iface) = iface
         && iface != config.can.iface
     {
@@ -262,7 +287,10 @@ fn load_config(path: &std::path::Path, iface: Option<String>) -> Result<DriverCo
         "config {}: {} (stimulator node {:#04x}), tick {} us, watchdog {} ticks, \
          interlocks min IPI {} us / {} pulses per {} ms / {} uA / {} us, prefix {:?}",
         path.display(),
-        c.can.iface,
+        match (&c.transport.kind, &c.transport.device) {
+            (TransportKind::Sciencemode, Some(d)) => format!("ScienceMode 2 on {}", d.display()),
+            _ => c.can.iface.clone(),
+        },
         c.can.stim_node,
         c.watchdog.tick_period_us,
         c.watchdog.timeout_ticks,
@@ -285,7 +313,12 @@ struct Outputs {
 }
 
 impl Outputs {
-    fn open(config: &DriverConfig) -> Result<Self, Failure> {
+    /// Opens the outputs; with ScienceMode also the serial port's read side for the
+    /// receive thread.
+    fn open(
+        config: &DriverConfig,
+        shared: &Shared,
+    ) -> Result<(Self, Option<std::fs::File>), Failure> {
         let hlog = match &config.telemetry.hlog {
             Some(p) => Some(
                 HlogWriter::create(p, "stim-driver timing", SystemTime::now())
@@ -294,6 +327,38 @@ impl Outputs {
             ),
             None => None,
         };
+        if let (TransportKind::Sciencemode, Some(device)) =
+            (config.transport.kind, &config.transport.device)
+        {
+            let port = open_serial(device)
+                .with_context(|| format!("serial device {}", device.display()))
+                .map_err(Failure::Run)?;
+            let rx = port
+                .try_clone()
+                .with_context(|| format!("serial device {}", device.display()))
+                .map_err(Failure::Run)?;
+            let nodes = config
+                .nodes()
+                .context("configuration")
+                .map_err(Failure::Config)?;
+            let tx = ScienceModeTx::with_link(
+                port,
+                nodes,
+                config.retry_policy(),
+                shared.serial_link.clone(),
+                u64::from(config.transport.poll_ms()) * 1_000_000,
+            );
+            info!(
+                "ScienceMode 2 on {} (a Hasomed RehaStim 2; docs/sciencemode.md)",
+                device.display()
+            );
+            let outputs = Self {
+                tx: BusTx::Serial(tx),
+                stamps: None,
+                hlog,
+            };
+            return Ok((outputs, Some(rx)));
+        }
         let tx = BusTx::open(&config.can.iface, config.retry_policy())
             .with_context(|| format!("CAN interface {:?}", config.can.iface))
             .map_err(Failure::Run)?;
@@ -307,6 +372,7 @@ impl Outputs {
                     }
                 }
             }
+            BusTx::Serial(_) => None,
             BusTx::Host(_) => {
                 warn!(
                     "{}: the host bus (Unix datagrams, no CAN): for tests and benches on hosts without SocketCAN",
@@ -315,7 +381,7 @@ impl Outputs {
                 None
             }
         };
-        Ok(Self { tx, stamps, hlog })
+        Ok((Self { tx, stamps, hlog }, None))
     }
 }
 
@@ -333,7 +399,7 @@ fn spawn_bus<'scope>(
     scope: &'scope std::thread::Scope<'scope, '_>,
     config: &'scope DriverConfig,
     shared: &'scope Shared,
-    settings: BusSettings,
+    receive: Receive,
 ) -> Result<Handle<'scope>, Failure> {
     let (ready_tx, ready_rx) = mpsc::channel();
     let thread = std::thread::Builder::new()
@@ -343,18 +409,31 @@ fn spawn_bus<'scope>(
                 let status = enter_realtime(rt).context("[bus_rt]")?;
                 info!("receive thread: {status}");
             }
-            run_bus(
-                &settings,
-                &shared.bus_events,
-                &shared.status,
-                &shared.bus,
-                &shared.sent_log,
-                &shared.forward_ended,
-                move || {
-                    let _ = ready_tx.send(());
-                },
-            )
-            .map_err(|e| failed(shared, e.into()))
+            let ready = move || {
+                let _ = ready_tx.send(());
+            };
+            match receive {
+                Receive::Can(settings) => run_bus(
+                    &settings,
+                    &shared.bus_events,
+                    &shared.status,
+                    &shared.bus,
+                    &shared.sent_log,
+                    &shared.forward_ended,
+                    ready,
+                )
+                .map_err(|e| failed(shared, e.into())),
+                Receive::Serial(port, settings) => run_serial_rx(
+                    &settings,
+                    port,
+                    &shared.serial_link,
+                    &shared.bus_events,
+                    &shared.bus,
+                    &shared.forward_ended,
+                    ready,
+                )
+                .map_err(|e| failed(shared, anyhow::Error::from(e).context("serial port"))),
+            }
         })
         .context("spawning the receive thread")
         .map_err(Failure::Run)?;
@@ -417,10 +496,10 @@ fn run_threads<'scope>(
     manager: &'scope ServiceManager,
     stop: &'static std::sync::atomic::AtomicBool,
     outputs: Outputs,
-    bus_settings: BusSettings,
+    receive: Receive,
 ) -> Result<(), Failure> {
     let Outputs { tx, stamps, hlog } = outputs;
-    let bus_thread = spawn_bus(scope, config, shared, bus_settings)?;
+    let bus_thread = spawn_bus(scope, config, shared, receive)?;
     let report_thread = spawn_report(scope, config, shared, hlog, stamps)?;
     let notifier = std::thread::Builder::new()
         .name("stim-driver-notify".to_owned())
@@ -518,14 +597,16 @@ fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
     let us = |ns: u64| ns as f64 / 1000.0;
     let c = shared.status.load();
     info!(
-        "final: {} StimTicks ({} missing, {} refused), {} pulses sent, {} refused by \
-         the interlocks, {} while not armed, {} CAN write errors, {} trips ({} \
+        "final: {} StimTicks ({} missing, {} refused), {} pulses sent ({} applied by the \
+         stimulator since its reset, its last STATUS), {} refused by the interlocks, {} \
+         while not armed, {} CAN write errors, {} trips ({} \
          watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
          stamps; hot-path heap allocations {}",
         c.ticks_received,
         c.ticks_lost,
         c.ticks_refused,
         c.pulses_sent,
+        c.stimulator_pulses,
         c.pulses_rejected,
         c.pulses_not_armed,
         c.can_tx_errors,

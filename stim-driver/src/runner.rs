@@ -14,8 +14,8 @@
 //! the bounded write retry: events go to the report thread through [`Shared::events`]. On
 //! stop it sends NMT stop and a "stopped" heartbeat ([`ForwardPath::shutdown`]).
 
-use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
@@ -32,6 +32,7 @@ use crate::config::DriverConfig;
 use crate::event::{BusEvent, DriverEvent, EventSink, QueueSink, SharedStatus};
 use crate::forward::ForwardPath;
 use crate::intrusion::{LoggingTx, SentLog};
+use crate::serial_rx::SerialLink;
 use crate::tx::CanTx;
 
 /// The iceoryx2 node name of the forward thread (the supervisor watches it).
@@ -52,6 +53,8 @@ pub struct Shared {
     pub bus_events: ArrayQueue<BusEvent>,
     /// The receive thread's counters.
     pub bus: BusCounters,
+    /// What the ScienceMode transmit side and receive thread share (unused on CAN).
+    pub serial_link: Arc<SerialLink>,
     /// The frames the forward thread wrote, for the receive thread to tell their echoes
     /// from foreign frames ([`crate::intrusion`]).
     pub sent_log: SentLog,
@@ -74,6 +77,7 @@ impl Shared {
             event_overflows: AtomicU64::new(0),
             bus_events: ArrayQueue::new(BUS_QUEUE_CAPACITY),
             bus: BusCounters::default(),
+            serial_link: Arc::new(SerialLink::new()),
             sent_log: SentLog::new(),
             hot_path_allocations: AtomicU64::new(0),
             forward_ended: AtomicBool::new(false),

@@ -19,24 +19,26 @@
 //! complete: a packet the line only partly took is finished within the retry budget (a
 //! packet torn by a drop is discarded by the device at the next start byte).
 //!
-//! Not yet here (issue 22, item 1): the receive side (acknowledgements, StimulationError
-//! and the Init handshake standing in for STATUS, EMCY, the stimulator heartbeat and the
-//! CONFIG read-back the arming sequence waits for) and the choice of transport in
-//! `stim-driver.toml`. Until then nothing constructs a [`ScienceModeTx`] outside tests.
+//! With a receive side ([`ScienceModeTx::with_link`], [`crate::serial_rx`]) it also
+//! answers the device's Init with InitAck, reports the NMT state and CONFIG id the driver
+//! commanded to the receive side, and sends GetStimulationMode, the liveness query whose
+//! answer stands for STATUS, in place of a Watchdog every `poll` interval.
 
 use std::fs::File;
 use std::io::{self, Write};
 use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::Path;
+use std::sync::Arc;
 
 use fes_can::{Frame, Message as CanMessage, NmtCommand, Nodes};
 use fes_sciencemode::limits::{CHANNELS, MAX_CURRENT_MA, MAX_PULSE_WIDTH_US};
-use fes_sciencemode::{MAX_PACKET_LEN, Message, Packet, SinglePulse};
+use fes_sciencemode::{AckResult, MAX_PACKET_LEN, Message, Packet, SinglePulse};
 use nix::sys::termios::{
     BaudRate, ControlFlags, InputFlags, SetArg, Termios, cfmakeraw, cfsetspeed, tcgetattr,
     tcsetattr,
 };
 
+use crate::serial_rx::{Commanded, SerialLink};
 use crate::tx::{CanTx, RetryPolicy, TxDone, TxError, write_with_retry};
 
 /// The ScienceMode 2 command for a driver frame (see the module table); `Ok(None)` when
@@ -91,16 +93,42 @@ pub struct ScienceModeTx<W> {
     nodes: Nodes,
     retry: RetryPolicy,
     number: u8,
+    link: Option<Arc<SerialLink>>,
+    poll_ns: u64,
+    next_poll_ns: u64,
 }
 
 impl<W: Write> ScienceModeTx<W> {
-    /// Writes to `port`, reading the driver's frames with `nodes`' identifiers.
+    /// Writes to `port`, reading the driver's frames with `nodes`' identifiers; no receive
+    /// side (no handshake, no liveness query).
     pub fn new(port: W, nodes: Nodes, retry: RetryPolicy) -> Self {
         Self {
             port,
             nodes,
             retry,
             number: 0,
+            link: None,
+            poll_ns: 0,
+            next_poll_ns: 0,
+        }
+    }
+
+    /// Writes to `port` beside the receive thread ([`crate::serial_rx`]) that shares
+    /// `link`: answers the device's Init with InitAck before the next frame, tells the
+    /// receive side the NMT state and CONFIG id the driver commanded, and sends
+    /// GetStimulationMode (the liveness query whose answer becomes STATUS) in place of the
+    /// Watchdog for a host heartbeat at most every `poll_ns` once the handshake is done.
+    pub fn with_link(
+        port: W,
+        nodes: Nodes,
+        retry: RetryPolicy,
+        link: Arc<SerialLink>,
+        poll_ns: u64,
+    ) -> Self {
+        Self {
+            link: Some(link),
+            poll_ns,
+            ..Self::new(port, nodes, retry)
         }
     }
 
@@ -113,27 +141,17 @@ impl<W: Write> ScienceModeTx<W> {
     pub fn port(&self) -> &W {
         &self.port
     }
-}
 
-impl<W: Write> CanTx for ScienceModeTx<W> {
-    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
-        let Some(message) = translate(&self.nodes, frame)? else {
-            let now = fes_rt::rt::clock::monotonic_ns();
-            return Ok(TxDone {
-                retries: 0,
-                written_ns: now,
-                write_ns: 0,
-            });
-        };
+    /// Encodes and writes one packet, complete, within the retry budget.
+    fn write_packet(&mut self, packet: Packet) -> Result<TxDone, TxError> {
         let mut buf = [0u8; MAX_PACKET_LEN];
-        let len = Packet::new(self.number, message)
-            .encode(&mut buf)
-            .map_err(|_| TxError::Failed {
-                errno: libc::EINVAL,
-            })?;
+        let len = packet.encode(&mut buf).map_err(|_| TxError::Failed {
+            errno: libc::EINVAL,
+        })?;
         let mut written = 0;
         let port = &mut self.port;
-        let done = write_with_retry(&self.retry, || {
+        let gone_is_down = self.link.is_some();
+        let result = write_with_retry(&self.retry, || {
             while written < len {
                 match port.write(&buf[written..len]) {
                     Ok(0) => return Err(libc::EIO),
@@ -143,7 +161,81 @@ impl<W: Write> CanTx for ScienceModeTx<W> {
                 }
             }
             Ok(())
-        })?;
+        });
+        match result {
+            // The driver's port (beside its receive side): EIO is a tty whose other end hung
+            // up (a pty's device closed), ENXIO a device gone: the link is down, as the
+            // receive side reports it too, whichever sees it first.
+            Err(TxError::Failed { errno })
+                if gone_is_down && matches!(errno, libc::EIO | libc::ENXIO) =>
+            {
+                Err(TxError::LinkDown { errno })
+            }
+            other => other,
+        }
+    }
+
+    /// The receive side's part of a frame (see [`Self::with_link`]): the InitAck due, the
+    /// commanded state, and the message to send in place of `message`.
+    fn link_side(
+        &mut self,
+        frame: &Frame,
+        message: Option<Message>,
+    ) -> Result<Option<Message>, TxError> {
+        let Some(link) = self.link.clone() else {
+            return Ok(message);
+        };
+        if let Some(init) = link.take_init() {
+            let ack = Packet::new(
+                init,
+                Message::InitAck {
+                    result: AckResult::Ok,
+                },
+            );
+            if let Err(e) = self.write_packet(ack) {
+                // Still due: answered with the next frame.
+                link.init_received(init);
+                return Err(e);
+            }
+            link.init_acknowledged();
+        }
+        let Ok(decoded) = self.nodes.decode(u32::from(frame.id), frame.payload()) else {
+            return Ok(message);
+        };
+        match decoded {
+            CanMessage::Nmt(n) => link.commanded(match n.command {
+                NmtCommand::Start => Commanded::Operational,
+                NmtCommand::Stop => Commanded::Stopped,
+                NmtCommand::EnterPreOperational
+                | NmtCommand::ResetNode
+                | NmtCommand::ResetCommunication => Commanded::PreOperational,
+            }),
+            CanMessage::Config(c) => link.config_written(c.config_id),
+            CanMessage::HostHeartbeat(_) if link.handshake_done() => {
+                let now = fes_rt::rt::clock::monotonic_ns();
+                if now >= self.next_poll_ns {
+                    self.next_poll_ns = now + self.poll_ns;
+                    return Ok(Some(Message::GetStimulationMode));
+                }
+            }
+            _ => {}
+        }
+        Ok(message)
+    }
+}
+
+impl<W: Write> CanTx for ScienceModeTx<W> {
+    fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        let message = translate(&self.nodes, frame)?;
+        let Some(message) = self.link_side(frame, message)? else {
+            let now = fes_rt::rt::clock::monotonic_ns();
+            return Ok(TxDone {
+                retries: 0,
+                written_ns: now,
+                write_ns: 0,
+            });
+        };
+        let done = self.write_packet(Packet::new(self.number, message))?;
         self.number = self.number.wrapping_add(1);
         Ok(done)
     }
@@ -372,6 +464,67 @@ mod tests {
             // A failed packet does not use up a number.
             assert_eq!(tx.next_number(), 0);
         }
+    }
+
+    #[test]
+    fn with_a_receive_side_init_is_answered_state_reported_and_a_hung_up_port_is_link_down() {
+        let link = Arc::new(SerialLink::new());
+        let mut tx = ScienceModeTx::with_link(Vec::new(), Nodes::DEFAULT, RETRY, link.clone(), 0);
+        let heartbeat = frame(CanMessage::HostHeartbeat(Heartbeat {
+            state: NmtState::PreOperational,
+        }));
+        // Before the handshake: a Watchdog; then InitAck (the Init's number) before the
+        // next frame, and GetStimulationMode in place of the Watchdog.
+        tx.send(&heartbeat).unwrap();
+        link.init_received(42);
+        tx.send(&heartbeat).unwrap();
+        assert!(link.handshake_done());
+        let start = frame(CanMessage::Nmt(Nmt {
+            command: NmtCommand::Start,
+            node: Nodes::DEFAULT.stim(),
+        }));
+        tx.send(&start).unwrap();
+        assert_eq!(link.last_commanded(), Commanded::Operational);
+        let config = frame(CanMessage::Config(Config {
+            config_id: 9,
+            page: fes_can::ConfigPage::OutputLimits {
+                max_amplitude_100ua: 300,
+                max_width_us: 400,
+                min_ipi_ms: 10,
+            },
+        }));
+        tx.send(&config).unwrap();
+        assert_eq!(link.config_id(), 9);
+        assert_eq!(
+            written(&tx),
+            [
+                Ok(Packet::new(0, Message::Watchdog)),
+                Ok(Packet::new(
+                    42,
+                    Message::InitAck {
+                        result: AckResult::Ok
+                    }
+                )),
+                Ok(Packet::new(1, Message::GetStimulationMode)),
+            ]
+        );
+        // The device end hung up: EIO is the link down (without a receive side, a failure).
+        let dead = |errno| Stingy {
+            out: Vec::new(),
+            chunk: 64,
+            calls: 0,
+            errno: Some(errno),
+        };
+        let mut tx = ScienceModeTx::with_link(dead(libc::EIO), Nodes::DEFAULT, RETRY, link, 0);
+        assert_eq!(
+            tx.send(&pulse(0, 200, 200)),
+            Err(TxError::LinkDown { errno: libc::EIO })
+        );
+        let mut tx = ScienceModeTx::new(dead(libc::EIO), Nodes::DEFAULT, RETRY);
+        assert_eq!(
+            tx.send(&pulse(0, 200, 200)),
+            Err(TxError::Failed { errno: libc::EIO })
+        );
     }
 
     #[test]

@@ -210,6 +210,8 @@ pub enum BusTx {
     Can(SocketTx),
     /// The host bus.
     Host(HostBusTx),
+    /// ScienceMode 2 on a serial line ([`crate::serial_tx`]).
+    Serial(crate::serial_tx::ScienceModeTx<std::fs::File>),
 }
 
 impl BusTx {
@@ -232,6 +234,7 @@ impl CanTx for BusTx {
         match self {
             Self::Can(t) => t.send(frame),
             Self::Host(t) => t.send(frame),
+            Self::Serial(t) => t.send(frame),
         }
     }
 }

@@ -92,6 +92,30 @@ pub struct StackOptions {
     /// rt-core's `pulse.amplitude_ua` (None: its default, the prescription's 20 mA); the
     /// fault suite sets a slip.
     pub pulse_amplitude_ua: Option<u32>,
+    /// The stimulator the driver drives: the CAN virtual stimulator on `iface`, or the
+    /// virtual RehaStim 2 on a pty (ScienceMode 2; `iface` unused).
+    pub stimulator: StimulatorKind,
+}
+
+/// Which virtual stimulator a stack runs (`fes bench --stimulator`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum StimulatorKind {
+    /// `sim-muscle stimulator`: this project's CAN protocol, on `iface`; the driver
+    /// publishes its FORCE frames as ForceSamples.
+    #[default]
+    Can,
+    /// `sim-muscle rehastim2`: a Hasomed RehaStim 2 over ScienceMode 2 on a pty
+    /// (docs/sciencemode.md). A RehaStim 2 measures no force: the virtual device publishes
+    /// the muscle's (measured) force as ForceSamples itself, as the rig's separate force
+    /// sensor would.
+    Sciencemode,
+}
+
+impl StimulatorKind {
+    /// The virtual RehaStim 2's pty link in stack directory `dir`.
+    pub fn pty_link(dir: &Path) -> PathBuf {
+        dir.join("ttyUSB0")
+    }
 }
 
 /// The prescription every stack runs under: the rig's default (deploy/etc/fes).
@@ -257,8 +281,20 @@ impl Stack {
         let rt_cfg = write_config(d, "rt-core.toml", rt_core_toml(&opts, &t, &controller_path))?;
         let drv_cfg = write_config(d, "stim-driver.toml", stim_driver_toml(&opts, &t, scale_n))?;
         let socket = d.join("supervisor.sock");
-        let mut procs = vec![spawn(&opts, "sim-muscle", sim_muscle_args(&opts, &t))?];
+        let mut procs = vec![spawn(
+            &opts,
+            "sim-muscle",
+            sim_muscle_args(&opts, &t, scale_n),
+        )?];
         std::thread::sleep(Duration::from_millis(300));
+        if opts.stimulator == StimulatorKind::Sciencemode {
+            // The driver opens the device's pty at start: wait for its link.
+            let link = StimulatorKind::pty_link(d);
+            let deadline = Instant::now() + Duration::from_secs(t.start_s);
+            while !link.exists() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
         let sim_pid = procs[0].child.id();
         let sup = SupervisorConfig {
             socket: &socket,
@@ -555,7 +591,32 @@ fn config_args(command: Option<&str>, config: &Path) -> Vec<String> {
 
 /// The virtual stimulator and fast muscle on the stack's interface, recording what it
 /// receives.
-fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts) -> Vec<String> {
+fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<String> {
+    if opts.stimulator == StimulatorKind::Sciencemode {
+        // The same muscle and force sensor as the CAN stimulator's; the force goes out as
+        // ForceSamples normalised by the driver's [force] max_n on CAN (the controller's
+        // full scale). The device's watchdog stays its own (1 s).
+        let mut args: Vec<String> = vec![
+            "rehastim2".into(),
+            "--pty-link".into(),
+            StimulatorKind::pty_link(&opts.dir).display().to_string(),
+            "--pulse-log".into(),
+            opts.dir.join("stimulator.csv").display().to_string(),
+            "--preset".into(),
+            "fast".into(),
+            "--measured".into(),
+            "--offset-n".into(),
+            "0".into(),
+            "--force-prefix".into(),
+            opts.prefix.clone(),
+            "--force-max-n".into(),
+            scale_n.to_string(),
+        ];
+        if opts.fatigue {
+            args.push("--fatigue".into());
+        }
+        return args;
+    }
     let mut args: Vec<String> = vec![
         "stimulator".into(),
         "--iface".into(),
@@ -618,13 +679,18 @@ prefix = "{prefix}"
 /// interlocks and watchdogs of the test bed, the
 /// force limit (the controller model's full scale), telemetry and the iceoryx2 prefix.
 fn stim_driver_toml(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> String {
+    let transport = match opts.stimulator {
+        StimulatorKind::Can => format!("[can]\niface = \"{}\"\n", opts.iface),
+        StimulatorKind::Sciencemode => format!(
+            "[transport]\nkind = \"sciencemode\"\ndevice = \"{}\"\n",
+            StimulatorKind::pty_link(&opts.dir).display()
+        ),
+    };
     format!(
         r#"schema = "fes-stim-driver/1"
 prescription = "prescription.toml"
 
-[can]
-iface = "{iface}"
-
+{transport}
 [stimulator]
 watchdog_ms = {stim_wd}
 max_amplitude_ua = 20000
@@ -657,7 +723,6 @@ hlog = "{dir}/stim-driver.hlog"
 [ipc]
 prefix = "{prefix}"
 "#,
-        iface = opts.iface,
         stim_wd = t.stimulator_watchdog_ms,
         drv_ticks = t.driver_tick_ticks,
         arm_ms = t.arm_confirm_ms,

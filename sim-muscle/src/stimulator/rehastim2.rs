@@ -44,6 +44,58 @@ pub struct Rehastim2Settings {
     pub init_period_ms: u16,
     /// The channel (1..=8) whose muscle the plant models.
     pub muscle_channel: u8,
+    /// A fault to inject, for tests of a host (none on a real device's behalf).
+    pub test_fault: Option<TestFault>,
+    /// The device's latency in executing a command, ms: a packet is acted on (and
+    /// answered) this long after it arrived (0: in the next tick). Hasomed gives 10-24 ms
+    /// for the real device (`docs/sciencemode.md`).
+    pub latency_ms: u16,
+}
+
+/// What [`TestFault`] makes the device do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TestFaultKind {
+    /// The pulse is not fired and StimulationError -2 (electrode error) is sent instead of
+    /// its acknowledgement.
+    Electrode,
+    /// The pulse is not fired and acknowledged with a parameter error (-2).
+    ParameterError,
+    /// The device answers nothing from this pulse on (it keeps reading).
+    Silent,
+}
+
+/// A fault the virtual device injects at its `after_pulses + 1`-th SinglePulse
+/// (`--test-fault KIND:N`: `electrode:N`, `parameter-error:N`, `silent:N`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TestFault {
+    /// What happens.
+    pub kind: TestFaultKind,
+    /// SinglePulse commands served normally before it.
+    pub after_pulses: u64,
+}
+
+impl std::str::FromStr for TestFault {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (kind, n) = s
+            .split_once(':')
+            .ok_or_else(|| format!("{s:?}: expected KIND:N"))?;
+        let kind = match kind {
+            "electrode" => TestFaultKind::Electrode,
+            "parameter-error" => TestFaultKind::ParameterError,
+            "silent" => TestFaultKind::Silent,
+            other => {
+                return Err(format!(
+                    "{other:?}: expected electrode, parameter-error or silent"
+                ));
+            }
+        };
+        let after_pulses = n
+            .parse()
+            .map_err(|_| format!("{n:?}: expected a number of pulses"))?;
+        Ok(TestFault { kind, after_pulses })
+    }
 }
 
 impl Rehastim2Settings {
@@ -52,6 +104,8 @@ impl Rehastim2Settings {
         watchdog_ms: 1000,
         init_period_ms: 100,
         muscle_channel: 1,
+        test_fault: None,
+        latency_ms: 0,
     };
 }
 
@@ -128,6 +182,12 @@ pub struct Rehastim2 {
     tick: u64,
     events: Vec<Event>,
     force_n: f64,
+    /// SinglePulse commands seen (for [`TestFault`]).
+    single_pulses: u64,
+    /// A [`TestFaultKind::Silent`] fault happened: nothing is answered any more.
+    silent: bool,
+    /// Packets waiting out the latency: (tick due, packet).
+    pending: VecDeque<(u64, Packet)>,
 }
 
 impl Rehastim2 {
@@ -149,6 +209,9 @@ impl Rehastim2 {
             tick: 0,
             events: Vec::with_capacity(1024),
             force_n: 0.0,
+            single_pulses: 0,
+            silent: false,
+            pending: VecDeque::with_capacity(256),
         }
     }
 
@@ -187,9 +250,37 @@ impl Rehastim2 {
     /// A packet from the host, received during the current tick; the device's answer, if
     /// any, is appended to `out` as bytes on the line.
     pub fn on_packet(&mut self, packet: Packet, out: &mut Vec<u8>) {
-        // Any packet is a sign of life.
+        // Any packet is a sign of life, at once.
         self.watchdog.feed(self.now_ns());
+        if self.settings.latency_ms > 0 {
+            let due = self.tick + u64::from(self.settings.latency_ms);
+            self.pending.push_back((due, packet));
+            return;
+        }
+        self.execute(packet, out);
+    }
+
+    /// Acts on `packet` and answers it.
+    fn execute(&mut self, packet: Packet, out: &mut Vec<u8>) {
         let number = packet.number;
+        let fault = match packet.message {
+            Message::SinglePulse(_) if self.connected => {
+                let f = self
+                    .settings
+                    .test_fault
+                    .filter(|f| f.after_pulses == self.single_pulses)
+                    .map(|f| f.kind);
+                self.single_pulses += 1;
+                f
+            }
+            _ => None,
+        };
+        if fault == Some(TestFaultKind::Silent) {
+            self.silent = true;
+        }
+        if self.silent {
+            return;
+        }
         let reply = match packet.message {
             Message::InitAck { result } => {
                 if result.is_ok() {
@@ -213,6 +304,16 @@ impl Rehastim2 {
                 self.stop_channel_list();
                 Some(Message::StopChannelListModeAck {
                     result: AckResult::Ok,
+                })
+            }
+            Message::SinglePulse(_) if fault == Some(TestFaultKind::Electrode) => {
+                Some(Message::StimulationError {
+                    error: fes_sciencemode::StimulationError::Electrode,
+                })
+            }
+            Message::SinglePulse(_) if fault == Some(TestFaultKind::ParameterError) => {
+                Some(Message::SinglePulseAck {
+                    result: AckResult::ParameterError,
                 })
             }
             Message::SinglePulse(p) => {
@@ -344,6 +445,12 @@ impl Rehastim2 {
     /// Runs one 1 ms tick: Init announcements, the watchdog, channel list cycles, and one
     /// plant step with the pulse due (if any). Answers go to `out`.
     pub fn tick(&mut self, plant: &mut dyn MusclePlant, out: &mut Vec<u8>) {
+        while let Some(&(due, packet)) = self.pending.front()
+            && due <= self.tick
+        {
+            self.pending.pop_front();
+            self.execute(packet, out);
+        }
         if !self.connected && self.tick >= self.next_init_tick {
             send(
                 Packet::new(
@@ -501,6 +608,90 @@ mod tests {
                 .map(|n| Packet::new(n, Message::Init { version: 1 }))
                 .collect::<Vec<_>>()
         );
+    }
+
+    #[test]
+    fn with_a_latency_a_command_is_executed_and_answered_that_much_later() {
+        let (mut d, mut plant) = connected();
+        d.settings.latency_ms = 5;
+        let mut out = Vec::new();
+        let pulse = Packet::new(
+            7,
+            Message::SinglePulse(SinglePulse {
+                channel: 0,
+                pulse_width_us: 200,
+                current_ma: 20,
+            }),
+        );
+        let arrived = d.tick;
+        d.on_packet(pulse, &mut out);
+        assert!(out.is_empty(), "not answered on arrival");
+        let mut answered = None;
+        for _ in 0..10 {
+            d.tick(&mut plant, &mut out);
+            if answered.is_none() && !out.is_empty() {
+                answered = Some(d.tick);
+                assert_eq!(ack_of(&out), AckResult::Ok);
+            }
+        }
+        // Answered in the tick `arrived + 5` (the tick counter has advanced past it).
+        assert_eq!(answered, Some(arrived + 5 + 1));
+        let fired: Vec<u64> = pulses(&mut d).iter().map(|p| p.0).collect();
+        assert_eq!(fired, [arrived + 5 + 1]);
+        assert_eq!(plant.pulses(), 1);
+    }
+
+    #[test]
+    fn an_injected_fault_strikes_at_its_pulse() {
+        let pulse = Packet::new(
+            5,
+            Message::SinglePulse(SinglePulse {
+                channel: 0,
+                pulse_width_us: 200,
+                current_ma: 20,
+            }),
+        );
+        for (spec, after) in [
+            (
+                "electrode:2",
+                Some(Message::StimulationError {
+                    error: fes_sciencemode::StimulationError::Electrode,
+                }),
+            ),
+            (
+                "parameter-error:2",
+                Some(Message::SinglePulseAck {
+                    result: AckResult::ParameterError,
+                }),
+            ),
+            ("silent:2", None),
+        ] {
+            let (mut d, mut plant) = connected();
+            d.settings.test_fault = Some(spec.parse().unwrap());
+            let mut out = Vec::new();
+            for _ in 0..2 {
+                out.clear();
+                d.on_packet(pulse, &mut out);
+                assert_eq!(ack_of(&out), AckResult::Ok, "{spec}");
+                d.tick(&mut plant, &mut out);
+                d.tick(&mut plant, &mut out);
+            }
+            assert_eq!(plant.pulses(), 2, "{spec}");
+            out.clear();
+            d.on_packet(pulse, &mut out);
+            let got: Vec<Message> = decode(&out).into_iter().map(|p| p.message).collect();
+            assert_eq!(got, after.into_iter().collect::<Vec<_>>(), "{spec}");
+            d.tick(&mut plant, &mut out);
+            d.tick(&mut plant, &mut out);
+            assert_eq!(plant.pulses(), 2, "{spec}: the faulty pulse is not fired");
+            if spec.starts_with("silent") {
+                out.clear();
+                d.on_packet(Packet::new(6, Message::GetStimulationMode), &mut out);
+                assert!(out.is_empty(), "silent answers nothing");
+            }
+        }
+        assert!("electrode".parse::<TestFault>().is_err());
+        assert!("smoke:1".parse::<TestFault>().is_err());
     }
 
     #[test]

@@ -15,15 +15,16 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use fes_sciencemode::{DecodeError, Decoder};
-use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use nix::fcntl::{FcntlArg, FdFlag, OFlag, fcntl};
 use nix::pty::openpty;
 use nix::sys::termios::{
     BaudRate, ControlFlags, SetArg, cfmakeraw, cfsetspeed, tcgetattr, tcsetattr,
 };
 
 use super::clock::{monotonic_ns, sleep_until};
-use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS};
+use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS, TestFault};
 use crate::plant::MusclePlant;
+use rt_core::msg::{Contract as _, ForceSample};
 
 /// Command-line options of the virtual RehaStim 2 (`sim-muscle rehastim2 ...`).
 #[derive(Debug, Clone, clap::Args)]
@@ -48,6 +49,24 @@ pub struct Rehastim2Args {
     /// Stop by itself after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// The device's latency in executing a command, ms (0: the next 1 ms tick; a real
+    /// RehaStim 2 takes 10-24 ms): each packet is acted on and answered this much later.
+    #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.latency_ms)]
+    pub latency_ms: u16,
+    /// Inject a fault for tests of a host: `electrode:N` (StimulationError instead of the
+    /// (N+1)-th single pulse), `parameter-error:N` (that pulse acknowledged with a parameter
+    /// error), `silent:N` (nothing answered from that pulse on).
+    #[arg(long, value_name = "KIND:N")]
+    pub test_fault: Option<TestFault>,
+    /// Publish the muscle's force every tick as iceoryx2 ForceSamples under this service
+    /// prefix, as the rig's separate force sensor would (a RehaStim 2 measures no force;
+    /// on CAN the driver publishes the stimulator's FORCE frames). Needs `--force-max-n`.
+    #[arg(long, value_name = "PREFIX", requires = "force_max_n")]
+    pub force_prefix: Option<String>,
+    /// The muscle's maximal force, N: `ForceSample.force = force_n / max_n` (the driver's
+    /// `[force] max_n` on CAN).
+    #[arg(long, value_name = "N", requires = "force_prefix")]
+    pub force_max_n: Option<f64>,
 }
 
 /// Why the virtual RehaStim 2 could not run.
@@ -64,6 +83,15 @@ pub enum PtyError {
         /// The system's error.
         #[source]
         source: nix::Error,
+    },
+    /// The ForceSample publisher (`--force-prefix`) could not be made.
+    #[error("{what}")]
+    Ipc {
+        /// What was being made.
+        what: &'static str,
+        /// iceoryx2's error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// A file (the link, the log, the pty) could not be used.
     #[error("{what} {}", path.display())]
@@ -96,6 +124,12 @@ impl Rehastim2Args {
                 self.muscle_channel
             )));
         }
+        if self.latency_ms > 1000 {
+            return Err(PtyError::Options(format!(
+                "--latency-ms {} must be at most 1000",
+                self.latency_ms
+            )));
+        }
         if self.watchdog_ms == 0 || self.init_period_ms == 0 {
             return Err(PtyError::Options(
                 "--watchdog-ms and --init-period-ms must be positive".into(),
@@ -105,6 +139,8 @@ impl Rehastim2Args {
             watchdog_ms: self.watchdog_ms,
             init_period_ms: self.init_period_ms,
             muscle_channel: self.muscle_channel,
+            test_fault: self.test_fault,
+            latency_ms: self.latency_ms,
         })
     }
 
@@ -115,6 +151,60 @@ impl Rehastim2Args {
             Some(d) => Err(PtyError::Options(format!(
                 "--duration-s {d} must be a positive number of seconds"
             ))),
+        }
+    }
+}
+
+/// The force sensor's stand-in: ForceSamples on iceoryx2 (`--force-prefix`).
+struct ForceOut {
+    /// Sends one sample (the node and the publisher live in the closure).
+    send: Box<dyn FnMut(ForceSample) -> bool>,
+    max_n: f64,
+    seq: u64,
+}
+
+impl ForceOut {
+    fn open(prefix: &str, max_n: f64) -> Result<Self, PtyError> {
+        if !(max_n.is_finite() && max_n > 0.0) {
+            return Err(PtyError::Options(format!(
+                "--force-max-n {max_n} must be a positive number of newtons"
+            )));
+        }
+        let node =
+            rt_core::rt::node::create_node("sim-muscle-rehastim2").map_err(|e| PtyError::Ipc {
+                what: "the iceoryx2 node for ForceSample",
+                source: Box::new(e),
+            })?;
+        let publisher =
+            rt_core::msg::port::publisher::<ForceSample>(&node, prefix).map_err(|e| {
+                PtyError::Ipc {
+                    what: "the ForceSample publisher",
+                    source: Box::new(e),
+                }
+            })?;
+        Ok(Self {
+            send: Box::new(move |sample| {
+                let _node = &node;
+                publisher.send_copy(sample).is_ok()
+            }),
+            max_n,
+            seq: 0,
+        })
+    }
+
+    /// Publishes `force_n` now; a value ForceSample cannot carry is skipped, as the
+    /// driver skips such a FORCE frame.
+    fn publish(&mut self, force_n: f64) {
+        let sample = ForceSample {
+            seq: self.seq + 1,
+            t_ns: monotonic_ns(),
+            // The pulse that caused it is the driver's to know; no driver publishes here.
+            stim_seq: 0,
+            force_n,
+            force: force_n / self.max_n,
+        };
+        if sample.validate().is_ok() && (self.send)(sample) {
+            self.seq += 1;
         }
     }
 }
@@ -160,6 +250,12 @@ fn open_pty() -> Result<Pty, PtyError> {
         FcntlArg::F_SETFL(OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK),
     )
     .map_err(pty_err("fcntl O_NONBLOCK"))?;
+    // Close-on-exec: a process this one starts (a host under test, run from the same test
+    // process) must not inherit the device's end, or the device switched off would leave
+    // its pty open and the host would never see the hang-up.
+    for fd in [&pair.master, &pair.slave] {
+        fcntl(fd, FcntlArg::F_SETFD(FdFlag::FD_CLOEXEC)).map_err(pty_err("fcntl FD_CLOEXEC"))?;
+    }
     Ok(Pty {
         master: File::from(pair.master),
         _slave: pair.slave,
@@ -237,6 +333,10 @@ pub fn run_rehastim2_until(
         args.pty_link.display()
     );
 
+    let mut force_out = match (&args.force_prefix, args.force_max_n) {
+        (Some(prefix), Some(max_n)) => Some(ForceOut::open(prefix, max_n)?),
+        _ => None,
+    };
     let mut device = Rehastim2::new(settings);
     let mut decoder = Decoder::new();
     let mut out = Vec::with_capacity(4096);
@@ -275,6 +375,9 @@ pub fn run_rehastim2_until(
         }
         device.tick(plant, &mut out);
         summary.ticks += 1;
+        if let Some(f) = force_out.as_mut() {
+            f.publish(device.force_n());
+        }
         if !out.is_empty() {
             match pty.master.write(&out) {
                 Ok(n) => summary.tx_dropped += (out.len() - n) as u64,
@@ -355,6 +458,10 @@ mod tests {
             init_period_ms: 50,
             muscle_channel: 1,
             duration_s: Some(20.0),
+            test_fault: None,
+            latency_ms: 0,
+            force_prefix: None,
+            force_max_n: None,
         };
         let stop = AtomicBool::new(false);
         std::thread::scope(|s| {

@@ -64,6 +64,10 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
         init_period_ms: 20,
         muscle_channel: 1,
         duration_s: Some(60.0),
+        test_fault: None,
+        latency_ms: 0,
+        force_prefix: None,
+        force_max_n: None,
     };
     let stop = AtomicBool::new(false);
     let nodes = Nodes::DEFAULT;

@@ -84,6 +84,10 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
         init_period_ms: 100,
         muscle_channel: 1,
         duration_s: Some(120.0),
+        test_fault: None,
+        latency_ms: 0,
+        force_prefix: None,
+        force_max_n: None,
     };
     let stop = AtomicBool::new(false);
     let (client, stdout, plant, summary) = std::thread::scope(|s| {

@@ -18,7 +18,7 @@ use anyhow::{Context, bail};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
 use workbench::baseline::{BeatShape, baseline_40hz};
-use workbench::bench::{ChainTiming, Stack, StackOptions, process_logs};
+use workbench::bench::{ChainTiming, Stack, StackOptions, StimulatorKind, process_logs};
 use workbench::canlog::CanLog;
 use workbench::plots::{
     LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
@@ -88,6 +88,12 @@ pub struct Args {
     /// its real-time latencies); `auto`: `can` where the kernel has CAN, else `host`.
     #[arg(long, value_enum, default_value_t = BusChoice::Auto)]
     pub bus: BusChoice,
+    /// The stimulator the driver drives. `can`: the CAN virtual stimulator on `--bus`;
+    /// `sciencemode`: the virtual Hasomed RehaStim 2 on a pseudo-terminal, driven over
+    /// ScienceMode 2 (docs/sciencemode.md; no CAN, `--bus` unused), publishing the
+    /// muscle's measured force itself as the rig's separate force sensor would.
+    #[arg(long, value_enum, default_value_t = StimulatorKind::Can)]
+    pub stimulator: StimulatorKind,
     /// Format of the figures: png (raster) or svg (vector, for papers).
     #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
     pub format: workbench::plots::FigureFormat,
@@ -172,6 +178,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if a.in_process {
         return in_process(&a, &out);
     }
+    if a.stimulator == StimulatorKind::Sciencemode {
+        // A serial line on a pty: no CAN environment needed.
+        std::fs::create_dir_all(&out).with_context(|| format!("create {}", out.display()))?;
+        let out = std::fs::canonicalize(&out)?;
+        return inside(&a, &bin_dir, &out, String::new(), false);
+    }
     let in_can_env = std::env::var_os("FES_VCAN_IFACE").is_some();
     let host_bus = match a.bus {
         BusChoice::Host => true,
@@ -223,9 +235,13 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     let out = std::fs::canonicalize(out)?;
     announce(a, &iface, uml);
-    // Every frame of the run, bring-up included, in candump -L format.
+    // Every frame of the run, bring-up included, in candump -L format (CAN only: on
+    // ScienceMode the device's pulse log, stimulator.csv, records what it received).
     let can_log = out.join("can.log");
-    let canlog = CanLog::start(&iface, &can_log)?;
+    let canlog = match a.stimulator {
+        StimulatorKind::Can => Some(CanLog::start(&iface, &can_log)?),
+        StimulatorKind::Sciencemode => None,
+    };
     let stack = start_healthy(a, bin_dir, &out, iface, uml)?;
     stack.arm_with(ProfileSpec::Cardiac(cardiac(a)))?;
     println!(
@@ -247,8 +263,10 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
     let scale_n = stack.scale_n();
     let delay = stack.delay();
     let unclean = stop(stack, uml);
-    let frames = canlog.finish()?;
-    println!("bench: {frames} CAN frames in {}", can_log.display());
+    if let Some(canlog) = canlog {
+        let frames = canlog.finish()?;
+        println!("bench: {frames} CAN frames in {}", can_log.display());
+    }
     if let Some(f) = failure {
         bail!("bench run failed: {f}");
     }
@@ -257,6 +275,14 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
 
 /// The bench's first line: the processes, the controller and the bus.
 fn announce(a: &Args, iface: &str, uml: bool) {
+    if a.stimulator == StimulatorKind::Sciencemode {
+        println!(
+            "bench: sim-muscle rehastim2 (fast{}; a virtual RehaStim 2 on a pty, ScienceMode 2), stim-driver, rt-core ({}), supervisor",
+            if a.fatigue { ", fatigue" } else { "" },
+            a.controller.display()
+        );
+        return;
+    }
     println!(
         "bench: sim-muscle (fast{}), stim-driver, rt-core ({}), supervisor on {iface} ({})",
         if a.fatigue { ", fatigue" } else { "" },
@@ -296,6 +322,7 @@ fn start_healthy(
         prefix: format!("bench{}", std::process::id()),
         env: Vec::new(),
         pulse_amplitude_ua: None,
+        stimulator: a.stimulator,
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
     if let Err(e) = healthy {

@@ -1213,6 +1213,7 @@ fn start_unarmed(
         prefix: format!("fi{}{tag}", std::process::id()),
         env,
         pulse_amplitude_ua,
+        stimulator: workbench::bench::StimulatorKind::Can,
     });
     (stack, dir)
 }

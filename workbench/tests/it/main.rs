@@ -1,6 +1,7 @@
 //! The workbench's integration tests, one binary: the `fes` commands (identify, analyse,
 //! modify, design, osp), the LCN's targets on the simulated muscles, the outer loop, and
-//! the four-process stack on the host bus (recording, fault injection).
+//! the four-process stack on the host bus (recording, fault injection); the bench on
+//! both transports (timing).
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;
@@ -21,3 +22,4 @@ mod readers;
 mod runtime_canlog;
 mod runtime_outer_loop;
 mod runtime_recording;
+mod timing;

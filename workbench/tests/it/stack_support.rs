@@ -45,6 +45,7 @@ pub fn start_armed(
         prefix,
         env,
         pulse_amplitude_ua: None,
+        stimulator: workbench::bench::StimulatorKind::Can,
     })
     .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
     let healthy_s = if timing == ChainTiming::Uml { 90 } else { 20 };

@@ -31,7 +31,7 @@ use fes_testkit::bus::{RxFrame, Tap};
 use fes_testkit::vcan::{Backend, CanEnv};
 use iceoryx2::prelude::*;
 
-const EXE: &str = env!("CARGO_BIN_EXE_stim-driver");
+pub(crate) const EXE: &str = env!("CARGO_BIN_EXE_stim-driver");
 /// Set (to "<prefix>;<script>") when this binary runs as the scripted publisher.
 pub const ENV_PUBLISHER: &str = "STIM_DRIVER_TEST_PUBLISHER";
 /// The publisher's test name (re-executed with `--exact --ignored`).
@@ -62,6 +62,11 @@ const LATE_WAKE_NS: u64 = 250_000;
 /// Pulse `j`'s amplitude, µA.
 fn amplitude_ua(j: u64) -> u32 {
     10_000 + 100 * (j % 100) as u32
+}
+
+/// Pulse `j`'s amplitude after the script's `mA` segment, mA (10..=59).
+pub fn amplitude_ma(j: u64) -> u32 {
+    10 + (j % 50) as u32
 }
 
 // ---------------------------------------------------------------------------------------
@@ -146,8 +151,12 @@ pub fn run_publisher(spec: &str) {
     scripted.set(true);
     let go_seq = seq;
     let mut j = 0u64;
+    // "mA": whole-milliampere amplitudes from here on (a RehaStim 2 carries no 0.1 mA).
+    let mut whole_ma = false;
     for segment in script.split(',') {
-        if let Some(ms) = segment.strip_prefix('s') {
+        if segment == "mA" {
+            whole_ma = true;
+        } else if let Some(ms) = segment.strip_prefix('s') {
             std::thread::sleep(Duration::from_millis(ms.parse().expect("stall ms")));
         } else if let Some(p) = segment.strip_prefix('p') {
             let (every, n) = p.split_once(':').expect("pE:N");
@@ -155,7 +164,12 @@ pub fn run_publisher(spec: &str) {
             for i in 0..n {
                 seq += 1;
                 if i % every == 0 {
-                    let t = publish(seq, Some(amplitude_ua(j)), 0);
+                    let amplitude = if whole_ma {
+                        amplitude_ma(j) * 1000
+                    } else {
+                        amplitude_ua(j)
+                    };
+                    let t = publish(seq, Some(amplitude), 0);
                     writeln!(out, "P {j} {seq} {t}").unwrap();
                     j += 1;
                 } else {
@@ -174,21 +188,21 @@ pub fn run_publisher(spec: &str) {
 
 /// One pulse decision the publisher made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Decision {
-    j: u64,
-    seq: u64,
-    t_ns: u64,
+pub(crate) struct Decision {
+    pub(crate) j: u64,
+    pub(crate) seq: u64,
+    pub(crate) t_ns: u64,
 }
 
 /// A running publisher process.
-struct Publisher {
+pub(crate) struct Publisher {
     child: Child,
     stdin: Option<ChildStdin>,
     lines: mpsc::Receiver<String>,
 }
 
 impl Publisher {
-    fn start(prefix: &str, script: &str) -> Self {
+    pub(crate) fn start(prefix: &str, script: &str) -> Self {
         let mut child = fes_testkit::child::dies_with_parent(&mut Command::new(
             std::env::current_exe().expect("test binary"),
         ))
@@ -216,20 +230,20 @@ impl Publisher {
         }
     }
 
-    fn go(&mut self) {
+    pub(crate) fn go(&mut self) {
         let stdin = self.stdin.as_mut().expect("stdin");
         stdin.write_all(b"go\n").expect("go");
         stdin.flush().expect("go");
     }
 
     /// Waits for the script to end; the decisions it published.
-    fn finish(self, timeout: Duration) -> Vec<Decision> {
+    pub(crate) fn finish(self, timeout: Duration) -> Vec<Decision> {
         self.finish_with_noise(timeout).0
     }
 
     /// [`Publisher::finish`], with the publisher's late wake-ups (more than
     /// [`LATE_WAKE_NS`]) and its scripted ticks.
-    fn finish_with_noise(mut self, timeout: Duration) -> (Vec<Decision>, u64, u64) {
+    pub(crate) fn finish_with_noise(mut self, timeout: Duration) -> (Vec<Decision>, u64, u64) {
         let deadline = Instant::now() + timeout;
         let mut decisions = Vec::new();
         let (late, ticks) = loop {
@@ -258,7 +272,7 @@ impl Publisher {
         (decisions, late, ticks)
     }
 
-    fn kill(mut self) {
+    pub(crate) fn kill(mut self) {
         self.child.kill().expect("SIGKILL the publisher");
         let _ = self.child.wait();
     }
@@ -318,7 +332,7 @@ impl Timing {
 
 /// The prescription of these scenarios: the driver's default limits (100 mA, 500 us, 50 uC
 /// per phase, 2 ms, 100 pulses/s), so that what they exercise is the driver, not a dose.
-const PRESCRIPTION: &str = r#"format = "fes-prescription/1"
+pub(crate) const PRESCRIPTION: &str = r#"format = "fes-prescription/1"
 label = "stim-driver on-bus scenarios: the driver's default limits"
 max_amplitude_ua = 100000
 max_phase_width_us = 500
@@ -534,7 +548,7 @@ fn greedy_legal(decisions: &[Decision], min_ipi_ns: u64) -> Vec<u64> {
 }
 
 /// The test process's side of the iceoryx2 contracts (like the supervisor's).
-struct Operator {
+pub(crate) struct Operator {
     _node: Node<ipc::Service>,
     commands: iceoryx2::port::publisher::Publisher<ipc::Service, DriverCommand, ()>,
     status: iceoryx2::port::subscriber::Subscriber<ipc::Service, DriverStatus, ()>,
@@ -543,7 +557,7 @@ struct Operator {
 }
 
 impl Operator {
-    fn new(prefix: &str) -> Self {
+    pub(crate) fn new(prefix: &str) -> Self {
         let node = create_node("sdt-operator").expect("node");
         let commands = port::publisher::<DriverCommand>(&node, prefix).expect("command publisher");
         let status = port::subscriber::<DriverStatus>(&node, prefix).expect("status subscriber");
@@ -556,7 +570,7 @@ impl Operator {
         }
     }
 
-    fn status(&mut self) -> Option<DriverStatus> {
+    pub(crate) fn status(&mut self) -> Option<DriverStatus> {
         while let Ok(Some(s)) = self.status.receive() {
             let s = *s.payload();
             assert_eq!(s.validate(), Ok(()), "DriverStatus {s:?}");
@@ -565,7 +579,7 @@ impl Operator {
         self.last
     }
 
-    fn wait_state(
+    pub(crate) fn wait_state(
         &mut self,
         timeout: Duration,
         ok: impl Fn(&DriverStatus) -> bool,
@@ -584,7 +598,7 @@ impl Operator {
         }
     }
 
-    fn send(&mut self, kind: DriverCommandKind) {
+    pub(crate) fn send(&mut self, kind: DriverCommandKind) {
         self.seq += 1;
         self.commands
             .send_copy(DriverCommand::new(self.seq, monotonic_ns(), kind))
@@ -592,7 +606,7 @@ impl Operator {
     }
 
     /// Sends Arm until the driver reports armed.
-    fn arm(&mut self, timeout: Duration, log: &Path) {
+    pub(crate) fn arm(&mut self, timeout: Duration, log: &Path) {
         let deadline = Instant::now() + timeout;
         while Instant::now() < deadline {
             self.send(DriverCommandKind::Arm);
@@ -615,14 +629,14 @@ impl Operator {
 
 /// The driver log's pulse refusals, each from its StimTick seq on: "<seq> refused (its
 /// pulse NOT sent): <the interlock's reason>".
-fn pulse_refusals(log_text: &str) -> impl Iterator<Item = &str> {
+pub(crate) fn pulse_refusals(log_text: &str) -> impl Iterator<Item = &str> {
     log_text
         .lines()
         .filter(|l| l.contains("refused (its pulse NOT sent)"))
         .filter_map(|l| Some(l.split_once("StimTick ")?.1))
 }
 
-fn tail(log: &Path) -> String {
+pub(crate) fn tail(log: &Path) -> String {
     let text = std::fs::read_to_string(log).unwrap_or_default();
     let lines: Vec<&str> = text.lines().collect();
     lines[lines.len().saturating_sub(40)..].join("\n")

@@ -1,0 +1,591 @@
+//! The ScienceMode 2 receive side (issue 22): one normal-priority thread that reads the
+//! RehaStim 2's packets from the serial line and hands the forward thread the SAME
+//! [`BusEvent`]s the CAN receive thread ([`crate::bus`]) produces, so that the forward
+//! path, its interlocks, its watchdog and the arming sequence stay as they are.
+//!
+//! The device has no STATUS, EMCY, heartbeat or CONFIG; this module stands in for them
+//! (`docs/sciencemode.md`, "The driver's receive side"):
+//!
+//! | RehaStim 2 | [`BusEvent`] |
+//! |------------|--------------|
+//! | Init (the device announces itself) | handshake: the transmit side writes InitAck; a second Init after a handshake is [`BusEvent::StimHeartbeat`] `BootUp` (the device restarted) |
+//! | GetStimulationModeAck (the liveness query the transmit side sends in place of every `poll`-th Watchdog) | [`BusEvent::Status`]: `pulses_delivered` = SinglePulse acknowledgements with result 0 so far, `state` from the NMT state the driver commanded (channel list mode running: `Stimulating`), `config_id` = the driver's last CONFIG id once the handshake is done and the device is not in channel list mode (0 otherwise) |
+//! | the same, the first time a configuration id shows | [`BusEvent::ConfigApplied`], the driver's configured limits, only when they lie within the device's fixed ones ([`limits_within_device`]) |
+//! | SinglePulseAck result 0 | one pulse delivered |
+//! | any acknowledgement with an error result, UnknownCommand, StimulationError | [`BusEvent::Emcy`] ([`device_emcy`]: the CANopen code and a detail naming the ScienceMode command and code) |
+//! | a packet that fails to decode (checksum, stuffing, length, unknown command), a failed read, the port gone (EIO / ENXIO / ENODEV, a hang-up) | [`BusEvent::LinkDown`]; the next good packet is [`BusEvent::LinkUp`] (which never re-arms) |
+//! | no answer for `stimulator_timeout_ms` | nothing: no STATUS, so the forward path's existing stimulator-silence trip |
+//!
+//! Hot path: the thread owns a fixed read buffer and a [`Decoder`] (no heap), and the
+//! events are `Copy` into a preallocated queue: nothing is allocated per packet.
+
+use std::fs::File;
+use std::io::{self, Read as _};
+use std::os::fd::AsRawFd as _;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU16, Ordering};
+use std::time::Duration;
+
+use crossbeam::queue::ArrayQueue;
+use fes_can::values::error_register;
+use fes_can::{Emcy, ErrorCode, NmtState, StimLimits, StimState};
+use fes_sciencemode::limits::{MAX_CURRENT_MA, MAX_PULSE_WIDTH_US};
+use fes_sciencemode::{AckResult, Command, Decoder, Message, Packet, StimulationMode};
+
+use crate::bus::BusCounters;
+use crate::event::BusEvent;
+use crate::reconcile::COUNT_MODULUS;
+
+/// The longest the thread waits for a byte before looking at `stop` again.
+pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
+
+/// The RehaStim 2's latency in executing a command, worst case, ms (Hasomed's figure:
+/// 10-24 ms; `docs/sciencemode.md`). The in-flight allowance of STATUS reconciliation
+/// (`watchdog.stimulator_timeout_ms`) must cover it plus two liveness queries.
+pub const DEVICE_LATENCY_MS: u32 = 24;
+
+/// What the driver last commanded over NMT (the device has no such state; the receive
+/// side reports it back in STATUS as a CAN stimulator would).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Commanded {
+    /// Enter pre-operational, a reset, or nothing yet.
+    PreOperational = 0,
+    /// NMT start (armed).
+    Operational = 1,
+    /// NMT stop.
+    Stopped = 2,
+}
+
+/// What the transmit side (forward thread) and the receive thread share: lock-free
+/// atomics, one writer each (see the field comments).
+#[derive(Debug, Default)]
+pub struct SerialLink {
+    /// `0x100 | number` while an Init waits for its InitAck (receive thread sets, transmit
+    /// side takes).
+    init_pending: AtomicU16,
+    /// InitAck written since the last Init (transmit side sets, receive thread clears).
+    handshake: AtomicBool,
+    /// The id of the last CONFIG the driver wrote since the handshake, 0 for none
+    /// (transmit side sets, receive thread clears on a new Init).
+    config_id: AtomicU8,
+    /// [`Commanded`] (transmit side).
+    commanded: AtomicU8,
+}
+
+impl SerialLink {
+    /// A link before any handshake.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The device announced itself with Init packet `number`: InitAck is due, the
+    /// handshake (and the configuration that came with it) is void.
+    pub fn init_received(&self, number: u8) {
+        self.handshake.store(false, Ordering::Release);
+        self.config_id.store(0, Ordering::Release);
+        self.init_pending
+            .store(0x100 | u16::from(number), Ordering::Release);
+    }
+
+    /// The number of the Init an InitAck is due for, taken (transmit side).
+    pub fn take_init(&self) -> Option<u8> {
+        let v = self.init_pending.swap(0, Ordering::AcqRel);
+        (v & 0x100 != 0).then_some((v & 0xFF) as u8)
+    }
+
+    /// InitAck was written (transmit side).
+    pub fn init_acknowledged(&self) {
+        self.handshake.store(true, Ordering::Release);
+    }
+
+    /// Whether the handshake is done.
+    pub fn handshake_done(&self) -> bool {
+        self.handshake.load(Ordering::Acquire)
+    }
+
+    /// The driver wrote CONFIG `id` (transmit side).
+    pub fn config_written(&self, id: u8) {
+        self.config_id.store(id, Ordering::Release);
+    }
+
+    /// The id of the last CONFIG written since the handshake (0: none).
+    pub fn config_id(&self) -> u8 {
+        self.config_id.load(Ordering::Acquire)
+    }
+
+    /// The driver commanded `c` over NMT (transmit side).
+    pub fn commanded(&self, c: Commanded) {
+        self.commanded.store(c as u8, Ordering::Release);
+    }
+
+    /// What the driver last commanded.
+    pub fn last_commanded(&self) -> Commanded {
+        match self.commanded.load(Ordering::Acquire) {
+            1 => Commanded::Operational,
+            2 => Commanded::Stopped,
+            _ => Commanded::PreOperational,
+        }
+    }
+}
+
+/// Whether the limits the driver is configured with lie within the RehaStim 2's fixed ones
+/// (`fes_sciencemode::limits`): amplitude ceiling at most 126 mA, width ceiling at most
+/// 500 us. `Err` names the first that does not.
+pub fn limits_within_device(limits: &StimLimits) -> Result<(), &'static str> {
+    if u32::from(limits.max_amplitude_100ua) > u32::from(MAX_CURRENT_MA) * 10 {
+        return Err("max_amplitude_ua");
+    }
+    if limits.max_width_us > MAX_PULSE_WIDTH_US {
+        return Err("max_width_us");
+    }
+    Ok(())
+}
+
+/// The EMCY that stands for a device error: an acknowledgement of `command` with result
+/// `code` (an error), UnknownCommand (`command` = UnknownCommand, `code` its data byte) or
+/// StimulationError. `detail` = ScienceMode command id × 256 + the code as a byte, so the
+/// fault names both (`docs/sciencemode.md`).
+pub fn device_emcy(command: Command, code: i8, state: StimState) -> Emcy {
+    let error = match command {
+        Command::StimulationError => ErrorCode::Generic,
+        Command::UnknownCommand => ErrorCode::Communication,
+        _ => match AckResult::from_code(code) {
+            AckResult::ParameterError => ErrorCode::ValueOutOfRange,
+            AckResult::WrongModeError => ErrorCode::WrongState,
+            AckResult::TransferError => ErrorCode::Communication,
+            _ => ErrorCode::Generic,
+        },
+    };
+    Emcy {
+        code: error,
+        register: error_register::GENERIC | error_register::MANUFACTURER,
+        state,
+        seq: 0,
+        detail: (u16::from(command.id()) << 8) | u16::from(code as u8),
+    }
+}
+
+/// The receive side's state, without I/O (see the module documentation): packets in,
+/// [`BusEvent`]s out.
+#[derive(Debug, Clone)]
+pub struct Receiver {
+    limits: StimLimits,
+    limits_ok: bool,
+    delivered: u32,
+    rejected: u8,
+    counter: u8,
+    last_error: ErrorCode,
+    /// The configuration id whose read-back was sent (0: none).
+    read_back: u8,
+    link_up: bool,
+    /// An Init was seen.
+    seen_init: bool,
+    state: StimState,
+}
+
+impl Receiver {
+    /// A receiver for a driver configured with `limits`.
+    pub fn new(limits: StimLimits) -> Self {
+        Self {
+            limits,
+            limits_ok: limits_within_device(&limits).is_ok(),
+            delivered: 0,
+            rejected: 0,
+            counter: 0,
+            last_error: ErrorCode::NoError,
+            read_back: 0,
+            link_up: true,
+            seen_init: false,
+            state: StimState::Boot,
+        }
+    }
+
+    /// SinglePulse acknowledgements with result 0 so far (modulo 2^24).
+    pub const fn delivered(&self) -> u32 {
+        self.delivered
+    }
+
+    fn fault(&mut self, command: Command, code: i8, push: &mut impl FnMut(BusEvent)) {
+        let emcy = device_emcy(command, code, self.state);
+        self.last_error = emcy.code;
+        push(BusEvent::Emcy(emcy));
+    }
+
+    /// One packet from the device.
+    pub fn on_packet(
+        &mut self,
+        packet: &Packet,
+        link: &SerialLink,
+        push: &mut impl FnMut(BusEvent),
+    ) {
+        if !self.link_up {
+            self.link_up = true;
+            push(BusEvent::LinkUp);
+        }
+        match packet.message {
+            Message::Init { .. } => {
+                if link.handshake_done() {
+                    // The device announced itself again: it restarted (its watchdog, a
+                    // power cycle). What the driver set up with it is gone.
+                    push(BusEvent::StimHeartbeat(NmtState::BootUp));
+                }
+                self.seen_init = true;
+                self.read_back = 0;
+                link.init_received(packet.number);
+            }
+            Message::GetStimulationModeAck { result, mode } => {
+                if !result.is_ok() {
+                    self.fault(Command::GetStimulationModeAck, result.code(), push);
+                    return;
+                }
+                if !link.handshake_done() {
+                    return;
+                }
+                let channel_list = mode == StimulationMode::Started;
+                self.state = if channel_list {
+                    StimState::Stimulating
+                } else {
+                    match link.last_commanded() {
+                        Commanded::Operational => StimState::Armed,
+                        Commanded::Stopped => StimState::Stopped,
+                        Commanded::PreOperational => StimState::PreOperational,
+                    }
+                };
+                let config_id = if !channel_list && self.limits_ok {
+                    link.config_id()
+                } else {
+                    0
+                };
+                self.counter = (self.counter + 1) & 0x0F;
+                push(BusEvent::Status(fes_can::Status {
+                    state: self.state,
+                    counter: self.counter,
+                    last_error: self.last_error,
+                    pulses_delivered: self.delivered,
+                    rejected: self.rejected,
+                    config_id,
+                }));
+                if config_id != 0 && config_id != self.read_back {
+                    self.read_back = config_id;
+                    for page in self.limits.to_pages(config_id) {
+                        push(BusEvent::ConfigApplied(page));
+                    }
+                }
+            }
+            Message::SinglePulseAck { result } => {
+                if result.is_ok() {
+                    self.delivered = (self.delivered + 1) % COUNT_MODULUS;
+                } else {
+                    self.rejected = self.rejected.wrapping_add(1);
+                    self.fault(Command::SinglePulseAck, result.code(), push);
+                }
+            }
+            Message::StopChannelListModeAck { result } => {
+                // The driver's NMT stop: executed, or refused for the wrong mode (channel
+                // list mode was not running: nothing to stop). Anything else is a fault.
+                if !matches!(result, AckResult::Ok | AckResult::WrongModeError) {
+                    self.fault(Command::StopChannelListModeAck, result.code(), push);
+                }
+            }
+            Message::InitChannelListModeAck { result }
+            | Message::StartChannelListModeAck { result } => {
+                // Never asked for by the driver; an error is still a device error.
+                if !result.is_ok() {
+                    self.fault(packet.message.command(), result.code(), push);
+                }
+            }
+            Message::UnknownCommand { code } => self.fault(Command::UnknownCommand, code, push),
+            Message::StimulationError { error } => {
+                self.fault(Command::StimulationError, error.code(), push);
+            }
+            // The host's own commands: a device never sends them. The line is not what it
+            // should be.
+            Message::InitAck { .. }
+            | Message::Watchdog
+            | Message::GetStimulationMode
+            | Message::InitChannelListMode(_)
+            | Message::StartChannelListMode(_)
+            | Message::StopChannelListMode
+            | Message::SinglePulse(_) => self.on_line_fault(push),
+        }
+    }
+
+    /// A packet that failed to decode, a failed read, or the port gone: a link fault.
+    pub fn on_line_fault(&mut self, push: &mut impl FnMut(BusEvent)) {
+        if self.link_up {
+            self.link_up = false;
+            push(BusEvent::LinkDown);
+        }
+    }
+}
+
+/// Settings of the ScienceMode receive thread.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SerialRxSettings {
+    /// The driver's configured limits (read back once the handshake is done).
+    pub limits: StimLimits,
+}
+
+/// Runs the receive thread on `port` until `stop` is set (see the module documentation).
+/// `on_ready` is called before the first read.
+pub fn run_serial_rx(
+    settings: &SerialRxSettings,
+    mut port: File,
+    link: &SerialLink,
+    to_forward: &ArrayQueue<BusEvent>,
+    counters: &BusCounters,
+    stop: &AtomicBool,
+    on_ready: impl FnOnce(),
+) -> io::Result<()> {
+    let mut receiver = Receiver::new(settings.limits);
+    let mut decoder = Decoder::new();
+    let mut buf = [0u8; 256];
+    let fd = port.as_raw_fd();
+    let bump = |c: &std::sync::atomic::AtomicU64| {
+        c.fetch_add(1, Ordering::Relaxed);
+    };
+    let mut push = |e: BusEvent| {
+        if to_forward.push(e).is_err() {
+            bump(&counters.events_lost);
+        }
+    };
+    on_ready();
+    while !stop.load(Ordering::Relaxed) {
+        let mut pfd = libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: `pfd` is valid for the call; one descriptor, owned by `port`, open.
+        let rc = unsafe { libc::poll(&mut pfd, 1, READ_TIMEOUT.as_millis() as libc::c_int) };
+        if rc == 0 {
+            continue;
+        }
+        if rc < 0 {
+            if io::Error::last_os_error().kind() != io::ErrorKind::Interrupted {
+                bump(&counters.read_errors);
+                std::thread::sleep(READ_TIMEOUT);
+            }
+            continue;
+        }
+        match port.read(&mut buf) {
+            Ok(0) => {
+                // End of file: the peer hung up.
+                bump(&counters.read_errors);
+                receiver.on_line_fault(&mut push);
+                std::thread::sleep(READ_TIMEOUT);
+            }
+            Ok(n) => {
+                for result in decoder.feed(&buf[..n]) {
+                    match result {
+                        Ok(packet) => {
+                            bump(&counters.frames);
+                            receiver.on_packet(&packet, link, &mut push);
+                        }
+                        Err(_) => {
+                            bump(&counters.decode_errors);
+                            receiver.on_line_fault(&mut push);
+                        }
+                    }
+                }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                ) => {}
+            Err(_) => {
+                // EIO (a pty whose device end closed), ENXIO / ENODEV (the USB adapter
+                // unplugged), anything else: the link is gone until reads work again.
+                bump(&counters.read_errors);
+                receiver.on_line_fault(&mut push);
+                std::thread::sleep(READ_TIMEOUT);
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fes_sciencemode::StimulationError;
+
+    fn run(r: &mut Receiver, link: &SerialLink, m: Message) -> Vec<BusEvent> {
+        let mut out = Vec::new();
+        r.on_packet(&Packet::new(3, m), link, &mut |e| out.push(e));
+        out
+    }
+
+    fn mode_ack(mode: StimulationMode) -> Message {
+        Message::GetStimulationModeAck {
+            result: AckResult::Ok,
+            mode,
+        }
+    }
+
+    fn status(events: &[BusEvent]) -> fes_can::Status {
+        match events.first() {
+            Some(BusEvent::Status(s)) => *s,
+            other => panic!("no STATUS: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn handshake_then_status_carries_the_acknowledged_pulses_and_the_config() {
+        let link = SerialLink::new();
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        // Init: InitAck due; no event (it is not a restart).
+        assert!(run(&mut r, &link, Message::Init { version: 1 }).is_empty());
+        assert_eq!(link.take_init(), Some(3));
+        assert_eq!(link.take_init(), None);
+        // Before the handshake a mode answer is no STATUS.
+        assert!(run(&mut r, &link, mode_ack(StimulationMode::Start)).is_empty());
+        link.init_acknowledged();
+        let s = status(&run(&mut r, &link, mode_ack(StimulationMode::Start)));
+        assert_eq!(
+            (s.state, s.config_id, s.pulses_delivered),
+            (StimState::PreOperational, 0, 0)
+        );
+        // CONFIG 7 written: STATUS shows it, then the read-back follows once.
+        link.config_written(7);
+        let e = run(&mut r, &link, mode_ack(StimulationMode::Start));
+        assert_eq!(status(&e).config_id, 7);
+        assert_eq!(e.len(), 1 + StimLimits::DEFAULT.to_pages(7).len());
+        assert!(matches!(e[1], BusEvent::ConfigApplied(c) if c.config_id == 7));
+        assert_eq!(
+            run(&mut r, &link, mode_ack(StimulationMode::Start)).len(),
+            1
+        );
+        // Armed: pulses acknowledged count, an error result is an EMCY.
+        link.commanded(Commanded::Operational);
+        for _ in 0..5 {
+            assert!(
+                run(
+                    &mut r,
+                    &link,
+                    Message::SinglePulseAck {
+                        result: AckResult::Ok
+                    }
+                )
+                .is_empty()
+            );
+        }
+        let s = status(&run(&mut r, &link, mode_ack(StimulationMode::Start)));
+        assert_eq!((s.state, s.pulses_delivered), (StimState::Armed, 5));
+    }
+
+    #[test]
+    fn channel_list_mode_or_limits_beyond_the_device_show_no_configuration() {
+        let link = SerialLink::new();
+        link.init_acknowledged();
+        link.config_written(4);
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        let e = run(&mut r, &link, mode_ack(StimulationMode::Started));
+        assert_eq!(e.len(), 1, "{e:?}");
+        let s = status(&e);
+        assert_eq!((s.state, s.config_id), (StimState::Stimulating, 0));
+        // 130 mA: more than the device's 126 mA. Never read back, never confirmed.
+        let wide = StimLimits {
+            max_amplitude_100ua: 1300,
+            ..StimLimits::DEFAULT
+        };
+        assert_eq!(limits_within_device(&wide), Err("max_amplitude_ua"));
+        let mut r = Receiver::new(wide);
+        let e = run(&mut r, &link, mode_ack(StimulationMode::Start));
+        assert_eq!(e.len(), 1, "{e:?}");
+        assert_eq!(status(&e).config_id, 0);
+    }
+
+    #[test]
+    fn device_errors_are_emcys_naming_command_and_code() {
+        let link = SerialLink::new();
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        let cases = [
+            (
+                Message::SinglePulseAck {
+                    result: AckResult::ParameterError,
+                },
+                ErrorCode::ValueOutOfRange,
+                0x25FE,
+            ),
+            (
+                Message::SinglePulseAck {
+                    result: AckResult::WrongModeError,
+                },
+                ErrorCode::WrongState,
+                0x25FD,
+            ),
+            (
+                Message::UnknownCommand { code: -1 },
+                ErrorCode::Communication,
+                0x03FF,
+            ),
+            (
+                Message::StimulationError {
+                    error: StimulationError::Electrode,
+                },
+                ErrorCode::Generic,
+                0x26FE,
+            ),
+            (
+                Message::StopChannelListModeAck {
+                    result: AckResult::BusyError,
+                },
+                ErrorCode::Generic,
+                0x23F8,
+            ),
+        ];
+        for (m, code, detail) in cases {
+            match run(&mut r, &link, m).as_slice() {
+                [BusEvent::Emcy(e)] => assert_eq!((e.code, e.detail), (code, detail), "{m:?}"),
+                other => panic!("{m:?}: {other:?}"),
+            }
+        }
+        // A stop refused because nothing ran is not an error.
+        assert!(
+            run(
+                &mut r,
+                &link,
+                Message::StopChannelListModeAck {
+                    result: AckResult::WrongModeError
+                }
+            )
+            .is_empty()
+        );
+    }
+
+    #[test]
+    fn a_second_init_is_a_restart_and_line_faults_are_link_faults() {
+        let link = SerialLink::new();
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        run(&mut r, &link, Message::Init { version: 1 });
+        link.take_init();
+        link.init_acknowledged();
+        link.config_written(2);
+        assert_eq!(
+            run(&mut r, &link, Message::Init { version: 1 }),
+            [BusEvent::StimHeartbeat(NmtState::BootUp)]
+        );
+        assert!(!link.handshake_done());
+        assert_eq!(link.config_id(), 0);
+        let mut out = Vec::new();
+        r.on_line_fault(&mut |e| out.push(e));
+        r.on_line_fault(&mut |e| out.push(e));
+        assert_eq!(out, [BusEvent::LinkDown]);
+        // A host command from the device's side: the line is wrong.
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        assert_eq!(run(&mut r, &link, Message::Watchdog), [BusEvent::LinkDown]);
+        // The next good packet: link up (which never re-arms by itself).
+        assert_eq!(
+            run(
+                &mut r,
+                &link,
+                Message::SinglePulseAck {
+                    result: AckResult::Ok
+                }
+            ),
+            [BusEvent::LinkUp]
+        );
+    }
+}
