@@ -341,8 +341,13 @@ impl HeartbeatSender {
                 while !sp.load(Ordering::Relaxed) {
                     {
                         let mut s = st.lock().unwrap_or_else(PoisonError::into_inner);
+                        // Stamped before the write: the frame cannot reach the
+                        // stimulator earlier, so a watchdog measured from this stamp is
+                        // never short (stamped after it, a write held up 1.5 ms in a UML
+                        // guest made a 250 ms watchdog look like 248.5 ms).
+                        let at = Instant::now();
                         if !s.paused && write(&socket, &frame).is_ok() {
-                            s.last_sent = Some(Instant::now());
+                            s.last_sent = Some(at);
                             s.sent += 1;
                         }
                     }
@@ -358,7 +363,8 @@ impl HeartbeatSender {
         })
     }
 
-    /// Stops sending; returns when the last heartbeat went out (none follows).
+    /// Stops sending; returns when the last heartbeat went out (none follows): the instant
+    /// just before its write.
     pub fn pause(&self) -> Option<Instant> {
         let mut s = self.state.lock().unwrap_or_else(PoisonError::into_inner);
         s.paused = true;
