@@ -1007,9 +1007,7 @@ prefix = "bench-1"
     const SM: &str = "schema = \"fes-stim-driver/1\"\n[transport]\nkind = \"sciencemode\"\ndevice = \"/dev/ttyUSB0\"\n[force]\nmax_n = 40.0\n";
 
     fn sm_err(extra: &str) -> String {
-        DriverConfig::parse(&format!("{SM}{extra}"))
-            .unwrap_err()
-            .to_string()
+        err_after(SM, extra)
     }
 
     #[test]
@@ -1076,10 +1074,15 @@ prefix = "bench-1"
         );
     }
 
-    fn err(extra: &str) -> String {
-        DriverConfig::parse(&format!("{MIN}{extra}"))
+    /// The error of `base` followed by `extra`.
+    fn err_after(base: &str, extra: &str) -> String {
+        DriverConfig::parse(&format!("{base}{extra}"))
             .unwrap_err()
             .to_string()
+    }
+
+    fn err(extra: &str) -> String {
+        err_after(MIN, extra)
     }
 
     #[test]
