@@ -529,7 +529,7 @@ fn units_binaries_configuration_and_docs_are_where_the_units_say() {
 /// placement, device dependency and doc directory are taken out.
 #[test]
 fn packaged_units_are_the_installers_less_the_placement() {
-    let bins = crate::systemd_support::build_stack();
+    let bins = crate::systemd_support::stack_binaries();
     for v in variants() {
         let root = v.extract();
         let staged = scratch(&format!("stage-{}", v.name));
@@ -672,7 +672,7 @@ fn generator_places_the_units_like_the_installer_and_refuses_bad_values() {
     // Defaults (placement.env as shipped: empty): the installer's.
     let out = root.join("gen-default");
     let stderr = run_generator(root.path(), &conf, &none, &out);
-    let bins = crate::systemd_support::build_stack();
+    let bins = crate::systemd_support::stack_binaries();
     let staged = scratch("gen-vs-install");
     stage("--rig", staged.path(), &bins, &[]);
     let installed = |unit: &str| {

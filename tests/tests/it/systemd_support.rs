@@ -29,10 +29,8 @@ pub fn target_dir() -> PathBuf {
 }
 
 /// The stack's binaries (the workspace's test build; a no-op when it is fresh) and their
-/// directory: [`fes_tests::stack::stack_binaries`].
-pub fn build_stack() -> PathBuf {
-    fes_tests::stack::stack_binaries()
-}
+/// directory.
+pub use fes_tests::stack::stack_binaries;
 
 /// A scratch directory inside the target directory (not /tmp: a UML guest hides the host's
 /// /tmp behind its own), from the testkit: removed when the test passes, kept when it fails

@@ -23,7 +23,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
-use systemd_support::{Scratch, UnitFile, build_stack, cpu_set, scratch, stage, workspace_root};
+use systemd_support::{Scratch, UnitFile, cpu_set, scratch, stack_binaries, stage, workspace_root};
 
 const UNIT_DIR: &str = "etc/systemd/system";
 const SERVICES: [&str; 5] = [
@@ -44,7 +44,7 @@ const ICEORYX2_USERS: [&str; 3] = [
 
 /// A staged bench (or rig) install with deterministic CPU placement.
 fn staged(mode: &str) -> (Scratch, BTreeMap<String, UnitFile>) {
-    let bins = build_stack();
+    let bins = stack_binaries();
     let scratch = scratch(&format!("units{}", mode.trim_start_matches('-')));
     stage(
         mode,
@@ -634,7 +634,7 @@ fn safety_iceoryx2_and_hardening_settings() {
 
 #[test]
 fn installer_keeps_the_operators_configuration() {
-    let bins = build_stack();
+    let bins = stack_binaries();
     let scratch = scratch("installer");
     let root = scratch.path();
     stage("--bench", root, &bins, &[]);
@@ -703,7 +703,7 @@ fn installer_keeps_the_operators_configuration() {
 #[test]
 fn safe_stop_logs_through_its_journal_stream_with_priorities() {
     use std::os::unix::fs::MetadataExt;
-    let bins = build_stack();
+    let bins = stack_binaries();
     let dir = scratch("safe-stop-log");
     let err_path = dir.join("stderr");
     let err = std::fs::File::create(&err_path).unwrap();
@@ -773,7 +773,7 @@ fn the_prescription_is_installed_read_only_and_bounds_every_shipped_config() {
         Some("/etc/fes/prescription.toml")
     );
     // Installed: 0644 beside 0640 configuration; kept over an upgrade.
-    let bins = build_stack();
+    let bins = stack_binaries();
     let scratch = scratch("prescription");
     let root = scratch.path();
     stage("--bench", root, &bins, &[]);

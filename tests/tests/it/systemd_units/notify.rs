@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::systemd_support::{Scratch, build_stack, scratch};
+use crate::systemd_support::{Scratch, scratch, stack_binaries};
 
 /// A fake service manager: the socket rt-core notifies.
 struct FakeManager {
@@ -100,7 +100,7 @@ fn config(scratch: &Scratch, tag: &str) -> PathBuf {
 
 /// Starts rt-core without real-time rights, with `env` added, stderr captured.
 fn spawn_rt_core(config: &PathBuf, env: &[(&str, String)]) -> Child {
-    let bin = build_stack().join("rt-core");
+    let bin = stack_binaries().join("rt-core");
     let mut cmd = Command::new(bin);
     cmd.arg("--config")
         .arg(config)
