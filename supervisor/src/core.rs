@@ -525,6 +525,16 @@ impl SupervisorCore {
         r
     }
 
+    /// The setpoint changes scheduled after `now_ns` ([`crate::profile::ProfileRunner::preview`]),
+    /// into `out`; none unless armed with a profile. Call after [`Self::reference`] for
+    /// the same time.
+    pub fn preview(&self, now_ns: u64, out: &mut [rt_core::msg::PreviewEdge]) -> usize {
+        match (&self.state, &self.profile) {
+            (ArmState::Armed, Some(run)) => run.preview(now_ns, out),
+            _ => 0,
+        }
+    }
+
     /// When the reference next changes by itself (a profile edge), if it does.
     pub fn next_change_ns(&self, now_ns: u64) -> Option<u64> {
         match self.state {

@@ -19,8 +19,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use rt_core::msg::service::{ServiceError, open_pubsub};
 use rt_core::msg::{
-    Contract, DriverCommand, DriverStatus, ForceSample, PulseOutcome, Reference, StimTick,
-    TimingReport,
+    Contract, DriverCommand, DriverStatus, ForceSample, PreviewEdge, PulseOutcome, Reference,
+    ReferencePreview, StimTick, TimingReport,
 };
 use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
@@ -110,6 +110,8 @@ fn publisher_nodes<T: Contract>(service: &PubSubService<T>) -> Vec<u128> {
 struct Ports {
     /// Reference to rt-core.
     reference: Publisher<ipc::Service, Reference, ()>,
+    /// The profile's scheduled setpoints, published beside each Reference.
+    preview: Publisher<ipc::Service, ReferencePreview, ()>,
     /// Orders to stim-driver.
     command: Publisher<ipc::Service, DriverCommand, ()>,
     ticks: Subscriber<ipc::Service, StimTick, ()>,
@@ -133,6 +135,7 @@ impl Ports {
     fn open(node: &Node<ipc::Service>, prefix: &str) -> Result<Self, DaemonError> {
         Ok(Self {
             reference: port::publisher::<Reference>(node, prefix)?,
+            preview: port::publisher::<ReferencePreview>(node, prefix)?,
             command: port::publisher::<DriverCommand>(node, prefix)?,
             ticks: port::subscriber::<StimTick>(node, prefix)?,
             forces: port::subscriber::<ForceSample>(node, prefix)?,
@@ -195,6 +198,8 @@ struct Daemon<'a> {
     period_ns: u64,
     scan_ns: u64,
     next_publish: u64,
+    /// `seq` of the last ReferencePreview published.
+    preview_seq: u64,
     next_scan: u64,
     next_watchdog: u64,
     /// The arming state at the last pass (a change starts a recording run).
@@ -290,6 +295,7 @@ impl<'a> Daemon<'a> {
             period_ns: cfg.reference.period_ms * 1_000_000,
             scan_ns: cfg.health.node_scan_period_ms * 1_000_000,
             next_publish: start_ns,
+            preview_seq: 0,
             next_scan: start_ns,
             next_watchdog: start_ns,
             last_state,
@@ -573,6 +579,16 @@ impl<'a> Daemon<'a> {
                 tracing::warn!("Reference not published: {e:?}");
             }
             self.run.record(&mut self.core, Item::Reference(r));
+            // What the profile has scheduled, beside it (rt-core plans over it; nothing
+            // scheduled, e.g. an operator's setpoint, is announced as an empty preview).
+            let mut edges = [PreviewEdge::default(); ReferencePreview::MAX_EDGES];
+            let n = self.core.preview(now, &mut edges);
+            self.preview_seq += 1;
+            let p = ReferencePreview::new(self.preview_seq, now, r.seq, &edges[..n]);
+            if let Err(e) = self.ports.preview.send_copy(p) {
+                tracing::warn!("ReferencePreview not published: {e:?}");
+            }
+            self.run.record(&mut self.core, Item::Preview(p));
             self.next_publish = now + self.period_ns;
         }
     }
@@ -624,6 +640,11 @@ impl<'a> Daemon<'a> {
         let t = monotonic_ns();
         let r = self.core.reference(t);
         let _ = self.ports.reference.send_copy(r);
+        self.preview_seq += 1;
+        let _ =
+            self.ports
+                .preview
+                .send_copy(ReferencePreview::new(self.preview_seq, t, r.seq, &[]));
         let disarm = self.link.issue(DriverOrder::Disarm, t);
         let _ = self.ports.command.send_copy(disarm);
     }

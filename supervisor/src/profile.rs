@@ -10,6 +10,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use rt_core::msg::PreviewEdge;
+
 use crate::limits::{ReferenceLimits, Rejection};
 
 /// Heart-rate range of the cardiac profile, beats per minute (thesis 1.1: 1-3.3 Hz).
@@ -515,6 +517,41 @@ impl ProfileRunner {
         }
     }
 
+    /// The setpoint changes scheduled after `now_ns`, in time order, into `out` (returns how
+    /// many): for a cardiac profile the running contraction's end, then the onset and end
+    /// of the next two beats (the next at the amplitude the outer loop has set for it, the
+    /// one after at the same, its best guess). Other profiles announce nothing (an
+    /// operator's setpoint, steps and ramps: rt-core decides causally). Call after
+    /// [`Self::advance`] to `now_ns`.
+    pub fn preview(&self, now_ns: u64, out: &mut [PreviewEdge]) -> usize {
+        let Some(run) = &self.cardiac else {
+            return 0;
+        };
+        let mut n = 0;
+        let mut push = |t_ns: u64, force: f64, max_rate_per_s: f64| {
+            if t_ns > now_ns && n < out.len() {
+                out[n] = PreviewEdge {
+                    t_ns,
+                    force,
+                    max_rate_per_s,
+                };
+                n += 1;
+            }
+        };
+        let beat = run.beat;
+        let rate = run.current.edge_rate(&self.limits);
+        push(beat.start_ns + beat.on_ns, 0.0, rate);
+        let next = run.pending.unwrap_or(run.current);
+        let next_rate = next.edge_rate(&self.limits);
+        let (period, on) = (next.period_ns(), next.on_ns());
+        for k in 0..2u64 {
+            let start = beat.end_ns() + k * period;
+            push(start, run.next_amplitude, next_rate);
+            push(start + on, 0.0, next_rate);
+        }
+        n
+    }
+
     /// The first beat of a cardiac profile (to announce it when the profile starts).
     pub fn first_beat(&self) -> Option<Beat> {
         self.cardiac.map(|c| c.beat)
@@ -594,6 +631,59 @@ mod tests {
             edge_rate_per_s: None,
             outer_loop: None,
         }
+    }
+
+    /// The preview announces what the setpoints will do: inside a contraction its end,
+    /// then the next two beats' onsets (at the amplitude the outer loop set for the next
+    /// beat) and ends, each at the profile's edge rate; every announced edge is the
+    /// setpoint change the runner then makes. Other profiles announce nothing.
+    #[test]
+    fn the_cardiac_preview_announces_the_edges_the_profile_then_makes() {
+        let t0 = 5_000 * MS;
+        let spec = ProfileSpec::Cardiac(cardiac(75.0, 0.4, 0.3));
+        let mut run = ProfileRunner::start(spec, limits(), t0);
+        let mut ev = Vec::new();
+        let rate = limits().max_rate_per_s;
+        run.advance(t0 + 10 * MS, &mut ev);
+        run.set_next_amplitude(0.35);
+        let mut edges = [PreviewEdge::default(); 6];
+        let n = run.preview(t0 + 10 * MS, &mut edges);
+        let at = |ms: u64, force: f64| PreviewEdge {
+            t_ns: t0 + ms * MS,
+            force,
+            max_rate_per_s: rate,
+        };
+        assert_eq!(
+            &edges[..n],
+            &[
+                at(320, 0.0),
+                at(800, 0.35),
+                at(1120, 0.0),
+                at(1600, 0.35),
+                at(1920, 0.0)
+            ]
+        );
+        // In the rest: the running contraction's end is past.
+        run.advance(t0 + 500 * MS, &mut ev);
+        let n = run.preview(t0 + 500 * MS, &mut edges);
+        assert_eq!(edges[0], at(800, 0.35));
+        assert_eq!(n, 4);
+        // Each announced edge is the setpoint the runner gives from then on.
+        for e in &edges[..n] {
+            let before = run.advance(e.t_ns - 1, &mut ev);
+            assert_ne!(before.force, e.force, "{e:?}");
+            let sp = run.advance(e.t_ns, &mut ev);
+            assert_eq!((sp.force, sp.rate_per_s), (e.force, e.max_rate_per_s));
+        }
+        let constant = ProfileRunner::start(
+            ProfileSpec::Constant {
+                force: 0.3,
+                rate_per_s: None,
+            },
+            limits(),
+            t0,
+        );
+        assert_eq!(constant.preview(t0 + MS, &mut edges), 0);
     }
 
     /// 75 beats/min is an 800 ms beat; duty 0.4 contracts for 320 ms: the setpoint is the

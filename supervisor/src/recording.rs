@@ -11,6 +11,7 @@
 //! | `ticks.csv` | every StimTick, all fields |
 //! | `force.csv` | every ForceSample |
 //! | `references.csv` | every published Reference |
+//! | `previews.csv` | every published ReferencePreview: `seq,t_ns,ref_seq,len`, then `t_ns_i,force_i,max_rate_per_s_i` for each of its 6 edge slots (empty where unused) |
 //! | `status.csv` | every DriverStatus |
 //! | `outcomes.csv` | every PulseOutcome: what the driver did with each pulse decision |
 //! | `timing.csv` | every TimingReport |
@@ -39,7 +40,8 @@ use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
 use rt_core::msg::{
-    DriverStatus, ForceSample, PulseFate, PulseOutcome, Reference, StimTick, TimingReport,
+    DriverStatus, ForceSample, PulseFate, PulseOutcome, Reference, ReferencePreview, StimTick,
+    TimingReport,
 };
 
 use crate::core::BeatRecord;
@@ -209,6 +211,7 @@ pub struct Recorder {
     ticks: Stream,
     force: Stream,
     references: Stream,
+    previews: Stream,
     status: Stream,
     outcomes: Stream,
     timing: Stream,
@@ -274,6 +277,7 @@ impl Recorder {
                 "references.csv",
                 Some("seq,t_ns,force,max_rate_per_s,flags"),
             )?,
+            previews: Stream::create(d, "previews.csv", Some(&preview_header()))?,
             status: Stream::create(
                 d,
                 "status.csv",
@@ -395,6 +399,25 @@ impl Recorder {
         let res = self.references.line(format_args!(
             "{},{},{},{},{}",
             r.seq, r.t_ns, r.force, r.max_rate_per_s, r.flags
+        ));
+        self.guard(res)
+    }
+
+    /// Records a published ReferencePreview: its edges in `len` column triples, unused
+    /// ones empty.
+    pub fn on_preview(&mut self, p: &ReferencePreview) -> Result<(), RecordingError> {
+        self.ok()?;
+        let mut cols = String::new();
+        for (i, e) in p.edges.iter().enumerate() {
+            if i < p.len as usize {
+                cols += &format!(",{},{},{}", e.t_ns, e.force, e.max_rate_per_s);
+            } else {
+                cols += ",,,";
+            }
+        }
+        let res = self.previews.line(format_args!(
+            "{},{},{},{}{}",
+            p.seq, p.t_ns, p.ref_seq, p.len, cols
         ));
         self.guard(res)
     }
@@ -739,6 +762,7 @@ impl Recorder {
             &mut self.ticks,
             &mut self.force,
             &mut self.references,
+            &mut self.previews,
             &mut self.status,
             &mut self.outcomes,
             &mut self.timing,
@@ -764,6 +788,7 @@ impl Recorder {
             &mut self.ticks,
             &mut self.force,
             &mut self.references,
+            &mut self.previews,
             &mut self.status,
             &mut self.outcomes,
             &mut self.timing,
@@ -809,4 +834,13 @@ pub fn utc_stamp() -> String {
         rem / 60 % 60,
         rem % 60
     )
+}
+
+/// The header of `previews.csv`.
+fn preview_header() -> String {
+    let mut h = String::from("seq,t_ns,ref_seq,len");
+    for i in 0..ReferencePreview::MAX_EDGES {
+        h += &format!(",t_ns_{i},force_{i},max_rate_per_s_{i}");
+    }
+    h
 }

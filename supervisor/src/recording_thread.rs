@@ -19,7 +19,9 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use crossbeam::channel::{Sender, TrySendError, bounded};
-use rt_core::msg::{DriverStatus, ForceSample, PulseOutcome, Reference, StimTick, TimingReport};
+use rt_core::msg::{
+    DriverStatus, ForceSample, PulseOutcome, Reference, ReferencePreview, StimTick, TimingReport,
+};
 
 use crate::core::BeatRecord;
 use crate::recording::{Recorder, RecorderSettings, RecordingError, RecordingSummary};
@@ -115,6 +117,8 @@ pub enum Item {
     Force(ForceSample, u64),
     /// A published Reference.
     Reference(Reference),
+    /// A published ReferencePreview.
+    Preview(ReferencePreview),
     /// A DriverStatus.
     Status(DriverStatus),
     /// A PulseOutcome and when it was taken, ns.
@@ -294,6 +298,7 @@ fn apply(rec: &mut Recorder, item: Item) -> Result<(), RecordingError> {
         Item::Tick(t, now) => rec.on_stim_tick(&t, now),
         Item::Force(f, now) => rec.on_force(&f, now),
         Item::Reference(r) => rec.on_reference(&r),
+        Item::Preview(p) => rec.on_preview(&p),
         Item::Status(s) => rec.on_status(&s),
         Item::Outcome(o, now) => rec.on_outcome(&o, now),
         Item::Timing(t) => rec.on_timing(&t),

@@ -80,6 +80,8 @@ pub struct StackOptions {
     pub timing: ChainTiming,
     /// Fatigue in the muscle.
     pub fatigue: bool,
+    /// The simulated muscle.
+    pub preset: sim_muscle::preset::Preset,
     /// Outer loop at start.
     pub outer_loop: bool,
     /// Outer-loop gain per beat (None: the supervisor's default).
@@ -589,7 +591,15 @@ fn config_args(command: Option<&str>, config: &Path) -> Vec<String> {
         .collect()
 }
 
-/// The virtual stimulator and fast muscle on the stack's interface, recording what it
+/// sim-muscle's name of a preset.
+fn preset_name(p: sim_muscle::preset::Preset) -> &'static str {
+    match p {
+        sim_muscle::preset::Preset::Fast => "fast",
+        sim_muscle::preset::Preset::Slow => "slow",
+    }
+}
+
+/// The virtual stimulator and the muscle on the stack's interface, recording what it
 /// receives.
 fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<String> {
     if opts.stimulator == StimulatorKind::Sciencemode {
@@ -603,7 +613,7 @@ fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<
             "--pulse-log".into(),
             opts.dir.join("stimulator.csv").display().to_string(),
             "--preset".into(),
-            "fast".into(),
+            preset_name(opts.preset).into(),
             "--measured".into(),
             "--offset-n".into(),
             "0".into(),
@@ -622,7 +632,7 @@ fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<
         "--iface".into(),
         opts.iface.clone(),
         "--preset".into(),
-        "fast".into(),
+        preset_name(opts.preset).into(),
         "--measured".into(),
         "--offset-n".into(),
         "0".into(),

@@ -1,10 +1,13 @@
 //! The bench's verdict: the LCN's patterns against the front of constant-frequency trains
 //! (CFTs) on the same muscle (issue 17, docs/bench.md "The CFT front").
 //!
-//! For the bench's reference profile, every CFT from `min_hz` to `max_hz` in 1 Hz steps
-//! starts at each beat's onset and spans its contraction window (pulses at
-//! `onset + j 1000/f ms` while inside the window); it drives the same simulated muscle
-//! (same preset, same fatigue setting, same force sensor and seed) over the same beats.
+//! For the bench's reference profile, every CFT(f, n) from `min_hz` to `max_hz` in 1 Hz
+//! steps starts at each beat's onset with pulses at `onset + round(j 1000/f) ms` inside its
+//! contraction window, and stops after `n` of them (`n` = 1 up to all that fit: a train
+//! that simply stops is as easy for a clinician to set as one that fills the
+//! contraction); it drives the same simulated muscle (same preset, same fatigue setting,
+//! same force sensor and seed) over the same beats. Trains with the same pulses (low `n`
+//! at neighbouring frequencies) are one point, named by the lowest frequency.
 //! Each train, and the LCN's run, is scored by the same three numbers:
 //!
 //! - pulses per contraction;
@@ -18,7 +21,10 @@
 //! With a stimulation lead (`lead_ms`) the run stimulates a window `lead_ms` shorter than
 //! the contraction it is judged against, and so do the trains (same window, same judge).
 //!
-//! The verdict: `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
+//! The verdict: `beats_every_cft` when every train with no more pulses per contraction than
+//! the run tracks strictly worse (a higher RMS error): the question a user asks of a
+//! pattern generator ("is there a constant train, as easy to set, that does as well with no
+//! more pulses?"); `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
 //! the reference's has no more pulses and no larger RMS error than the LCN, one of them
 //! strictly less; `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest
 //! CFT that tracks at least as well (none: `None`); `ftipp_vs_best_cft`, the LCN's FTIpP
@@ -106,6 +112,9 @@ pub struct FrontSettings {
 pub struct FrontPoint {
     /// Train frequency, Hz (`None` for the LCN).
     pub hz: Option<u32>,
+    /// Pulses of the train per contraction before it stops (`None` for the LCN).
+    #[serde(default)]
+    pub n: Option<u32>,
     /// Pulses per contraction.
     pub pulses_per_contraction: f64,
     /// RMS of the measured force against the profile's reference (delayed by d).
@@ -123,6 +132,12 @@ pub struct FrontVerdict {
     pub cft_front: Vec<FrontPoint>,
     /// The LCN's point.
     pub lcn: FrontPoint,
+    /// Every train with no more pulses per contraction than the LCN tracks worse (higher
+    /// RMS error).
+    pub beats_every_cft: bool,
+    /// The train with the lowest RMS error among those with no more pulses per contraction
+    /// than the LCN (`None`: no train has so few).
+    pub best_cft_no_more_pulses: Option<FrontPoint>,
     /// FTI of one beat of the profile's reference, normalised force x s.
     pub reference_fti_per_contraction: f64,
     /// Some CFT of equal FTI has pulses <= and RMS <= the LCN's, one strictly.
@@ -164,6 +179,95 @@ impl FrontSettings {
             now = read(f);
         }
         Ok(out)
+    }
+
+    /// The sensor's reading of zero force, sample by sample, less the offset removed, in
+    /// newtons: what [`Self::measured`] adds to the muscle's force (the sensor is linear
+    /// and its noise does not depend on the force). `None` when the sensor filters (then
+    /// only the full simulation is exact).
+    fn zero_reading(&self, n: usize) -> Result<Option<Vec<f64>>, sim_muscle::ding::ParamError> {
+        match &self.sensor {
+            Some(c) if c.lowpass_tau_s > 0.0 => Ok(None),
+            Some(c) => {
+                let mut s = ForceSensor::new(*c, self.muscle.ts_s)?;
+                Ok(Some(
+                    (0..n).map(|_| s.measure(0.0) - self.offset_n).collect(),
+                ))
+            }
+            None => Ok(Some(vec![-self.offset_n; n])),
+        }
+    }
+
+    /// [`Self::measured`] of a train that repeats the same pulses (`offsets` from each
+    /// onset) in every beat, over `n` samples. A muscle without fatigue whose beats all
+    /// have the same shape, one after the other, forgets each beat before the next: its
+    /// force is then periodic from the second beat on, so three beats are simulated (and
+    /// the periodicity checked to 1e-12 of the force scale) and the rest copied. Anything
+    /// else (fatigue, a filtering sensor, uneven beats, a force still changing from beat to
+    /// beat) is simulated in full.
+    fn train_measured(
+        &self,
+        beats: &[BeatWindow],
+        n: usize,
+        offsets: &[usize],
+        zero: Option<&[f64]>,
+    ) -> Result<Vec<f64>, sim_muscle::ding::ParamError> {
+        let full = |s: &Self| {
+            let mut pulse = vec![false; n];
+            for b in beats {
+                for &t in offsets {
+                    if b.start + t < n {
+                        pulse[b.start + t] = true;
+                    }
+                }
+            }
+            s.measured(&pulse)
+        };
+        let Some(zero) = zero else {
+            return full(self);
+        };
+        let Some(first) = beats.first() else {
+            return full(self);
+        };
+        let p = first.period;
+        let even = beats
+            .iter()
+            .enumerate()
+            .all(|(i, b)| b.period == p && b.on == first.on && b.start == first.start + i * p);
+        let s0 = first.start;
+        let end = s0 + beats.len() * p;
+        if self.muscle.fatigue.is_some() || !even || beats.len() < 3 || end > n {
+            return full(self);
+        }
+        // Three beats and the tail after the last one.
+        let tail = n - end;
+        let len = 3 * p + tail;
+        let mut muscle = Muscle::new(self.muscle)?;
+        let mut force = Vec::with_capacity(len + 1);
+        force.push(0.0);
+        for k in 0..len {
+            let fire = k < 3 * p && offsets.contains(&(k % p));
+            force.push(muscle.step(fire.then_some(Pulse::SUPRAMAXIMAL)));
+        }
+        let tol = 1e-12 * self.scale_n;
+        if (0..p).any(|j| (force[p + j] - force[2 * p + j]).abs() > tol) {
+            return full(self);
+        }
+        // force[j]: the force j samples after the first onset (after j steps).
+        let at = |k: usize| -> f64 {
+            if k <= s0 {
+                return 0.0;
+            }
+            let j = k - s0;
+            if j <= p {
+                force[j]
+            } else if k < end {
+                force[p + (j - p) % p]
+            } else {
+                force[3 * p + (k - end)]
+            }
+        };
+        Ok((0..n).map(|k| (at(k) + zero[k]) / self.scale_n).collect())
     }
 
     /// The twitch FTI of the rested muscle (no fatigue, exact force) over a beat window.
@@ -213,6 +317,7 @@ impl FrontSettings {
         let fti_pc = fti / beats_n;
         FrontPoint {
             hz,
+            n: None,
             pulses_per_contraction: ppc,
             rms_error: if count > 0 {
                 (sq / count as f64).sqrt()
@@ -233,12 +338,15 @@ impl FrontSettings {
                 cft_front: Vec::new(),
                 lcn: FrontPoint {
                     hz: None,
+                    n: None,
                     pulses_per_contraction: f64::NAN,
                     rms_error: f64::NAN,
                     ftipp: f64::NAN,
                     fti_per_contraction: f64::NAN,
                 },
                 reference_fti_per_contraction: f64::NAN,
+                beats_every_cft: false,
+                best_cft_no_more_pulses: None,
                 lcn_dominated: false,
                 pulses_vs_equal_rms_cft: None,
                 ftipp_vs_best_cft: None,
@@ -247,19 +355,28 @@ impl FrontSettings {
         let fti_1 = self.twitch_fti(first)?;
         let reference_fti = self.shape(first).reference().iter().sum::<f64>() * 1e-3;
         let lcn = self.score(None, &beats, &run.pulse, &run.measured, fti_1);
-        let mut front = Vec::new();
+        let zero = self.zero_reading(n)?;
+        let mut front: Vec<FrontPoint> = Vec::new();
+        let mut seen: std::collections::HashSet<Vec<usize>> = std::collections::HashSet::new();
         for hz in self.min_hz..=self.max_hz {
-            let mut pulse = vec![false; n];
-            for b in &beats {
-                let times = constant_train(hz as f64, 0, b.on, 1e-3).unwrap_or_default();
-                for t in times {
-                    if b.start + t < n {
-                        pulse[b.start + t] = true;
+            let times = constant_train(hz as f64, 0, first.on, 1e-3).unwrap_or_default();
+            for k in 1..=times.len() {
+                if !seen.insert(times[..k].to_vec()) {
+                    continue;
+                }
+                let measured = self.train_measured(&beats, n, &times[..k], zero.as_deref())?;
+                let mut pulse = vec![false; n];
+                for b in &beats {
+                    for &t in &times[..k] {
+                        if b.start + t < n {
+                            pulse[b.start + t] = true;
+                        }
                     }
                 }
+                let mut point = self.score(Some(hz), &beats, &pulse, &measured, fti_1);
+                point.n = Some(k as u32);
+                front.push(point);
             }
-            let measured = self.measured(&pulse)?;
-            front.push(self.score(Some(hz), &beats, &pulse, &measured, fti_1));
         }
         let equal_fti = |p: &&FrontPoint| {
             (p.fti_per_contraction - reference_fti).abs() <= EQUAL_FTI * reference_fti
@@ -280,7 +397,22 @@ impl FrontSettings {
             .filter(equal_fti)
             .map(|p| p.ftipp)
             .fold(f64::NEG_INFINITY, f64::max);
+        // "No more pulses": a train's count against the run's mean per contraction.
+        let no_more =
+            |p: &&FrontPoint| p.pulses_per_contraction <= lcn.pulses_per_contraction + 1e-9;
+        let best_cft_no_more_pulses = front
+            .iter()
+            .filter(no_more)
+            .min_by(|a, b| a.rms_error.total_cmp(&b.rms_error))
+            .copied();
+        let beats_every_cft = lcn.rms_error.is_finite()
+            && front
+                .iter()
+                .filter(no_more)
+                .all(|p| p.rms_error > lcn.rms_error);
         Ok(FrontVerdict {
+            beats_every_cft,
+            best_cft_no_more_pulses,
             pulses_vs_equal_rms_cft: cheapest
                 .is_finite()
                 .then(|| lcn.pulses_per_contraction / cheapest),
@@ -343,6 +475,62 @@ mod tests {
         assert_eq!((w[0].start, w[1].start), (0, 797));
         assert_eq!(w[0].period, 797);
         assert_eq!(w[1].period, 800);
+    }
+
+    /// The periodic shortcut of the front (three beats simulated, the rest copied) gives
+    /// the full simulation's measured force to 1e-9, with the run's noisy sensor, for a
+    /// doublet-led train, a single pulse and a 100 Hz train; with fatigue it falls back to
+    /// the full simulation, exactly.
+    #[test]
+    fn the_periodic_front_is_the_full_simulation() {
+        let mut s = settings();
+        s.sensor = Some(SensorConfig::defaults_for(s.scale_n, 7));
+        let beats: Vec<BeatWindow> = (0..6)
+            .map(|i| BeatWindow {
+                start: 3 + i * 800,
+                period: 800,
+                on: 320,
+            })
+            .collect();
+        let n = 3 + 6 * 800 + 137;
+        let zero = s.zero_reading(n).unwrap();
+        for offsets in [
+            vec![0, 3, 40, 80, 120],
+            vec![0],
+            (0..32).map(|k| k * 10).collect(),
+        ] {
+            let mut pulse = vec![false; n];
+            for b in &beats {
+                for &t in &offsets {
+                    pulse[b.start + t] = true;
+                }
+            }
+            let full = s.measured(&pulse).unwrap();
+            let fast = s
+                .train_measured(&beats, n, &offsets, zero.as_deref())
+                .unwrap();
+            assert_eq!(full.len(), fast.len());
+            for (k, (a, b)) in full.iter().zip(&fast).enumerate() {
+                assert!((a - b).abs() < 1e-9, "{offsets:?}: sample {k}: {a} vs {b}");
+            }
+        }
+        let mut tired = s.clone();
+        tired.muscle.fatigue = Some(sim_muscle::ding::FatigueParams::for_muscle(
+            &tired.muscle.ding,
+        ));
+        let offsets = [0usize, 25, 50];
+        let mut pulse = vec![false; n];
+        for b in &beats {
+            for &t in &offsets {
+                pulse[b.start + t] = true;
+            }
+        }
+        assert_eq!(
+            tired.measured(&pulse).unwrap(),
+            tired
+                .train_measured(&beats, n, &offsets, zero.as_deref())
+                .unwrap()
+        );
     }
 
     /// A run that *is* one of the CFTs (20 Hz over each contraction): its own point lies

@@ -365,6 +365,17 @@ pub fn plot_front(
     title: &str,
     verdict: &crate::cft::FrontVerdict,
 ) -> Result<(), PlotError> {
+    plot_front_compare(out, title, verdict, &[])
+}
+
+/// [`plot_front`] with more runs' points (label, point), e.g. the same controller with
+/// planning off, drawn in orange.
+pub fn plot_front_compare(
+    out: &Path,
+    title: &str,
+    verdict: &crate::cft::FrontVerdict,
+    others: &[(&str, &crate::cft::FrontPoint)],
+) -> Result<(), PlotError> {
     let e = fail(out);
     on_figure!(out, (1000, 650), |root| {
         root.fill(&WHITE).map_err(|x| e(&x))?;
@@ -372,6 +383,7 @@ pub fn plot_front(
             .cft_front
             .iter()
             .chain(std::iter::once(&verdict.lcn))
+            .chain(others.iter().map(|(_, p)| *p))
             .filter(|p| p.rms_error.is_finite() && p.pulses_per_contraction.is_finite())
             .collect();
         let x_max = pts
@@ -397,15 +409,18 @@ pub fn plot_front(
         let equal = |p: &crate::cft::FrontPoint| {
             (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
         };
-        let line: Vec<(f64, f64)> = verdict
-            .cft_front
-            .iter()
-            .map(|p| (p.pulses_per_contraction, p.rms_error))
-            .collect();
+        // The lower envelope: the best train for each pulse count.
+        let mut best: std::collections::BTreeMap<u64, f64> = std::collections::BTreeMap::new();
+        for p in &verdict.cft_front {
+            let k = p.pulses_per_contraction.round() as u64;
+            let b = best.entry(k).or_insert(f64::INFINITY);
+            *b = b.min(p.rms_error);
+        }
+        let line: Vec<(f64, f64)> = best.iter().map(|(&k, &r)| (k as f64, r)).collect();
         chart
-            .draw_series(LineSeries::new(line, BLUE.stroke_width(1)))
+            .draw_series(LineSeries::new(line, BLUE.stroke_width(2)))
             .map_err(|x| e(&x))?
-            .label("constant-frequency trains, 5-100 Hz")
+            .label("CFT(f, n), 5-100 Hz: the best train for each pulse count")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1)));
         chart
             .draw_series(verdict.cft_front.iter().map(|p| {
@@ -425,7 +440,10 @@ pub fn plot_front(
                 verdict
                     .cft_front
                     .iter()
-                    .filter(|p| p.hz.is_some_and(|h| h % 10 == 0))
+                    .filter(|p| {
+                        p.hz.is_some_and(|h| h % 10 == 0)
+                            && !verdict.cft_front.iter().any(|q| q.hz == p.hz && q.n > p.n)
+                    })
                     .map(|p| {
                         Text::new(
                             format!("{} Hz", p.hz.unwrap_or(0)),
@@ -444,7 +462,7 @@ pub fn plot_front(
             )))
             .map_err(|x| e(&x))?
             .label(format!(
-                "LCN: {:.2} pulses, RMS {:.4}{}",
+                "pattern generator: {:.2} pulses, RMS {:.4}{}",
                 l.pulses_per_contraction,
                 l.rms_error,
                 if verdict.lcn_dominated {
@@ -454,6 +472,20 @@ pub fn plot_front(
                 }
             ))
             .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+        for (label, p) in others {
+            chart
+                .draw_series(std::iter::once(Circle::new(
+                    (p.pulses_per_contraction, p.rms_error),
+                    7,
+                    RGBColor(230, 120, 0).filled(),
+                )))
+                .map_err(|x| e(&x))?
+                .label(format!(
+                    "{label}: {:.2} pulses, RMS {:.4}",
+                    p.pulses_per_contraction, p.rms_error
+                ))
+                .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(230, 120, 0).filled()));
+        }
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.9))

@@ -9,6 +9,7 @@
 
 use rt_core::control::file::Controller;
 use rt_core::control::pattern_generator::TickInput;
+use rt_core::msg::{PreviewEdge, ReferencePreview};
 use rt_core::rt::reference::{ReferencePolicy, ReferenceTracker};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::plant::{MusclePlant, Pulse};
@@ -57,7 +58,26 @@ impl SimSettings {
         outer_loop: OuterLoopSettings,
         seconds: f64,
     ) -> Result<Self, SimError> {
-        let mut muscle = MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
+        Self::bench_muscle(
+            controller,
+            sim_muscle::preset::Preset::Fast,
+            fatigue,
+            profile,
+            outer_loop,
+            seconds,
+        )
+    }
+
+    /// [`Self::bench`] on either of sim-muscle's presets (`fes bench --muscle`).
+    pub fn bench_muscle(
+        controller: &Controller,
+        preset: sim_muscle::preset::Preset,
+        fatigue: bool,
+        profile: ProfileSpec,
+        outer_loop: OuterLoopSettings,
+        seconds: f64,
+    ) -> Result<Self, SimError> {
+        let mut muscle = MuscleConfig::preset(preset);
         if fatigue {
             muscle.fatigue = Some(sim_muscle::ding::FatigueParams::for_muscle(&muscle.ding));
         }
@@ -74,6 +94,10 @@ impl SimSettings {
             outer_loop,
             contraction: ContractionSettings {
                 delay_ms: controller.lmn.delay as f64,
+                plateau_start: std::env::var("XPS")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(0.5),
                 ..Default::default()
             },
             limits: ReferenceLimits::default(),
@@ -129,6 +153,8 @@ pub struct SimResult {
     pub pulse: Vec<bool>,
     /// Completed beats with the outer loop's reaction.
     pub beats: Vec<BeatRecord>,
+    /// The planner's counters at the end (all zero without planning).
+    pub planner: rt_core::control::planner::PlannerStats,
 }
 
 const MS: u64 = 1_000_000;
@@ -180,7 +206,9 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
     let mut tracker = ReferenceTracker::new(ReferencePolicy {
         stale_after_ns: 100 * MS,
         stale_ramp_per_s: 2.0,
+        tick_ns: MS,
     });
+    let mut edges = [PreviewEdge::default(); ReferencePreview::MAX_EDGES];
     let t0 = T0_NS;
     core.command(&Command::Arm, t0, Ok(()))
         .map_err(SimError::Refused)?;
@@ -199,6 +227,7 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
         measured: Vec::with_capacity(n),
         pulse: Vec::with_capacity(n),
         beats: Vec::new(),
+        planner: Default::default(),
     };
     let mut measured_now = match &mut sensor {
         Some(sen) => (sen.measure(0.0) - s.offset_n) / s.scale_n,
@@ -207,13 +236,17 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
     for k in 0..n as u64 {
         let t = t0 + k * MS;
         let r = core.reference(t);
-        // Offered once per tick, as rt-core takes the newest waiting reference.
+        // Offered once per tick, as rt-core takes the newest waiting reference, with the
+        // preview the supervisor publishes beside it.
         let _ = tracker.offer(&r, t);
+        let n = core.preview(t, &mut edges);
+        let _ = tracker.offer_preview(&ReferencePreview::new(r.seq, t, r.seq, &edges[..n]), t);
         let target = tracker.advance(t);
         let o = pg.tick(&TickInput {
             reference: target.value,
             measured_force: Some(measured_now),
             resting: target.resting,
+            preview: target.preview,
         });
         out.reference.push(target.value);
         out.model_force.push(o.model_force);
@@ -231,5 +264,6 @@ pub fn simulate(controller: &Controller, s: &SimSettings) -> Result<SimResult, S
         measured_now = (y_n - s.offset_n) / s.scale_n;
         out.beats.extend(core.take_beats());
     }
+    out.planner = pg.stats().planner;
     Ok(out)
 }

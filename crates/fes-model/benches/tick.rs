@@ -2,7 +2,12 @@
 //! tick for M = 1, 6 and 10 units, in the model mode (the default) and, for M = 10, the
 //! measured-force mode (estimator + d-step re-prediction).
 //!
-//! Run: `cargo bench -p rt-core --bench tick`.
+//! `planning_beat`: one whole 800 ms beat of the cardiac profile (320 ms at 0.5) with the
+//! receding-horizon planner and its preview, M = 1, 6 and 10: the time per beat over 800
+//! is the mean planning tick; the planner works at most `budget_steps` network steps in a
+//! tick, so its worst tick is that many steps (rt-core's compute histogram has it).
+//!
+//! Run: `cargo bench -p fes-model --bench tick`.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::hint::black_box;
@@ -44,6 +49,7 @@ fn bench_tick(c: &mut Criterion) {
             reference: 0.5,
             measured_force: Some(0.5),
             resting: false,
+            ..Default::default()
         };
         for _ in 0..2000 {
             pg.tick(&input);
@@ -59,5 +65,64 @@ fn bench_tick(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_tick);
+fn bench_planning(c: &mut Criterion) {
+    use fes_model::control::planner::PlanningConfig;
+    use fes_model::control::preview::{Preview, PreviewPoint};
+
+    let mut group = c.benchmark_group("planning_beat");
+    group.sample_size(20);
+    let (period, on, level) = (800usize, 320usize, 0.5);
+    let setpoint = |k: usize| if k % period < on { level } else { 0.0 };
+    // One beat's inputs, precomputed: the tracker's targets and the previews.
+    let mut r = 0.0f64;
+    let inputs: Vec<TickInput> = (0..period)
+        .map(|k| {
+            let mut points = vec![PreviewPoint {
+                at: 0,
+                force: setpoint(k),
+                rate_per_s: 50.0,
+            }];
+            for edge in [on, period, period + on] {
+                if edge > k {
+                    points.push(PreviewPoint {
+                        at: (edge - k) as u32,
+                        force: setpoint(edge),
+                        rate_per_s: 50.0,
+                    });
+                }
+            }
+            let goal = setpoint(k);
+            r = if goal > r {
+                (r + 0.05).min(goal)
+            } else {
+                (r - 0.05).max(goal)
+            };
+            TickInput {
+                reference: r,
+                measured_force: None,
+                resting: goal == 0.0,
+                preview: Preview::new(&points).expect("valid preview"),
+            }
+        })
+        .collect();
+    for m in [1, 6, 10] {
+        let settings = ControllerSettings {
+            planning: PlanningConfig::RECOMMENDED,
+            ..ControllerSettings::default()
+        };
+        let ctl =
+            Controller::design(fast_muscle(m), &table_6_1_specs(m), settings).expect("design");
+        let mut pg = ctl.pattern_generator().expect("pattern generator");
+        group.bench_function(BenchmarkId::new("model", m), |b| {
+            b.iter(|| {
+                for input in &inputs {
+                    black_box(pg.tick(black_box(input)));
+                }
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_tick, bench_planning);
 criterion_main!(benches);

@@ -6,7 +6,7 @@ use super::clock::Wakeup;
 use super::feedback::{FeedbackRejection, FeedbackTracker};
 use super::reference::{ReferencePolicy, ReferenceRejection, ReferenceTracker};
 use super::source::{TickDecision, TickSource};
-use crate::msg::{ForceSample, Reference, StimTick};
+use crate::msg::{ForceSample, Reference, ReferencePreview, StimTick};
 
 /// Pulse parameters of every fired pulse (supramaximal pulses: amplitude and width are
 /// fixed; the generator only decides *when*, thesis 6.5.2).
@@ -78,6 +78,19 @@ impl<S: TickSource> PatternLoop<S> {
         now_ns: u64,
     ) -> Result<(), ReferenceRejection> {
         let result = self.references.offer(reference, now_ns);
+        self.rejected_since_last_tick |= result.is_err();
+        result
+    }
+
+    /// Offers a received preview of the scheduled setpoints (see
+    /// [`ReferenceTracker::offer_preview`]); a rejection marks the next tick with
+    /// [`StimTick::FLAG_REFERENCE_REJECTED`].
+    pub fn offer_preview(
+        &mut self,
+        preview: &ReferencePreview,
+        now_ns: u64,
+    ) -> Result<(), ReferenceRejection> {
+        let result = self.references.offer_preview(preview, now_ns);
         self.rejected_since_last_tick |= result.is_err();
         result
     }

@@ -388,6 +388,7 @@ impl RtCoreConfig {
         ReferencePolicy {
             stale_after_ns: self.reference.stale_after_ms * 1_000_000,
             stale_ramp_per_s: self.reference.stale_ramp_per_s,
+            tick_ns: self.period_us * 1_000,
         }
     }
 

@@ -2,7 +2,8 @@
 //! tick: it holds the newest valid reference, applies its ramp limit, and ramps the target
 //! to zero when the reference goes stale (the supervisor stopped refreshing it).
 
-use crate::msg::{Contract, Reference, ValidationError};
+use crate::control::preview::{MAX_PREVIEW_POINTS, Preview, PreviewPoint};
+use crate::msg::{Contract, Reference, ReferencePreview, ValidationError};
 
 /// How a reference ages. Read from the process configuration; never changed in the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -12,6 +13,9 @@ pub struct ReferencePolicy {
     /// Rate at which a stale reference's target ramps to zero, normalised force per second
     /// (0 = drop to zero at once).
     pub stale_ramp_per_s: f64,
+    /// The loop period, ns: a scheduled edge `t` ns ahead takes effect `ceil(t / tick_ns)`
+    /// ticks from now in the preview handed to the generator.
+    pub tick_ns: u64,
 }
 
 /// Why a received reference was not used.
@@ -56,6 +60,9 @@ pub struct Target {
     /// or a reference of zero force still ramping down): the pattern generator rests (no
     /// pulse) from the first tick of the ramp, not only once the ramp has reached zero.
     pub resting: bool,
+    /// The setpoints scheduled ahead, from the reference in use ([`Preview::NONE`] without a
+    /// fresh preview, or while the reference is missing, stale or stopped).
+    pub preview: Preview,
 }
 
 impl Target {
@@ -69,6 +76,7 @@ impl Target {
             stale: false,
             stop: false,
             resting: value == 0.0,
+            preview: Preview::NONE,
         }
     }
 }
@@ -78,6 +86,7 @@ impl Target {
 pub struct ReferenceTracker {
     policy: ReferencePolicy,
     current: Option<Reference>,
+    preview: Option<ReferencePreview>,
     target: f64,
     last_advance_ns: Option<u64>,
 }
@@ -92,9 +101,72 @@ impl ReferenceTracker {
         Self {
             policy,
             current: None,
+            preview: None,
             target: 0.0,
             last_advance_ns: None,
         }
+    }
+
+    /// Offers a received preview at time `now_ns`; a valid, newer one replaces the one kept.
+    pub fn offer_preview(
+        &mut self,
+        preview: &ReferencePreview,
+        now_ns: u64,
+    ) -> Result<(), ReferenceRejection> {
+        preview.validate()?;
+        if let Some(current) = &self.preview
+            && preview.seq <= current.seq
+        {
+            return Err(ReferenceRejection::OutOfOrder {
+                seq: preview.seq,
+                last_seq: current.seq,
+            });
+        }
+        if preview.t_ns > now_ns.saturating_add(Self::FUTURE_TOLERANCE_NS) {
+            return Err(ReferenceRejection::FromTheFuture {
+                t_ns: preview.t_ns,
+                now_ns,
+            });
+        }
+        self.preview = Some(*preview);
+        Ok(())
+    }
+
+    /// The preview of the tick at `now_ns`: the reference in use now, then every edge of the
+    /// kept preview still ahead, at the tick it takes effect (edges on the same tick: the
+    /// later wins). None without a fresh preview (no older than `stale_after_ns`) or a
+    /// usable reference.
+    fn preview_at(&self, reference: &Reference, now_ns: u64) -> Preview {
+        let Some(p) = &self.preview else {
+            return Preview::NONE;
+        };
+        if now_ns.saturating_sub(p.t_ns) > self.policy.stale_after_ns || p.edges().is_empty() {
+            return Preview::NONE;
+        }
+        let tick = self.policy.tick_ns.max(1);
+        let mut points = [PreviewPoint::default(); MAX_PREVIEW_POINTS];
+        points[0] = PreviewPoint {
+            at: 0,
+            force: reference.force,
+            rate_per_s: reference.max_rate_per_s,
+        };
+        let mut n = 1;
+        for e in p.edges().iter().filter(|e| e.t_ns > now_ns) {
+            let at = (e.t_ns - now_ns).div_ceil(tick).min(u32::MAX as u64) as u32;
+            let point = PreviewPoint {
+                at,
+                force: e.force,
+                rate_per_s: e.max_rate_per_s,
+            };
+            if points[n - 1].at == at {
+                points[n - 1] = point;
+            } else if n < MAX_PREVIEW_POINTS {
+                points[n] = point;
+                n += 1;
+            }
+        }
+        // Validated on receipt, so this holds; a preview that fails is dropped, not trusted.
+        Preview::new(&points[..n]).unwrap_or(Preview::NONE)
     }
 
     /// Offers a received reference at time `now_ns`; a valid, newer one replaces the one in
@@ -138,6 +210,7 @@ impl ReferenceTracker {
                 stale: false,
                 stop: false,
                 resting: true,
+                preview: Preview::NONE,
             };
         };
         let stale = now_ns.saturating_sub(reference.t_ns) > self.policy.stale_after_ns;
@@ -157,19 +230,13 @@ impl ReferenceTracker {
             stale,
             stop,
             resting: desired == 0.0,
+            preview: if stale || stop {
+                Preview::NONE
+            } else {
+                self.preview_at(&reference, now_ns)
+            },
         }
     }
 }
 
-/// Moves `from` towards `to` by at most `rate * dt_s`; a rate of 0 means "at once".
-fn slew(from: f64, to: f64, rate: f64, dt_s: f64) -> f64 {
-    if rate <= 0.0 {
-        return to;
-    }
-    let step = rate * dt_s;
-    if to > from {
-        (from + step).min(to)
-    } else {
-        (from - step).max(to)
-    }
-}
+use crate::control::preview::slew;

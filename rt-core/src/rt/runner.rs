@@ -31,7 +31,9 @@ use super::process_config::RtCoreConfig;
 use super::realtime::{RtStatus, enter_realtime};
 use super::source::TickSource;
 use super::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
-use crate::msg::{Contract, ForceSample, Reference, StimTick, TimingReport, TimingSource};
+use crate::msg::{
+    Contract, ForceSample, Reference, ReferencePreview, StimTick, TimingReport, TimingSource,
+};
 
 /// How a finished real-time loop went.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -42,6 +44,8 @@ pub struct LoopOutcome {
     pub final_seq: u64,
     /// Whether the counting allocator was installed (else allocations were not counted).
     pub allocations_counted: bool,
+    /// The source's closing words ([`TickSource::summary`]), e.g. the planner's counters.
+    pub source_summary: Option<String>,
 }
 
 /// Runs the pattern generator's real-time loop on the calling thread until `stop` is set,
@@ -61,11 +65,13 @@ pub fn run_pattern_loop<S: TickSource>(
     on_ready(&status);
     rt_loop.run(config.telemetry.trace_allocations, stop);
     let allocations_counted = rt_loop.allocations_counted;
+    let source_summary = rt_loop.generator.source().summary();
     let final_seq = rt_loop.finish();
     Ok(LoopOutcome {
         status,
         final_seq,
         allocations_counted,
+        source_summary,
     })
 }
 
@@ -76,6 +82,8 @@ struct LoopPorts {
     notifier: Option<Notifier<ipc::Service>>,
     /// Measured force (feedback mode only).
     forces: Option<Subscriber<ipc::Service, ForceSample, ()>>,
+    /// The supervisor's scheduled setpoints.
+    previews: Subscriber<ipc::Service, ReferencePreview, ()>,
     /// The supervisor's references.
     references: Subscriber<ipc::Service, Reference, ()>,
     /// One StimTick per tick.
@@ -89,6 +97,7 @@ impl LoopPorts {
         let ports = Self {
             publisher: port::publisher::<StimTick>(node, prefix)?,
             references: port::subscriber::<Reference>(node, prefix)?,
+            previews: port::subscriber::<ReferencePreview>(node, prefix)?,
             forces: if config.feedback.enabled {
                 Some(port::subscriber::<ForceSample>(node, prefix)?)
             } else {
@@ -112,6 +121,9 @@ impl LoopPorts {
         self.references
             .update_connections()
             .map_err(|e| connect_err("Reference subscriber")(&e))?;
+        self.previews
+            .update_connections()
+            .map_err(|e| connect_err("ReferencePreview subscriber")(&e))?;
         if let Some(n) = &self.notifier {
             n.update_connections()
                 .map_err(|e| connect_err("stim-tick notifier")(&e))?;
@@ -225,6 +237,7 @@ impl<'a, S: TickSource> RtLoop<'a, S> {
         let ports = &self.ports;
         connecting(&mut self.connection_allocs, || {
             let _ = ports.references.update_connections();
+            let _ = ports.previews.update_connections();
             if let Some(f) = &ports.forces {
                 let _ = f.update_connections();
             }
@@ -240,6 +253,9 @@ impl<'a, S: TickSource> RtLoop<'a, S> {
             &self.telemetry.counters,
             |reference| generator.offer_reference(reference, wake_ns).is_ok(),
         );
+        receive_each(&self.ports.previews, &self.telemetry.counters, |preview| {
+            generator.offer_preview(preview, wake_ns).is_ok()
+        });
     }
 
     /// In feedback mode, takes every waiting ForceSample (at most the subscriber buffer).

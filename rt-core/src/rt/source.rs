@@ -13,6 +13,7 @@ use crate::control::file::{Controller, ControllerFileError};
 use crate::control::pattern_generator::{
     FeedbackMode, PatternGenerator, PatternGeneratorError, TickInput,
 };
+use crate::control::planner::{Deadline, PlannerStats};
 
 /// The decision of one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -59,6 +60,12 @@ pub trait TickSource {
     /// Shortest spacing between two pulses, in ticks, that this source guarantees (the
     /// thesis's shaper: a pulse is always followed by at least one empty sample, so 2).
     fn min_pulse_gap_ticks(&self) -> u32;
+
+    /// What the source has to say when the loop ends (read after the hot path; may
+    /// allocate). None by default.
+    fn summary(&self) -> Option<String> {
+        None
+    }
 }
 
 /// The thesis's pattern generator (LCN -> pulse shaper -> LMN, Fig. 6.8) as a tick source,
@@ -66,6 +73,9 @@ pub trait TickSource {
 #[derive(Debug, Clone)]
 pub struct ControllerSource {
     generator: PatternGenerator,
+    /// The planner's wall-clock budget per tick, ns (`None`: no clock, the step budget
+    /// alone bounds it, deterministic).
+    plan_budget_ns: Option<u64>,
     min_gap_ticks: u32,
     units: usize,
     mode: FeedbackMode,
@@ -114,7 +124,11 @@ impl ControllerSource {
             });
         }
         let generator = controller.pattern_generator()?;
+        let plan_budget_ns = generator
+            .planner()
+            .map(|p| (p.config().budget_us * 1e3) as u64);
         Ok(Self {
+            plan_budget_ns,
             units: generator.network().units(),
             mode: generator.mode(),
             generator,
@@ -136,16 +150,51 @@ impl ControllerSource {
     pub fn generator(&self) -> &PatternGenerator {
         &self.generator
     }
+
+    /// Planning bounded by its step budget alone, without reading the clock (tests that
+    /// replay decisions; rt-core itself keeps the clock).
+    pub fn without_plan_clock(mut self) -> Self {
+        self.plan_budget_ns = None;
+        self
+    }
+
+    /// The planner's counters (zero without planning).
+    pub fn planner_stats(&self) -> PlannerStats {
+        self.generator.stats().planner
+    }
+}
+
+/// The planner's deadline in rt-core: CLOCK_MONOTONIC against the tick's start plus the
+/// controller file's `planning.budget_us`.
+struct ClockDeadline {
+    until_ns: u64,
+}
+
+impl Deadline for ClockDeadline {
+    #[inline]
+    fn expired(&mut self) -> bool {
+        super::clock::monotonic_ns() >= self.until_ns
+    }
 }
 
 impl TickSource for ControllerSource {
     #[inline]
     fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision {
-        let out = self.generator.tick(&TickInput {
+        let input = TickInput {
             reference: target.value,
             measured_force,
             resting: target.resting,
-        });
+            preview: target.preview,
+        };
+        let out = match self.plan_budget_ns {
+            Some(budget) => {
+                let mut deadline = ClockDeadline {
+                    until_ns: super::clock::monotonic_ns().saturating_add(budget),
+                };
+                self.generator.tick_within(&input, &mut deadline)
+            }
+            None => self.generator.tick(&input),
+        };
         TickDecision {
             pulse: out.pulse,
             u_cont: out.u_cont,
@@ -162,6 +211,28 @@ impl TickSource for ControllerSource {
 
     fn min_pulse_gap_ticks(&self) -> u32 {
         self.min_gap_ticks
+    }
+
+    fn summary(&self) -> Option<String> {
+        self.generator.planner().map(|p| {
+            let s = p.stats();
+            format!(
+                "planner: {} contraction(s) planned, {} replanned, {} rebased, {} converged; \
+                 {} tick(s) decided by a plan, {} causal for want of a plan; {} tick(s) cut \
+                 by the {} us budget; {} without an end in sight; {} rollouts, {} steps",
+                s.windows,
+                s.replans,
+                s.rebased,
+                s.converged,
+                s.planned_ticks,
+                s.causal_fallbacks,
+                s.deadline_cuts,
+                p.config().budget_us,
+                s.no_end,
+                s.rollouts,
+                s.steps
+            )
+        })
     }
 }
 

@@ -18,6 +18,7 @@ fn pattern_loop(ipi: u32) -> PatternLoop<TestPattern> {
         ReferencePolicy {
             stale_after_ns: 100 * MS,
             stale_ramp_per_s: 1.0,
+            tick_ns: 1_000_000,
         },
         None,
         PulseSettings {
@@ -94,6 +95,7 @@ fn a_non_finite_decision_is_a_fault_without_a_pulse() {
         ReferencePolicy {
             stale_after_ns: 100 * MS,
             stale_ramp_per_s: 1.0,
+            tick_ns: 1_000_000,
         },
         None,
         PulseSettings {

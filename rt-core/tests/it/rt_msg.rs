@@ -18,6 +18,21 @@ fn layouts_are_pinned() {
     assert_eq!(offset_of!(Reference, force), 16);
     assert_eq!(offset_of!(Reference, flags), 32);
 
+    assert_eq!(
+        (size_of::<PreviewEdge>(), align_of::<PreviewEdge>()),
+        (24, 8)
+    );
+    assert_eq!(
+        (
+            size_of::<ReferencePreview>(),
+            align_of::<ReferencePreview>()
+        ),
+        (176, 8)
+    );
+    assert_eq!(offset_of!(ReferencePreview, ref_seq), 16);
+    assert_eq!(offset_of!(ReferencePreview, len), 24);
+    assert_eq!(offset_of!(ReferencePreview, edges), 32);
+
     assert_eq!((size_of::<StimTick>(), align_of::<StimTick>()), (104, 8));
     assert_eq!(offset_of!(StimTick, seq), 0);
     assert_eq!(offset_of!(StimTick, t_ns), 8);
@@ -68,6 +83,8 @@ fn layouts_are_pinned() {
 #[test]
 fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<Reference>(), "fes::Reference::v1");
+    assert_eq!(type_name::<ReferencePreview>(), "fes::ReferencePreview::v1");
+    assert_eq!(type_name::<PreviewEdge>(), "fes::PreviewEdge::v1");
     assert_eq!(type_name::<StimTick>(), "fes::StimTick::v1");
     assert_eq!(type_name::<ForceSample>(), "fes::ForceSample::v1");
     assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v2");
@@ -144,6 +161,96 @@ fn table<M: Contract>(base: M, cases: &[Case<M>]) {
             Some(e) => assert_eq!(got, Err(*e), "{name}"),
         }
     }
+}
+
+fn preview() -> ReferencePreview {
+    let edge = |t_ns, force| PreviewEdge {
+        t_ns,
+        force,
+        max_rate_per_s: 50.0,
+    };
+    ReferencePreview::new(4, 100, 3, &[edge(200, 0.0), edge(500, 0.4), edge(820, 0.0)])
+}
+
+#[test]
+fn reference_preview_validation_table() {
+    use ValidationError::*;
+    table(
+        preview(),
+        &[
+            (
+                "nothing announced",
+                |p| *p = ReferencePreview::new(4, 100, 3, &[]),
+                None,
+            ),
+            ("a step edge", |p| p.edges[1].max_rate_per_s = 0.0, None),
+            ("seq 0", |p| p.seq = 0, Some(ZeroSequence)),
+            ("ref_seq 0", |p| p.ref_seq = 0, Some(ZeroSequence)),
+            (
+                "len beyond the edges",
+                |p| p.len = 7,
+                Some(IntOutOfRange {
+                    field: "len",
+                    value: 7,
+                    min: 0,
+                    max: 6,
+                }),
+            ),
+            (
+                "an edge not after the issue time",
+                |p| p.edges[0].t_ns = 100,
+                Some(TimestampOrder {
+                    earlier: "t_ns",
+                    earlier_ns: 100,
+                    later: "edges[i].t_ns",
+                    later_ns: 100,
+                }),
+            ),
+            (
+                "edges out of order",
+                |p| p.edges[2].t_ns = 400,
+                Some(TimestampOrder {
+                    earlier: "edges[i-1].t_ns",
+                    earlier_ns: 500,
+                    later: "edges[i].t_ns",
+                    later_ns: 400,
+                }),
+            ),
+            (
+                "force above 1",
+                |p| p.edges[1].force = 1.5,
+                Some(OutOfRange {
+                    field: "edges[].force",
+                    value: 1.5,
+                    min: 0.0,
+                    max: 1.0,
+                }),
+            ),
+            (
+                "infinite rate",
+                |p| p.edges[1].max_rate_per_s = f64::INFINITY,
+                Some(NotFinite {
+                    field: "edges[].max_rate_per_s",
+                    value: f64::INFINITY,
+                }),
+            ),
+            (
+                "an unused edge not zero",
+                |p| p.edges[4].force = 0.3,
+                Some(Inconsistent("an unused preview edge is not zero")),
+            ),
+            (
+                "an unused edge of -0.0",
+                |p| p.edges[5].force = -0.0,
+                Some(Inconsistent("an unused preview edge is not zero")),
+            ),
+            (
+                "reserved bytes",
+                |p| p.reserved = [0, 1, 0, 0],
+                Some(ReservedNotZero { field: "reserved" }),
+            ),
+        ],
+    );
 }
 
 #[test]

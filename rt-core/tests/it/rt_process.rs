@@ -114,6 +114,7 @@ fn assert_replay_matches(controller: &Controller, ticks: &[StimTick]) {
             reference: t.reference,
             measured_force: None,
             resting: t.has(StimTick::FLAG_RESTING),
+            ..Default::default()
         });
         assert_eq!(out.pulse, t.fires(), "pulse at seq {}", t.seq);
         assert_eq!(

@@ -1,6 +1,7 @@
 //! `rt_core::rt::reference` (moved from its unit tests: the crate has one test binary).
 
-use rt_core::msg::Reference;
+use rt_core::control::preview::PreviewPoint;
+use rt_core::msg::{PreviewEdge, Reference, ReferencePreview};
 use rt_core::rt::reference::*;
 
 const MS: u64 = 1_000_000;
@@ -9,6 +10,7 @@ fn tracker() -> ReferenceTracker {
     ReferenceTracker::new(ReferencePolicy {
         stale_after_ns: 100 * MS,
         stale_ramp_per_s: 2.0,
+        tick_ns: 1_000_000,
     })
 }
 
@@ -122,4 +124,61 @@ fn invalid_old_and_future_references_are_rejected_and_the_last_one_held() {
     ));
     let held = t.advance(11 * MS);
     assert_eq!((held.value, held.ref_seq), (0.4, 5));
+}
+
+/// The preview handed to the generator: the reference in use now, then each announced edge
+/// still ahead at the tick it takes effect (rounded up to whole ticks); none while the
+/// reference is stale or stopped, or once the preview itself is stale; a preview that fails
+/// validation or comes out of order is refused.
+#[test]
+fn the_preview_is_the_reference_now_then_the_edges_ahead_in_ticks() {
+    let mut t = tracker();
+    let mut r = Reference::new(1, 10 * MS, 0.3);
+    r.max_rate_per_s = 50.0;
+    t.offer(&r, 10 * MS).unwrap();
+    assert!(
+        t.advance(10 * MS).preview.is_none(),
+        "no preview received yet"
+    );
+    let edge = |ms: u64, force| PreviewEdge {
+        t_ns: ms * MS,
+        force,
+        max_rate_per_s: 50.0,
+    };
+    let p = ReferencePreview::new(1, 10 * MS, 1, &[edge(330, 0.0), edge(810, 0.4)]);
+    t.offer_preview(&p, 10 * MS).unwrap();
+    let preview = t.advance(10 * MS + MS / 2).preview;
+    let point = |at, force| PreviewPoint {
+        at,
+        force,
+        rate_per_s: 50.0,
+    };
+    // 319.5 ms and 799.5 ms ahead: 320 and 800 ticks.
+    assert_eq!(
+        preview.points(),
+        &[point(0, 0.3), point(320, 0.0), point(800, 0.4)]
+    );
+    // Past the first edge, only the second is ahead.
+    let mut r2 = Reference::new(2, 330 * MS, 0.0);
+    r2.max_rate_per_s = 50.0;
+    t.offer(&r2, 330 * MS).unwrap();
+    let p2 = ReferencePreview::new(2, 330 * MS, 2, &[edge(810, 0.4)]);
+    t.offer_preview(&p2, 330 * MS).unwrap();
+    let preview = t.advance(330 * MS).preview;
+    assert_eq!(preview.points(), &[point(0, 0.0), point(480, 0.4)]);
+    // A stale reference or preview (over 100 ms old) gives none.
+    assert!(t.advance(431 * MS).preview.is_none());
+    // Replayed or invalid previews are refused.
+    assert!(t.offer_preview(&p2, 431 * MS).is_err());
+    let mut bad = p2;
+    bad.seq = 3;
+    bad.edges[0].force = 2.0;
+    assert!(t.offer_preview(&bad, 431 * MS).is_err());
+    // An operator stop: no preview.
+    let mut stop = Reference::new(3, 440 * MS, 0.0);
+    stop.flags = Reference::FLAG_STOP;
+    t.offer(&stop, 440 * MS).unwrap();
+    let p3 = ReferencePreview::new(4, 440 * MS, 3, &[edge(810, 0.4), edge(900, 0.0)]);
+    t.offer_preview(&p3, 440 * MS).unwrap();
+    assert!(t.advance(440 * MS).preview.is_none());
 }

@@ -65,9 +65,13 @@ pub struct Args {
     /// Fatigue in the simulated muscle (Ding 2003).
     #[arg(long)]
     pub fatigue: bool,
-    /// Controller file for rt-core (fes-lcn/1).
-    #[arg(long, default_value = "models/fast.lcn.json")]
-    pub controller: PathBuf,
+    /// The simulated muscle: sim-muscle's fast or slow preset (thesis 5.1's two rabbit
+    /// muscles), with its shipped controller unless --controller names another.
+    #[arg(long, value_enum, default_value_t = MuscleChoice::Fast)]
+    pub muscle: MuscleChoice,
+    /// Controller file for rt-core (fes-lcn/1); default `models/<muscle>.lcn.json`.
+    #[arg(long)]
+    pub controller: Option<PathBuf>,
     /// Output directory (configurations, logs, recording, plots); default
     /// `target/bench/<UTC time>`.
     #[arg(long)]
@@ -97,6 +101,40 @@ pub struct Args {
     /// Format of the figures: png (raster) or svg (vector, for papers).
     #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
     pub format: workbench::plots::FigureFormat,
+}
+
+/// `--muscle`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MuscleChoice {
+    /// Fast twitch, strong catch-like effect (the control muscle).
+    Fast,
+    /// Chronically stimulated: slower, no catch-like gain.
+    Slow,
+}
+
+impl MuscleChoice {
+    /// The sim-muscle preset.
+    pub fn preset(self) -> sim_muscle::preset::Preset {
+        match self {
+            Self::Fast => sim_muscle::preset::Preset::Fast,
+            Self::Slow => sim_muscle::preset::Preset::Slow,
+        }
+    }
+
+    /// The shipped controller for this muscle.
+    pub fn controller(self) -> PathBuf {
+        PathBuf::from(match self {
+            Self::Fast => "models/fast.lcn.json",
+            Self::Slow => "models/slow.lcn.json",
+        })
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::Fast => "fast",
+            Self::Slow => "slow",
+        }
+    }
 }
 
 /// `--bus`.
@@ -137,13 +175,22 @@ fn check(a: &Args) -> anyhow::Result<()> {
             0 => anyhow::anyhow!("{e}"),
             l => anyhow::anyhow!("{e} (with --stim-lead-ms {l})"),
         })?;
-    if !a.controller.is_file() {
+    if !a.controller().is_file() {
         bail!(
             "controller file {} not found (run from the repository root, or give --controller; models/README.md says how it is made)",
-            a.controller.display()
+            a.controller().display()
         );
     }
     Ok(())
+}
+
+impl Args {
+    /// The controller file: `--controller`, else the muscle's shipped one.
+    pub fn controller(&self) -> PathBuf {
+        self.controller
+            .clone()
+            .unwrap_or_else(|| self.muscle.controller())
+    }
 }
 
 fn outer_settings(a: &Args) -> supervisor::outer_loop::OuterLoopSettings {
@@ -277,16 +324,18 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
 fn announce(a: &Args, iface: &str, uml: bool) {
     if a.stimulator == StimulatorKind::Sciencemode {
         println!(
-            "bench: sim-muscle rehastim2 (fast{}; a virtual RehaStim 2 on a pty, ScienceMode 2), stim-driver, rt-core ({}), supervisor",
+            "bench: sim-muscle rehastim2 ({}{}; a virtual RehaStim 2 on a pty, ScienceMode 2), stim-driver, rt-core ({}), supervisor",
+            a.muscle.name(),
             if a.fatigue { ", fatigue" } else { "" },
-            a.controller.display()
+            a.controller().display()
         );
         return;
     }
     println!(
-        "bench: sim-muscle (fast{}), stim-driver, rt-core ({}), supervisor on {iface} ({})",
+        "bench: sim-muscle ({}{}), stim-driver, rt-core ({}), supervisor on {iface} ({})",
+        a.muscle.name(),
         if a.fatigue { ", fatigue" } else { "" },
-        a.controller.display(),
+        a.controller().display(),
         if uml {
             "User-Mode Linux guest: timings are functional only"
         } else if fes_hostbus::bus_dir(iface).is_some() {
@@ -309,7 +358,8 @@ fn start_healthy(
     let stack = Stack::start(StackOptions {
         dir: out.to_path_buf(),
         bin_dir: bin_dir.to_path_buf(),
-        controller: a.controller.clone(),
+        controller: a.controller(),
+        preset: a.muscle.preset(),
         iface,
         timing: if uml {
             ChainTiming::Uml
@@ -397,11 +447,12 @@ fn summarise_recording(
         );
     };
     // The same muscle and sensor as the stimulator's, simulated for the CFT front.
-    let front = rt_core::control::file::Controller::load(&a.controller)
+    let front = rt_core::control::file::Controller::load(a.controller())
         .ok()
         .and_then(|c| {
-            workbench::simulation::SimSettings::bench(
+            workbench::simulation::SimSettings::bench_muscle(
                 &c,
+                a.muscle.preset(),
                 a.fatigue,
                 ProfileSpec::Cardiac(cardiac(a)),
                 outer_settings(a),
@@ -415,7 +466,7 @@ fn summarise_recording(
         &AnalysisInput {
             delay,
             target: a.amplitude,
-            baseline: Some(baseline(a.amplitude, scale_n, delay)),
+            baseline: Some(baseline(a.muscle.preset(), a.amplitude, scale_n, delay)),
             uml,
             front,
         },
@@ -426,11 +477,16 @@ fn summarise_recording(
     write_json(&summary, &plots, a)
 }
 
-/// The 40 Hz baseline of equal FTI on the fast preset (without fatigue), for beats of
+/// The 40 Hz baseline of equal FTI on the bench's preset (without fatigue), for beats of
 /// the profile's amplitude.
-fn baseline(amplitude: f64, scale_n: f64, delay: usize) -> BaselineFn {
+fn baseline(
+    preset: sim_muscle::preset::Preset,
+    amplitude: f64,
+    scale_n: f64,
+    delay: usize,
+) -> BaselineFn {
     Box::new(move |fti: f64, period_ms: usize, on_ms: usize| {
-        let muscle = sim_muscle::muscle::MuscleConfig::preset(sim_muscle::preset::Preset::Fast);
+        let muscle = sim_muscle::muscle::MuscleConfig::preset(preset);
         let shape = BeatShape {
             period_ms,
             on_ms,
@@ -446,16 +502,18 @@ fn baseline(amplitude: f64, scale_n: f64, delay: usize) -> BaselineFn {
 fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     use workbench::simulation::{SimSettings, simulate};
 
-    let controller = rt_core::control::file::Controller::load(&a.controller)
-        .with_context(|| format!("controller {}", a.controller.display()))?;
+    let controller = rt_core::control::file::Controller::load(a.controller())
+        .with_context(|| format!("controller {}", a.controller().display()))?;
     let (scale_n, delay) = (controller.lmn.force_scale_n, controller.lmn.delay);
     println!(
-        "bench: in-process simulation (simulated time; no CAN, no processes, no latencies): fast muscle{}, {}",
+        "bench: in-process simulation (simulated time; no CAN, no processes, no latencies): {} muscle{}, {}",
+        a.muscle.name(),
         if a.fatigue { " with fatigue" } else { "" },
-        a.controller.display()
+        a.controller().display()
     );
-    let settings = SimSettings::bench(
+    let settings = SimSettings::bench_muscle(
         &controller,
+        a.muscle.preset(),
         a.fatigue,
         ProfileSpec::Cardiac(cardiac(a)),
         outer_settings(a),
@@ -510,7 +568,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         &AnalysisInput {
             delay,
             target: a.amplitude,
-            baseline: Some(baseline(a.amplitude, scale_n, delay)),
+            baseline: Some(baseline(a.muscle.preset(), a.amplitude, scale_n, delay)),
             uml: false,
             front: Some(front),
         },
@@ -523,16 +581,41 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     );
     let plots = draw(&series, out, &summary, a, delay, false)?;
     print_summary(&summary, &plots, &[]);
+    if controller.settings.planning.mode != rt_core::control::planner::PlanningMode::Off {
+        let p = &run.planner;
+        println!(
+            "  planner: {} contractions planned ({} converged, {} replanned), {} ticks decided by a plan, {} causal for want of one, {} cut by a deadline",
+            p.windows, p.converged, p.replans, p.planned_ticks, p.causal_fallbacks, p.deadline_cuts
+        );
+    }
     println!("  per beat: {}", beats_csv.display());
     println!("  per tick: {}", series_csv.display());
-    write_json(&summary, &plots, a)
+    write_json_with(
+        &summary,
+        &plots,
+        a,
+        Some(("planner", serde_json::to_value(run.planner)?)),
+    )
 }
 
 /// `--json FILE`: the summary, the plots and the command line.
 fn write_json(summary: &Summary, plots: &[PathBuf], a: &Args) -> anyhow::Result<()> {
+    write_json_with(summary, plots, a, None)
+}
+
+/// [`write_json`] with one more key.
+fn write_json_with(
+    summary: &Summary,
+    plots: &[PathBuf],
+    a: &Args,
+    extra: Option<(&str, serde_json::Value)>,
+) -> anyhow::Result<()> {
     if let Some(j) = &a.json {
         let mut v = serde_json::to_value(summary)?;
         if let Some(o) = v.as_object_mut() {
+            if let Some((k, x)) = extra {
+                o.insert(k.into(), x);
+            }
             o.insert(
                 "plots".into(),
                 serde_json::json!(

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use rt_core::control::file::Controller;
 use rt_core::control::lcn_design::{THESIS_DAMPING, UnitSpec};
+use rt_core::control::planner::PlanningConfig;
 use rt_core::control::poles::{Pole, third_pole};
 use rt_core::model::file;
 
@@ -41,9 +42,37 @@ pub struct Args {
     /// why the loop then switches between neighbouring controllers).
     #[arg(long)]
     pub allow_negative_gain: bool,
+    /// Pulse decisions: `receding-horizon` plans each contraction the reference preview
+    /// announces over the model (docs/control.md, section 11), `off` leaves every pulse to
+    /// the causal LCN + shaper.
+    #[arg(long, value_enum, default_value_t = PlanningArg::RecedingHorizon)]
+    pub planning: PlanningArg,
+    /// Price of a pulse in the plan's objective, in summed squared error (normalised force
+    /// squared over 1 ms ticks): higher, fewer pulses.
+    #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.lambda)]
+    pub plan_lambda: f64,
+    /// Weight of the plateau's mean error in the plan's objective (0: none; the outer loop
+    /// then hunts between pulse counts).
+    #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.mean_weight)]
+    pub plan_mean_weight: f64,
+    /// Price of each pulse a contraction has more or fewer than the last one (0: none).
+    #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.count_change)]
+    pub plan_count_change: f64,
+    /// Wall-clock planning budget per tick in rt-core, us.
+    #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.budget_us)]
+    pub plan_budget_us: f64,
     /// The controller file to write.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// `--planning`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlanningArg {
+    /// The causal LCN + shaper decide every pulse.
+    Off,
+    /// Receding-horizon pulse decisions over the reference preview.
+    RecedingHorizon,
 }
 
 /// Rise times in seconds, one per unit, from `--rise-ms` (a list or `auto`).
@@ -153,6 +182,15 @@ pub fn run(args: Args) -> Result<()> {
     let specs = UnitSpec::for_rise_times(&tr, args.damping, p3);
     let mut settings = args.variant.settings();
     settings.design.allow_negative_gain = args.allow_negative_gain;
+    if args.planning == PlanningArg::RecedingHorizon {
+        settings.planning = PlanningConfig {
+            lambda: args.plan_lambda,
+            mean_weight: args.plan_mean_weight,
+            count_change: args.plan_count_change,
+            budget_us: args.plan_budget_us,
+            ..PlanningConfig::RECOMMENDED
+        };
+    }
     let ts = lmn.ts;
     let controller = Controller::design(lmn, &specs, settings)
         .with_context(|| format!("designing the LCN for {}", args.model.display()))?;

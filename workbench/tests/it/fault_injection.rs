@@ -1207,6 +1207,7 @@ fn start_unarmed(
         controller: fes_tests::stack::workspace_root().join("models/fast.lcn.json"),
         iface: format!("hostbus:{}", dir.join("bus").display()),
         timing: TIMING,
+        preset: sim_muscle::preset::Preset::Fast,
         fatigue: false,
         outer_loop: true,
         outer_gain: None,

@@ -18,6 +18,7 @@ mod dataset_v2_cli;
 mod fault_injection;
 mod ident_cli;
 mod lcn_targets;
+mod planning_bench;
 mod readers;
 mod runtime_canlog;
 mod runtime_outer_loop;

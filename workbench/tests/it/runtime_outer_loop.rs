@@ -128,7 +128,10 @@ fn fatigue_outer_loop_on_holds_the_target_off_decays() {
 /// the 10th within 10 % of the target; off: the contraction decays by more than 15 %.
 #[test]
 fn shipped_controller_fatigue_outer_loop_on_holds_every_beat_off_decays() {
-    let c = shipped_controller();
+    // The causal loop's figures (docs/bench.md); planning under fatigue:
+    // `planning_bench::planning_under_fatigue_holds_the_target_with_fewer_pulses`.
+    let mut c = shipped_controller();
+    c.settings.planning.mode = rt_core::control::planner::PlanningMode::Off;
     let run = |on: bool| {
         let s = SimSettings::bench(&c, true, cardiac(), outer(on), 60.0).unwrap();
         plateaus(&simulate(&c, &s).unwrap())

@@ -39,6 +39,7 @@ pub fn start_armed(
         controller: workspace_root().join("models/fast.lcn.json"),
         iface,
         timing,
+        preset: sim_muscle::preset::Preset::Fast,
         fatigue: false,
         outer_loop: true,
         outer_gain: None,

@@ -56,6 +56,7 @@ fn one_unit_unshaped_loop_follows_the_linear_closed_loop() {
             reference: r,
             measured_force: None,
             resting: false,
+            ..Default::default()
         });
         assert!(
             out.u_raw >= 0.0 && out.integrated,
@@ -96,6 +97,7 @@ fn run(
             reference: r,
             measured_force: None,
             resting: false,
+            ..Default::default()
         });
         force.push(out.model_force);
         if out.pulse {
@@ -154,11 +156,13 @@ fn reset_reproduces_the_run_and_bad_references_are_clamped() {
                 reference: bad,
                 measured_force: None,
                 resting: false,
+                ..Default::default()
             });
             let b = reference.tick(&TickInput {
                 reference: good,
                 measured_force: None,
                 resting: false,
+                ..Default::default()
             });
             assert_eq!(a, b);
         }
@@ -185,6 +189,7 @@ fn anti_windup_holds_the_integrator_when_reference_drops() {
             reference: 0.0,
             measured_force: None,
             resting: false,
+            ..Default::default()
         });
         if !out.integrated {
             held += 1;
@@ -306,6 +311,7 @@ fn no_pulse_while_the_reference_is_zero() {
                 reference: r,
                 measured_force: None,
                 resting: false,
+                ..Default::default()
             });
             if r == 0.0 {
                 assert!(!out.pulse, "beat {beat}: pulse at rest, {k} ms");
@@ -341,11 +347,13 @@ fn no_pulse_while_the_reference_ramps_down_to_rest() {
             reference: r,
             measured_force: None,
             resting: true,
+            ..Default::default()
         });
         let f = free.tick(&TickInput {
             reference: r,
             measured_force: None,
             resting: false,
+            ..Default::default()
         });
         assert!(!g.pulse, "pulse at {k} ms of the ramp to rest");
         assert_eq!(g.energy, 0.0);

@@ -34,6 +34,7 @@ use super::lcn_design::{LcnDesignError, UnitDesign, UnitSpec, design_lcn};
 use super::pattern_generator::{
     FeedbackMode, FeedbackState, PatternGenerator, PatternGeneratorError,
 };
+use super::planner::{PlanningConfig, PlanningConfigError, PlanningMode};
 use super::poles::Pole;
 use super::shaper::{ShaperConfig, ShaperConfigError};
 
@@ -95,6 +96,14 @@ pub struct ControllerFile {
     /// Estimator poles (needed for `measured_force`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimator_poles: Option<EstimatorPoles>,
+    /// Receding-horizon pulse decisions over the reference preview (a file without it
+    /// decides causally: [`PlanningMode::Off`]).
+    #[serde(default, skip_serializing_if = "planning_off")]
+    pub planning: Option<PlanningConfig>,
+}
+
+fn planning_off(p: &Option<PlanningConfig>) -> bool {
+    p.is_none_or(|p| p.mode == PlanningMode::Off)
 }
 
 /// Everything of a controller besides the model and the per-unit specifications.
@@ -112,6 +121,8 @@ pub struct ControllerSettings {
     pub feedback_state: FeedbackState,
     /// Estimator poles (needed for [`FeedbackMode::MeasuredForce`]; optional otherwise).
     pub estimator_poles: Option<EstimatorPoles>,
+    /// The planner ([`PlanningMode::Off`]: the causal loop decides every pulse).
+    pub planning: PlanningConfig,
 }
 
 /// Why a controller file could not be read, written or accepted.
@@ -171,6 +182,9 @@ pub enum ControllerFileError {
     /// Invalid shaper settings.
     #[error("shaper: {0}")]
     Shaper(#[from] ShaperConfigError),
+    /// Invalid planner settings.
+    #[error("planning: {0}")]
+    Planning(#[from] PlanningConfigError),
 }
 
 fn invalid(field: impl Into<String>, problem: impl Into<String>) -> ControllerFileError {
@@ -205,6 +219,15 @@ impl Controller {
             .map_err(|e| ControllerFileError::Model(ModelFileError::Invalid(e)))?;
         let network = lmn.network().map_err(ControllerFileError::Network)?;
         settings.shaper.validate()?;
+        settings.planning.validate()?;
+        if settings.planning.mode != PlanningMode::Off
+            && settings.feedback_state != FeedbackState::Advanced
+        {
+            return Err(invalid(
+                "planning.mode",
+                "planning needs feedback_state advanced (the warm start runs the advanced loop)",
+            ));
+        }
         let min_rcond = settings.design.min_rcond;
         if !(min_rcond.is_finite() && min_rcond >= 0.0) {
             return Err(invalid(
@@ -249,7 +272,8 @@ impl Controller {
             s.mode,
             s.feedback_state,
             l.as_deref(),
-        )
+        )?
+        .with_planning(s.planning)
     }
 
     /// The file document.
@@ -279,6 +303,8 @@ impl Controller {
             mode: self.settings.mode,
             feedback_state: self.settings.feedback_state,
             estimator_poles: self.settings.estimator_poles,
+            planning: (self.settings.planning.mode != PlanningMode::Off)
+                .then_some(self.settings.planning),
         })
     }
 
@@ -360,6 +386,7 @@ impl Controller {
             mode: file.mode,
             feedback_state: file.feedback_state,
             estimator_poles: file.estimator_poles,
+            planning: file.planning.unwrap_or_default(),
         };
         let c = Self::design(lmn, &specs, settings)?;
         for (i, (stored, design)) in file.units.iter().zip(&c.units).enumerate() {

@@ -22,5 +22,7 @@ pub mod io_design;
 pub mod lcn;
 pub mod lcn_design;
 pub mod pattern_generator;
+pub mod planner;
 pub mod poles;
+pub mod preview;
 pub mod shaper;

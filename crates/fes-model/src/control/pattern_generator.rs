@@ -39,7 +39,12 @@ use crate::model::{AdvancedForm, CoreState, DelayLine, Network, NetworkError};
 
 use super::design::LocalGains;
 use super::estimator::{EstimatorError, ForceEstimator};
-use super::lcn::{AntiWindup, LcnError, LocalControllerNetwork};
+use super::lcn::{AntiWindup, ControlAction, LcnError, LocalControllerNetwork};
+use super::planner::{
+    CausalRollout, Deadline, NoDeadline, Planner, PlannerStats, PlanningConfig,
+    PlanningConfigError, PlanningMode,
+};
+use super::preview::Preview;
 use super::shaper::{PulseShaper, ShaperConfig, ShaperConfigError, ShaperStats, ShaperSum};
 
 /// Which signal closes the controller's loop.
@@ -87,6 +92,9 @@ pub struct TickInput {
     /// zero reference (rt-core's reference tracker sets it; `false` when only a value is
     /// known).
     pub resting: bool,
+    /// The setpoints known ahead ([`Preview::NONE`]: none; the planner then leaves the
+    /// decision to the causal loop).
+    pub preview: Preview,
 }
 
 /// Outputs of one tick.
@@ -115,6 +123,8 @@ pub struct TickOutput {
     pub integrated: bool,
     /// Measured mode: innovation `y[k] - ŷ[k]` (0 otherwise or when the sample was missing).
     pub innovation: f64,
+    /// The decision came from the planner's plan (false: the causal LCN + shaper).
+    pub planned: bool,
 }
 
 /// Why a pattern generator could not be built.
@@ -148,6 +158,12 @@ pub enum PatternGeneratorError {
     /// Invalid estimator.
     #[error(transparent)]
     Estimator(#[from] EstimatorError),
+    /// Invalid planner settings.
+    #[error(transparent)]
+    Planning(#[from] PlanningConfigError),
+    /// The planner's warm start runs the advanced loop.
+    #[error("planning needs feedback_state advanced")]
+    PlanningDelayed,
     /// The network cannot start.
     #[error(transparent)]
     Network(#[from] NetworkError),
@@ -176,6 +192,8 @@ pub struct PatternGeneratorStats {
     pub measurements_missing: u64,
     /// Shaper counters.
     pub shaper: ShaperStats,
+    /// Planner counters (all zero without planning).
+    pub planner: PlannerStats,
 }
 
 /// The pattern generator (thesis Fig. 6.8 in the advanced form).
@@ -190,6 +208,7 @@ pub struct PatternGenerator {
     /// `z[k-d] = x[k]`.
     delayed: Option<DelayLine<CoreState<f64>>>,
     initial_delayed: Option<DelayLine<CoreState<f64>>>,
+    planner: Option<Planner>,
     ticks: u64,
     references_clamped: u64,
     integrator_held: u64,
@@ -256,10 +275,32 @@ impl PatternGenerator {
             measured,
             initial_delayed: delayed,
             delayed,
+            planner: None,
             ticks: 0,
             references_clamped: 0,
             integrator_held: 0,
         })
+    }
+
+    /// Adds receding-horizon planning over the preview ([`super::planner`]);
+    /// [`PlanningMode::Off`] leaves the generator as it is (causal, bit for bit). Allocates
+    /// the planner's buffers.
+    pub fn with_planning(mut self, cfg: PlanningConfig) -> Result<Self, PatternGeneratorError> {
+        if cfg.mode == PlanningMode::Off {
+            self.planner = None;
+            return Ok(self);
+        }
+        if self.delayed.is_some() {
+            return Err(PatternGeneratorError::PlanningDelayed);
+        }
+        let min_ipi = self.shaper.config().min_gap as usize + 1;
+        self.planner = Some(Planner::new(cfg, self.core.network().ts(), min_ipi)?);
+        Ok(self)
+    }
+
+    /// The planner, when planning is on.
+    pub fn planner(&self) -> Option<&Planner> {
+        self.planner.as_ref()
     }
 
     /// The feedback mode.
@@ -289,6 +330,11 @@ impl PatternGenerator {
             integrator_held: self.integrator_held,
             measurements_missing: self.measured.as_ref().map_or(0, |m| m.estimator.missing()),
             shaper: self.shaper.stats(),
+            planner: self
+                .planner
+                .as_ref()
+                .map(Planner::stats)
+                .unwrap_or_default(),
         }
     }
 
@@ -298,6 +344,9 @@ impl PatternGenerator {
         self.lcn.reset();
         self.shaper.reset();
         self.delayed = self.initial_delayed;
+        if let Some(p) = self.planner.as_mut() {
+            p.reset();
+        }
         if let Some(m) = self.measured.as_mut() {
             m.estimator.reset(self.core.network());
             m.predictions = m.initial_predictions;
@@ -307,17 +356,26 @@ impl PatternGenerator {
         self.integrator_held = 0;
     }
 
-    /// One tick (module docs): decide whether to fire a pulse now.
+    /// One tick (module docs): decide whether to fire a pulse now. With planning, the
+    /// planner's step budget alone bounds its work (deterministic).
     #[inline]
     pub fn tick(&mut self, input: &TickInput) -> TickOutput {
-        self.advance(input, true)
+        self.advance(input, true, &mut NoDeadline)
+    }
+
+    /// [`Self::tick`] with a caller's clock: the planner stops planning when `deadline`
+    /// says the tick's time is up (rt-core), keeping the plan it has or, without one,
+    /// leaving the decision to the causal loop (both counted).
+    #[inline]
+    pub fn tick_within(&mut self, input: &TickInput, deadline: &mut dyn Deadline) -> TickOutput {
+        self.advance(input, true, deadline)
     }
 
     /// One tick with the pulse shaper bypassed: `u_cont` itself drives the model (the
     /// continuous loop of the design, for analysis and verification; never for
     /// stimulation — `pulse` is always `false`).
     pub fn tick_unshaped(&mut self, input: &TickInput) -> TickOutput {
-        self.advance(input, false)
+        self.advance(input, false, &mut NoDeadline)
     }
 
     #[inline(always)]
@@ -335,7 +393,12 @@ impl PatternGenerator {
     }
 
     #[inline(always)]
-    fn advance(&mut self, input: &TickInput, shaped: bool) -> TickOutput {
+    fn advance(
+        &mut self,
+        input: &TickInput,
+        shaped: bool,
+        deadline: &mut dyn Deadline,
+    ) -> TickOutput {
         self.ticks += 1;
         let r = self.reference(input.reference);
         // At rest (a zero reference, or one ramping down to zero) the shaper rests.
@@ -355,7 +418,19 @@ impl PatternGenerator {
                 };
                 let (phi, z) = (state.phi, state.ss_state());
                 let action = self.lcn.control(&act, z, clamp);
-                let (pulse, u) = apply(&mut self.shaper, action.u_cont, rest, shaped);
+                let core_now = *self.core.state();
+                let planned = match self.planner.as_mut() {
+                    Some(p) if shaped => {
+                        let net = self.core.network();
+                        let mut warm = WarmStart::new(net, &self.lcn, &self.shaper, clamp);
+                        p.plan(net, &core_now, &input.preview, r, rest, &mut warm, deadline)
+                    }
+                    _ => None,
+                };
+                let (pulse, u) = decide(&mut self.shaper, action.u_cont, rest, shaped, planned);
+                if let Some(p) = self.planner.as_mut() {
+                    p.commit(self.core.network(), &core_now, u);
+                }
                 let step = self.core.step_with_activation(&act_core, u);
                 let y_fed_back = if self.delayed.is_some() {
                     step.y
@@ -375,6 +450,7 @@ impl PatternGenerator {
                     z,
                     integrated,
                     innovation: 0.0,
+                    planned: planned.is_some(),
                 }
             }
             Some(m) => {
@@ -385,7 +461,17 @@ impl PatternGenerator {
                 let phi = core.phi;
                 let z = core.ss_state();
                 let action = self.lcn.control(&act, z, clamp);
-                let (pulse, u) = apply(&mut self.shaper, action.u_cont, rest, shaped);
+                let planned = match self.planner.as_mut() {
+                    Some(p) if shaped => {
+                        let mut warm = WarmStart::new(net, &self.lcn, &self.shaper, clamp);
+                        p.plan(net, &core, &input.preview, r, rest, &mut warm, deadline)
+                    }
+                    _ => None,
+                };
+                let (pulse, u) = decide(&mut self.shaper, action.u_cont, rest, shaped, planned);
+                if let Some(p) = self.planner.as_mut() {
+                    p.commit(net, &core, u);
+                }
                 let y_ahead = net.step_with_activation(&mut core, &act, u);
                 let y_pred_now = m.predictions.push(y_ahead);
                 m.estimator.push_pulse(u);
@@ -407,6 +493,7 @@ impl PatternGenerator {
                     z,
                     integrated,
                     innovation: upd.innovation,
+                    planned: planned.is_some(),
                 }
             }
         };
@@ -417,6 +504,81 @@ impl PatternGenerator {
             self.lcn.reset();
         }
         out
+    }
+}
+
+/// The causal loop (LCN + shaper, model mode, advanced state) on copies of its state,
+/// rolled forward by the planner as its warm start: exactly the decisions
+/// [`PatternGenerator::tick`] would make without a plan, on the plan's reference.
+struct WarmStart<'a> {
+    net: &'a Network<f64>,
+    lcn0: LocalControllerNetwork,
+    shaper0: PulseShaper,
+    lcn: LocalControllerNetwork,
+    shaper: PulseShaper,
+    clamp: bool,
+    action: Option<ControlAction>,
+}
+
+impl<'a> WarmStart<'a> {
+    fn new(
+        net: &'a Network<f64>,
+        lcn: &LocalControllerNetwork,
+        shaper: &PulseShaper,
+        clamp: bool,
+    ) -> Self {
+        Self {
+            net,
+            lcn0: *lcn,
+            shaper0: *shaper,
+            lcn: *lcn,
+            shaper: *shaper,
+            clamp,
+            action: None,
+        }
+    }
+}
+
+impl CausalRollout for WarmStart<'_> {
+    fn begin(&mut self) {
+        self.lcn = self.lcn0;
+        self.shaper = self.shaper0;
+        self.action = None;
+    }
+
+    fn decide(&mut self, st: &CoreState<f64>, _r: f64, rest: bool) -> bool {
+        let act = self.net.activation(st);
+        let action = self.lcn.control(&act, st.ss_state(), self.clamp);
+        self.action = Some(action);
+        apply(&mut self.shaper, action.u_cont, rest, true).0
+    }
+
+    fn observe(&mut self, y_ahead: f64, r: f64, rest: bool) {
+        if let Some(action) = self.action.take() {
+            self.lcn.integrate(&action, y_ahead - r);
+        }
+        if rest && self.lcn.anti_windup() == AntiWindup::None {
+            self.lcn.reset();
+        }
+    }
+}
+
+/// The tick's decision: the plan's when there is one (never at rest; the shaper is not
+/// stepped, so its energy stays as the causal loop left it), else the shaper's.
+#[inline(always)]
+fn decide(
+    shaper: &mut PulseShaper,
+    u_cont: f64,
+    rest: bool,
+    shaped: bool,
+    planned: Option<bool>,
+) -> (bool, f64) {
+    match planned {
+        Some(p) if shaped => {
+            let fire = p && !rest;
+            (fire, if fire { 1.0 } else { 0.0 })
+        }
+        _ => apply(shaper, u_cont, rest, shaped),
     }
 }
 

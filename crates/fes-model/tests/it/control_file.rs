@@ -57,6 +57,7 @@ fn round_trip_through_a_file_keeps_everything() {
             reference: 0.4,
             measured_force: Some(0.1 * (k % 5) as f64),
             resting: false,
+            ..Default::default()
         };
         assert_eq!(a.tick(&input), b.tick(&input), "k {k}");
     }

@@ -77,6 +77,7 @@ fn run_with_plant(
             reference: r,
             measured_force: Some(y),
             resting: false,
+            ..Default::default()
         });
         if out.pulse {
             pulses.push(k);
@@ -100,11 +101,13 @@ fn with_a_perfect_model_the_measured_mode_makes_the_model_modes_decisions() {
             reference: r,
             measured_force: None,
             resting: false,
+            ..Default::default()
         });
         let ob = b.tick(&TickInput {
             reference: r,
             measured_force: Some(y),
             resting: false,
+            ..Default::default()
         });
         assert!(
             ob.innovation.abs() < 1e-12,
@@ -172,6 +175,7 @@ fn missing_measurements_are_counted_and_survived() {
             reference: 0.3,
             measured_force: measured,
             resting: false,
+            ..Default::default()
         });
         assert!(out.u_cont.is_finite() && out.x_i.is_finite());
         muscle.apply(out.pulse);

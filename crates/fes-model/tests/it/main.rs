@@ -14,6 +14,7 @@ mod control_file;
 mod control_io_design;
 mod control_measured;
 mod control_no_alloc;
+mod control_planner;
 mod control_shaper;
 mod model_file;
 mod model_forms;

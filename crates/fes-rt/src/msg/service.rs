@@ -26,6 +26,9 @@ pub const DEFAULT_PREFIX: &str = "fes";
 
 /// Topic of [`super::Reference`]: supervisor -> rt-core.
 pub const TOPIC_REFERENCE: &str = "reference";
+/// Topic of [`super::ReferencePreview`]: supervisor -> rt-core (the setpoints scheduled
+/// ahead).
+pub const TOPIC_REFERENCE_PREVIEW: &str = "reference_preview";
 /// Topic of [`super::StimTick`]: rt-core -> stim-driver (and recorders), every tick.
 pub const TOPIC_STIM_TICK: &str = "stim_tick";
 /// Event service notified by rt-core right after each [`super::StimTick`] is published, so a

@@ -461,6 +461,9 @@ fn report_outcome(
 ) -> Result<(), Failure> {
     match outcome {
         Ok(outcome) => {
+            if let Some(summary) = &outcome.source_summary {
+                info!("{summary}");
+            }
             info!(
                 "stopped: final tick seq {} published{}",
                 outcome.final_seq,

@@ -82,4 +82,11 @@ impl TickSource for Source {
             Source::Controller(c) => c.min_pulse_gap_ticks(),
         }
     }
+
+    fn summary(&self) -> Option<String> {
+        match self {
+            Source::TestPattern(p) => p.summary(),
+            Source::Controller(c) => c.summary(),
+        }
+    }
 }

@@ -74,6 +74,7 @@ pub fn run_pattern_generator(pg: &mut PatternGenerator, reference: &[f64]) -> Lc
             reference: r,
             measured_force: None,
             resting: false,
+            ..Default::default()
         });
         run.model_force.push(out.model_force);
         run.pulse.push(out.pulse);

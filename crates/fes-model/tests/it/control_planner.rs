@@ -1,0 +1,342 @@
+//! The receding-horizon planner (docs/control.md, section 11): planning off is the causal
+//! loop bit for bit; with a preview the plan is never worse on the model than any
+//! constant-frequency train with no more pulses; pulses stay inside the contraction and
+//! the minimum interval; an expired deadline leaves the causal decisions; decisions are
+//! deterministic; a changed preview replans.
+
+use super::control_support::{TS, fast_muscle, table_6_1_specs};
+use fes_model::control::file::{Controller, ControllerSettings};
+use fes_model::control::pattern_generator::{PatternGenerator, TickInput, TickOutput};
+use fes_model::control::planner::{Deadline, PlanningConfig, train_times};
+use fes_model::control::preview::{Preview, PreviewPoint, slew};
+use fes_model::model::AdvancedForm;
+
+/// A cardiac reference: contractions of `on` ticks every `period`, at `level`, edges at
+/// `rate` per second, as the supervisor schedules them and rt-core's tracker ramps them.
+#[derive(Clone, Copy)]
+struct Cardiac {
+    period: usize,
+    on: usize,
+    level: f64,
+    rate: f64,
+}
+
+impl Cardiac {
+    fn setpoint(&self, k: usize) -> f64 {
+        if k % self.period < self.on {
+            self.level
+        } else {
+            0.0
+        }
+    }
+
+    /// The preview at tick `k`: the setpoint now, then the next four edges.
+    fn preview(&self, k: usize) -> Preview {
+        let mut points = vec![PreviewPoint {
+            at: 0,
+            force: self.setpoint(k),
+            rate_per_s: self.rate,
+        }];
+        let start = k - k % self.period;
+        for edge in [
+            start + self.on,
+            start + self.period,
+            start + self.period + self.on,
+            start + 2 * self.period,
+        ] {
+            if edge > k {
+                points.push(PreviewPoint {
+                    at: (edge - k) as u32,
+                    force: self.setpoint(edge),
+                    rate_per_s: self.rate,
+                });
+            }
+        }
+        Preview::new(&points).unwrap()
+    }
+
+    /// The tracker's targets over `n` ticks.
+    fn targets(&self, n: usize) -> Vec<f64> {
+        let mut r = 0.0;
+        (0..n)
+            .map(|k| {
+                r = slew(r, self.setpoint(k), self.rate, TS);
+                r
+            })
+            .collect()
+    }
+}
+
+const CARDIAC: Cardiac = Cardiac {
+    period: 800,
+    on: 320,
+    level: 0.3,
+    rate: 50.0,
+};
+
+fn controller(planning: PlanningConfig) -> Controller {
+    let settings = ControllerSettings {
+        planning,
+        ..ControllerSettings::default()
+    };
+    Controller::design(fast_muscle(6), &table_6_1_specs(6), settings).unwrap()
+}
+
+fn planning() -> PlanningConfig {
+    PlanningConfig::RECOMMENDED
+}
+
+/// Runs `n` ticks of the cardiac reference, with its preview when `preview` is set.
+fn run(pg: &mut PatternGenerator, c: Cardiac, n: usize, preview: bool) -> Vec<TickOutput> {
+    let r = c.targets(n);
+    (0..n)
+        .map(|k| {
+            pg.tick(&TickInput {
+                reference: r[k],
+                measured_force: None,
+                resting: c.setpoint(k) == 0.0,
+                preview: if preview { c.preview(k) } else { Preview::NONE },
+            })
+        })
+        .collect()
+}
+
+fn pulses(out: &[TickOutput]) -> Vec<usize> {
+    out.iter()
+        .enumerate()
+        .filter(|(_, o)| o.pulse)
+        .map(|(k, _)| k)
+        .collect()
+}
+
+#[test]
+fn planning_off_and_no_preview_are_the_causal_loop_bit_for_bit() {
+    let causal = run(
+        &mut controller(PlanningConfig::default())
+            .pattern_generator()
+            .unwrap(),
+        CARDIAC,
+        3000,
+        true,
+    );
+    assert!(pulses(&causal).len() > 10);
+    // Planning on, but nothing announced ahead: the planner never decides.
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let blind = run(&mut pg, CARDIAC, 3000, false);
+    assert_eq!(causal, blind);
+    assert_eq!(pg.stats().planner.planned_ticks, 0);
+    // Planning off ignores the preview.
+    let off = run(
+        &mut controller(PlanningConfig::default())
+            .pattern_generator()
+            .unwrap(),
+        CARDIAC,
+        3000,
+        false,
+    );
+    assert_eq!(causal, off);
+}
+
+/// The objective of docs/control.md section 11 over the second beat, computed here from
+/// the model alone (not by the planner): the network runs the first beat's pulses as
+/// fired, then `beat2` (ticks from the second onset); the core output against the
+/// targets over the second beat, plus the plateau's mean error term.
+fn objective(
+    c: &Controller,
+    r: &[f64],
+    beat1: &[usize],
+    beat2: &[usize],
+    cfg: &PlanningConfig,
+) -> f64 {
+    let mut core = AdvancedForm::new(c.network).unwrap();
+    let p = CARDIAC.period;
+    let (a, b) = (p, p + CARDIAC.on);
+    let pa = a + (cfg.plateau_start * (b - a) as f64) as usize;
+    let (mut sq, mut plateau) = (0.0, 0.0);
+    for (k, &rk) in r.iter().enumerate().take(2 * p) {
+        let fire = if k < p {
+            beat1.contains(&k)
+        } else {
+            beat2.contains(&(k - p))
+        };
+        let y = core.step(if fire { 1.0 } else { 0.0 }).y_ahead;
+        if k >= p {
+            let e = y - rk;
+            sq += e * e;
+            if k >= pa && k < b {
+                plateau += e;
+            }
+        }
+    }
+    let np = (b - pa) as f64;
+    sq + cfg.mean_weight * plateau * plateau / np + cfg.lambda * beat2.len() as f64
+}
+
+#[test]
+fn the_plan_beats_every_train_with_no_more_pulses_on_the_model() {
+    for level in [0.1, 0.3, 0.6] {
+        let c = Cardiac { level, ..CARDIAC };
+        let cfg = planning();
+        let ctl = controller(cfg);
+        let mut pg = ctl.pattern_generator().unwrap();
+        // The second beat: planned in the rest after the first, from its preview.
+        let p = c.period;
+        let out = run(&mut pg, c, 2 * p, true);
+        let fired = pulses(&out);
+        let beat1: Vec<usize> = fired.iter().copied().filter(|&k| k < p).collect();
+        let plan: Vec<usize> = fired.iter().filter(|&&k| k >= p).map(|k| k - p).collect();
+        let r = c.targets(2 * p);
+        let j_plan = objective(&ctl, &r, &beat1, &plan, &cfg);
+        assert!(!plan.is_empty(), "level {level}: no pulse");
+        let mut compared = 0;
+        for hz in cfg.min_hz..=cfg.max_hz {
+            let mut t = [0u16; 128];
+            let all = train_times(hz, TS, 0, c.on, &mut t);
+            for n in 1..=all {
+                let train: Vec<usize> = t[..n].iter().map(|&x| x as usize).collect();
+                let j = objective(&ctl, &r, &beat1, &train, &cfg);
+                assert!(
+                    j_plan <= j + 1e-9,
+                    "level {level}: the plan {plan:?} (J {j_plan}) is worse on the model than \
+                     {hz} Hz x {n} (J {j})"
+                );
+                compared += usize::from(n <= plan.len());
+            }
+        }
+        assert!(compared > 50, "level {level}: {compared} trains compared");
+        let stats = pg.stats().planner;
+        assert!(
+            stats.planned_ticks >= 2 * c.on as u64 - 100,
+            "level {level}: {stats:?}"
+        );
+    }
+}
+
+#[test]
+fn planned_pulses_stay_in_the_contraction_and_the_minimum_interval() {
+    for level in [0.2, 0.5, 0.9] {
+        let c = Cardiac { level, ..CARDIAC };
+        let mut pg = controller(planning()).pattern_generator().unwrap();
+        let out = run(&mut pg, c, 4000, true);
+        let p = pulses(&out);
+        assert!(p.len() > 8, "level {level}: {p:?}");
+        for w in p.windows(2) {
+            assert!(
+                w[1] - w[0] >= 2,
+                "level {level}: IPI {} ms at {}",
+                w[1] - w[0],
+                w[0]
+            );
+        }
+        for &k in &p {
+            assert!(
+                c.setpoint(k) > 0.0,
+                "level {level}: a pulse at rest, tick {k}"
+            );
+        }
+        assert!(out.iter().skip(100).filter(|o| o.pulse).all(|o| o.planned));
+        let s = pg.stats().planner;
+        // Five contractions run, and the sixth (at 4000) already planned.
+        assert_eq!(s.windows, 6, "{s:?}");
+        assert_eq!(s.replans, 0, "{s:?}");
+        assert!(s.converged >= 4, "{s:?}");
+    }
+}
+
+#[test]
+fn decisions_are_deterministic() {
+    let a = run(
+        &mut controller(planning()).pattern_generator().unwrap(),
+        CARDIAC,
+        2500,
+        true,
+    );
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let b = run(&mut pg, CARDIAC, 2500, true);
+    assert_eq!(a, b);
+    pg.reset();
+    let c = run(&mut pg, CARDIAC, 2500, true);
+    assert_eq!(a, c);
+}
+
+/// A deadline that has always expired.
+struct Expired;
+
+impl Deadline for Expired {
+    fn expired(&mut self) -> bool {
+        true
+    }
+}
+
+#[test]
+fn an_expired_deadline_leaves_every_decision_to_the_causal_loop() {
+    let causal = run(
+        &mut controller(PlanningConfig::default())
+            .pattern_generator()
+            .unwrap(),
+        CARDIAC,
+        2000,
+        true,
+    );
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let r = CARDIAC.targets(2000);
+    let late: Vec<TickOutput> = (0..2000)
+        .map(|k| {
+            pg.tick_within(
+                &TickInput {
+                    reference: r[k],
+                    measured_force: None,
+                    resting: CARDIAC.setpoint(k) == 0.0,
+                    preview: CARDIAC.preview(k),
+                },
+                &mut Expired,
+            )
+        })
+        .collect();
+    assert_eq!(pulses(&causal), pulses(&late));
+    let s = pg.stats().planner;
+    assert_eq!(s.planned_ticks, 0, "{s:?}");
+    assert!(s.deadline_cuts > 1000, "{s:?}");
+    assert!(s.causal_fallbacks > 500, "{s:?}");
+}
+
+#[test]
+fn a_changed_level_replans_the_contraction() {
+    // The beat at 1600 is announced at 0.3 until tick 1300, when the outer loop moves it
+    // to 0.5 (in the rest before it).
+    let (low, high) = (
+        CARDIAC,
+        Cardiac {
+            level: 0.5,
+            ..CARDIAC
+        },
+    );
+    let (r_low, r_high) = (low.targets(2000), high.targets(2000));
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let out: Vec<TickOutput> = (0..2000)
+        .map(|k| {
+            let (c, r) = if k < 1300 {
+                (low, &r_low)
+            } else {
+                (high, &r_high)
+            };
+            pg.tick(&TickInput {
+                reference: r[k],
+                measured_force: None,
+                resting: c.setpoint(k) == 0.0,
+                preview: c.preview(k),
+            })
+        })
+        .collect();
+    let s = pg.stats().planner;
+    assert_eq!(s.replans, 1, "{s:?}");
+    assert_eq!(s.causal_fallbacks, 0, "{s:?}");
+    // The higher level gets more pulses than the beats before it.
+    let count = |from: usize| out[from..from + 320].iter().filter(|o| o.pulse).count();
+    assert!(
+        count(1600) > count(800),
+        "{} vs {}",
+        count(1600),
+        count(800)
+    );
+}
