@@ -1,10 +1,12 @@
 //! The controller file loader on any text: an error, or a controller whose pattern
-//! generator builds and runs from rest with finite outputs.
+//! generator builds and runs from rest with finite outputs, with the contraction's
+//! preview in every tick so that a file whose `planning` section is on runs the planner.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use rt_core::control::file::Controller;
 use rt_core::control::pattern_generator::TickInput;
+use rt_core::control::preview::{Preview, PreviewPoint};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
@@ -18,10 +20,22 @@ fuzz_target!(|data: &[u8]| {
         .expect("an accepted controller builds its pattern generator");
     for k in 0..300u32 {
         let r = if (50..200).contains(&k) { 0.3 } else { 0.0 };
+        let point = |at: u32, force: f64| PreviewPoint {
+            at,
+            force,
+            rate_per_s: 0.0,
+        };
+        let points = match k {
+            0..50 => vec![point(0, 0.0), point(50 - k, 0.3), point(200 - k, 0.0)],
+            50..200 => vec![point(0, 0.3), point(200 - k, 0.0)],
+            _ => vec![point(0, 0.0)],
+        };
+        let preview = Preview::new(&points).expect("a valid preview");
         let d = g.tick(&TickInput {
             reference: r,
             measured_force: None,
             resting: false,
+            preview,
         });
         assert!(
             d.u_cont.is_finite() && d.energy.is_finite() && d.model_force.is_finite(),
