@@ -584,8 +584,22 @@ mod tests {
                 .collect(),
         };
         let v = s.verdict(&series).unwrap();
-        assert_eq!(v.cft_front.len(), 96);
-        let own = v.cft_front.iter().find(|p| p.hz == Some(20)).unwrap();
+        // Every CFT(f, n): the whole train of each frequency (one per Hz, 5..=100) and each
+        // of its prefixes, a train that stops after n pulses, counted once per pulse set.
+        let whole = |p: &&FrontPoint| {
+            let hz = p.hz.unwrap() as f64;
+            let count = constant_train(hz, 0, on, 1e-3).unwrap().len();
+            p.n == Some(count as u32)
+        };
+        let trains: Vec<&FrontPoint> = v.cft_front.iter().filter(whole).collect();
+        assert_eq!(trains.len(), 96);
+        assert!(v.cft_front.len() > trains.len());
+        assert!(
+            v.cft_front
+                .iter()
+                .all(|p| (p.pulses_per_contraction - f64::from(p.n.unwrap())).abs() < 1e-9)
+        );
+        let own = trains.iter().find(|p| p.hz == Some(20)).unwrap();
         assert_eq!(own.pulses_per_contraction, v.lcn.pulses_per_contraction);
         assert_eq!(
             own.pulses_per_contraction,
@@ -593,11 +607,17 @@ mod tests {
         );
         assert!((own.rms_error - v.lcn.rms_error).abs() < 1e-12);
         assert!((own.ftipp - v.lcn.ftipp).abs() < 1e-12);
+        // The run is itself a point of the front, so the cheapest train that tracks as well
+        // needs at most its pulses, and the best train with no more pulses tracks at least
+        // as well.
         let ratio = v.pulses_vs_equal_rms_cft.unwrap();
-        assert!(ratio <= 1.0 + 1e-12, "{ratio}");
+        assert!(ratio >= 1.0 - 1e-12, "{ratio}");
+        let best = v.best_cft_no_more_pulses.unwrap();
+        assert!(best.rms_error <= v.lcn.rms_error + 1e-12);
+        assert!(!v.beats_every_cft);
         // Pulses grow with the frequency; the twitch normalisation makes FTIpP finite.
         assert!(
-            v.cft_front
+            trains
                 .windows(2)
                 .all(|w| { w[1].pulses_per_contraction >= w[0].pulses_per_contraction })
         );
