@@ -485,8 +485,12 @@ impl Clone for Planner {
     }
 }
 
-/// Tolerance on the preview's targets when deciding that a window is the one planned.
+/// Tolerance on a contraction's level when deciding that a window is the one planned.
 const SAME_REFERENCE: f64 = 1e-9;
+/// Ticks an announced edge may move and still be the one planned: the caller's clock
+/// jitter puts each announcement a tick either way, so two announcements of one edge may
+/// differ by two.
+const EDGE_TICKS: usize = 2;
 /// Tolerance on the state handed in against the predicted one (relative).
 const SAME_STATE: f64 = 1e-12;
 
@@ -662,19 +666,50 @@ impl Planner {
             return;
         }
         let active = |j: usize| !b.rest_now[j] && b.r_now[j] > 0.0;
-        // Keep the window while its contraction and tail match what is announced.
+        // Keep the window while the contraction announced is the one planned: the same
+        // onset and end to two ticks, the same level. rt-core's clock jitters by tens of
+        // microseconds, so an edge may land a tick either way and a ramp's targets differ
+        // in the last digits from tick to tick; neither is a new contraction.
         if let Some(w) = self.win {
             let jn = (now - w.h0) as usize;
             if jn < w.b {
-                let same = (jn..w.e).all(|j| {
-                    let k = j - jn;
-                    (b.r_now[k] - b.r[j]).abs() <= SAME_REFERENCE
-                        && (j >= w.a && j < w.b) == active(k)
-                });
-                if same {
-                    return;
+                let level = |r: &[f64]| r.iter().fold(0.0f64, |m, &v| m.max(v));
+                let a_new = (0..MAX_HORIZON).find(|&j| active(j));
+                let b_new = a_new.and_then(|a| (a + 1..MAX_HORIZON).find(|&j| !active(j)));
+                // An onset announced up to two ticks from the planned one is still to come.
+                let onset_due =
+                    a_new.is_some_and(|a| a > 0 && (jn + a).abs_diff(w.a) <= EDGE_TICKS);
+                if jn >= w.a && !active(0) && !onset_due {
+                    // The contraction is announced over: an end up to two ticks early is
+                    // the one planned (its last ticks fire nothing), an earlier one is not.
+                    if jn + EDGE_TICKS >= w.b {
+                        return;
+                    }
+                } else {
+                    let same = match (a_new, b_new) {
+                        (Some(a), Some(bb)) => {
+                            // Active now: the onset is due (announced late, at most).
+                            let onset_ok = if a == 0 {
+                                jn + EDGE_TICKS >= w.a
+                            } else {
+                                onset_due
+                            };
+                            onset_ok
+                                && (jn + bb).abs_diff(w.b) <= EDGE_TICKS
+                                && (level(&b.r_now[a..bb]) - level(&b.r[w.a..w.b])).abs()
+                                    <= SAME_REFERENCE
+                        }
+                        _ => false,
+                    };
+                    if same {
+                        return;
+                    }
                 }
                 self.stats.replans += 1;
+            } else if jn < w.b + EDGE_TICKS && active(0) {
+                // An end announced up to two ticks late: the same contraction, its last
+                // ticks decided causally.
+                return;
             }
         }
         let window = (0..MAX_HORIZON).find(|&j| active(j)).map(|a| {

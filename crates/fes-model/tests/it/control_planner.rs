@@ -340,3 +340,48 @@ fn a_changed_level_replans_the_contraction() {
         count(800)
     );
 }
+
+#[test]
+fn an_edge_announced_a_tick_early_or_late_is_the_same_contraction() {
+    // rt-core converts the supervisor's announced times to ticks on a clock that jitters
+    // by tens of microseconds, so an edge may be announced a tick either way from one tick
+    // to the next. That is the contraction already planned, not a new one: no replan.
+    let c = CARDIAC;
+    let r = c.targets(2400);
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let mut jitter = 0x2545_f491_u32;
+    for (k, &rk) in r.iter().enumerate() {
+        let exact = c.preview(k);
+        let points: Vec<PreviewPoint> = exact
+            .points()
+            .iter()
+            .map(|p| {
+                jitter ^= jitter << 13;
+                jitter ^= jitter >> 17;
+                jitter ^= jitter << 5;
+                let at = match (p.at, jitter % 3) {
+                    (0, _) | (_, 0) => p.at,
+                    (at, 1) => at + 1,
+                    (at, _) if at > 1 => at - 1,
+                    (at, _) => at,
+                };
+                PreviewPoint { at, ..*p }
+            })
+            .collect();
+        let mut preview = Preview::new(&points);
+        if preview.is_err() {
+            preview = Ok(exact);
+        }
+        pg.tick(&TickInput {
+            reference: rk,
+            measured_force: None,
+            resting: c.setpoint(k) == 0.0,
+            preview: preview.unwrap(),
+        });
+    }
+    // One window for the first contraction (unannounced, at tick 0), then one for each
+    // next contraction, planned as the previous one ends: 4 in three beats, none replanned.
+    let s = pg.stats().planner;
+    assert_eq!(s.windows, 4, "{s:?}");
+    assert_eq!(s.replans, 0, "{s:?}");
+}
