@@ -780,7 +780,7 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
                     .total_cmp(&b.pulses_per_contraction)
             });
         println!(
-            "  CFT front (5-100 Hz over each contraction, same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
+            "  CFT front (every 5-100 Hz train from each onset, whole or stopped after n pulses; same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
             fmt(v.lcn.pulses_per_contraction, 2),
             fmt(v.lcn.rms_error, 4),
             fmt(v.lcn.ftipp, 3),
@@ -792,12 +792,26 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
             if v.lcn_dominated { "YES" } else { "no" },
             opt(v.pulses_vs_equal_rms_cft, 3),
             cheapest.map_or(String::new(), |p| format!(
-                " ({} Hz: {} pulses, RMS {})",
+                " ({} Hz x {}: RMS {})",
                 p.hz.unwrap_or(0),
-                fmt(p.pulses_per_contraction, 1),
+                p.n.unwrap_or(0),
                 fmt(p.rms_error, 4)
             )),
             opt(v.ftipp_vs_best_cft, 3)
+        );
+        // The user's question: does any train with no more pulses track as well?
+        println!(
+            "    a train with no more pulses that tracks as well: {}",
+            match (&v.best_cft_no_more_pulses, v.beats_every_cft) {
+                (_, true) => "none (the run beats every one)".to_string(),
+                (Some(p), false) => format!(
+                    "{} Hz x {} pulses, RMS {}",
+                    p.hz.unwrap_or(0),
+                    p.n.unwrap_or(0),
+                    fmt(p.rms_error, 4)
+                ),
+                (None, false) => "none has so few pulses".to_string(),
+            }
         );
     }
     println!(
