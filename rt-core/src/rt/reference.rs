@@ -132,8 +132,8 @@ impl ReferenceTracker {
         Ok(())
     }
 
-    /// The preview of the tick at `now_ns`: the reference in use now, then every edge of the
-    /// kept preview still ahead, at the tick it takes effect (edges on the same tick: the
+    /// The preview of the tick at `now_ns`: the reference in use now (or an edge already due
+    /// that it does not reflect yet), then every edge of the kept preview still ahead, at the tick it takes effect (edges on the same tick: the
     /// later wins). None without a fresh preview (no older than `stale_after_ns`) or a
     /// usable reference.
     fn preview_at(&self, reference: &Reference, now_ns: u64) -> Preview {
@@ -150,6 +150,18 @@ impl ReferenceTracker {
             force: reference.force,
             rate_per_s: reference.max_rate_per_s,
         };
+        // An edge already due whose Reference has not arrived yet (the supervisor's wake-up
+        // and the IPC take tens to hundreds of microseconds) is the setpoint in effect now:
+        // dropping it would announce, for a tick or two, a contraction that never starts or
+        // never ends, and the planner would throw its plan away at every edge.
+        if let Some(e) = p
+            .edges()
+            .iter()
+            .rfind(|e| e.t_ns <= now_ns && e.t_ns > reference.t_ns)
+        {
+            points[0].force = e.force;
+            points[0].rate_per_s = e.max_rate_per_s;
+        }
         let mut n = 1;
         for e in p.edges().iter().filter(|e| e.t_ns > now_ns) {
             let at = (e.t_ns - now_ns).div_ceil(tick).min(u32::MAX as u64) as u32;

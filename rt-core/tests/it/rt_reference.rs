@@ -182,3 +182,46 @@ fn the_preview_is_the_reference_now_then_the_edges_ahead_in_ticks() {
     t.offer_preview(&p3, 440 * MS).unwrap();
     assert!(t.advance(440 * MS).preview.is_none());
 }
+
+/// At an edge the preview has passed but whose Reference has not arrived yet (the
+/// supervisor publishes it after the edge, and the IPC takes its time), the preview
+/// announces the edge's setpoint as in effect now: the contraction planned does not vanish
+/// for a tick. Once the Reference arrives it is the reference again.
+#[test]
+fn an_edge_due_before_its_reference_arrives_is_the_setpoint_now() {
+    let mut t = tracker();
+    let reference = |seq, ms_ns: u64, force| {
+        let mut r = Reference::new(seq, ms_ns, force);
+        r.max_rate_per_s = 50.0;
+        r
+    };
+    let edge = |ms: u64, force| PreviewEdge {
+        t_ns: ms * MS,
+        force,
+        max_rate_per_s: 50.0,
+    };
+    let point = |at, force| PreviewPoint {
+        at,
+        force,
+        rate_per_s: 50.0,
+    };
+    // The supervisor's keep-alive at 320 ms: at rest, the contraction 330-650 ms ahead.
+    t.offer(&reference(1, 320 * MS, 0.0), 320 * MS).unwrap();
+    let p = ReferencePreview::new(1, 320 * MS, 1, &[edge(330, 0.3), edge(650, 0.0)]);
+    t.offer_preview(&p, 320 * MS).unwrap();
+    // 200 us after the onset, the onset's Reference not yet received.
+    let late = t.advance(330 * MS + 200_000).preview;
+    assert_eq!(late.points(), &[point(0, 0.3), point(320, 0.0)]);
+    // The Reference arrives (published 300 us after the edge): the reference again.
+    t.offer(&reference(2, 330 * MS + 300_000, 0.3), 330 * MS + 400_000)
+        .unwrap();
+    let now = t.advance(330 * MS + 400_000).preview;
+    assert_eq!(now.points(), &[point(0, 0.3), point(320, 0.0)]);
+    // The same at the end: a keep-alive at 640 ms, the edge due at 650 ms, its Reference
+    // of 0 not yet in.
+    t.offer(&reference(3, 640 * MS, 0.3), 640 * MS).unwrap();
+    let p2 = ReferencePreview::new(2, 640 * MS, 3, &[edge(650, 0.0), edge(1130, 0.3)]);
+    t.offer_preview(&p2, 640 * MS).unwrap();
+    let end = t.advance(650 * MS + 100_000).preview;
+    assert_eq!(end.points(), &[point(0, 0.0), point(480, 0.3)]);
+}
