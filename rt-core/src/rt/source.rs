@@ -219,7 +219,8 @@ impl TickSource for ControllerSource {
             format!(
                 "planner: {} contraction(s) planned, {} replanned, {} rebased, {} converged; \
                  {} tick(s) decided by a plan, {} causal for want of a plan; {} tick(s) cut \
-                 by the {} us budget; {} without an end in sight; {} rollouts, {} steps",
+                 by the {} us budget; {} without an end in sight; plans dropped: {} for want \
+                 of a preview, {} with nothing announced; {} rollouts, {} steps",
                 s.windows,
                 s.replans,
                 s.rebased,
@@ -229,6 +230,8 @@ impl TickSource for ControllerSource {
                 s.deadline_cuts,
                 p.config().budget_us,
                 s.no_end,
+                s.dropped_no_preview,
+                s.dropped_nothing_ahead,
                 s.rollouts,
                 s.steps
             )

@@ -239,6 +239,11 @@ pub struct PlannerStats {
     pub deadline_cuts: u64,
     /// Ticks with a preview whose contraction has no end inside the horizon (causal).
     pub no_end: u64,
+    /// Plans dropped because the preview went missing under them (none received, stale,
+    /// a stop or an operator's setpoint).
+    pub dropped_no_preview: u64,
+    /// Plans dropped because the preview no longer announced any contraction.
+    pub dropped_nothing_ahead: u64,
     /// Rollouts run.
     pub rollouts: u64,
     /// Network steps run by the planner.
@@ -662,6 +667,9 @@ impl Planner {
             &mut b.r_now,
             &mut b.rest_now,
         ) {
+            if self.win.is_some() {
+                self.stats.dropped_no_preview += 1;
+            }
             self.win = None;
             self.phase = Phase::Idle;
             self.expected = None;
@@ -728,6 +736,9 @@ impl Planner {
                 return;
             }
             None => {
+                if self.win.is_some() {
+                    self.stats.dropped_nothing_ahead += 1;
+                }
                 self.win = None;
                 self.phase = Phase::Idle;
                 self.expected = None;
