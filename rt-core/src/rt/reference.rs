@@ -3,7 +3,7 @@
 //! to zero when the reference goes stale (the supervisor stopped refreshing it).
 
 use crate::control::preview::{MAX_PREVIEW_POINTS, Preview, PreviewPoint};
-use crate::msg::{Contract, Reference, ReferencePreview, ValidationError};
+use crate::msg::{Contract, PreviewEdge, Reference, ReferencePreview, ValidationError};
 
 /// How a reference ages. Read from the process configuration; never changed in the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -107,6 +107,21 @@ impl ReferenceTracker {
         }
     }
 
+    /// The newest scheduled edge already due at `now_ns` that the reference in use does not
+    /// reflect yet (published before it), from a fresh preview. The supervisor publishes an
+    /// edge's Reference after the edge, and on a loaded host by milliseconds; the schedule it
+    /// announced is what the reference is now.
+    fn due_edge(&self, reference: &Reference, now_ns: u64) -> Option<PreviewEdge> {
+        let p = self.preview.as_ref()?;
+        if now_ns.saturating_sub(p.t_ns) > self.policy.stale_after_ns {
+            return None;
+        }
+        p.edges()
+            .iter()
+            .rfind(|e| e.t_ns <= now_ns && e.t_ns > reference.t_ns)
+            .copied()
+    }
+
     /// Offers a received preview at time `now_ns`; a valid, newer one replaces the one kept.
     pub fn offer_preview(
         &mut self,
@@ -150,15 +165,9 @@ impl ReferenceTracker {
             force: reference.force,
             rate_per_s: reference.max_rate_per_s,
         };
-        // An edge already due whose Reference has not arrived yet (the supervisor's wake-up
-        // and the IPC take tens to hundreds of microseconds) is the setpoint in effect now:
-        // dropping it would announce, for a tick or two, a contraction that never starts or
-        // never ends, and the planner would throw its plan away at every edge.
-        if let Some(e) = p
-            .edges()
-            .iter()
-            .rfind(|e| e.t_ns <= now_ns && e.t_ns > reference.t_ns)
-        {
+        // An edge already due whose Reference has not arrived yet is the setpoint in effect
+        // now (as `advance` applies it).
+        if let Some(e) = self.due_edge(reference, now_ns) {
             points[0].force = e.force;
             points[0].rate_per_s = e.max_rate_per_s;
         }
@@ -231,6 +240,11 @@ impl ReferenceTracker {
             (0.0, 0.0)
         } else if stale {
             (0.0, self.policy.stale_ramp_per_s)
+        } else if let Some(e) = self.due_edge(&reference, now_ns) {
+            // The schedule's edge is due and its Reference not in yet: follow the schedule,
+            // so that a contraction starts and ends when announced, not when the supervisor
+            // gets round to publishing it. A stop still wins the moment it arrives.
+            (e.force, e.max_rate_per_s)
         } else {
             (reference.force, reference.max_rate_per_s)
         };

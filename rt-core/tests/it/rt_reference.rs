@@ -184,9 +184,10 @@ fn the_preview_is_the_reference_now_then_the_edges_ahead_in_ticks() {
 }
 
 /// At an edge the preview has passed but whose Reference has not arrived yet (the
-/// supervisor publishes it after the edge, and the IPC takes its time), the preview
-/// announces the edge's setpoint as in effect now: the contraction planned does not vanish
-/// for a tick. Once the Reference arrives it is the reference again.
+/// supervisor publishes it after the edge, by milliseconds on a loaded host), the target
+/// follows the announced schedule and the preview announces the edge's setpoint as in effect
+/// now: a contraction starts and ends when announced. Once the Reference arrives it is the
+/// reference again; a stop wins at once; a stale preview schedules nothing.
 #[test]
 fn an_edge_due_before_its_reference_arrives_is_the_setpoint_now() {
     let mut t = tracker();
@@ -209,9 +210,13 @@ fn an_edge_due_before_its_reference_arrives_is_the_setpoint_now() {
     t.offer(&reference(1, 320 * MS, 0.0), 320 * MS).unwrap();
     let p = ReferencePreview::new(1, 320 * MS, 1, &[edge(330, 0.3), edge(650, 0.0)]);
     t.offer_preview(&p, 320 * MS).unwrap();
-    // 200 us after the onset, the onset's Reference not yet received.
-    let late = t.advance(330 * MS + 200_000).preview;
-    assert_eq!(late.points(), &[point(0, 0.3), point(320, 0.0)]);
+    // 200 us after the onset, the onset's Reference not yet received: the target follows
+    // the schedule (no longer resting, ramping up) and the preview says so.
+    let late = t.advance(330 * MS + 200_000);
+    assert!(!late.resting);
+    assert_eq!(late.preview.points(), &[point(0, 0.3), point(320, 0.0)]);
+    let ramp = t.advance(331 * MS + 200_000);
+    assert!((ramp.value - 0.05).abs() < 1e-9, "{}", ramp.value);
     // The Reference arrives (published 300 us after the edge): the reference again.
     t.offer(&reference(2, 330 * MS + 300_000, 0.3), 330 * MS + 400_000)
         .unwrap();
@@ -222,6 +227,23 @@ fn an_edge_due_before_its_reference_arrives_is_the_setpoint_now() {
     t.offer(&reference(3, 640 * MS, 0.3), 640 * MS).unwrap();
     let p2 = ReferencePreview::new(2, 640 * MS, 3, &[edge(650, 0.0), edge(1130, 0.3)]);
     t.offer_preview(&p2, 640 * MS).unwrap();
-    let end = t.advance(650 * MS + 100_000).preview;
-    assert_eq!(end.points(), &[point(0, 0.0), point(480, 0.3)]);
+    let end = t.advance(650 * MS + 100_000);
+    assert!(end.resting);
+    assert_eq!(end.preview.points(), &[point(0, 0.0), point(480, 0.3)]);
+    // A stop wins the moment it arrives, whatever the schedule says.
+    let p3 = ReferencePreview::new(3, 1120 * MS, 3, &[edge(1130, 0.3)]);
+    t.offer(&reference(4, 1120 * MS, 0.0), 1120 * MS).unwrap();
+    t.offer_preview(&p3, 1120 * MS).unwrap();
+    let mut stop = reference(5, 1125 * MS, 0.0);
+    stop.flags = Reference::FLAG_STOP;
+    t.offer(&stop, 1125 * MS).unwrap();
+    let stopped = t.advance(1131 * MS);
+    assert!(stopped.stop && stopped.resting && stopped.value == 0.0);
+    assert!(stopped.preview.is_none());
+    // A stale preview schedules nothing: 101 ms after it, its due edge is not applied.
+    let mut t = tracker();
+    t.offer(&reference(1, 320 * MS, 0.0), 320 * MS).unwrap();
+    t.offer_preview(&p, 320 * MS).unwrap();
+    t.offer(&reference(2, 400 * MS, 0.0), 400 * MS).unwrap();
+    assert!(t.advance(421 * MS + 1).resting);
 }
