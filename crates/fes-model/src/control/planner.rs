@@ -675,7 +675,14 @@ impl Planner {
             self.expected = None;
             return;
         }
-        let active = |j: usize| !b.rest_now[j] && b.r_now[j] > 0.0;
+        // Whether the contraction is on at tick j, by the schedule: from the next tick on
+        // the preview says (tick 0 is the tracker's target, which follows the supervisor's
+        // Reference; a Reference published late at an edge, by milliseconds on a loaded
+        // host, must not move the announced contraction).
+        let active = |j: usize| {
+            let j = j.max(1);
+            !b.rest_now[j] && b.r_now[j] > 0.0
+        };
         // Keep the window while the contraction announced is the one planned: the same
         // onset and end to two ticks, the same level. rt-core's clock jitters by tens of
         // microseconds, so an edge may land a tick either way and a ramp's targets differ
@@ -692,7 +699,8 @@ impl Planner {
                 if jn >= w.a && !active(0) && !onset_due {
                     // The contraction is announced over: an end up to two ticks early is
                     // the one planned (its last ticks fire nothing), an earlier one is not.
-                    if jn + EDGE_TICKS >= w.b {
+                    // (Activity is read from the next tick: the end announced is jn + 1.)
+                    if jn + 1 + EDGE_TICKS >= w.b {
                         return;
                     }
                 } else {
@@ -700,7 +708,7 @@ impl Planner {
                         (Some(a), Some(bb)) => {
                             // Active now: the onset is due (announced late, at most).
                             let onset_ok = if a == 0 {
-                                jn + EDGE_TICKS >= w.a
+                                jn + 1 + EDGE_TICKS >= w.a
                             } else {
                                 onset_due
                             };
