@@ -230,4 +230,31 @@ impl MessageDesc {
     pub fn signal(&self, name: &str) -> Option<&'static SignalDesc> {
         self.signals.iter().find(|s| s.name == name)
     }
+
+    /// The payload bits (bit `i` of the little-endian 64-bit word is payload bit `i`) that
+    /// a signal occupies on multiplexor page `page` (`None`: a message without pages).
+    /// Every other bit is reserved and must be zero.
+    pub fn used_bits(&self, page: Option<u8>) -> u64 {
+        self.signals
+            .iter()
+            .filter(|s| match s.mux {
+                Mux::Plain | Mux::Multiplexor => true,
+                Mux::Page(p) => Some(p) == page,
+            })
+            .fold(0, |used, s| used | (s.mask() << s.start_bit))
+    }
+
+    /// Refuses a payload with a reserved bit set, naming the first byte that has one.
+    pub fn check_reserved(&self, page: Option<u8>, data: &[u8; 8]) -> Result<(), DecodeError> {
+        let reserved = u64::from_le_bytes(*data) & !self.used_bits(page);
+        if reserved == 0 {
+            return Ok(());
+        }
+        let byte = (reserved.trailing_zeros() / 8) as usize;
+        Err(DecodeError::ReservedNonZero {
+            message: self.name,
+            byte,
+            value: data[byte],
+        })
+    }
 }

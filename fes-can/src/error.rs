@@ -51,6 +51,18 @@ pub enum DecodeError {
         /// The raw value received.
         raw: i64,
     },
+    /// A bit that no signal of the message (or of its multiplexor page) occupies is set:
+    /// unused bytes and bits must be zero, so that every accepted frame has one meaning
+    /// and re-encodes to exactly the bytes received.
+    #[error("{message}: reserved byte {byte} is {value:#04x}, must be 0")]
+    ReservedNonZero {
+        /// Message name.
+        message: &'static str,
+        /// Index (0-7) of the first payload byte with a reserved bit set.
+        byte: usize,
+        /// That byte as received.
+        value: u8,
+    },
 }
 
 impl DecodeError {
@@ -60,9 +72,9 @@ impl DecodeError {
             DecodeError::UnknownId { .. } => ErrorCode::Communication,
             DecodeError::WrongLength { .. } => ErrorCode::LengthError,
             DecodeError::BadCrc { .. } => ErrorCode::BadCrc,
-            DecodeError::OutOfRange { .. } | DecodeError::UnknownValue { .. } => {
-                ErrorCode::ValueOutOfRange
-            }
+            DecodeError::OutOfRange { .. }
+            | DecodeError::UnknownValue { .. }
+            | DecodeError::ReservedNonZero { .. } => ErrorCode::ValueOutOfRange,
         }
     }
 }

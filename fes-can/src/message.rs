@@ -2,8 +2,9 @@
 //!
 //! `encode` turns a typed message into a [`Frame`] (identifier, DLC, 8 data bytes);
 //! `decode` turns an identifier and payload back into a [`Message`] or a
-//! [`DecodeError`]: wrong length, wrong CRC, a value outside its range or an undefined
-//! enumerated value are all errors, never panics. Both work on stack arrays only (no heap
+//! [`DecodeError`]: wrong length, wrong CRC, a value outside its range, an undefined
+//! enumerated value or a non-zero reserved (unused) bit are all errors, never panics; an
+//! accepted frame re-encodes to exactly the bytes received. Both work on stack arrays only (no heap
 //! allocation), so the driver can call them on its real-time path. Field values are raw
 //! bus integers; the field name carries the unit (e.g. `amplitude_100ua` = 0.1 mA steps).
 //!
@@ -410,7 +411,7 @@ impl Nodes {
         let mut d = [0u8; 8];
         d[..data.len()].copy_from_slice(data);
         let k = kind;
-        Ok(match kind {
+        let m = match kind {
             MessageKind::Nmt => Message::Nmt(Nmt {
                 command: enumerated(k, &nmt::COMMAND, &d, NmtCommand::from_raw)?,
                 node: field(k, &nmt::NODE, &d)?,
@@ -481,7 +482,15 @@ impl Nodes {
             MessageKind::StimHeartbeat => Message::StimHeartbeat(Heartbeat {
                 state: enumerated(k, &heartbeat::STATE, &d, NmtState::from_raw)?,
             }),
-        })
+        };
+        // Unused bytes and bits must be zero: otherwise two frames would carry one message
+        // and an accepted frame would not re-encode to the bytes received.
+        let page = match m {
+            Message::Config(c) | Message::ConfigApplied(c) => Some(c.page.id().raw()),
+            _ => None,
+        };
+        desc.check_reserved(page, &d)?;
+        Ok(m)
     }
 }
 

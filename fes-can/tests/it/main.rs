@@ -5,4 +5,5 @@
 mod dbc_consistency;
 mod doc_table;
 mod no_alloc;
+mod reserved_bits;
 mod roundtrip;

@@ -407,6 +407,8 @@ impl Stimulator {
                 raw as u16
             }
             DecodeError::UnknownId { id } => id as u16,
+            // The index of the first payload byte with a reserved bit set.
+            DecodeError::ReservedNonZero { byte, .. } => byte as u16,
         };
         // An intact PULSE (length and CRC good) still names its sequence number.
         let seq = match (kind, e) {

@@ -732,6 +732,22 @@ fn wrong_length_and_bad_values_are_reported() {
 }
 
 #[test]
+fn a_config_with_a_reserved_byte_set_is_refused_naming_the_byte() {
+    let mut b = Bench::new();
+    // The charge page uses bytes 0-3; byte 6 is reserved (issue 34).
+    let [_, _, charge] = settings().ceiling.to_pages(5);
+    let mut f = Message::Config(charge).encode().unwrap();
+    f.data[6] = 0x01;
+    b.frame(f);
+    assert_eq!(
+        (b.last_emcy().code, b.last_emcy().detail),
+        (ErrorCode::ValueOutOfRange, 6)
+    );
+    assert_eq!(b.stim.rejected(), 1);
+    assert_eq!(b.stim.config_id(), 0);
+}
+
+#[test]
 fn missed_ticks_advance_the_plant_without_extra_frames_or_pulses() {
     let mut b = Bench::new();
     b.operational();
