@@ -292,7 +292,7 @@ impl Rehastim2 {
             Message::Watchdog => None,
             Message::GetStimulationMode => Some(Message::GetStimulationModeAck {
                 result: AckResult::Ok,
-                mode: self.mode,
+                mode: Some(self.mode),
             }),
             Message::InitChannelListMode(init) => Some(Message::InitChannelListModeAck {
                 result: self.init_channel_list(init),
@@ -333,7 +333,8 @@ impl Rehastim2 {
                 };
                 Some(Message::SinglePulseAck { result })
             }
-            // The device's own messages, sent to it: not commands it knows.
+            // The device's own messages, sent to it: not commands it knows. §4.1:
+            // UnknownCommand echoes the packet number and the command byte.
             Message::Init { .. }
             | Message::UnknownCommand { .. }
             | Message::GetStimulationModeAck { .. }
@@ -341,19 +342,29 @@ impl Rehastim2 {
             | Message::StartChannelListModeAck { .. }
             | Message::StopChannelListModeAck { .. }
             | Message::SinglePulseAck { .. }
-            | Message::StimulationError { .. } => Some(Message::UnknownCommand { code: -1 }),
+            | Message::StimulationError { .. }
+            | Message::PhaseResult(_)
+            | Message::ActualValues { .. }
+            | Message::MotomedCommandDone { .. }
+            | Message::MotomedError { .. } => Some(Message::UnknownCommand {
+                command: packet.message.command().id(),
+            }),
         };
         if let Some(message) = reply {
             send(Packet::new(number, message), out);
         }
     }
 
-    /// A packet whose command the device does not know (the decoder's
-    /// [`DecodeError::UnknownCommand`]): answered with UnknownCommand.
-    pub fn on_unknown_command(&mut self, out: &mut Vec<u8>) {
+    /// Packet `number` whose command byte `command` the device does not know (the
+    /// decoder's [`DecodeError::UnknownCommand`]): answered with UnknownCommand echoing
+    /// both (§4.1, §5.2 "Unknown command error").
+    pub fn on_unknown_command(&mut self, number: u8, command: u8, out: &mut Vec<u8>) {
         self.watchdog.feed(self.now_ns());
         if self.connected {
-            send(Packet::new(0, Message::UnknownCommand { code: -1 }), out);
+            send(
+                Packet::new(number, Message::UnknownCommand { command }),
+                out,
+            );
         }
     }
 

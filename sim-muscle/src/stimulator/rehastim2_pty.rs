@@ -356,9 +356,9 @@ pub fn run_rehastim2_until(
                                 summary.packets_rx += 1;
                                 device.on_packet(p, &mut out);
                             }
-                            Err(DecodeError::UnknownCommand { .. }) => {
+                            Err(DecodeError::UnknownCommand { number, command }) => {
                                 summary.bad_packets += 1;
-                                device.on_unknown_command(&mut out);
+                                device.on_unknown_command(number, command, &mut out);
                             }
                             Err(e) => {
                                 summary.bad_packets += 1;
