@@ -250,7 +250,11 @@ impl Receiver {
                 if !link.handshake_done() {
                     return;
                 }
-                let channel_list = mode == Some(StimulationMode::Started);
+                // §3.6 Fig. 4: the driver's SinglePulse is accepted only in the start
+                // mode; initialised or started, the device is in channel list mode, which
+                // the driver never enters: no configuration shows, so no Arm, and a
+                // disarmed driver stops it.
+                let channel_list = mode != Some(StimulationMode::Start);
                 self.state = if channel_list {
                     StimState::Stimulating
                 } else {
@@ -506,10 +510,16 @@ mod tests {
         link.init_acknowledged();
         link.config_written(4);
         let mut r = Receiver::new(StimLimits::DEFAULT);
-        let e = run(&mut r, &link, mode_ack(StimulationMode::Started));
-        assert_eq!(e.len(), 1, "{e:?}");
-        let s = status(&e);
-        assert_eq!((s.state, s.config_id), (StimState::Stimulating, 0));
+        for mode in [StimulationMode::Started, StimulationMode::Initialised] {
+            let e = run(&mut r, &link, mode_ack(mode));
+            assert_eq!(e.len(), 1, "{e:?}");
+            let s = status(&e);
+            assert_eq!(
+                (s.state, s.config_id),
+                (StimState::Stimulating, 0),
+                "{mode:?}"
+            );
+        }
         // 130 mA: more than the device's 126 mA. Never read back, never confirmed.
         let wide = StimLimits {
             max_amplitude_100ua: 1300,

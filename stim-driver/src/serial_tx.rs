@@ -12,8 +12,9 @@
 //! | NMT start | nothing (the device has no armed state: a pulse is a command) |
 //! | CONFIG | nothing (the device's limits are fixed; the driver's interlocks apply the configured ones before a PULSE exists) |
 //!
-//! A pulse the device cannot carry exactly (a channel above 8, an amplitude that is not a
-//! whole mA or above 126 mA, a width above 500 us) is never rounded: the write fails with
+//! A pulse the device cannot carry exactly (a channel above 8, an amplitude that is not an
+//! even number of mA, the device generating currents in 2 mA steps, or above 126 mA, a width
+//! above 500 us) is never rounded: the write fails with
 //! `EINVAL`, which trips an armed driver ([`crate::forward`]). Writes are allocation-free
 //! (a stack buffer), non-blocking with the same bounded retry as the CAN socket, and
 //! complete: a packet the line only partly took is finished within the retry budget (a
@@ -55,7 +56,9 @@ pub fn translate(nodes: &Nodes, frame: &Frame) -> Result<Option<Message>, TxErro
         CanMessage::Pulse(p) => {
             let current_ma = p.amplitude_100ua / 10;
             if p.channel >= CHANNELS
-                || !p.amplitude_100ua.is_multiple_of(10)
+                // 2 mA steps (HASOMED: 0-126 mA in 2 mA steps): an odd mA would be
+                // delivered as a neighbour; refused instead of rounded.
+                || !p.amplitude_100ua.is_multiple_of(20)
                 || current_ma > u16::from(MAX_CURRENT_MA)
                 || p.width_us > MAX_PULSE_WIDTH_US
             {
@@ -367,9 +370,11 @@ mod tests {
         let invalid = Err(TxError::Failed {
             errno: libc::EINVAL,
         });
-        // 20.5 mA (not a whole mA), 127 mA, 501 us, channel 9 (index 8).
+        // 20.5 mA (not a whole mA), 21 mA (odd: the device's steps are 2 mA), 127 mA,
+        // 501 us, channel 9 (index 8).
         for f in [
             pulse(0, 205, 200),
+            pulse(0, 210, 200),
             pulse(0, 1270, 200),
             pulse(0, 200, 501),
             pulse(8, 200, 200),

@@ -36,11 +36,12 @@ pub struct Rehastim2Args {
     /// Write every pulse and event to this CSV file.
     #[arg(long)]
     pub pulse_log: Option<PathBuf>,
-    /// The device's watchdog: channel list mode stops after this much silence from the
-    /// host, ms.
+    /// The device's watchdog (§2.3: 1200 ms): after this much silence from the host,
+    /// stimulation stops, every mode is reset and the device announces Init again, ms.
     #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.watchdog_ms)]
     pub watchdog_ms: u16,
-    /// Period of the Init announcement until the host answers, ms.
+    /// Period of the Init announcement until the host answers, ms (§2.3
+    /// InitRepetitionTime: 500).
     #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.init_period_ms)]
     pub init_period_ms: u16,
     /// The channel (1..=8) whose muscle the plant models; pulses on others are logged only.
@@ -58,6 +59,10 @@ pub struct Rehastim2Args {
     /// error), `silent:N` (nothing answered from that pulse on).
     #[arg(long, value_name = "KIND:N")]
     pub test_fault: Option<TestFault>,
+    /// A MOTOmed attached: send ActualValues every 20 ms once connected (§2.3, §4.4), as
+    /// a real RehaStim 2 does unasked.
+    #[arg(long)]
+    pub motomed: bool,
     /// Publish the muscle's force every tick as iceoryx2 ForceSamples under this service
     /// prefix, as the rig's separate force sensor would (a RehaStim 2 measures no force;
     /// on CAN the driver publishes the stimulator's FORCE frames). Needs `--force-max-n`.
@@ -141,6 +146,7 @@ impl Rehastim2Args {
             muscle_channel: self.muscle_channel,
             test_fault: self.test_fault,
             latency_ms: self.latency_ms,
+            motomed_actual_values: self.motomed,
         })
     }
 
@@ -390,7 +396,7 @@ pub fn run_rehastim2_until(
             match e {
                 Event::Pulse { .. } => summary.pulses += 1,
                 Event::WatchdogExpired { silent_ms, .. } => tracing::warn!(
-                    "watchdog: {silent_ms} ms without a packet from the host, channel list mode stopped"
+                    "watchdog: {silent_ms} ms without a packet from the host: stimulation stopped, modes reset, Init again"
                 ),
                 Event::BadPacket { error, .. } => tracing::warn!("bad packet: {error}"),
             }
@@ -460,6 +466,7 @@ mod tests {
             duration_s: Some(20.0),
             test_fault: None,
             latency_ms: 0,
+            motomed: false,
             force_prefix: None,
             force_max_n: None,
         };
