@@ -279,6 +279,21 @@ pub fn open_serial(path: &Path) -> io::Result<File> {
     Ok(port)
 }
 
+/// The latency timer of the FTDI USB-serial converter behind `device`, ms, read from
+/// sysfs under `sys_root` (`/sys`): `class/tty/<ttyUSBn>/device/latency_timer`, `device`'s
+/// symbolic links (a udev name such as `/dev/rehastim2`) followed. `None` when there is no
+/// such file (not an FTDI adapter, a pty). The protocol description asks for 1 ms (§2.1);
+/// the driver's default of 16 ms would hold each of the device's answers up to that long.
+pub fn ftdi_latency_timer_ms(sys_root: &Path, device: &Path) -> Option<u32> {
+    let real = std::fs::canonicalize(device).ok()?;
+    let name = real.file_name()?;
+    let path = sys_root
+        .join("class/tty")
+        .join(name)
+        .join("device/latency_timer");
+    std::fs::read_to_string(path).ok()?.trim().parse().ok()
+}
+
 /// Whether `port` is a pseudo-terminal's slave (`/dev/pts/N`).
 fn is_pty(port: &File) -> bool {
     nix::unistd::ttyname(port).is_ok_and(|p| p.starts_with("/dev/pts/"))
@@ -530,6 +545,33 @@ mod tests {
             tx.send(&pulse(0, 200, 200)),
             Err(TxError::Failed { errno: libc::EIO })
         );
+    }
+
+    #[test]
+    fn the_ftdi_latency_timer_is_read_through_the_udev_name() {
+        // §2.1: the FTDI latency timer should be 1 ms. A fake sysfs and /dev.
+        let dir = std::env::temp_dir().join(format!("ftdi-latency-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let timer = dir.join("sys/class/tty/ttyUSB7/device");
+        std::fs::create_dir_all(&timer).unwrap();
+        std::fs::create_dir_all(dir.join("dev")).unwrap();
+        std::fs::write(dir.join("dev/ttyUSB7"), b"").unwrap();
+        std::os::unix::fs::symlink(dir.join("dev/ttyUSB7"), dir.join("dev/rehastim2")).unwrap();
+        std::fs::write(timer.join("latency_timer"), b"16\n").unwrap();
+        let sys = dir.join("sys");
+        assert_eq!(
+            ftdi_latency_timer_ms(&sys, &dir.join("dev/rehastim2")),
+            Some(16)
+        );
+        std::fs::write(timer.join("latency_timer"), b"1\n").unwrap();
+        assert_eq!(
+            ftdi_latency_timer_ms(&sys, &dir.join("dev/ttyUSB7")),
+            Some(1)
+        );
+        // No such adapter (a pty, another converter): nothing to say.
+        std::fs::write(dir.join("dev/ttyS0"), b"").unwrap();
+        assert_eq!(ftdi_latency_timer_ms(&sys, &dir.join("dev/ttyS0")), None);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
