@@ -61,7 +61,19 @@ pub struct Rehastim2Settings {
     pub latency_ms: u16,
     /// A MOTOmed attached: the device sends ActualValues every 20 ms once connected.
     pub motomed_actual_values: bool,
+    /// The device's mean time to process a command, ms (0: off, the command is acted on
+    /// as [`Self::latency_ms`] says). §2.3: responses take up to 100 ms (MaxResponseTime),
+    /// on average under 20 ms. When on, each command that has an acknowledgement takes
+    /// 0.5..1.5 x this mean, or [`SLOW_PROCESSING_MS`] for [`SLOW_PROCESSING_PERCENT`] % of
+    /// them, and is answered when done; a command arriving meanwhile is answered with -8
+    /// busy (§5.1: "RehaStim2 is currently processing the last command").
+    pub processing_mean_ms: u16,
 }
+
+/// The slow share of commands when [`Rehastim2Settings::processing_mean_ms`] is on, %.
+pub const SLOW_PROCESSING_PERCENT: u64 = 3;
+/// A slow command's processing time, ms (§2.3 MaxResponseTime).
+pub const SLOW_PROCESSING_MS: u64 = 100;
 
 /// The ActualValues interval with a MOTOmed attached, ms (§2.3 ActualValuesInterval).
 pub const ACTUAL_VALUES_INTERVAL_MS: u64 = 20;
@@ -122,6 +134,7 @@ impl Rehastim2Settings {
         test_fault: None,
         latency_ms: 0,
         motomed_actual_values: false,
+        processing_mean_ms: 0,
     };
 }
 
@@ -208,6 +221,14 @@ pub struct Rehastim2 {
     silent: bool,
     /// Packets waiting out the latency: (tick due, packet).
     pending: VecDeque<(u64, Packet)>,
+    /// Processing a command until this tick ([`Rehastim2Settings::processing_mean_ms`]).
+    busy_until: u64,
+    /// Pseudo-random state for the processing times (xorshift64).
+    rng: u64,
+    /// -8 busy acknowledgements sent.
+    busy_sent: u64,
+    /// -3 wrong-mode acknowledgements sent.
+    wrong_mode_sent: u64,
 }
 
 impl Rehastim2 {
@@ -233,6 +254,34 @@ impl Rehastim2 {
             single_pulses: 0,
             silent: false,
             pending: VecDeque::with_capacity(256),
+            busy_until: 0,
+            rng: 0x9E37_79B9_7F4A_7C15,
+            busy_sent: 0,
+            wrong_mode_sent: 0,
+        }
+    }
+
+    /// -8 busy acknowledgements the device has sent (a host that waits for each answer
+    /// provokes none).
+    pub const fn busy_sent(&self) -> u64 {
+        self.busy_sent
+    }
+
+    /// -3 wrong-mode acknowledgements the device has sent.
+    pub const fn wrong_mode_sent(&self) -> u64 {
+        self.wrong_mode_sent
+    }
+
+    /// The processing time of the next command, ticks.
+    fn draw_processing_ticks(&mut self) -> u64 {
+        self.rng ^= self.rng << 13;
+        self.rng ^= self.rng >> 7;
+        self.rng ^= self.rng << 17;
+        let mean = u64::from(self.settings.processing_mean_ms);
+        if self.rng % 100 < SLOW_PROCESSING_PERCENT {
+            SLOW_PROCESSING_MS
+        } else {
+            (mean / 2 + (self.rng >> 8) % (mean + 1)).max(1)
         }
     }
 
@@ -273,6 +322,23 @@ impl Rehastim2 {
     pub fn on_packet(&mut self, packet: Packet, out: &mut Vec<u8>) {
         // Any packet is a sign of life, at once.
         self.watchdog.feed(self.now_ns());
+        if self.settings.processing_mean_ms > 0
+            && self.connected
+            && let Some(busy) = busy_ack(&packet.message)
+        {
+            if self.tick < self.busy_until {
+                // §5.1 -8: still processing the last command.
+                self.busy_sent += 1;
+                send(Packet::new(packet.number, busy), out);
+                return;
+            }
+            // Answered in the tick that ends the processing time (the packet arrived
+            // during this tick, before it ran); busy until then.
+            let ticks = self.draw_processing_ticks();
+            self.busy_until = self.tick + ticks;
+            self.pending.push_back((self.tick + ticks - 1, packet));
+            return;
+        }
         if self.settings.latency_ms > 0 {
             let due = self.tick + u64::from(self.settings.latency_ms);
             self.pending.push_back((due, packet));
@@ -376,6 +442,9 @@ impl Rehastim2 {
             }),
         };
         if let Some(message) = reply {
+            if message.ack_result() == Some(AckResult::WrongModeError) {
+                self.wrong_mode_sent += 1;
+            }
             send(Packet::new(number, message), out);
         }
     }
@@ -577,6 +646,20 @@ impl Rehastim2 {
         self.force_n = plant.step(applied);
         self.tick += 1;
     }
+}
+
+/// The -8 busy acknowledgement of a host command that has one (`None`: Watchdog, InitAck
+/// and anything a host does not send).
+fn busy_ack(m: &Message) -> Option<Message> {
+    let result = AckResult::BusyError;
+    Some(match m {
+        Message::GetStimulationMode => Message::GetStimulationModeAck { result, mode: None },
+        Message::InitChannelListMode(_) => Message::InitChannelListModeAck { result },
+        Message::StartChannelListMode(_) => Message::StartChannelListModeAck { result },
+        Message::StopChannelListMode => Message::StopChannelListModeAck { result },
+        Message::SinglePulse(_) => Message::SinglePulseAck { result },
+        _ => return None,
+    })
 }
 
 /// The current the device generates for a requested `current_ma`: its output steps are
@@ -959,6 +1042,70 @@ mod tests {
         out.clear();
         d.on_packet(Packet::new(9, Message::GetStimulationMode), &mut out);
         assert!(out.is_empty());
+    }
+
+    #[test]
+    fn while_processing_a_command_the_device_answers_busy() {
+        // §2.3: responses within 100 ms, on average under 20 ms; §5.1 -8 "currently
+        // processing the last command. Wait for the response packet."
+        let (mut d, mut plant) = connected();
+        d.settings.processing_mean_ms = 10;
+        let mut out = Vec::new();
+        let single = |n| {
+            Packet::new(
+                n,
+                Message::SinglePulse(SinglePulse {
+                    channel: 0,
+                    pulse_width_us: 200,
+                    current_ma: 20,
+                }),
+            )
+        };
+        d.on_packet(single(1), &mut out);
+        assert!(out.is_empty(), "answered when processed");
+        // A second command at once: busy, answered with -8 and its number.
+        d.on_packet(single(2), &mut out);
+        assert_eq!(
+            decode(&out),
+            [Packet::new(
+                2,
+                Message::SinglePulseAck {
+                    result: AckResult::BusyError
+                }
+            )]
+        );
+        out.clear();
+        // A Watchdog has no answer: never busy.
+        d.on_packet(Packet::new(3, Message::Watchdog), &mut out);
+        assert!(out.is_empty());
+        let mut waited = 0;
+        while out.is_empty() {
+            d.tick(&mut plant, &mut out);
+            waited += 1;
+            assert!(waited <= 100, "MaxResponseTime");
+        }
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        assert_eq!(d.busy_sent(), 1);
+        // A host that waits for each answer provokes no -8: 200 commands, each sent once
+        // the previous one was answered. Processing times: 5..15 ms, some 100 ms.
+        let mut times = Vec::new();
+        for n in 0..200u8 {
+            out.clear();
+            d.on_packet(single(n), &mut out);
+            let mut t = 0;
+            while out.is_empty() {
+                d.tick(&mut plant, &mut out);
+                t += 1;
+            }
+            assert_eq!(ack_of(&out), AckResult::Ok);
+            times.push(t);
+        }
+        assert_eq!(d.busy_sent(), 1);
+        assert!(times.iter().all(|&t| t <= 100), "{times:?}");
+        let mean = times.iter().sum::<u64>() as f64 / times.len() as f64;
+        assert!((8.0..20.0).contains(&mean), "mean {mean} ms: {times:?}");
+        assert!(times.contains(&100), "some slow commands");
+        assert_eq!(d.wrong_mode_sent(), 0);
     }
 
     #[test]

@@ -63,6 +63,11 @@ pub struct Rehastim2Args {
     /// a real RehaStim 2 does unasked.
     #[arg(long)]
     pub motomed: bool,
+    /// The device's mean time to process a command, ms (0: off). Each command with an
+    /// acknowledgement then takes 0.5..1.5 x this, a few per cent 100 ms (§2.3), and a
+    /// command arriving meanwhile is answered -8 busy (§5.1).
+    #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.processing_mean_ms)]
+    pub processing_ms: u16,
     /// Publish the muscle's force every tick as iceoryx2 ForceSamples under this service
     /// prefix, as the rig's separate force sensor would (a RehaStim 2 measures no force;
     /// on CAN the driver publishes the stimulator's FORCE frames). Needs `--force-max-n`.
@@ -147,6 +152,7 @@ impl Rehastim2Args {
             test_fault: self.test_fault,
             latency_ms: self.latency_ms,
             motomed_actual_values: self.motomed,
+            processing_mean_ms: self.processing_ms,
         })
     }
 
@@ -228,6 +234,10 @@ pub struct PtyRunSummary {
     pub pulses: u64,
     /// Answer bytes dropped because the pty's buffer was full (nobody reading).
     pub tx_dropped: u64,
+    /// -8 busy acknowledgements sent (§5.1).
+    pub busy_sent: u64,
+    /// -3 wrong-mode acknowledgements sent.
+    pub wrong_mode_sent: u64,
 }
 
 /// The pty pair, the slave side configured as the device's serial line.
@@ -392,6 +402,8 @@ pub fn run_rehastim2_until(
             out.clear();
         }
         let mut wrote = false;
+        summary.busy_sent = device.busy_sent();
+        summary.wrong_mode_sent = device.wrong_mode_sent();
         for e in device.drain_events() {
             match e {
                 Event::Pulse { .. } => summary.pulses += 1,
@@ -467,6 +479,7 @@ mod tests {
             test_fault: None,
             latency_ms: 0,
             motomed: false,
+            processing_ms: 0,
             force_prefix: None,
             force_max_n: None,
         };

@@ -67,6 +67,7 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
         test_fault: None,
         latency_ms: 0,
         motomed: false,
+        processing_ms: 0,
         force_prefix: None,
         force_max_n: None,
     };

@@ -87,6 +87,7 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
         test_fault: None,
         latency_ms: 0,
         motomed: false,
+        processing_ms: 0,
         force_prefix: None,
         force_max_n: None,
     };

@@ -60,6 +60,7 @@ impl Device {
             test_fault,
             latency_ms,
             motomed,
+            processing_ms: 0,
             force_prefix: None,
             force_max_n: None,
         };
