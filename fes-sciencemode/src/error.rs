@@ -43,9 +43,8 @@ pub enum DecodeError {
         /// CRC-8 of the data received.
         computed: u8,
     },
-    /// Byte stuffing is violated (§2.2): a stuffing byte at the end of the data or before a
-    /// byte that does not unstuff to one of the five special bytes, or a special byte sent
-    /// unstuffed.
+    /// Byte stuffing is violated (§2.2): a stuffing byte at the end of the packet data, with
+    /// no byte after it to un-stuff.
     #[error("bad byte stuffing at data byte {position} ({byte:#04x})")]
     BadStuffing {
         /// Position among the stuffed data bytes.
@@ -59,10 +58,14 @@ pub enum DecodeError {
         /// Unstuffed data bytes.
         len: u8,
     },
-    /// The command identifier is not one of the stimulation commands this codec implements
-    /// (the MOTOmed commands 50..=90 included).
-    #[error("unknown command {command}")]
+    /// The command identifier is not one this codec decodes (the MOTOmed commands and
+    /// their acknowledgements, §3.4, other than the information packets, and any number
+    /// the protocol does not define).
+    #[error("packet {number}: unknown command {command}")]
     UnknownCommand {
+        /// The packet number (a device answers an unknown command with UnknownCommand
+        /// echoing it, §4.1).
+        number: u8,
         /// The command byte.
         command: u8,
     },

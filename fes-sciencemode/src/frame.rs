@@ -5,10 +5,15 @@
 //! start stuff checksum       stuff length       number command data       stop
 //! ```
 //!
-//! * Byte stuffing: in the packet data each of the five special bytes 0xF0 (start), 0x0F
-//!   (stop), 0x81 (stuffing byte), 0x55 (stuffing key) and 0x0A is sent as the stuffing
-//!   byte 0x81 followed by the byte XOR the stuffing key 0x55. The checksum and the length
-//!   are always sent that way, whatever their value, so their positions are fixed.
+//! * Byte stuffing: "every constant from Table 6, except the stuffing key, is escaped with
+//!   the stuffing byte" (§2.2): in the packet data each of the three special bytes 0xF0
+//!   (start), 0x0F (stop) and 0x81 (stuffing byte) is sent as the stuffing byte 0x81
+//!   followed by the byte XOR the stuffing key 0x55. The stuffing key 0x55 itself, and 0x0A,
+//!   go out as they are. The checksum and the length are always sent that way, whatever
+//!   their value, so their positions are fixed.
+//! * The decoder un-stuffs generically: 0x81 followed by any byte is that byte XOR 0x55, so
+//!   it reads both the device's form and the one pyScienceMode 1.1.5 sends (which also
+//!   stuffs 0x55 and 0x0A); every other byte, 0x55 and 0x0A included, is data as it is.
 //! * The checksum is the CRC-8 (polynomial 0x07, initial value 0, no reflection, no final
 //!   XOR) of the packet data as sent (stuffed); the length is the number of packet data
 //!   bytes as sent.
@@ -37,12 +42,10 @@ pub const HEADER_LEN: usize = 5;
 /// The most stuffed packet data bytes of one packet.
 pub const MAX_DATA_LEN: usize = MAX_PACKET_LEN - HEADER_LEN - 1;
 
-/// Whether `b` must be stuffed in packet data.
+/// Whether `b` must be stuffed in packet data: the constants of Table 6 except the
+/// stuffing key (§2.2), i.e. 0xF0, 0x0F and 0x81.
 pub const fn is_special(b: u8) -> bool {
-    matches!(
-        b,
-        START_BYTE | STOP_BYTE | STUFFING_BYTE | STUFFING_KEY | 0x0A
-    )
+    matches!(b, START_BYTE | STOP_BYTE | STUFFING_BYTE)
 }
 
 const CRC8_TABLE: [u8; 256] = {
@@ -281,21 +284,15 @@ impl Decoder {
             let b = stuffed[i];
             let position = i as u8;
             let value = if b == STUFFING_BYTE {
+                // §2.2: the stuffing byte escapes the next byte, which is sent XOR the key.
+                // Any byte is un-stuffed (the device escapes only 0xF0, 0x0F and 0x81; a
+                // host such as pyScienceMode also escapes 0x55 and 0x0A).
                 let next = stuffed
                     .get(i + 1)
                     .copied()
                     .ok_or(DecodeError::BadStuffing { position, byte: b })?;
-                let v = next ^ STUFFING_KEY;
-                if !is_special(v) {
-                    return Err(DecodeError::BadStuffing {
-                        position: position + 1,
-                        byte: next,
-                    });
-                }
                 i += 2;
-                v
-            } else if is_special(b) {
-                return Err(DecodeError::BadStuffing { position, byte: b });
+                next ^ STUFFING_KEY
             } else {
                 i += 1;
                 b
@@ -309,7 +306,13 @@ impl Decoder {
         };
         Ok(Packet {
             number: *number,
-            message: Message::decode(*command, rest)?,
+            message: Message::decode(*command, rest).map_err(|e| match e {
+                DecodeError::UnknownCommand { command, .. } => DecodeError::UnknownCommand {
+                    number: *number,
+                    command,
+                },
+                other => other,
+            })?,
         })
     }
 }

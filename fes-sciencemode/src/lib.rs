@@ -50,7 +50,7 @@ pub use frame::{
 };
 pub use message::{
     AckResult, ChannelListInit, ChannelListUpdate, ChannelPulse, Command, Message, Packet,
-    PulseMode, SinglePulse, StimulationError, StimulationMode,
+    PhaseResult, PulseMode, SinglePulse, StimulationError, StimulationMode,
 };
 
 /// The serial line's baud rate (§2.1): 460 800 baud, 8 data bits, even parity, one stop bit,

@@ -12,8 +12,10 @@ pub const MAX_COMMAND_DATA: usize = 32;
 
 /// Command identifiers (the command byte of §2.2), for the commands this codec implements.
 ///
-/// The MOTOmed commands (50..=90) exist in the protocol but are not used by the controller;
-/// the decoder reports them as [`DecodeError::UnknownCommand`].
+/// The MOTOmed commands (50..=90, §3.4) are not used by the controller. The ones a device
+/// sends unasked with a MOTOmed attached (the information packets of §3.5: PhaseResult,
+/// ActualValues every 20 ms, MotomedCommandDone, MotomedError) are decoded, so that a host
+/// can skip them; the decoder reports the others as [`DecodeError::UnknownCommand`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum Command {
@@ -47,6 +49,15 @@ pub enum Command {
     SinglePulseAck = 37,
     /// Device → host, unsolicited: the stimulation failed (§4.3).
     StimulationError = 38,
+    /// Device → host, unsolicited: the results of the last MOTOmed phase (§4.4).
+    PhaseResult = 58,
+    /// Device → host, unsolicited, every 20 ms with a MOTOmed (§2.3 ActualValuesInterval,
+    /// §4.4): crank angle, speed and torque.
+    ActualValues = 60,
+    /// Device → host, unsolicited: the last MOTOmed command is done (§4.4).
+    MotomedCommandDone = 89,
+    /// Device → host, unsolicited: a MOTOmed error (§4.4).
+    MotomedError = 90,
 }
 
 impl Command {
@@ -67,6 +78,10 @@ impl Command {
         Command::SinglePulse,
         Command::SinglePulseAck,
         Command::StimulationError,
+        Command::PhaseResult,
+        Command::ActualValues,
+        Command::MotomedCommandDone,
+        Command::MotomedError,
     ];
 
     /// The command with identifier `id`, if this codec implements it.
@@ -321,22 +336,24 @@ pub enum Message {
         /// The host's verdict.
         result: AckResult,
     },
-    /// Device → host: a command was not recognised.
+    /// Device → host: a command was not recognised (§4.1). Carries the packet number of
+    /// the packet it answers, like any acknowledgement.
     UnknownCommand {
-        /// The error code the device sends.
-        code: i8,
+        /// The command byte the device did not recognise, echoed.
+        command: u8,
     },
     /// Host → device: keep-alive. The device stops stimulating when the host sends nothing
     /// for too long (`docs/sciencemode.md`, "Watchdog").
     Watchdog,
     /// Host → device: ask for the stimulation mode.
     GetStimulationMode,
-    /// Device → host: the stimulation mode.
+    /// Device → host: the stimulation mode. §4.2: when the result is not 0 (transfer
+    /// error, busy) the acknowledgement carries the result only, and no mode.
     GetStimulationModeAck {
         /// Whether the request was served.
         result: AckResult,
-        /// The mode.
-        mode: StimulationMode,
+        /// The mode; `None` in an error acknowledgement.
+        mode: Option<StimulationMode>,
     },
     /// Host → device: initialise channel list mode.
     InitChannelListMode(ChannelListInit),
@@ -371,6 +388,55 @@ pub enum Message {
         /// What failed.
         error: StimulationError,
     },
+    /// Device → host, unsolicited (MOTOmed): the results of the last phase (§4.4).
+    PhaseResult(PhaseResult),
+    /// Device → host, unsolicited every 20 ms (MOTOmed, §4.4). Values MSB first.
+    ActualValues {
+        /// Crank angle, degrees from the 12 o'clock position of the left crank.
+        angle_deg: u16,
+        /// Speed, rpm; positive forward, negative backward.
+        speed_rpm: i16,
+        /// Torque, dNm; positive active, negative passive.
+        torque_dnm: i16,
+    },
+    /// Device → host, unsolicited (MOTOmed, §4.4): the last MOTOmed command is done.
+    MotomedCommandDone {
+        /// The result (0: done).
+        result: AckResult,
+    },
+    /// Device → host, unsolicited (MOTOmed, §4.4): -4 MOTOmed connection error, -6 invalid
+    /// MOTOmed trainer.
+    MotomedError {
+        /// The error code.
+        code: i8,
+    },
+}
+
+/// PhaseResult's data (§4.4): the results of the last MOTOmed phase. Values MSB first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct PhaseResult {
+    /// Phase counter.
+    pub phase_counter: u8,
+    /// Passive distance, in units of 10 m.
+    pub passive_distance_10m: u16,
+    /// Active distance, in units of 10 m.
+    pub active_distance_10m: u16,
+    /// Average power, W.
+    pub average_power_w: u8,
+    /// Maximum power, W.
+    pub maximum_power_w: u8,
+    /// Phase duration, s.
+    pub phase_duration_s: u16,
+    /// Active phase duration, s.
+    pub active_phase_duration_s: u16,
+    /// Phase work, J.
+    pub phase_work_j: u16,
+    /// Success value, %.
+    pub success_percent: u8,
+    /// Symmetry (left), %.
+    pub symmetry_left_percent: u8,
+    /// Average muscle tone, dNm.
+    pub average_muscle_tone_dnm: u8,
 }
 
 /// Writes command data into a small stack buffer.
@@ -402,6 +468,12 @@ impl DataWriter {
         self.push(lo);
     }
 
+    fn push_i16(&mut self, v: i16) {
+        let [hi, lo] = v.to_be_bytes();
+        self.push(hi);
+        self.push(lo);
+    }
+
     fn push_i8(&mut self, v: i8) {
         self.push(v.to_be_bytes()[0]);
     }
@@ -426,7 +498,24 @@ impl Message {
             Message::SinglePulse(_) => Command::SinglePulse,
             Message::SinglePulseAck { .. } => Command::SinglePulseAck,
             Message::StimulationError { .. } => Command::StimulationError,
+            Message::PhaseResult(_) => Command::PhaseResult,
+            Message::ActualValues { .. } => Command::ActualValues,
+            Message::MotomedCommandDone { .. } => Command::MotomedCommandDone,
+            Message::MotomedError { .. } => Command::MotomedError,
         }
+    }
+
+    /// Whether this is one of the information packets a device sends unasked with a
+    /// MOTOmed attached (§3.5: PhaseResult, ActualValues, MotomedCommandDone,
+    /// MotomedError). They carry the device's own packet number and answer no command.
+    pub const fn is_motomed_information(&self) -> bool {
+        matches!(
+            self,
+            Message::PhaseResult(_)
+                | Message::ActualValues { .. }
+                | Message::MotomedCommandDone { .. }
+                | Message::MotomedError { .. }
+        )
     }
 
     /// The acknowledgement's result, for the device's answers that carry one.
@@ -445,7 +534,7 @@ impl Message {
     fn write_data(&self, w: &mut DataWriter) {
         match *self {
             Message::Init { version } => w.push(version),
-            Message::UnknownCommand { code } => w.push_i8(code),
+            Message::UnknownCommand { command } => w.push(command),
             Message::InitAck { result }
             | Message::InitChannelListModeAck { result }
             | Message::StartChannelListModeAck { result }
@@ -453,7 +542,9 @@ impl Message {
             | Message::SinglePulseAck { result } => w.push_i8(result.code()),
             Message::GetStimulationModeAck { result, mode } => {
                 w.push_i8(result.code());
-                w.push(mode as u8);
+                if let Some(mode) = mode {
+                    w.push(mode as u8);
+                }
             }
             Message::Watchdog | Message::GetStimulationMode | Message::StopChannelListMode => {}
             Message::InitChannelListMode(i) => {
@@ -477,12 +568,37 @@ impl Message {
                 w.push(p.current_ma);
             }
             Message::StimulationError { error } => w.push_i8(error.code()),
+            Message::PhaseResult(r) => {
+                w.push(r.phase_counter);
+                w.push_u16(r.passive_distance_10m);
+                w.push_u16(r.active_distance_10m);
+                w.push(r.average_power_w);
+                w.push(r.maximum_power_w);
+                w.push_u16(r.phase_duration_s);
+                w.push_u16(r.active_phase_duration_s);
+                w.push_u16(r.phase_work_j);
+                w.push(r.success_percent);
+                w.push(r.symmetry_left_percent);
+                w.push(r.average_muscle_tone_dnm);
+            }
+            Message::ActualValues {
+                angle_deg,
+                speed_rpm,
+                torque_dnm,
+            } => {
+                w.push_u16(angle_deg);
+                w.push_i16(speed_rpm);
+                w.push_i16(torque_dnm);
+            }
+            Message::MotomedCommandDone { result } => w.push_i8(result.code()),
+            Message::MotomedError { code } => w.push_i8(code),
         }
     }
 
     /// Decodes `command`'s `data` (unstuffed).
     pub fn decode(command: u8, data: &[u8]) -> Result<Message, DecodeError> {
-        let command = Command::from_id(command).ok_or(DecodeError::UnknownCommand { command })?;
+        let command =
+            Command::from_id(command).ok_or(DecodeError::UnknownCommand { number: 0, command })?;
         let expect = |n: u8| -> Result<(), DecodeError> {
             if data.len() == usize::from(n) {
                 Ok(())
@@ -509,7 +625,7 @@ impl Message {
             }
             Command::UnknownCommand => {
                 expect(1)?;
-                Message::UnknownCommand { code: signed(0) }
+                Message::UnknownCommand { command: byte(0) }
             }
             Command::Watchdog => {
                 expect(0)?;
@@ -520,6 +636,14 @@ impl Message {
                 Message::GetStimulationMode
             }
             Command::GetStimulationModeAck => {
+                // §4.2: "if Result != 0, then byte 8 = stop byte": an error acknowledgement
+                // carries the result only.
+                if data.len() == 1 && !result(0).is_ok() {
+                    return Ok(Message::GetStimulationModeAck {
+                        result: result(0),
+                        mode: None,
+                    });
+                }
                 expect(2)?;
                 let mode = StimulationMode::from_byte(byte(1)).ok_or(DecodeError::BadField {
                     command,
@@ -528,7 +652,7 @@ impl Message {
                 })?;
                 Message::GetStimulationModeAck {
                     result: result(0),
-                    mode,
+                    mode: Some(mode),
                 }
             }
             Command::InitChannelListMode => {
@@ -602,6 +726,38 @@ impl Message {
                 Message::StimulationError {
                     error: StimulationError::from_code(signed(0)),
                 }
+            }
+            Command::PhaseResult => {
+                expect(16)?;
+                Message::PhaseResult(PhaseResult {
+                    phase_counter: byte(0),
+                    passive_distance_10m: word(1),
+                    active_distance_10m: word(3),
+                    average_power_w: byte(5),
+                    maximum_power_w: byte(6),
+                    phase_duration_s: word(7),
+                    active_phase_duration_s: word(9),
+                    phase_work_j: word(11),
+                    success_percent: byte(13),
+                    symmetry_left_percent: byte(14),
+                    average_muscle_tone_dnm: byte(15),
+                })
+            }
+            Command::ActualValues => {
+                expect(6)?;
+                Message::ActualValues {
+                    angle_deg: word(0),
+                    speed_rpm: i16::from_be_bytes([byte(2), byte(3)]),
+                    torque_dnm: i16::from_be_bytes([byte(4), byte(5)]),
+                }
+            }
+            Command::MotomedCommandDone => {
+                expect(1)?;
+                Message::MotomedCommandDone { result: result(0) }
+            }
+            Command::MotomedError => {
+                expect(1)?;
+                Message::MotomedError { code: signed(0) }
             }
         };
         Ok(message)

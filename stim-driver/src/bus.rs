@@ -145,6 +145,10 @@ pub struct BusCounters {
     pub own_echoes: AtomicU64,
     /// Frames on the driver's own identifiers that it did not write.
     pub intrusions: AtomicU64,
+    /// ScienceMode only: information packets a RehaStim 2 sends unasked with a MOTOmed
+    /// attached (ActualValues every 20 ms, PhaseResult, MotomedCommandDone, MotomedError;
+    /// §3.5 of the protocol description), decoded and skipped.
+    pub information_packets: AtomicU64,
 }
 
 impl BusCounters {

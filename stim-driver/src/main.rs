@@ -30,7 +30,7 @@ use stim_driver::report::{ReportOutcome, run_report};
 use stim_driver::runner::{ForwardOutcome, Shared, run_forward};
 use stim_driver::safe_stop::safe_stop;
 use stim_driver::serial_rx::{SerialRxSettings, run_serial_rx};
-use stim_driver::serial_tx::{ScienceModeTx, open_serial};
+use stim_driver::serial_tx::{ScienceModeTx, ftdi_latency_timer_ms, open_serial};
 use stim_driver::tx::BusTx;
 use stim_driver::txstamp::{self, TxStampReader};
 use tracing::{error, info, warn};
@@ -352,6 +352,17 @@ impl Outputs {
                 "ScienceMode 2 on {} (a Hasomed RehaStim 2; docs/sciencemode.md)",
                 device.display()
             );
+            // §2.1 of the protocol description: the adapter's latency timer at 1 ms.
+            if let Some(ms) = ftdi_latency_timer_ms(std::path::Path::new("/sys"), device)
+                && ms > 1
+            {
+                warn!(
+                    "{}: FTDI latency timer {ms} ms, the protocol description asks for 1 ms \
+                     (§2.1): the device's answers wait up to {ms} ms in the adapter \
+                     (docs/deployment.md, the udev rule's latency_timer)",
+                    device.display()
+                );
+            }
             let outputs = Self {
                 tx: BusTx::Serial(tx),
                 stamps: None,

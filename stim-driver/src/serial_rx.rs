@@ -12,7 +12,8 @@
 //! | GetStimulationModeAck (the liveness query the transmit side sends in place of every `poll`-th Watchdog) | [`BusEvent::Status`]: `pulses_delivered` = SinglePulse acknowledgements with result 0 so far, `state` from the NMT state the driver commanded (channel list mode running: `Stimulating`), `config_id` = the driver's last CONFIG id once the handshake is done and the device is not in channel list mode (0 otherwise) |
 //! | the same, the first time a configuration id shows | [`BusEvent::ConfigApplied`], the driver's configured limits, only when they lie within the device's fixed ones ([`limits_within_device`]) |
 //! | SinglePulseAck result 0 | one pulse delivered |
-//! | any acknowledgement with an error result, UnknownCommand, StimulationError | [`BusEvent::Emcy`] ([`device_emcy`]: the CANopen code and a detail naming the ScienceMode command and code) |
+//! | any acknowledgement with an error result (GetStimulationModeAck's carries no mode, §4.2), UnknownCommand (echoing the command byte it did not know, §4.1), StimulationError | [`BusEvent::Emcy`] ([`device_emcy`]: the CANopen code and a detail naming the ScienceMode command and code) |
+//! | MOTOmed information packets (ActualValues every 20 ms, PhaseResult, MotomedCommandDone, MotomedError; §3.5, §4.4) | nothing: counted ([`Receiver::information_packets`], `BusCounters::information_packets`) and skipped, never a link fault |
 //! | a packet that fails to decode (checksum, stuffing, length, unknown command), a failed read, the port gone (EIO / ENXIO / ENODEV, a hang-up) | [`BusEvent::LinkDown`]; the next good packet is [`BusEvent::LinkUp`] (which never re-arms) |
 //! | no answer for `stimulator_timeout_ms` | nothing: no STATUS, so the forward path's existing stimulator-silence trip |
 //!
@@ -181,6 +182,8 @@ pub struct Receiver {
     /// An Init was seen.
     seen_init: bool,
     state: StimState,
+    /// MOTOmed information packets skipped.
+    information: u64,
 }
 
 impl Receiver {
@@ -197,7 +200,13 @@ impl Receiver {
             link_up: true,
             seen_init: false,
             state: StimState::Boot,
+            information: 0,
         }
+    }
+
+    /// MOTOmed information packets (§3.5) received and skipped so far.
+    pub const fn information_packets(&self) -> u64 {
+        self.information
     }
 
     /// SinglePulse acknowledgements with result 0 so far (modulo 2^24).
@@ -241,7 +250,11 @@ impl Receiver {
                 if !link.handshake_done() {
                     return;
                 }
-                let channel_list = mode == StimulationMode::Started;
+                // §3.6 Fig. 4: the driver's SinglePulse is accepted only in the start
+                // mode; initialised or started, the device is in channel list mode, which
+                // the driver never enters: no configuration shows, so no Arm, and a
+                // disarmed driver stops it.
+                let channel_list = mode != Some(StimulationMode::Start);
                 self.state = if channel_list {
                     StimState::Stimulating
                 } else {
@@ -294,7 +307,20 @@ impl Receiver {
                     self.fault(packet.message.command(), result.code(), push);
                 }
             }
-            Message::UnknownCommand { code } => self.fault(Command::UnknownCommand, code, push),
+            // §4.1: the device echoes the command byte it did not recognise; the EMCY's
+            // detail names it.
+            Message::UnknownCommand { command } => {
+                self.fault(Command::UnknownCommand, i8::from_be_bytes([command]), push);
+            }
+            // §3.5: information packets a device sends unasked with a MOTOmed attached
+            // (ActualValues every 20 ms). They answer no command of the driver's: counted
+            // and skipped, never a fault.
+            Message::PhaseResult(_)
+            | Message::ActualValues { .. }
+            | Message::MotomedCommandDone { .. }
+            | Message::MotomedError { .. } => {
+                self.information += 1;
+            }
             Message::StimulationError { error } => {
                 self.fault(Command::StimulationError, error.code(), push);
             }
@@ -380,6 +406,9 @@ pub fn run_serial_rx(
                     match result {
                         Ok(packet) => {
                             bump(&counters.frames);
+                            if packet.message.is_motomed_information() {
+                                bump(&counters.information_packets);
+                            }
                             receiver.on_packet(&packet, link, &mut push);
                         }
                         Err(_) => {
@@ -420,7 +449,7 @@ mod tests {
     fn mode_ack(mode: StimulationMode) -> Message {
         Message::GetStimulationModeAck {
             result: AckResult::Ok,
-            mode,
+            mode: Some(mode),
         }
     }
 
@@ -481,10 +510,16 @@ mod tests {
         link.init_acknowledged();
         link.config_written(4);
         let mut r = Receiver::new(StimLimits::DEFAULT);
-        let e = run(&mut r, &link, mode_ack(StimulationMode::Started));
-        assert_eq!(e.len(), 1, "{e:?}");
-        let s = status(&e);
-        assert_eq!((s.state, s.config_id), (StimState::Stimulating, 0));
+        for mode in [StimulationMode::Started, StimulationMode::Initialised] {
+            let e = run(&mut r, &link, mode_ack(mode));
+            assert_eq!(e.len(), 1, "{e:?}");
+            let s = status(&e);
+            assert_eq!(
+                (s.state, s.config_id),
+                (StimState::Stimulating, 0),
+                "{mode:?}"
+            );
+        }
         // 130 mA: more than the device's 126 mA. Never read back, never confirmed.
         let wide = StimLimits {
             max_amplitude_100ua: 1300,
@@ -517,9 +552,19 @@ mod tests {
                 0x25FD,
             ),
             (
-                Message::UnknownCommand { code: -1 },
+                // §4.1: UnknownCommand echoes the command byte (here 50).
+                Message::UnknownCommand { command: 50 },
                 ErrorCode::Communication,
-                0x03FF,
+                0x0332,
+            ),
+            (
+                // §4.2: an error acknowledgement without a mode (busy, -8).
+                Message::GetStimulationModeAck {
+                    result: AckResult::BusyError,
+                    mode: None,
+                },
+                ErrorCode::Generic,
+                0x0BF8,
             ),
             (
                 Message::StimulationError {
@@ -553,6 +598,34 @@ mod tests {
             )
             .is_empty()
         );
+    }
+
+    #[test]
+    fn motomed_information_packets_are_counted_and_never_a_fault() {
+        // §3.5 / §2.3: with a MOTOmed attached the device sends ActualValues every 20 ms
+        // (and PhaseResult, MotomedCommandDone, MotomedError) on its own packet counter.
+        let link = SerialLink::new();
+        link.init_acknowledged();
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        let info = [
+            Message::ActualValues {
+                angle_deg: 90,
+                speed_rpm: -30,
+                torque_dnm: 15,
+            },
+            Message::PhaseResult(fes_sciencemode::PhaseResult::default()),
+            Message::MotomedCommandDone {
+                result: AckResult::Ok,
+            },
+            Message::MotomedError { code: -4 },
+        ];
+        for m in info {
+            assert!(run(&mut r, &link, m).is_empty(), "{m:?}");
+        }
+        assert_eq!(r.information_packets(), 4);
+        // The link stays up: a STATUS follows as usual.
+        let s = status(&run(&mut r, &link, mode_ack(StimulationMode::Start)));
+        assert_eq!(s.state, StimState::PreOperational);
     }
 
     #[test]

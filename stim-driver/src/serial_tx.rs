@@ -12,8 +12,9 @@
 //! | NMT start | nothing (the device has no armed state: a pulse is a command) |
 //! | CONFIG | nothing (the device's limits are fixed; the driver's interlocks apply the configured ones before a PULSE exists) |
 //!
-//! A pulse the device cannot carry exactly (a channel above 8, an amplitude that is not a
-//! whole mA or above 126 mA, a width above 500 us) is never rounded: the write fails with
+//! A pulse the device cannot carry exactly (a channel above 8, an amplitude that is not an
+//! even number of mA, the device generating currents in 2 mA steps, or above 126 mA, a width
+//! above 500 us) is never rounded: the write fails with
 //! `EINVAL`, which trips an armed driver ([`crate::forward`]). Writes are allocation-free
 //! (a stack buffer), non-blocking with the same bounded retry as the CAN socket, and
 //! complete: a packet the line only partly took is finished within the retry budget (a
@@ -55,7 +56,9 @@ pub fn translate(nodes: &Nodes, frame: &Frame) -> Result<Option<Message>, TxErro
         CanMessage::Pulse(p) => {
             let current_ma = p.amplitude_100ua / 10;
             if p.channel >= CHANNELS
-                || !p.amplitude_100ua.is_multiple_of(10)
+                // 2 mA steps (HASOMED: 0-126 mA in 2 mA steps): an odd mA would be
+                // delivered as a neighbour; refused instead of rounded.
+                || !p.amplitude_100ua.is_multiple_of(20)
                 || current_ma > u16::from(MAX_CURRENT_MA)
                 || p.width_us > MAX_PULSE_WIDTH_US
             {
@@ -276,6 +279,21 @@ pub fn open_serial(path: &Path) -> io::Result<File> {
     Ok(port)
 }
 
+/// The latency timer of the FTDI USB-serial converter behind `device`, ms, read from
+/// sysfs under `sys_root` (`/sys`): `class/tty/<ttyUSBn>/device/latency_timer`, `device`'s
+/// symbolic links (a udev name such as `/dev/rehastim2`) followed. `None` when there is no
+/// such file (not an FTDI adapter, a pty). The protocol description asks for 1 ms (§2.1);
+/// the driver's default of 16 ms would hold each of the device's answers up to that long.
+pub fn ftdi_latency_timer_ms(sys_root: &Path, device: &Path) -> Option<u32> {
+    let real = std::fs::canonicalize(device).ok()?;
+    let name = real.file_name()?;
+    let path = sys_root
+        .join("class/tty")
+        .join(name)
+        .join("device/latency_timer");
+    std::fs::read_to_string(path).ok()?.trim().parse().ok()
+}
+
 /// Whether `port` is a pseudo-terminal's slave (`/dev/pts/N`).
 fn is_pty(port: &File) -> bool {
     nix::unistd::ttyname(port).is_ok_and(|p| p.starts_with("/dev/pts/"))
@@ -367,9 +385,11 @@ mod tests {
         let invalid = Err(TxError::Failed {
             errno: libc::EINVAL,
         });
-        // 20.5 mA (not a whole mA), 127 mA, 501 us, channel 9 (index 8).
+        // 20.5 mA (not a whole mA), 21 mA (odd: the device's steps are 2 mA), 127 mA,
+        // 501 us, channel 9 (index 8).
         for f in [
             pulse(0, 205, 200),
+            pulse(0, 210, 200),
             pulse(0, 1270, 200),
             pulse(0, 200, 501),
             pulse(8, 200, 200),
@@ -525,6 +545,33 @@ mod tests {
             tx.send(&pulse(0, 200, 200)),
             Err(TxError::Failed { errno: libc::EIO })
         );
+    }
+
+    #[test]
+    fn the_ftdi_latency_timer_is_read_through_the_udev_name() {
+        // §2.1: the FTDI latency timer should be 1 ms. A fake sysfs and /dev.
+        let dir = std::env::temp_dir().join(format!("ftdi-latency-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let timer = dir.join("sys/class/tty/ttyUSB7/device");
+        std::fs::create_dir_all(&timer).unwrap();
+        std::fs::create_dir_all(dir.join("dev")).unwrap();
+        std::fs::write(dir.join("dev/ttyUSB7"), b"").unwrap();
+        std::os::unix::fs::symlink(dir.join("dev/ttyUSB7"), dir.join("dev/rehastim2")).unwrap();
+        std::fs::write(timer.join("latency_timer"), b"16\n").unwrap();
+        let sys = dir.join("sys");
+        assert_eq!(
+            ftdi_latency_timer_ms(&sys, &dir.join("dev/rehastim2")),
+            Some(16)
+        );
+        std::fs::write(timer.join("latency_timer"), b"1\n").unwrap();
+        assert_eq!(
+            ftdi_latency_timer_ms(&sys, &dir.join("dev/ttyUSB7")),
+            Some(1)
+        );
+        // No such adapter (a pty, another converter): nothing to say.
+        std::fs::write(dir.join("dev/ttyS0"), b"").unwrap();
+        assert_eq!(ftdi_latency_timer_ms(&sys, &dir.join("dev/ttyS0")), None);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

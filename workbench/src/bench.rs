@@ -605,7 +605,7 @@ fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<
     if opts.stimulator == StimulatorKind::Sciencemode {
         // The same muscle and force sensor as the CAN stimulator's; the force goes out as
         // ForceSamples normalised by the driver's [force] max_n on CAN (the controller's
-        // full scale). The device's watchdog stays its own (1 s).
+        // full scale). The device's watchdog stays its own (1.2 s, §2.3 of the protocol).
         let mut args: Vec<String> = vec![
             "rehastim2".into(),
             "--pty-link".into(),

@@ -3,6 +3,7 @@
 //! allocation-free hot path.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
+mod document;
 mod no_alloc;
 mod roundtrip;
 mod vectors;

@@ -6,7 +6,7 @@
 
 use fes_sciencemode::{
     AckResult, ChannelListInit, ChannelListUpdate, ChannelPulse, Decoder, MAX_PACKET_LEN, Message,
-    Packet, PulseMode, SinglePulse, StimulationError, StimulationMode,
+    Packet, PhaseResult, PulseMode, SinglePulse, StimulationError, StimulationMode,
 };
 use proptest::prelude::*;
 
@@ -31,11 +31,23 @@ pub fn message() -> impl Strategy<Value = Message> {
     prop_oneof![
         any::<u8>().prop_map(|version| Message::Init { version }),
         ack().prop_map(|result| Message::InitAck { result }),
-        any::<i8>().prop_map(|code| Message::UnknownCommand { code }),
+        any::<u8>().prop_map(|command| Message::UnknownCommand { command }),
         Just(Message::Watchdog),
         Just(Message::GetStimulationMode),
-        (ack(), proptest::sample::select(StimulationMode::ALL))
-            .prop_map(|(result, mode)| Message::GetStimulationModeAck { result, mode }),
+        // §4.2: an error acknowledgement may carry the result only; a successful one
+        // always carries the mode.
+        (
+            ack(),
+            proptest::option::of(proptest::sample::select(StimulationMode::ALL))
+        )
+            .prop_map(|(result, mode)| Message::GetStimulationModeAck {
+                result,
+                mode: if result.is_ok() {
+                    Some(mode.unwrap_or(StimulationMode::Start))
+                } else {
+                    mode
+                },
+            }),
         (
             any::<u8>(),
             any::<u8>(),
@@ -72,6 +84,31 @@ pub fn message() -> impl Strategy<Value = Message> {
         any::<i8>().prop_map(|c| Message::StimulationError {
             error: StimulationError::from_code(c)
         }),
+        proptest::collection::vec(any::<u8>(), 16).prop_map(|b| {
+            let w = |i: usize| u16::from_be_bytes([b[i], b[i + 1]]);
+            Message::PhaseResult(PhaseResult {
+                phase_counter: b[0],
+                passive_distance_10m: w(1),
+                active_distance_10m: w(3),
+                average_power_w: b[5],
+                maximum_power_w: b[6],
+                phase_duration_s: w(7),
+                active_phase_duration_s: w(9),
+                phase_work_j: w(11),
+                success_percent: b[13],
+                symmetry_left_percent: b[14],
+                average_muscle_tone_dnm: b[15],
+            })
+        }),
+        (any::<u16>(), any::<i16>(), any::<i16>()).prop_map(|(a, s, t)| {
+            Message::ActualValues {
+                angle_deg: a,
+                speed_rpm: s,
+                torque_dnm: t,
+            }
+        }),
+        ack().prop_map(|result| Message::MotomedCommandDone { result }),
+        any::<i8>().prop_map(|code| Message::MotomedError { code }),
     ]
 }
 
@@ -125,13 +162,27 @@ proptest! {
     #[test]
     fn any_byte_stream_decodes_without_panic_and_packets_reencode(bytes in proptest::collection::vec(any::<u8>(), 0..300)) {
         let mut d = Decoder::new();
-        // A packet's bytes are contiguous and end with the byte that completes it.
-        for (i, &b) in bytes.iter().enumerate() {
+        // Every packet decoded re-encodes (in the description's stuffing, which may differ
+        // from the bytes it came from: the decoder un-stuffs any byte after 0x81) to bytes
+        // that decode to the same packet.
+        for &b in &bytes {
             if let Some(Ok(p)) = d.push(b) {
                 let wire = encode(&p).expect("a decoded packet fits a packet");
-                prop_assert!(bytes[..=i].ends_with(&wire), "{p:?} re-encodes to {wire:02X?}");
+                let again: Vec<_> = Decoder::new().feed(&wire).collect();
+                prop_assert_eq!(again, vec![Ok(p)], "{:?} re-encodes to {:02X?}", p, wire);
             }
         }
+    }
+
+    #[test]
+    fn the_encoder_escapes_only_the_table_6_constants(p in packet()) {
+        // §2.2: 0xF0, 0x0F and 0x81 are escaped, the stuffing key 0x55 (and 0x0A) are not:
+        // after the header, a byte is 0x81 only as an escape, and the stuffed data is the
+        // unstuffed data plus one byte per 0xF0, 0x0F or 0x81 in it.
+        let Some(wire) = encode(&p) else { return Ok(()); };
+        let (data, len) = p.data();
+        let specials = data[..len].iter().filter(|&&b| matches!(b, 0xF0 | 0x0F | 0x81)).count();
+        prop_assert_eq!(wire.len(), 5 + len + specials + 1);
     }
 
     #[test]

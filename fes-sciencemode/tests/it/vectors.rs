@@ -3,6 +3,11 @@
 //! pasted here; the call is in each comment). Our encoder must produce the same bytes and
 //! our decoder must read them back to the same fields.
 //!
+//! pyScienceMode 1.1.5 also stuffs 0x55 and 0x0A, which the protocol description sends as
+//! they are (§2.2: "every constant from Table 6, except the stuffing key, is escaped"); for
+//! packets holding those our encoder sends the description's form and our decoder reads
+//! pyScienceMode's form too (`stuffed_command_data`).
+//!
 //! pyScienceMode XORs a packet number or command byte that is a special byte in place,
 //! without the 0x81 stuffing byte before it (only the command data is stuffed properly).
 //! Packets where that happens are not decodable as the protocol defines them; the last
@@ -79,7 +84,7 @@ fn get_stimulation_mode_ack() {
             2,
             Message::GetStimulationModeAck {
                 result: AckResult::Ok,
-                mode: StimulationMode::Initialised,
+                mode: Some(StimulationMode::Initialised),
             },
         ),
         &[0xF0, 0x81, 0x92, 0x81, 0x51, 0x02, 0x0B, 0x00, 0x01, 0x0F],
@@ -111,24 +116,34 @@ fn init_channel_list_mode() {
 
 #[test]
 fn stuffed_command_data() {
+    let packet = Packet::new(
+        5,
+        Message::InitChannelListMode(ChannelListInit {
+            low_frequency_factor: 2,
+            active_channels: 0x0F,
+            low_frequency_channels: 0x0A,
+            inter_pulse_interval_code: 0x55,
+            main_interval_code: 0x0181,
+            channel_execution: 0,
+        }),
+    );
     // packet_construction(5, "InitChannelListMode", [2, 0x0F, 0x0A, 0x55, 1, 0x81, 0]):
-    // four of the five special bytes in the data, each sent as 0x81, byte ^ 0x55; the
-    // checksum covers the stuffed bytes and the length counts them.
+    // pyScienceMode stuffs 0x0F, 0x0A, 0x55 and 0x81, each as 0x81, byte ^ 0x55. Our
+    // decoder reads it (§2.2 un-stuffing applies to any byte after 0x81).
+    let theirs = [
+        0xF0, 0x81, 0x93, 0x81, 0x58, 0x05, 0x1E, 0x02, 0x81, 0x5A, 0x81, 0x5F, 0x81, 0x00, 0x01,
+        0x81, 0xD4, 0x00, 0x0F,
+    ];
+    assert_eq!(decode_all(&theirs), [Ok(packet)]);
+    // The description's form (§2.2, Table 6: only 0xF0, 0x0F and 0x81 are escaped; the
+    // stuffing key 0x55 and 0x0A go as they are), which our encoder sends; the checksum
+    // covers the stuffed bytes and the length counts them. Bytes computed by a separate
+    // Python implementation of §2.2.
     check(
-        Packet::new(
-            5,
-            Message::InitChannelListMode(ChannelListInit {
-                low_frequency_factor: 2,
-                active_channels: 0x0F,
-                low_frequency_channels: 0x0A,
-                inter_pulse_interval_code: 0x55,
-                main_interval_code: 0x0181,
-                channel_execution: 0,
-            }),
-        ),
+        packet,
         &[
-            0xF0, 0x81, 0x93, 0x81, 0x58, 0x05, 0x1E, 0x02, 0x81, 0x5A, 0x81, 0x5F, 0x81, 0x00,
-            0x01, 0x81, 0xD4, 0x00, 0x0F,
+            0xF0, 0x81, 0x93, 0x81, 0x5E, 0x05, 0x1E, 0x02, 0x81, 0x5A, 0x0A, 0x55, 0x01, 0x81,
+            0xD4, 0x00, 0x0F,
         ],
     );
 }
@@ -215,12 +230,32 @@ fn pyscience_modes_in_place_xor_of_a_special_command_is_not_our_packet() {
     let theirs = [0xF0, 0x81, 0xDA, 0x81, 0x57, 0x01, 0x5F, 0x0F];
     assert_eq!(
         decode_all(&theirs),
-        [Err(DecodeError::UnknownCommand { command: 0x5F })]
+        [Err(DecodeError::UnknownCommand {
+            number: 1,
+            command: 0x5F
+        })]
     );
-    // Ours stuffs it: 0x81 0x5F.
+    // Ours sends it as it is (§2.2: 0x0A is not a Table 6 constant).
     assert_eq!(
         encode(&Packet::new(1, Message::GetStimulationMode)),
-        [0xF0, 0x81, 0x07, 0x81, 0x56, 0x01, 0x81, 0x5F, 0x0F]
+        [0xF0, 0x81, 0x76, 0x81, 0x57, 0x01, 0x0A, 0x0F]
+    );
+    // And reads it stuffed as well: 0x81 0x5F is 0x0A.
+    let data = [0x01, 0x81, 0x5F];
+    let stuffed = [
+        0xF0,
+        0x81,
+        crc8(&data) ^ 0x55,
+        0x81,
+        3 ^ 0x55,
+        0x01,
+        0x81,
+        0x5F,
+        0x0F,
+    ];
+    assert_eq!(
+        decode_all(&stuffed),
+        [Ok(Packet::new(1, Message::GetStimulationMode))]
     );
     // packet_construction(10, "Watchdog"): packet number 10 goes out as 0x5F; the packet
     // decodes, with number 0x5F (a number is only echoed, never interpreted).
@@ -281,8 +316,8 @@ fn errors_are_typed() {
             ))
         ]
     );
-    // A special byte sent unstuffed (0x55 in the data), with a matching checksum.
-    let data = [0x03, 0x02, 0x55];
+    // A stuffing byte at the end of the packet data: nothing to un-stuff.
+    let data = [0x03, 0x02, 0x81];
     let forged = [
         0xF0,
         0x81,
@@ -291,35 +326,14 @@ fn errors_are_typed() {
         3 ^ 0x55,
         0x03,
         0x02,
-        0x55,
+        0x81,
         0x0F,
     ];
     assert_eq!(
         decode_all(&forged),
         [Err(DecodeError::BadStuffing {
             position: 2,
-            byte: 0x55
-        })]
-    );
-    // A stuffing byte before a byte that does not unstuff to a special one.
-    let data = [0x03, 0x02, 0x81, 0x01];
-    let forged = [
-        0xF0,
-        0x81,
-        crc8(&data) ^ 0x55,
-        0x81,
-        4 ^ 0x55,
-        0x03,
-        0x02,
-        0x81,
-        0x01,
-        0x0F,
-    ];
-    assert_eq!(
-        decode_all(&forged),
-        [Err(DecodeError::BadStuffing {
-            position: 3,
-            byte: 0x01
+            byte: 0x81
         })]
     );
     // An unknown command (a MOTOmed command), and a known one with the wrong data length.
@@ -336,7 +350,10 @@ fn errors_are_typed() {
     ];
     assert_eq!(
         decode_all(&forged),
-        [Err(DecodeError::UnknownCommand { command: 50 })]
+        [Err(DecodeError::UnknownCommand {
+            number: 3,
+            command: 50
+        })]
     );
     let data = [0x03, 0x04, 0x00];
     let forged = [
@@ -371,7 +388,8 @@ fn a_channel_list_holds_one_to_eight_entries_and_fits_a_packet() {
     assert!(ChannelListUpdate::new(&[]).is_err());
     assert!(ChannelListUpdate::new(&[ChannelPulse::default(); 9]).is_err());
     // Eight entries fit a packet, even when every byte that can be special is: a mode is
-    // never special, so an entry stuffs to at most 7 bytes and the packet to 65.
+    // never special, so an entry stuffs to at most 7 bytes and the packet to 65 (the
+    // packet number 0x81 stuffed too).
     let plain = ChannelPulse {
         mode: PulseMode::Single,
         pulse_width_us: 300,
@@ -382,11 +400,11 @@ fn a_channel_list_holds_one_to_eight_entries_and_fits_a_packet() {
     assert_eq!(wire.len(), 5 + 2 + 32 + 1);
     let special = ChannelPulse {
         mode: PulseMode::Single,
-        pulse_width_us: 0x0A0F,
-        current_ma: 0x55,
+        pulse_width_us: 0xF00F,
+        current_ma: 0x81,
     };
     let list = ChannelListUpdate::new(&[special; 8]).unwrap();
-    let packet = Packet::new(0x0A, Message::StartChannelListMode(list));
+    let packet = Packet::new(0x81, Message::StartChannelListMode(list));
     let wire = encode(&packet);
     assert_eq!(wire.len(), 5 + 2 + 1 + 8 * 7 + 1);
     assert_eq!(decode_all(&wire), [Ok(packet)]);

@@ -5,16 +5,25 @@
 //! What it does, as the device does:
 //!
 //! * announces itself with Init (protocol version 1) every [`Rehastim2Settings::init_period_ms`]
-//!   until the host answers InitAck; before that it ignores every other command;
+//!   (500 ms, the description's InitRepetitionTime, §2.3) until the host answers InitAck;
+//!   before that it ignores every other command;
 //! * answers GetStimulationMode, InitChannelListMode, StartChannelListMode (start or update),
 //!   StopChannelListMode and SinglePulse with their acknowledgements, refusing values
 //!   outside the device's range (`fes_sciencemode::limits`) with a parameter error and
-//!   commands in the wrong mode with a wrong-mode error;
+//!   commands in the wrong mode with a wrong-mode error (§3.6 Fig. 4: SinglePulse only in
+//!   start mode, before InitChannelListMode);
+//! * generates currents in 2 mA steps (HASOMED: 0-126 mA in 2 mA steps): an odd mA is
+//!   delivered, and logged, as the even mA below it;
 //! * in channel list mode, fires each active channel's pulse (or doublet, triplet) every
 //!   main interval, low-frequency channels every (factor + 1)-th interval, channels and
 //!   repeated pulses the inter-pulse interval apart;
-//! * its watchdog: when the host sends nothing for [`Rehastim2Settings::watchdog_ms`],
-//!   channel list mode stops (back to start mode, the list discarded).
+//! * its watchdog (§2.3 WatchdogTimeout, 1200 ms; §5.2): when the host sends nothing for
+//!   [`Rehastim2Settings::watchdog_ms`], stimulation stops, every mode is reset and the
+//!   connection is dropped: the device announces Init again every `init_period_ms` and
+//!   ignores commands until a new InitAck;
+//! * with [`Rehastim2Settings::motomed_actual_values`], a MOTOmed attached: ActualValues
+//!   every 20 ms (§2.3 ActualValuesInterval, §4.4), numbered by the device's own packet
+//!   counter (§2.2).
 //!
 //! Every delivered pulse and every watchdog expiry goes to the [`Event`] log. The plant is
 //! the muscle under one channel ([`Rehastim2Settings::muscle_channel`]); pulses on the
@@ -50,7 +59,24 @@ pub struct Rehastim2Settings {
     /// answered) this long after it arrived (0: in the next tick). Hasomed gives 10-24 ms
     /// for the real device (`docs/sciencemode.md`).
     pub latency_ms: u16,
+    /// A MOTOmed attached: the device sends ActualValues every 20 ms once connected.
+    pub motomed_actual_values: bool,
+    /// The device's mean time to process a command, ms (0: off, the command is acted on
+    /// as [`Self::latency_ms`] says). §2.3: responses take up to 100 ms (MaxResponseTime),
+    /// on average under 20 ms. When on, each command that has an acknowledgement takes
+    /// 0.5..1.5 x this mean, or [`SLOW_PROCESSING_MS`] for [`SLOW_PROCESSING_PERCENT`] % of
+    /// them, and is answered when done; a command arriving meanwhile is answered with -8
+    /// busy (§5.1: "RehaStim2 is currently processing the last command").
+    pub processing_mean_ms: u16,
 }
+
+/// The slow share of commands when [`Rehastim2Settings::processing_mean_ms`] is on, %.
+pub const SLOW_PROCESSING_PERCENT: u64 = 3;
+/// A slow command's processing time, ms (§2.3 MaxResponseTime).
+pub const SLOW_PROCESSING_MS: u64 = 100;
+
+/// The ActualValues interval with a MOTOmed attached, ms (§2.3 ActualValuesInterval).
+pub const ACTUAL_VALUES_INTERVAL_MS: u64 = 20;
 
 /// What [`TestFault`] makes the device do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -99,13 +125,16 @@ impl std::str::FromStr for TestFault {
 }
 
 impl Rehastim2Settings {
-    /// The device's defaults: 1 s watchdog, Init every 100 ms, the muscle on channel 1.
+    /// The device's defaults (§2.3): 1200 ms watchdog, Init every 500 ms; the muscle on
+    /// channel 1, no MOTOmed.
     pub const DEFAULT: Rehastim2Settings = Rehastim2Settings {
-        watchdog_ms: 1000,
-        init_period_ms: 100,
+        watchdog_ms: 1200,
+        init_period_ms: 500,
         muscle_channel: 1,
         test_fault: None,
         latency_ms: 0,
+        motomed_actual_values: false,
+        processing_mean_ms: 0,
     };
 }
 
@@ -136,7 +165,8 @@ pub enum Event {
         /// Whether it reached the plant (the muscle's channel).
         applied: bool,
     },
-    /// The host fell silent: channel list mode stopped.
+    /// The host fell silent: stimulation stopped, every mode reset, the connection dropped
+    /// (the device announces Init again).
     WatchdogExpired {
         /// Tick of expiry.
         tick: u64,
@@ -178,7 +208,10 @@ pub struct Rehastim2 {
     scheduled: VecDeque<Scheduled>,
     watchdog: HeartbeatWatchdog,
     next_init_tick: u64,
+    /// The device's own packet counter (Init and information packets, §2.2).
     init_number: u8,
+    /// Tick of the next ActualValues (with a MOTOmed).
+    next_actual_tick: u64,
     tick: u64,
     events: Vec<Event>,
     force_n: f64,
@@ -188,6 +221,14 @@ pub struct Rehastim2 {
     silent: bool,
     /// Packets waiting out the latency: (tick due, packet).
     pending: VecDeque<(u64, Packet)>,
+    /// Processing a command until this tick ([`Rehastim2Settings::processing_mean_ms`]).
+    busy_until: u64,
+    /// Pseudo-random state for the processing times (xorshift64).
+    rng: u64,
+    /// -8 busy acknowledgements sent.
+    busy_sent: u64,
+    /// -3 wrong-mode acknowledgements sent.
+    wrong_mode_sent: u64,
 }
 
 impl Rehastim2 {
@@ -206,12 +247,41 @@ impl Rehastim2 {
             watchdog: HeartbeatWatchdog::new(settings.watchdog_ms, 0),
             next_init_tick: 0,
             init_number: 0,
+            next_actual_tick: 0,
             tick: 0,
             events: Vec::with_capacity(1024),
             force_n: 0.0,
             single_pulses: 0,
             silent: false,
             pending: VecDeque::with_capacity(256),
+            busy_until: 0,
+            rng: 0x9E37_79B9_7F4A_7C15,
+            busy_sent: 0,
+            wrong_mode_sent: 0,
+        }
+    }
+
+    /// -8 busy acknowledgements the device has sent (a host that waits for each answer
+    /// provokes none).
+    pub const fn busy_sent(&self) -> u64 {
+        self.busy_sent
+    }
+
+    /// -3 wrong-mode acknowledgements the device has sent.
+    pub const fn wrong_mode_sent(&self) -> u64 {
+        self.wrong_mode_sent
+    }
+
+    /// The processing time of the next command, ticks.
+    fn draw_processing_ticks(&mut self) -> u64 {
+        self.rng ^= self.rng << 13;
+        self.rng ^= self.rng >> 7;
+        self.rng ^= self.rng << 17;
+        let mean = u64::from(self.settings.processing_mean_ms);
+        if self.rng % 100 < SLOW_PROCESSING_PERCENT {
+            SLOW_PROCESSING_MS
+        } else {
+            (mean / 2 + (self.rng >> 8) % (mean + 1)).max(1)
         }
     }
 
@@ -252,6 +322,23 @@ impl Rehastim2 {
     pub fn on_packet(&mut self, packet: Packet, out: &mut Vec<u8>) {
         // Any packet is a sign of life, at once.
         self.watchdog.feed(self.now_ns());
+        if self.settings.processing_mean_ms > 0
+            && self.connected
+            && let Some(busy) = busy_ack(&packet.message)
+        {
+            if self.tick < self.busy_until {
+                // §5.1 -8: still processing the last command.
+                self.busy_sent += 1;
+                send(Packet::new(packet.number, busy), out);
+                return;
+            }
+            // Answered in the tick that ends the processing time (the packet arrived
+            // during this tick, before it ran); busy until then.
+            let ticks = self.draw_processing_ticks();
+            self.busy_until = self.tick + ticks;
+            self.pending.push_back((self.tick + ticks - 1, packet));
+            return;
+        }
         if self.settings.latency_ms > 0 {
             let due = self.tick + u64::from(self.settings.latency_ms);
             self.pending.push_back((due, packet));
@@ -283,8 +370,10 @@ impl Rehastim2 {
         }
         let reply = match packet.message {
             Message::InitAck { result } => {
-                if result.is_ok() {
+                if result.is_ok() && !self.connected {
                     self.connected = true;
+                    self.watchdog.feed(self.now_ns());
+                    self.next_actual_tick = self.tick;
                 }
                 None
             }
@@ -292,7 +381,7 @@ impl Rehastim2 {
             Message::Watchdog => None,
             Message::GetStimulationMode => Some(Message::GetStimulationModeAck {
                 result: AckResult::Ok,
-                mode: self.mode,
+                mode: Some(self.mode),
             }),
             Message::InitChannelListMode(init) => Some(Message::InitChannelListModeAck {
                 result: self.init_channel_list(init),
@@ -317,7 +406,9 @@ impl Rehastim2 {
                 })
             }
             Message::SinglePulse(p) => {
-                let result = if self.mode == StimulationMode::Started {
+                // §3.6 Fig. 4: SinglePulse belongs to the stimulation start mode; once
+                // InitChannelListMode has been accepted it is the wrong mode.
+                let result = if self.mode != StimulationMode::Start {
                     AckResult::WrongModeError
                 } else if !p.in_range() {
                     AckResult::ParameterError
@@ -326,14 +417,15 @@ impl Rehastim2 {
                         tick: self.tick + 1,
                         channel: p.channel + 1,
                         width_us: effective_width_us(p.pulse_width_us),
-                        current_ma: p.current_ma,
+                        current_ma: generated_current_ma(p.current_ma),
                         source: PulseSource::Single,
                     });
                     AckResult::Ok
                 };
                 Some(Message::SinglePulseAck { result })
             }
-            // The device's own messages, sent to it: not commands it knows.
+            // The device's own messages, sent to it: not commands it knows. §4.1:
+            // UnknownCommand echoes the packet number and the command byte.
             Message::Init { .. }
             | Message::UnknownCommand { .. }
             | Message::GetStimulationModeAck { .. }
@@ -341,19 +433,32 @@ impl Rehastim2 {
             | Message::StartChannelListModeAck { .. }
             | Message::StopChannelListModeAck { .. }
             | Message::SinglePulseAck { .. }
-            | Message::StimulationError { .. } => Some(Message::UnknownCommand { code: -1 }),
+            | Message::StimulationError { .. }
+            | Message::PhaseResult(_)
+            | Message::ActualValues { .. }
+            | Message::MotomedCommandDone { .. }
+            | Message::MotomedError { .. } => Some(Message::UnknownCommand {
+                command: packet.message.command().id(),
+            }),
         };
         if let Some(message) = reply {
+            if message.ack_result() == Some(AckResult::WrongModeError) {
+                self.wrong_mode_sent += 1;
+            }
             send(Packet::new(number, message), out);
         }
     }
 
-    /// A packet whose command the device does not know (the decoder's
-    /// [`DecodeError::UnknownCommand`]): answered with UnknownCommand.
-    pub fn on_unknown_command(&mut self, out: &mut Vec<u8>) {
+    /// Packet `number` whose command byte `command` the device does not know (the
+    /// decoder's [`DecodeError::UnknownCommand`]): answered with UnknownCommand echoing
+    /// both (§4.1, §5.2 "Unknown command error").
+    pub fn on_unknown_command(&mut self, number: u8, command: u8, out: &mut Vec<u8>) {
         self.watchdog.feed(self.now_ns());
         if self.connected {
-            send(Packet::new(0, Message::UnknownCommand { code: -1 }), out);
+            send(
+                Packet::new(number, Message::UnknownCommand { command }),
+                out,
+            );
         }
     }
 
@@ -433,7 +538,7 @@ impl Rehastim2 {
                         tick: (start_us + offset_us).div_ceil(1000),
                         channel,
                         width_us,
-                        current_ma: e.current_ma,
+                        current_ma: generated_current_ma(e.current_ma),
                         source: PulseSource::ChannelList,
                     });
                 }
@@ -467,15 +572,37 @@ impl Rehastim2 {
         if self.connected
             && let Some(silent_ns) = self.watchdog.expired(self.now_ns())
         {
-            if self.mode != StimulationMode::Start {
-                self.events.push(Event::WatchdogExpired {
-                    tick: self.tick,
-                    silent_ms: silent_ns / 1_000_000,
-                });
-                self.stop_channel_list();
-            }
-            // Re-armed: one expiry per silence.
-            self.watchdog.feed(self.now_ns());
+            // §5.2 "Data transfer physically broken / disturbed": stimulation stopped, all
+            // modes reset, the device sends Init (again every InitRepetitionTime, §2.3,
+            // until the host answers).
+            self.events.push(Event::WatchdogExpired {
+                tick: self.tick,
+                silent_ms: silent_ns / 1_000_000,
+            });
+            self.stop_channel_list();
+            self.scheduled.clear();
+            self.pending.clear();
+            self.connected = false;
+            self.next_init_tick = self.tick;
+        }
+        if self.connected
+            && self.settings.motomed_actual_values
+            && self.tick >= self.next_actual_tick
+        {
+            // A crank turning forward at 30 rpm (0.18 degree per ms), 5 dNm active.
+            send(
+                Packet::new(
+                    self.init_number,
+                    Message::ActualValues {
+                        angle_deg: ((self.tick * 18 / 100) % 360) as u16,
+                        speed_rpm: 30,
+                        torque_dnm: 5,
+                    },
+                ),
+                out,
+            );
+            self.init_number = self.init_number.wrapping_add(1);
+            self.next_actual_tick = self.tick + ACTUAL_VALUES_INTERVAL_MS;
         }
         if self.mode == StimulationMode::Started {
             while self.next_cycle_tick <= self.tick {
@@ -519,6 +646,28 @@ impl Rehastim2 {
         self.force_n = plant.step(applied);
         self.tick += 1;
     }
+}
+
+/// The -8 busy acknowledgement of a host command that has one (`None`: Watchdog, InitAck
+/// and anything a host does not send).
+fn busy_ack(m: &Message) -> Option<Message> {
+    let result = AckResult::BusyError;
+    Some(match m {
+        Message::GetStimulationMode => Message::GetStimulationModeAck { result, mode: None },
+        Message::InitChannelListMode(_) => Message::InitChannelListModeAck { result },
+        Message::StartChannelListMode(_) => Message::StartChannelListModeAck { result },
+        Message::StopChannelListMode => Message::StopChannelListModeAck { result },
+        Message::SinglePulse(_) => Message::SinglePulseAck { result },
+        _ => return None,
+    })
+}
+
+/// The current the device generates for a requested `current_ma`: its output steps are
+/// 2 mA (HASOMED: 0-126 mA in 2 mA steps; the user manual: 0-130 mA in 65 steps), and the
+/// protocol description does not say which neighbour an odd value becomes. This device
+/// takes the one below (never more than asked).
+pub const fn generated_current_ma(current_ma: u8) -> u8 {
+    current_ma & !1
 }
 
 fn send(packet: Packet, out: &mut Vec<u8>) {
@@ -599,7 +748,8 @@ mod tests {
         let mut d = Rehastim2::new(Rehastim2Settings::DEFAULT);
         let mut plant = ChargeIntegrator::new();
         let mut out = Vec::new();
-        for _ in 0..250 {
+        // §2.3 InitRepetitionTime: 500 ms (ticks 0, 500, 1000).
+        for _ in 0..1100 {
             d.tick(&mut plant, &mut out);
         }
         assert_eq!(
@@ -855,8 +1005,8 @@ mod tests {
         }
         let before = pulses(&mut d).len();
         assert_eq!(before, 60);
-        // Silence: the last packet came at tick 2501; the list stops when more than 1 s has
-        // passed, at tick 3502.
+        // Silence: the last packet came at tick 2501; the list stops when more than 1200 ms
+        // (§2.3 WatchdogTimeout) have passed, at tick 3702.
         for _ in 0..2000 {
             d.tick(&mut plant, &mut out);
         }
@@ -868,7 +1018,7 @@ mod tests {
                 _ => None,
             })
             .expect("watchdog expired");
-        assert_eq!(expiry, 3502);
+        assert_eq!(expiry, 3702);
         let last_pulse = events
             .iter()
             .filter_map(|e| match e {
@@ -879,5 +1029,162 @@ mod tests {
             .unwrap();
         assert!(last_pulse < expiry, "pulse at {last_pulse} after {expiry}");
         assert_eq!(d.mode(), StimulationMode::Start);
+        // §5.2: all modes reset, the connection dropped: Init at the expiry and every
+        // 500 ms after (§2.3 InitRepetitionTime), commands ignored until InitAck.
+        assert!(!d.connected());
+        let inits: Vec<u8> = decode(&out)
+            .into_iter()
+            .filter(|p| matches!(p.message, Message::Init { .. }))
+            .map(|p| p.number)
+            .collect();
+        // Ticks 3702, 4202, 4702 (the run ends at tick 5001).
+        assert_eq!(inits.len(), 3, "{inits:?}");
+        out.clear();
+        d.on_packet(Packet::new(9, Message::GetStimulationMode), &mut out);
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn while_processing_a_command_the_device_answers_busy() {
+        // §2.3: responses within 100 ms, on average under 20 ms; §5.1 -8 "currently
+        // processing the last command. Wait for the response packet."
+        let (mut d, mut plant) = connected();
+        d.settings.processing_mean_ms = 10;
+        let mut out = Vec::new();
+        let single = |n| {
+            Packet::new(
+                n,
+                Message::SinglePulse(SinglePulse {
+                    channel: 0,
+                    pulse_width_us: 200,
+                    current_ma: 20,
+                }),
+            )
+        };
+        d.on_packet(single(1), &mut out);
+        assert!(out.is_empty(), "answered when processed");
+        // A second command at once: busy, answered with -8 and its number.
+        d.on_packet(single(2), &mut out);
+        assert_eq!(
+            decode(&out),
+            [Packet::new(
+                2,
+                Message::SinglePulseAck {
+                    result: AckResult::BusyError
+                }
+            )]
+        );
+        out.clear();
+        // A Watchdog has no answer: never busy.
+        d.on_packet(Packet::new(3, Message::Watchdog), &mut out);
+        assert!(out.is_empty());
+        let mut waited = 0;
+        while out.is_empty() {
+            d.tick(&mut plant, &mut out);
+            waited += 1;
+            assert!(waited <= 100, "MaxResponseTime");
+        }
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        assert_eq!(d.busy_sent(), 1);
+        // A host that waits for each answer provokes no -8: 200 commands, each sent once
+        // the previous one was answered. Processing times: 5..15 ms, some 100 ms.
+        let mut times = Vec::new();
+        for n in 0..200u8 {
+            out.clear();
+            d.on_packet(single(n), &mut out);
+            let mut t = 0;
+            while out.is_empty() {
+                d.tick(&mut plant, &mut out);
+                t += 1;
+            }
+            assert_eq!(ack_of(&out), AckResult::Ok);
+            times.push(t);
+        }
+        assert_eq!(d.busy_sent(), 1);
+        assert!(times.iter().all(|&t| t <= 100), "{times:?}");
+        let mean = times.iter().sum::<u64>() as f64 / times.len() as f64;
+        assert!((8.0..20.0).contains(&mean), "mean {mean} ms: {times:?}");
+        assert!(times.contains(&100), "some slow commands");
+        assert_eq!(d.wrong_mode_sent(), 0);
+    }
+
+    #[test]
+    fn single_pulse_only_in_start_mode() {
+        // §3.6 Fig. 4: SinglePulse is a command of the stimulation start mode; after
+        // InitChannelListMode (initialised, not started) it is refused with -3 (§5.1).
+        let (mut d, _plant) = connected();
+        let mut out = Vec::new();
+        let single = Packet::new(
+            2,
+            Message::SinglePulse(SinglePulse {
+                channel: 0,
+                pulse_width_us: 200,
+                current_ma: 20,
+            }),
+        );
+        d.on_packet(single, &mut out);
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        out.clear();
+        d.on_packet(
+            Packet::new(3, Message::InitChannelListMode(init(0b1, 0, 0, 20))),
+            &mut out,
+        );
+        assert_eq!(ack_of(&out), AckResult::Ok);
+        out.clear();
+        d.on_packet(single, &mut out);
+        assert_eq!(ack_of(&out), AckResult::WrongModeError);
+        out.clear();
+        d.on_packet(Packet::new(4, Message::StopChannelListMode), &mut out);
+        out.clear();
+        d.on_packet(single, &mut out);
+        assert_eq!(ack_of(&out), AckResult::Ok);
+    }
+
+    #[test]
+    fn currents_are_generated_in_2_ma_steps() {
+        // HASOMED: 0-126 mA in 2 mA steps. An odd mA is accepted and generated (and
+        // logged) as the even mA below it.
+        let (mut d, mut plant) = connected();
+        let mut out = Vec::new();
+        for (n, current_ma) in [(1u8, 21u8), (2, 22)] {
+            d.on_packet(
+                Packet::new(
+                    n,
+                    Message::SinglePulse(SinglePulse {
+                        channel: 0,
+                        pulse_width_us: 200,
+                        current_ma,
+                    }),
+                ),
+                &mut out,
+            );
+            d.tick(&mut plant, &mut out);
+            d.tick(&mut plant, &mut out);
+        }
+        let currents: Vec<u8> = pulses(&mut d).into_iter().map(|p| p.3).collect();
+        assert_eq!(currents, [20, 22]);
+        assert_eq!(generated_current_ma(127), 126);
+        assert_eq!(generated_current_ma(0), 0);
+    }
+
+    #[test]
+    fn with_a_motomed_actual_values_come_every_20_ms_on_the_device_counter() {
+        // §2.3 ActualValuesInterval 20 ms; §2.2: information packets carry the device's own
+        // packet counter (here after Init 0).
+        let (mut d, mut plant) = connected();
+        d.settings.motomed_actual_values = true;
+        let mut out = Vec::new();
+        for _ in 0..100 {
+            d.tick(&mut plant, &mut out);
+        }
+        let actual: Vec<Packet> = decode(&out)
+            .into_iter()
+            .filter(|p| p.message.is_motomed_information())
+            .collect();
+        assert_eq!(actual.len(), 5, "{actual:?}");
+        assert_eq!(
+            actual.iter().map(|p| p.number).collect::<Vec<_>>(),
+            [1, 2, 3, 4, 5]
+        );
     }
 }

@@ -36,11 +36,12 @@ pub struct Rehastim2Args {
     /// Write every pulse and event to this CSV file.
     #[arg(long)]
     pub pulse_log: Option<PathBuf>,
-    /// The device's watchdog: channel list mode stops after this much silence from the
-    /// host, ms.
+    /// The device's watchdog (§2.3: 1200 ms): after this much silence from the host,
+    /// stimulation stops, every mode is reset and the device announces Init again, ms.
     #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.watchdog_ms)]
     pub watchdog_ms: u16,
-    /// Period of the Init announcement until the host answers, ms.
+    /// Period of the Init announcement until the host answers, ms (§2.3
+    /// InitRepetitionTime: 500).
     #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.init_period_ms)]
     pub init_period_ms: u16,
     /// The channel (1..=8) whose muscle the plant models; pulses on others are logged only.
@@ -58,6 +59,15 @@ pub struct Rehastim2Args {
     /// error), `silent:N` (nothing answered from that pulse on).
     #[arg(long, value_name = "KIND:N")]
     pub test_fault: Option<TestFault>,
+    /// A MOTOmed attached: send ActualValues every 20 ms once connected (§2.3, §4.4), as
+    /// a real RehaStim 2 does unasked.
+    #[arg(long)]
+    pub motomed: bool,
+    /// The device's mean time to process a command, ms (0: off). Each command with an
+    /// acknowledgement then takes 0.5..1.5 x this, a few per cent 100 ms (§2.3), and a
+    /// command arriving meanwhile is answered -8 busy (§5.1).
+    #[arg(long, default_value_t = Rehastim2Settings::DEFAULT.processing_mean_ms)]
+    pub processing_ms: u16,
     /// Publish the muscle's force every tick as iceoryx2 ForceSamples under this service
     /// prefix, as the rig's separate force sensor would (a RehaStim 2 measures no force;
     /// on CAN the driver publishes the stimulator's FORCE frames). Needs `--force-max-n`.
@@ -141,6 +151,8 @@ impl Rehastim2Args {
             muscle_channel: self.muscle_channel,
             test_fault: self.test_fault,
             latency_ms: self.latency_ms,
+            motomed_actual_values: self.motomed,
+            processing_mean_ms: self.processing_ms,
         })
     }
 
@@ -222,6 +234,10 @@ pub struct PtyRunSummary {
     pub pulses: u64,
     /// Answer bytes dropped because the pty's buffer was full (nobody reading).
     pub tx_dropped: u64,
+    /// -8 busy acknowledgements sent (§5.1).
+    pub busy_sent: u64,
+    /// -3 wrong-mode acknowledgements sent.
+    pub wrong_mode_sent: u64,
 }
 
 /// The pty pair, the slave side configured as the device's serial line.
@@ -356,9 +372,9 @@ pub fn run_rehastim2_until(
                                 summary.packets_rx += 1;
                                 device.on_packet(p, &mut out);
                             }
-                            Err(DecodeError::UnknownCommand { .. }) => {
+                            Err(DecodeError::UnknownCommand { number, command }) => {
                                 summary.bad_packets += 1;
-                                device.on_unknown_command(&mut out);
+                                device.on_unknown_command(number, command, &mut out);
                             }
                             Err(e) => {
                                 summary.bad_packets += 1;
@@ -386,11 +402,13 @@ pub fn run_rehastim2_until(
             out.clear();
         }
         let mut wrote = false;
+        summary.busy_sent = device.busy_sent();
+        summary.wrong_mode_sent = device.wrong_mode_sent();
         for e in device.drain_events() {
             match e {
                 Event::Pulse { .. } => summary.pulses += 1,
                 Event::WatchdogExpired { silent_ms, .. } => tracing::warn!(
-                    "watchdog: {silent_ms} ms without a packet from the host, channel list mode stopped"
+                    "watchdog: {silent_ms} ms without a packet from the host: stimulation stopped, modes reset, Init again"
                 ),
                 Event::BadPacket { error, .. } => tracing::warn!("bad packet: {error}"),
             }
@@ -460,6 +478,8 @@ mod tests {
             duration_s: Some(20.0),
             test_fault: None,
             latency_ms: 0,
+            motomed: false,
+            processing_ms: 0,
             force_prefix: None,
             force_max_n: None,
         };

@@ -66,6 +66,8 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
         duration_s: Some(60.0),
         test_fault: None,
         latency_ms: 0,
+        motomed: false,
+        processing_ms: 0,
         force_prefix: None,
         force_max_n: None,
     };
@@ -131,7 +133,8 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
             tx.send(&heartbeat).unwrap();
             if k.is_multiple_of(5) {
                 seq += 1;
-                tx.send(&pulse(seq, 0, 200 + 10 * seq, 250)).unwrap();
+                // 22, 24, ... mA: even, the device's steps being 2 mA.
+                tx.send(&pulse(seq, 0, 200 + 20 * seq, 250)).unwrap();
             }
             std::thread::sleep(Duration::from_millis(10));
         }
@@ -165,7 +168,7 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
     let rows: Vec<&str> = log.lines().skip(1).collect();
     assert_eq!(rows.len(), 8, "{log}");
     for (i, row) in rows.iter().enumerate() {
-        let current = 20 + (i + 1);
+        let current = 20 + 2 * (i + 1);
         assert!(
             row.ends_with(&format!(",pulse,1,250,{current},single,1,")),
             "row {i}: {row}\n{log}"

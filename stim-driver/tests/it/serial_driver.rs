@@ -44,6 +44,21 @@ fn sciencemode_arms_and_delivers_and_every_acknowledged_pulse_is_reconciled() {
     println!("ScienceMode: 125 decisions, {sent} delivered in order, {refused} refused as late");
 }
 
+/// A MOTOmed attached (§3.5, §2.3): the device sends ActualValues every 20 ms on its own
+/// packet counter, unasked. The driver skips them: it arms, delivers, and the run ends on
+/// the final tick, never on a link fault.
+#[test]
+fn sciencemode_motomed_actual_values_are_skipped_not_a_link_fault() {
+    let mut rig = Rig::start_with_motomed("motomed");
+    let (decisions, before, s, _) = run_armed(&mut rig, "mA,p20:1000");
+    let sent = s.pulses_sent - before.pulses_sent;
+    assert_eq!(decisions.len(), 50);
+    // run_armed asserts the run ended on the final tick (no LinkDown, no other fault).
+    assert!(sent >= 40, "{sent} of 50 delivered: {s:?}");
+    let log = std::fs::read_to_string(&rig.device.log).unwrap();
+    assert!(!log.contains("bad_packet"), "{log}");
+}
+
 /// The device at the real RehaStim 2's worst-case latency (24 ms to execute a command,
 /// Hasomed's figure): every acknowledgement and liveness answer 24 ms late. The in-flight
 /// allowance of STATUS reconciliation (the pulses written within `stimulator_timeout_ms`,
@@ -143,11 +158,15 @@ fn sciencemode_driver_stalled_fails_safe_and_never_rearms() {
     assert_eq!(at, later, "pulses delivered while the driver was stopped");
     signal_driver(&rig, libc::SIGCONT);
     let s = rig.wait_fault(Duration::from_secs(3));
+    // 1.5 s of silence is beyond the device's 1200 ms watchdog (§2.3): it has reset every
+    // mode and announces Init again (§5.2), which the resumed driver may see first as the
+    // device's restart.
     assert!(
         [
             DriverStatus::FAULT_STALE_TICK,
             DriverStatus::FAULT_TICK_TIMEOUT,
             DriverStatus::FAULT_STIMULATOR_SILENT,
+            DriverStatus::FAULT_STIMULATOR_RESET,
         ]
         .contains(&s.fault_code),
         "{s:?}\n{}",

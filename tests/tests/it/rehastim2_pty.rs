@@ -86,6 +86,8 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
         duration_s: Some(120.0),
         test_fault: None,
         latency_ms: 0,
+        motomed: false,
+        processing_ms: 0,
         force_prefix: None,
         force_max_n: None,
     };

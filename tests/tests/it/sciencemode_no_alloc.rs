@@ -25,7 +25,7 @@ fn the_serial_sides_allocate_nothing_per_packet() {
         Message::Init { version: 1 },
         Message::GetStimulationModeAck {
             result: AckResult::Ok,
-            mode: StimulationMode::Start,
+            mode: Some(StimulationMode::Start),
         },
         Message::SinglePulseAck {
             result: AckResult::Ok,
@@ -33,7 +33,12 @@ fn the_serial_sides_allocate_nothing_per_packet() {
         Message::SinglePulseAck {
             result: AckResult::ParameterError,
         },
-        Message::UnknownCommand { code: -1 },
+        Message::UnknownCommand { command: 50 },
+        Message::ActualValues {
+            angle_deg: 90,
+            speed_rpm: -30,
+            torque_dnm: 15,
+        },
         Message::StimulationError {
             error: StimulationError::Electrode,
         },

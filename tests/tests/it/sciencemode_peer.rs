@@ -193,7 +193,7 @@ fn pysciencemode_reads_our_device_packets() {
                 1,
                 Message::GetStimulationModeAck {
                     result: AckResult::Ok,
-                    mode: StimulationMode::Started,
+                    mode: Some(StimulationMode::Started),
                 },
             ),
             Some("Stimulation started"),
@@ -203,7 +203,7 @@ fn pysciencemode_reads_our_device_packets() {
                 2,
                 Message::GetStimulationModeAck {
                     result: AckResult::Ok,
-                    mode: StimulationMode::Start,
+                    mode: Some(StimulationMode::Start),
                 },
             ),
             Some("Start Mode"),
@@ -420,9 +420,25 @@ fn pysciencemode_builds_our_host_commands_byte_for_byte() {
         .collect();
     let lines = peer("rebuild", &input);
     assert_eq!(lines.len(), commands.len());
+    let mut differing = 0;
     for (p, line) in commands.iter().zip(&lines) {
-        assert_eq!(*line, hex(&encode(p)), "{p:?}");
+        // pyScienceMode also escapes 0x55 and 0x0A, which the protocol description sends
+        // as they are (§2.2: every Table 6 constant "except the stuffing key" is escaped;
+        // docs/sciencemode.md): where the packet data holds one, the bytes differ in
+        // exactly that, and our decoder reads pyScienceMode's bytes to the same packet.
+        // Elsewhere the bytes are the same.
+        let (data, len) = p.data();
+        if data[..len].iter().any(|b| matches!(b, 0x55 | 0x0A)) {
+            differing += 1;
+            let theirs = unhex(line);
+            let out: Vec<_> = Decoder::new().feed(&theirs).collect();
+            assert_eq!(out, [Ok(*p)], "{p:?}: {line}");
+        } else {
+            assert_eq!(*line, hex(&encode(p)), "{p:?}");
+        }
     }
+    // The cases cover both forms.
+    assert!(differing > 0 && differing < commands.len());
 }
 
 #[test]

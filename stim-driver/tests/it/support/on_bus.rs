@@ -64,9 +64,10 @@ fn amplitude_ua(j: u64) -> u32 {
     10_000 + 100 * (j % 100) as u32
 }
 
-/// Pulse `j`'s amplitude after the script's `mA` segment, mA (10..=59).
+/// Pulse `j`'s amplitude after the script's `mA` segment, mA (10..=58, even).
 pub fn amplitude_ma(j: u64) -> u32 {
-    10 + (j % 50) as u32
+    // Even: a RehaStim 2 generates currents in 2 mA steps.
+    10 + 2 * (j % 25) as u32
 }
 
 // ---------------------------------------------------------------------------------------

@@ -42,7 +42,12 @@ pub struct Device {
 }
 
 impl Device {
-    pub fn start(dir: &Path, test_fault: Option<TestFault>, latency_ms: u16) -> Self {
+    pub fn start(
+        dir: &Path,
+        test_fault: Option<TestFault>,
+        latency_ms: u16,
+        motomed: bool,
+    ) -> Self {
         let link = dir.join("ttyUSB0");
         let log = dir.join("pulses.csv");
         let args = Rehastim2Args {
@@ -54,6 +59,8 @@ impl Device {
             duration_s: None,
             test_fault,
             latency_ms,
+            motomed,
+            processing_ms: 0,
             force_prefix: None,
             force_max_n: None,
         };
@@ -171,12 +178,22 @@ impl Rig {
     /// [`Rig::start`] with a device that injects `fault` and takes `latency_ms` to execute
     /// a command.
     pub fn start_with(name: &str, fault: Option<TestFault>, latency_ms: u16) -> Self {
+        Self::start_device(name, fault, latency_ms, false)
+    }
+
+    /// [`Rig::start`] with a MOTOmed attached to the device: ActualValues every 20 ms
+    /// (`sim-muscle rehastim2 --motomed`).
+    pub fn start_with_motomed(name: &str) -> Self {
+        Self::start_device(name, None, 0, true)
+    }
+
+    fn start_device(name: &str, fault: Option<TestFault>, latency_ms: u16, motomed: bool) -> Self {
         let pid = std::process::id();
         let prefix = format!("sds{pid}{name}");
         let dir = std::env::temp_dir().join(format!("stim-driver-serial-{name}-{pid}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let device = Device::start(&dir, fault, latency_ms);
+        let device = Device::start(&dir, fault, latency_ms, motomed);
         let config = write_config(&dir, &device.link, &prefix);
         let log = dir.join("driver.log");
         let log_file = std::fs::File::create(&log).unwrap();
