@@ -5,25 +5,10 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_sciencemode::{
-    AckResult, DecodeError, Decoder, MAX_PACKET_LEN, Message, Packet, PhaseResult, StimulationMode,
-    crc8,
+    AckResult, DecodeError, Message, Packet, PhaseResult, StimulationMode, crc8,
 };
 
-fn encode(p: &Packet) -> Vec<u8> {
-    let mut buf = [0u8; MAX_PACKET_LEN];
-    let n = p.encode(&mut buf).unwrap();
-    buf[..n].to_vec()
-}
-
-fn decode_all(bytes: &[u8]) -> Vec<Result<Packet, DecodeError>> {
-    Decoder::new().feed(bytes).collect()
-}
-
-#[track_caller]
-fn check(packet: Packet, wire: &[u8]) {
-    assert_eq!(encode(&packet), wire, "encoding {packet:?}");
-    assert_eq!(decode_all(wire), [Ok(packet)], "decoding {wire:02X?}");
-}
+use super::support::{check, decode_all, encode};
 
 /// Frames unstuffed packet data as §2.2 / Table 6 say (test side, independent of the
 /// codec's encoder): 0xF0, 0x0F and 0x81 escaped as 0x81, byte ^ 0x55.

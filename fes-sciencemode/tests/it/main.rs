@@ -6,4 +6,5 @@
 mod document;
 mod no_alloc;
 mod roundtrip;
+mod support;
 mod vectors;
