@@ -687,12 +687,13 @@ impl Planner {
         // onset and end to two ticks, the same level. rt-core's clock jitters by tens of
         // microseconds, so an edge may land a tick either way and a ramp's targets differ
         // in the last digits from tick to tick; neither is a new contraction.
+        // The contraction announced: its onset and end in ticks from now.
+        let a_new = (0..MAX_HORIZON).find(|&j| active(j));
+        let b_new = a_new.and_then(|a| (a + 1..MAX_HORIZON).find(|&j| !active(j)));
         if let Some(w) = self.win {
             let jn = (now - w.h0) as usize;
             if jn < w.b {
                 let level = |r: &[f64]| r.iter().fold(0.0f64, |m, &v| m.max(v));
-                let a_new = (0..MAX_HORIZON).find(|&j| active(j));
-                let b_new = a_new.and_then(|a| (a + 1..MAX_HORIZON).find(|&j| !active(j)));
                 // An onset announced up to two ticks from the planned one is still to come.
                 let onset_due =
                     a_new.is_some_and(|a| a > 0 && (jn + a).abs_diff(w.a) <= EDGE_TICKS);
@@ -730,20 +731,16 @@ impl Planner {
                 return;
             }
         }
-        let window = (0..MAX_HORIZON).find(|&j| active(j)).map(|a| {
-            let end = (a + 1..MAX_HORIZON).find(|&j| !active(j));
-            (a, end)
-        });
-        let (a, bb) = match window {
-            Some((a, Some(bb))) => (a, bb),
-            Some((_, None)) => {
+        let (a, bb) = match (a_new, b_new) {
+            (Some(a), Some(bb)) => (a, bb),
+            (Some(_), None) => {
                 self.stats.no_end += 1;
                 self.win = None;
                 self.phase = Phase::Idle;
                 self.expected = None;
                 return;
             }
-            None => {
+            (None, _) => {
                 if self.win.is_some() {
                     self.stats.dropped_nothing_ahead += 1;
                 }
