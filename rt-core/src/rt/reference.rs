@@ -147,11 +147,11 @@ impl ReferenceTracker {
         Ok(())
     }
 
-    /// The preview of the tick at `now_ns`: the reference in use now (or an edge already due
-    /// that it does not reflect yet), then every edge of the kept preview still ahead, at the tick it takes effect (edges on the same tick: the
-    /// later wins). None without a fresh preview (no older than `stale_after_ns`) or a
-    /// usable reference.
-    fn preview_at(&self, reference: &Reference, now_ns: u64) -> Preview {
+    /// The preview of the tick at `now_ns`: the setpoint in effect now (`force` at `rate`:
+    /// the reference, or an edge already due that it does not reflect yet), then every edge
+    /// of the kept preview still ahead, at the tick it takes effect (edges on the same tick:
+    /// the later wins). None without a fresh preview (no older than `stale_after_ns`).
+    fn preview_at(&self, force: f64, rate: f64, now_ns: u64) -> Preview {
         let Some(p) = &self.preview else {
             return Preview::NONE;
         };
@@ -162,15 +162,9 @@ impl ReferenceTracker {
         let mut points = [PreviewPoint::default(); MAX_PREVIEW_POINTS];
         points[0] = PreviewPoint {
             at: 0,
-            force: reference.force,
-            rate_per_s: reference.max_rate_per_s,
+            force,
+            rate_per_s: rate,
         };
-        // An edge already due whose Reference has not arrived yet is the setpoint in effect
-        // now (as `advance` applies it).
-        if let Some(e) = self.due_edge(reference, now_ns) {
-            points[0].force = e.force;
-            points[0].rate_per_s = e.max_rate_per_s;
-        }
         let mut n = 1;
         for e in p.edges().iter().filter(|e| e.t_ns > now_ns) {
             let at = (e.t_ns - now_ns).div_ceil(tick).min(u32::MAX as u64) as u32;
@@ -259,7 +253,7 @@ impl ReferenceTracker {
             preview: if stale || stop {
                 Preview::NONE
             } else {
-                self.preview_at(&reference, now_ns)
+                self.preview_at(desired, rate, now_ns)
             },
         }
     }
