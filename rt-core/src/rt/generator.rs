@@ -106,8 +106,9 @@ impl<S: TickSource> PatternLoop<S> {
     /// Runs the source once for this wake-up and returns the tick to publish
     /// (`t_publish_ns` is set to the wake time; the publisher stamps it just before sending).
     ///
-    /// The source is called once whatever the number of skipped periods, so a stall can
-    /// never produce more than one pulse in a tick. While the reference's operator stop is in
+    /// The source decides once whatever the number of skipped periods, so a stall can
+    /// never produce more than one pulse in a tick; it is told of the skipped periods first
+    /// ([`TickSource::missed`]: no pulse in them) so that it keeps wall-clock time. While the reference's operator stop is in
     /// effect no pulse is fired.
     pub fn step(&mut self, wake: &Wakeup) -> (StimTick, StepEvents) {
         let target = self.references.advance(wake.wake_ns);
@@ -115,6 +116,9 @@ impl<S: TickSource> PatternLoop<S> {
             .feedback
             .as_ref()
             .and_then(|f| f.measured(wake.wake_ns));
+        if wake.missed_periods > 0 {
+            self.source.missed(wake.missed_periods, &target);
+        }
         let mut decision = self.source.tick(&target, measured);
         let mut events = StepEvents::default();
         if !decision.is_finite() {

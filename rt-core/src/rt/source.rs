@@ -54,6 +54,13 @@ pub trait TickSource {
     /// whether it is heading to rest) and, in feedback mode, the latest measured force.
     fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision;
 
+    /// The `periods` before this tick were skipped (the thread woke that late); called
+    /// before [`Self::tick`]. Nothing was fired in them. A source that keeps time in ticks
+    /// (a model of the muscle, a plan on the announced schedule) steps them without a
+    /// pulse, so that its clock stays the wall clock's. Required, so that no wrapper can
+    /// drop it unseen.
+    fn missed(&mut self, periods: u32, target: &Target);
+
     /// Returns to rest (all states zero), e.g. after a fault.
     fn reset(&mut self);
 
@@ -205,6 +212,18 @@ impl TickSource for ControllerSource {
         }
     }
 
+    fn missed(&mut self, periods: u32, target: &Target) {
+        self.generator.missed(
+            periods,
+            &TickInput {
+                reference: target.value,
+                measured_force: None,
+                resting: target.resting,
+                preview: target.preview,
+            },
+        );
+    }
+
     fn reset(&mut self) {
         self.generator.reset();
     }
@@ -293,6 +312,11 @@ impl TickSource for TestPattern {
             },
             ..TickDecision::default()
         }
+    }
+
+    /// The interval counts wall-clock ticks: skipped periods are ticks without a pulse.
+    fn missed(&mut self, periods: u32, _target: &Target) {
+        self.since_last = self.since_last.map(|n| n.saturating_add(periods));
     }
 
     fn reset(&mut self) {

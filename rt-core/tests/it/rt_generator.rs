@@ -41,6 +41,7 @@ impl TickSource for Faulty {
             ..TickDecision::default()
         }
     }
+    fn missed(&mut self, _periods: u32, _r: &Target) {}
     fn reset(&mut self) {}
     fn min_pulse_gap_ticks(&self) -> u32 {
         1
@@ -83,9 +84,14 @@ fn a_stall_yields_one_tick_with_the_misses_and_no_burst() {
     assert_eq!(b.seq, a.seq + 1);
     assert_eq!(b.missed_periods, 100);
     assert!(b.has(StimTick::FLAG_OVERRUN));
-    assert!(!b.fires(), "the source is called once: its gap still holds");
+    // The source decides once: one pulse at most, however long the stall. Its interval
+    // counts wall-clock ticks (the skipped periods fired nothing), so 101 ms after the last
+    // pulse it fires, and the tick after keeps the 2-tick gap.
+    assert!(b.fires());
     let (c, _) = l.step(&sched.advance(103 * MS));
-    assert!(c.fires() && c.missed_periods == 0);
+    assert!(!c.fires() && c.missed_periods == 0);
+    let (d, _) = l.step(&sched.advance(104 * MS));
+    assert!(d.fires());
 }
 
 #[test]
@@ -128,4 +134,49 @@ fn a_rejected_reference_flags_the_next_tick_only() {
     assert!(a.has(StimTick::FLAG_REFERENCE_REJECTED) && a.has(StimTick::FLAG_NO_REFERENCE));
     let (b, _) = l.step(&sched.advance(MS));
     assert!(!b.has(StimTick::FLAG_REFERENCE_REJECTED));
+}
+
+/// A source that logs what it is told: (missed periods reported, ticks decided).
+#[derive(Default)]
+struct Told(Vec<(u32, u32)>);
+impl TickSource for Told {
+    fn tick(&mut self, _r: &Target, _m: Option<f64>) -> TickDecision {
+        self.0.push((0, 1));
+        TickDecision::default()
+    }
+    fn missed(&mut self, periods: u32, _r: &Target) {
+        self.0.push((periods, 0));
+    }
+    fn reset(&mut self) {}
+    fn min_pulse_gap_ticks(&self) -> u32 {
+        2
+    }
+}
+
+#[test]
+fn skipped_periods_are_told_to_the_source_before_its_one_decision() {
+    // A wake-up 3.5 periods late skips 3: the source hears of them first (a model or a
+    // plan keeps wall-clock time by them) and then decides once; an on-time tick tells
+    // nothing.
+    let mut l = PatternLoop::new(
+        Told::default(),
+        ReferencePolicy {
+            stale_after_ns: 100 * MS,
+            stale_ramp_per_s: 1.0,
+            tick_ns: 1_000_000,
+        },
+        None,
+        PulseSettings {
+            channel: 0,
+            amplitude_ua: 1,
+            width_us: 1,
+        },
+        false,
+    );
+    let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
+    let (t, _) = l.step(&sched.advance(MS + 10_000));
+    assert_eq!(t.missed_periods, 0);
+    let (t, _) = l.step(&sched.advance(5 * MS + 500_000));
+    assert_eq!(t.missed_periods, 3);
+    assert_eq!(l.source().0, [(0, 1), (3, 0), (0, 1)]);
 }

@@ -106,16 +106,19 @@ fn ticks_are_gap_free_and_sigterm_ends_with_a_final_tick_and_flushed_histograms(
 }
 
 /// Replays the recorded references through a fresh pattern generator from the same file
-/// (record == resim): the live loop must have made exactly the offline decisions.
+/// (record == resim): the live loop must have made exactly the offline decisions, the
+/// periods it skipped stepped without a pulse before the tick that reports them.
 fn assert_replay_matches(controller: &Controller, ticks: &[StimTick]) {
     let mut generator = controller.pattern_generator().unwrap();
     for t in ticks.iter().filter(|t| !t.has(StimTick::FLAG_FINAL)) {
-        let out = generator.tick(&TickInput {
+        let input = TickInput {
             reference: t.reference,
             measured_force: None,
             resting: t.has(StimTick::FLAG_RESTING),
             ..Default::default()
-        });
+        };
+        generator.missed(t.missed_periods, &input);
+        let out = generator.tick(&input);
         assert_eq!(out.pulse, t.fires(), "pulse at seq {}", t.seq);
         assert_eq!(
             out.u_cont.to_bits(),

@@ -81,6 +81,11 @@ impl FeedbackState {
     }
 }
 
+/// Most skipped periods [`PatternGenerator::missed`] steps (50 ms: a stall longer than
+/// that is a fault of the host, not scheduling noise, and stepping it would make the
+/// late tick later still).
+pub const MAX_CATCH_UP_TICKS: u32 = 50;
+
 /// Inputs of one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TickInput {
@@ -360,7 +365,23 @@ impl PatternGenerator {
     /// planner's step budget alone bounds its work (deterministic).
     #[inline]
     pub fn tick(&mut self, input: &TickInput) -> TickOutput {
-        self.advance(input, true, &mut NoDeadline)
+        self.advance(input, true, &mut NoDeadline, false)
+    }
+
+    /// Periods the caller skipped before this tick (its thread stalled past them): the
+    /// stimulator received nothing in them, so each is stepped as a tick in which no pulse
+    /// is fired and nothing is planned (model, controller and planner clock stay on wall
+    /// time, and the muscle's model decays as the muscle did). At most
+    /// [`MAX_CATCH_UP_TICKS`] are stepped; a longer stall leaves the model that much
+    /// behind. `input` is this tick's (its measurement, if any, is not used for them).
+    pub fn missed(&mut self, periods: u32, input: &TickInput) {
+        let quiet = TickInput {
+            measured_force: None,
+            ..*input
+        };
+        for _ in 0..periods.min(MAX_CATCH_UP_TICKS) {
+            self.advance(&quiet, true, &mut NoDeadline, true);
+        }
     }
 
     /// [`Self::tick`] with a caller's clock: the planner stops planning when `deadline`
@@ -368,14 +389,14 @@ impl PatternGenerator {
     /// leaving the decision to the causal loop (both counted).
     #[inline]
     pub fn tick_within(&mut self, input: &TickInput, deadline: &mut dyn Deadline) -> TickOutput {
-        self.advance(input, true, deadline)
+        self.advance(input, true, deadline, false)
     }
 
     /// One tick with the pulse shaper bypassed: `u_cont` itself drives the model (the
     /// continuous loop of the design, for analysis and verification; never for
     /// stimulation — `pulse` is always `false`).
     pub fn tick_unshaped(&mut self, input: &TickInput) -> TickOutput {
-        self.advance(input, false, &mut NoDeadline)
+        self.advance(input, false, &mut NoDeadline, false)
     }
 
     #[inline(always)]
@@ -398,6 +419,7 @@ impl PatternGenerator {
         input: &TickInput,
         shaped: bool,
         deadline: &mut dyn Deadline,
+        withheld: bool,
     ) -> TickOutput {
         self.ticks += 1;
         let r = self.reference(input.reference);
@@ -420,6 +442,7 @@ impl PatternGenerator {
                 let action = self.lcn.control(&act, z, clamp);
                 let core_now = *self.core.state();
                 let planned = match self.planner.as_mut() {
+                    _ if withheld => Some(false),
                     Some(p) if shaped => {
                         let net = self.core.network();
                         let mut warm = WarmStart::new(net, &self.lcn, &self.shaper, clamp);
@@ -429,7 +452,11 @@ impl PatternGenerator {
                 };
                 let (pulse, u) = decide(&mut self.shaper, action.u_cont, rest, shaped, planned);
                 if let Some(p) = self.planner.as_mut() {
-                    p.commit(self.core.network(), &core_now, u);
+                    if withheld {
+                        p.skip(self.core.network(), &core_now);
+                    } else {
+                        p.commit(self.core.network(), &core_now, u);
+                    }
                 }
                 let step = self.core.step_with_activation(&act_core, u);
                 let y_fed_back = if self.delayed.is_some() {
@@ -462,6 +489,7 @@ impl PatternGenerator {
                 let z = core.ss_state();
                 let action = self.lcn.control(&act, z, clamp);
                 let planned = match self.planner.as_mut() {
+                    _ if withheld => Some(false),
                     Some(p) if shaped => {
                         let mut warm = WarmStart::new(net, &self.lcn, &self.shaper, clamp);
                         p.plan(net, &core, &input.preview, r, rest, &mut warm, deadline)
@@ -470,7 +498,11 @@ impl PatternGenerator {
                 };
                 let (pulse, u) = decide(&mut self.shaper, action.u_cont, rest, shaped, planned);
                 if let Some(p) = self.planner.as_mut() {
-                    p.commit(net, &core, u);
+                    if withheld {
+                        p.skip(net, &core);
+                    } else {
+                        p.commit(net, &core, u);
+                    }
                 }
                 let y_ahead = net.step_with_activation(&mut core, &act, u);
                 let y_pred_now = m.predictions.push(y_ahead);

@@ -252,6 +252,8 @@ pub struct PlannerStats {
     pub converged: u64,
     /// Plans that improved on the best candidate so far.
     pub improvements: u64,
+    /// Periods the caller skipped (stalls), counted on the clock with nothing fired.
+    pub skipped_ticks: u64,
 }
 
 /// The pulse times of a plan, in ticks from the window's first tick.
@@ -443,6 +445,8 @@ pub struct Planner {
     n_fired: usize,
     /// Pulses of the last contraction completed.
     n_prev: Option<usize>,
+    /// A pulse of the plan fell in a skipped period ([`Planner::skip`]): rebase.
+    lost_pulse: bool,
     ticks: u64,
     stats: PlannerStats,
 }
@@ -486,6 +490,7 @@ impl Clone for Planner {
             last_fire: self.last_fire,
             n_fired: self.n_fired,
             n_prev: self.n_prev,
+            lost_pulse: self.lost_pulse,
             ticks: self.ticks,
             stats: self.stats,
         }
@@ -546,6 +551,7 @@ impl Planner {
             last_fire: None,
             n_fired: 0,
             n_prev: None,
+            lost_pulse: false,
             ticks: 0,
             stats: PlannerStats::default(),
         })
@@ -586,6 +592,7 @@ impl Planner {
         self.jn = 0;
         self.last_fire = None;
         self.n_prev = None;
+        self.lost_pulse = false;
         self.stats = PlannerStats::default();
     }
 
@@ -608,7 +615,8 @@ impl Planner {
         self.follow_preview(now, st, preview, target_now, resting_now);
         let w = self.win?;
         self.jn = (now - w.h0) as usize;
-        if self.expected.is_some_and(|x| !same_state(&x, st)) && self.jn < w.b {
+        let lost = core::mem::take(&mut self.lost_pulse);
+        if (lost || self.expected.is_some_and(|x| !same_state(&x, st))) && self.jn < w.b {
             self.rebase(st);
         }
         self.work(net, warm, deadline);
@@ -648,6 +656,24 @@ impl Planner {
             }
         }
         self.ticks += 1;
+    }
+
+    /// A period the caller skipped (its thread stalled past the tick): nothing was fired
+    /// in it. `st` is the network's state before the model's step for it (taken with no
+    /// pulse). The clock advances, so that the window stays on the schedule the preview
+    /// gives in wall-clock ticks; counting calls instead put the plan a stall's length
+    /// late and made every stall of three periods or more look like a moved edge, whose
+    /// replan restarted the search from the causal loop's pattern mid-contraction. A pulse
+    /// the plan wanted here is lost: the state then differs from the plan's prediction and
+    /// the next tick plans on from the state reached (a rebase).
+    pub fn skip(&mut self, net: &Network<f64>, st: &CoreState<f64>) {
+        let wanted = self.win.is_some_and(|w| {
+            let j = (self.ticks - w.h0) as usize;
+            (w.a..w.b).contains(&j) && self.bufs.inc.j.is_finite() && self.bufs.inc.contains(j)
+        });
+        self.stats.skipped_ticks += 1;
+        self.lost_pulse |= wanted;
+        self.commit(net, st, 0.0);
     }
 
     /// Samples the preview and keeps, replaces or drops the window.
@@ -780,6 +806,7 @@ impl Planner {
         });
         b.inc = Plan::EMPTY;
         self.n_fired = 0;
+        self.lost_pulse = false;
         self.phase = Phase::Warm;
         self.expected = None;
         self.stats.windows += 1;

@@ -385,3 +385,105 @@ fn an_edge_announced_a_tick_early_or_late_is_the_same_contraction() {
     assert_eq!(s.windows, 4, "{s:?}");
     assert_eq!(s.replans, 0, "{s:?}");
 }
+
+/// Runs `n` ticks of the cardiac reference with its preview; at tick `stall` the caller
+/// stalls for `periods` periods (the ticks after it are not run: the next call is at
+/// `stall + periods + 1`, told of the periods skipped), as rt-core does when its thread
+/// wakes late. Returns the ticks that fired.
+fn run_with_stall(
+    pg: &mut PatternGenerator,
+    c: Cardiac,
+    n: usize,
+    stall: usize,
+    periods: usize,
+) -> Vec<usize> {
+    let r = c.targets(n);
+    let input = |k: usize| TickInput {
+        reference: r[k],
+        measured_force: None,
+        resting: c.setpoint(k) == 0.0,
+        preview: c.preview(k),
+    };
+    let mut fired = Vec::new();
+    let mut k = 0;
+    while k < n {
+        if k == stall + 1 {
+            k += periods;
+            pg.missed(periods as u32, &input(k));
+        }
+        if pg.tick(&input(k)).pulse {
+            fired.push(k);
+        }
+        k += 1;
+    }
+    fired
+}
+
+#[test]
+fn a_stall_at_rest_leaves_the_plan_on_the_schedule() {
+    // A 6 ms stall 400 ms before an onset (rt-core's thread preempted on a loaded host).
+    // The planner counts wall-clock ticks, so the contraction announced is still the one
+    // planned: no replan, and every pulse after the stall is where it would have been.
+    // (Counting calls put the plan six ticks late, the announced edges then moved by six
+    // and each such stall restarted the search: on the process bench one beat in ten lost
+    // its onset pulse and fired one at the contraction's end.)
+    let c = CARDIAC;
+    let n = 3 * c.period;
+    let calm = run(
+        &mut controller(planning()).pattern_generator().unwrap(),
+        c,
+        n,
+        true,
+    );
+    let calm = pulses(&calm);
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let stalled = run_with_stall(&mut pg, c, n, c.period + 397, 6);
+    assert_eq!(stalled, calm);
+    let s = pg.stats().planner;
+    assert_eq!((s.replans, s.skipped_ticks), (0, 6), "{s:?}");
+}
+
+#[test]
+fn a_pulse_lost_in_a_stall_is_planned_around_without_a_replan() {
+    // A stall over the onset of the third contraction swallows its planned first pulse:
+    // no replan (the schedule has not moved), the plan goes on from the state reached
+    // (a rebase), nothing fires in the stall, every tick of the contraction after it is
+    // decided by the plan, and the next contraction is planned on schedule.
+    let c = CARDIAC;
+    let n = 4 * c.period;
+    let onset = 2 * c.period;
+    let calm = pulses(&run(
+        &mut controller(planning()).pattern_generator().unwrap(),
+        c,
+        n,
+        true,
+    ));
+    assert!(
+        calm.contains(&onset),
+        "the calm plan fires at the onset: {calm:?}"
+    );
+    let mut pg = controller(planning()).pattern_generator().unwrap();
+    let stall = onset - 3;
+    let stalled = run_with_stall(&mut pg, c, n, stall, 6);
+    let s = pg.stats().planner;
+    assert_eq!(
+        (s.replans, s.causal_fallbacks, s.skipped_ticks),
+        (0, 0, 6),
+        "{s:?}"
+    );
+    assert!(s.rebased >= 1, "{s:?}");
+    assert!(
+        !stalled.iter().any(|&k| k > stall && k <= stall + 6),
+        "{stalled:?}"
+    );
+    let before = |v: &[usize]| {
+        v.iter()
+            .copied()
+            .filter(|&k| k <= stall)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(before(&stalled), before(&calm));
+    let next = onset + c.period;
+    assert!(stalled.contains(&next), "the next onset fires: {stalled:?}");
+    assert!(stalled.iter().all(|&k| k % c.period < c.on), "{stalled:?}");
+}

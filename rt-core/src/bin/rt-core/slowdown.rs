@@ -59,11 +59,19 @@ impl<S: TickSource> TickSource for Slowed<S> {
         decision
     }
 
+    fn missed(&mut self, periods: u32, target: &Target) {
+        self.inner.missed(periods, target);
+    }
+
     fn reset(&mut self) {
         self.inner.reset();
     }
 
     fn min_pulse_gap_ticks(&self) -> u32 {
         self.inner.min_pulse_gap_ticks()
+    }
+
+    fn summary(&self) -> Option<String> {
+        self.inner.summary()
     }
 }

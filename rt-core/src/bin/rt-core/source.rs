@@ -69,6 +69,13 @@ impl TickSource for Source {
         }
     }
 
+    fn missed(&mut self, periods: u32, target: &Target) {
+        match self {
+            Source::TestPattern(p) => p.missed(periods, target),
+            Source::Controller(c) => c.missed(periods, target),
+        }
+    }
+
     fn reset(&mut self) {
         match self {
             Source::TestPattern(p) => p.reset(),
