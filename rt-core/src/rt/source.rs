@@ -239,7 +239,8 @@ impl TickSource for ControllerSource {
                 "planner: {} contraction(s) planned, {} replanned, {} rebased, {} converged; \
                  {} tick(s) decided by a plan, {} causal for want of a plan; {} tick(s) cut \
                  by the {} us budget; {} without an end in sight; plans dropped: {} for want \
-                 of a preview, {} with nothing announced; {} rollouts, {} steps",
+                 of a preview, {} with nothing announced; {} skipped period(s) stepped \
+                 without a pulse; {} rollouts, {} steps",
                 s.windows,
                 s.replans,
                 s.rebased,
@@ -251,6 +252,7 @@ impl TickSource for ControllerSource {
                 s.no_end,
                 s.dropped_no_preview,
                 s.dropped_nothing_ahead,
+                s.skipped_ticks,
                 s.rollouts,
                 s.steps
             )
