@@ -108,8 +108,8 @@ impl<S: TickSource> PatternLoop<S> {
     ///
     /// The source decides once whatever the number of skipped periods, so a stall can
     /// never produce more than one pulse in a tick; it is told of the skipped periods first
-    /// ([`TickSource::missed`]: no pulse in them) so that it keeps wall-clock time. While the reference's operator stop is in
-    /// effect no pulse is fired.
+    /// ([`TickSource::missed`]: no pulse in them) so that it keeps wall-clock time. While
+    /// the reference's operator stop is in effect no pulse is fired.
     pub fn step(&mut self, wake: &Wakeup) -> (StimTick, StepEvents) {
         let target = self.references.advance(wake.wake_ns);
         let measured = self

@@ -184,15 +184,22 @@ impl Deadline for ClockDeadline {
     }
 }
 
+/// The pattern generator's input for the tracker's `target` (and, in feedback mode, the
+/// latest measured force).
+#[inline]
+fn tick_input(target: &Target, measured_force: Option<f64>) -> TickInput {
+    TickInput {
+        reference: target.value,
+        measured_force,
+        resting: target.resting,
+        preview: target.preview,
+    }
+}
+
 impl TickSource for ControllerSource {
     #[inline]
     fn tick(&mut self, target: &Target, measured_force: Option<f64>) -> TickDecision {
-        let input = TickInput {
-            reference: target.value,
-            measured_force,
-            resting: target.resting,
-            preview: target.preview,
-        };
+        let input = tick_input(target, measured_force);
         let out = match self.plan_budget_ns {
             Some(budget) => {
                 let mut deadline = ClockDeadline {
@@ -213,15 +220,7 @@ impl TickSource for ControllerSource {
     }
 
     fn missed(&mut self, periods: u32, target: &Target) {
-        self.generator.missed(
-            periods,
-            &TickInput {
-                reference: target.value,
-                measured_force: None,
-                resting: target.resting,
-                preview: target.preview,
-            },
-        );
+        self.generator.missed(periods, &tick_input(target, None));
     }
 
     fn reset(&mut self) {

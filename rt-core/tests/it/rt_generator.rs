@@ -12,15 +12,32 @@ use rt_core::rt::source::{TickDecision, TickSource};
 
 const MS: u64 = 1_000_000;
 
-fn pattern_loop(ipi: u32) -> PatternLoop<TestPattern> {
+/// A loop around `source` with the tests' reference policy (stale after 100 ms, ramping
+/// down at 1 per second, 1 ms ticks) and pulse settings `pulse`.
+fn loop_of<S: TickSource>(source: S, pulse: PulseSettings, degraded: bool) -> PatternLoop<S> {
     PatternLoop::new(
-        TestPattern::new(ipi).unwrap(),
+        source,
         ReferencePolicy {
             stale_after_ns: 100 * MS,
             stale_ramp_per_s: 1.0,
             tick_ns: 1_000_000,
         },
         None,
+        pulse,
+        degraded,
+    )
+}
+
+/// The least pulse: channel 0, 1 uA, 1 us.
+const TINY: PulseSettings = PulseSettings {
+    channel: 0,
+    amplitude_ua: 1,
+    width_us: 1,
+};
+
+fn pattern_loop(ipi: u32) -> PatternLoop<TestPattern> {
+    loop_of(
+        TestPattern::new(ipi).unwrap(),
         PulseSettings {
             channel: 2,
             amplitude_ua: 20_000,
@@ -96,21 +113,7 @@ fn a_stall_yields_one_tick_with_the_misses_and_no_burst() {
 
 #[test]
 fn a_non_finite_decision_is_a_fault_without_a_pulse() {
-    let mut l = PatternLoop::new(
-        Faulty(0),
-        ReferencePolicy {
-            stale_after_ns: 100 * MS,
-            stale_ramp_per_s: 1.0,
-            tick_ns: 1_000_000,
-        },
-        None,
-        PulseSettings {
-            channel: 0,
-            amplitude_ua: 1,
-            width_us: 1,
-        },
-        true,
-    );
+    let mut l = loop_of(Faulty(0), TINY, true);
     let mut sched = PeriodicSchedule::new(Duration::from_millis(1), 0).unwrap();
     let faults: Vec<bool> = (0..4)
         .map(|k| {
@@ -158,21 +161,7 @@ fn skipped_periods_are_told_to_the_source_before_its_one_decision() {
     // A wake-up 3.5 periods late skips 3: the source hears of them first (a model or a
     // plan keeps wall-clock time by them) and then decides once; an on-time tick tells
     // nothing.
-    let mut l = PatternLoop::new(
-        Told::default(),
-        ReferencePolicy {
-            stale_after_ns: 100 * MS,
-            stale_ramp_per_s: 1.0,
-            tick_ns: 1_000_000,
-        },
-        None,
-        PulseSettings {
-            channel: 0,
-            amplitude_ua: 1,
-            width_us: 1,
-        },
-        false,
-    );
+    let mut l = loop_of(Told::default(), TINY, false);
     let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
     let (t, _) = l.step(&sched.advance(MS + 10_000));
     assert_eq!(t.missed_periods, 0);
