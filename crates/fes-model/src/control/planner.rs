@@ -585,9 +585,7 @@ impl Planner {
 
     /// Forgets every plan and zeroes the counters (the generator's reset).
     pub fn reset(&mut self) {
-        self.win = None;
-        self.phase = Phase::Idle;
-        self.expected = None;
+        self.drop_window();
         self.ticks = 0;
         self.jn = 0;
         self.last_fire = None;
@@ -676,6 +674,13 @@ impl Planner {
         self.commit(net, st, 0.0);
     }
 
+    /// No contraction planned: the causal loop decides until a window opens.
+    fn drop_window(&mut self) {
+        self.win = None;
+        self.phase = Phase::Idle;
+        self.expected = None;
+    }
+
     /// Samples the preview and keeps, replaces or drops the window.
     fn follow_preview(
         &mut self,
@@ -696,9 +701,7 @@ impl Planner {
             if self.win.is_some() {
                 self.stats.dropped_no_preview += 1;
             }
-            self.win = None;
-            self.phase = Phase::Idle;
-            self.expected = None;
+            self.drop_window();
             return;
         }
         // Whether the contraction is on at tick j, by the schedule: from the next tick on
@@ -761,18 +764,14 @@ impl Planner {
             (Some(a), Some(bb)) => (a, bb),
             (Some(_), None) => {
                 self.stats.no_end += 1;
-                self.win = None;
-                self.phase = Phase::Idle;
-                self.expected = None;
+                self.drop_window();
                 return;
             }
             (None, _) => {
                 if self.win.is_some() {
                     self.stats.dropped_nothing_ahead += 1;
                 }
-                self.win = None;
-                self.phase = Phase::Idle;
-                self.expected = None;
+                self.drop_window();
                 return;
             }
         };
