@@ -550,8 +550,8 @@ mod tests {
     #[test]
     fn the_ftdi_latency_timer_is_read_through_the_udev_name() {
         // §2.1: the FTDI latency timer should be 1 ms. A fake sysfs and /dev.
-        let dir = std::env::temp_dir().join(format!("ftdi-latency-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let scratch = fes_testkit::Scratch::new("ftdi-latency");
+        let dir = scratch.path();
         let timer = dir.join("sys/class/tty/ttyUSB7/device");
         std::fs::create_dir_all(&timer).unwrap();
         std::fs::create_dir_all(dir.join("dev")).unwrap();
@@ -571,7 +571,6 @@ mod tests {
         // No such adapter (a pty, another converter): nothing to say.
         std::fs::write(dir.join("dev/ttyS0"), b"").unwrap();
         assert_eq!(ftdi_latency_timer_ms(&sys, &dir.join("dev/ttyS0")), None);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
