@@ -32,6 +32,9 @@
 
 use std::collections::VecDeque;
 
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
 use fes_sciencemode::limits::{self, effective_width_us};
 use fes_sciencemode::{
     AckResult, ChannelListInit, ChannelListUpdate, DecodeError, MAX_PACKET_LEN, Message,
@@ -71,7 +74,7 @@ pub struct Rehastim2Settings {
 }
 
 /// The slow share of commands when [`Rehastim2Settings::processing_mean_ms`] is on, %.
-pub const SLOW_PROCESSING_PERCENT: u64 = 3;
+pub const SLOW_PROCESSING_PERCENT: u32 = 3;
 /// A slow command's processing time, ms (§2.3 MaxResponseTime).
 pub const SLOW_PROCESSING_MS: u64 = 100;
 
@@ -223,8 +226,8 @@ pub struct Rehastim2 {
     pending: VecDeque<(u64, Packet)>,
     /// Processing a command until this tick ([`Rehastim2Settings::processing_mean_ms`]).
     busy_until: u64,
-    /// Pseudo-random state for the processing times (xorshift64).
-    rng: u64,
+    /// The processing times' draws (seeded: a run repeats).
+    rng: ChaCha8Rng,
     /// -8 busy acknowledgements sent.
     busy_sent: u64,
     /// -3 wrong-mode acknowledgements sent.
@@ -255,7 +258,7 @@ impl Rehastim2 {
             silent: false,
             pending: VecDeque::with_capacity(256),
             busy_until: 0,
-            rng: 0x9E37_79B9_7F4A_7C15,
+            rng: ChaCha8Rng::seed_from_u64(0x9E37_79B9_7F4A_7C15),
             busy_sent: 0,
             wrong_mode_sent: 0,
         }
@@ -274,14 +277,11 @@ impl Rehastim2 {
 
     /// The processing time of the next command, ticks.
     fn draw_processing_ticks(&mut self) -> u64 {
-        self.rng ^= self.rng << 13;
-        self.rng ^= self.rng >> 7;
-        self.rng ^= self.rng << 17;
         let mean = u64::from(self.settings.processing_mean_ms);
-        if self.rng % 100 < SLOW_PROCESSING_PERCENT {
+        if self.rng.random_ratio(SLOW_PROCESSING_PERCENT, 100) {
             SLOW_PROCESSING_MS
         } else {
-            (mean / 2 + (self.rng >> 8) % (mean + 1)).max(1)
+            (mean / 2 + self.rng.random_range(0..=mean)).max(1)
         }
     }
 
