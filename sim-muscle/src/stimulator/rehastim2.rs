@@ -743,6 +743,13 @@ mod tests {
         p[0].message.ack_result().unwrap()
     }
 
+    /// The device's one acknowledgement to `packet`.
+    fn answer(d: &mut Rehastim2, packet: Packet) -> AckResult {
+        let mut out = Vec::new();
+        d.on_packet(packet, &mut out);
+        ack_of(&out)
+    }
+
     #[test]
     fn announces_init_until_acknowledged() {
         let mut d = Rehastim2::new(Rehastim2Settings::DEFAULT);
@@ -858,9 +865,7 @@ mod tests {
                 }),
             )
         };
-        d.on_packet(pulse(0, 200, 20), &mut out);
-        assert_eq!(ack_of(&out), AckResult::Ok);
-        out.clear();
+        assert_eq!(answer(&mut d, pulse(0, 200, 20)), AckResult::Ok);
         d.tick(&mut plant, &mut out);
         d.tick(&mut plant, &mut out);
         assert_eq!(pulses(&mut d), [(2, 1, 200, 20)]);
@@ -893,33 +898,31 @@ mod tests {
             current_ma: 20,
         }])
         .unwrap();
-        d.on_packet(
-            Packet::new(1, Message::StartChannelListMode(list)),
-            &mut out,
+        assert_eq!(
+            answer(&mut d, Packet::new(1, Message::StartChannelListMode(list))),
+            AckResult::WrongModeError
         );
-        assert_eq!(ack_of(&out), AckResult::WrongModeError);
-        out.clear();
         // An 8 ms main interval is the shortest; 7 ms is a parameter error.
-        d.on_packet(
-            Packet::new(2, Message::InitChannelListMode(init(0b1, 0, 0, 7))),
-            &mut out,
+        assert_eq!(
+            answer(
+                &mut d,
+                Packet::new(2, Message::InitChannelListMode(init(0b1, 0, 0, 7)))
+            ),
+            AckResult::ParameterError
         );
-        assert_eq!(ack_of(&out), AckResult::ParameterError);
-        out.clear();
         // Channels 1 (single) and 2 (doublet, low frequency, every 2nd), 20 ms.
-        d.on_packet(
-            Packet::new(3, Message::InitChannelListMode(init(0b11, 0b10, 1, 20))),
-            &mut out,
+        assert_eq!(
+            answer(
+                &mut d,
+                Packet::new(3, Message::InitChannelListMode(init(0b11, 0b10, 1, 20)))
+            ),
+            AckResult::Ok
         );
-        assert_eq!(ack_of(&out), AckResult::Ok);
-        out.clear();
         // One entry for two active channels: parameter error.
-        d.on_packet(
-            Packet::new(4, Message::StartChannelListMode(list)),
-            &mut out,
+        assert_eq!(
+            answer(&mut d, Packet::new(4, Message::StartChannelListMode(list))),
+            AckResult::ParameterError
         );
-        assert_eq!(ack_of(&out), AckResult::ParameterError);
-        out.clear();
         let two = ChannelListUpdate::new(&[
             ChannelPulse {
                 mode: PulseMode::Single,
@@ -956,19 +959,20 @@ mod tests {
         assert_eq!(plant.pulses(), 3);
         // SinglePulse while the list runs: wrong mode. Stop: back to start mode.
         out.clear();
-        d.on_packet(
-            Packet::new(
-                6,
-                Message::SinglePulse(SinglePulse {
-                    channel: 0,
-                    pulse_width_us: 100,
-                    current_ma: 10,
-                }),
+        assert_eq!(
+            answer(
+                &mut d,
+                Packet::new(
+                    6,
+                    Message::SinglePulse(SinglePulse {
+                        channel: 0,
+                        pulse_width_us: 100,
+                        current_ma: 10,
+                    }),
+                )
             ),
-            &mut out,
+            AckResult::WrongModeError
         );
-        assert_eq!(ack_of(&out), AckResult::WrongModeError);
-        out.clear();
         d.on_packet(Packet::new(7, Message::StopChannelListMode), &mut out);
         assert_eq!(ack_of(&out), AckResult::Ok);
         for _ in 0..50 {
@@ -1122,18 +1126,15 @@ mod tests {
                 current_ma: 20,
             }),
         );
-        d.on_packet(single, &mut out);
-        assert_eq!(ack_of(&out), AckResult::Ok);
-        out.clear();
-        d.on_packet(
-            Packet::new(3, Message::InitChannelListMode(init(0b1, 0, 0, 20))),
-            &mut out,
+        assert_eq!(answer(&mut d, single), AckResult::Ok);
+        assert_eq!(
+            answer(
+                &mut d,
+                Packet::new(3, Message::InitChannelListMode(init(0b1, 0, 0, 20)))
+            ),
+            AckResult::Ok
         );
-        assert_eq!(ack_of(&out), AckResult::Ok);
-        out.clear();
-        d.on_packet(single, &mut out);
-        assert_eq!(ack_of(&out), AckResult::WrongModeError);
-        out.clear();
+        assert_eq!(answer(&mut d, single), AckResult::WrongModeError);
         d.on_packet(Packet::new(4, Message::StopChannelListMode), &mut out);
         out.clear();
         d.on_packet(single, &mut out);
