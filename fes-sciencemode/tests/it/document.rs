@@ -4,11 +4,9 @@
 //! 0x07, over the stuffed packet data) and pasted here.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use fes_sciencemode::{
-    AckResult, DecodeError, Message, Packet, PhaseResult, StimulationMode, crc8,
-};
+use fes_sciencemode::{AckResult, DecodeError, Message, Packet, PhaseResult, StimulationMode};
 
-use super::support::{check, decode_all, encode};
+use super::support::{check, decode_all, encode, wrap};
 
 /// Frames unstuffed packet data as §2.2 / Table 6 say (test side, independent of the
 /// codec's encoder): 0xF0, 0x0F and 0x81 escaped as 0x81, byte ^ 0x55.
@@ -21,16 +19,7 @@ fn frame(data: &[u8]) -> Vec<u8> {
             stuffed.push(b);
         }
     }
-    let mut out = vec![
-        0xF0,
-        0x81,
-        crc8(&stuffed) ^ 0x55,
-        0x81,
-        u8::try_from(stuffed.len()).unwrap() ^ 0x55,
-    ];
-    out.extend(stuffed);
-    out.push(0x0F);
-    out
+    wrap(&stuffed)
 }
 
 fn single_pulse_ack(number: u8) -> Packet {
@@ -86,19 +75,7 @@ fn a_host_that_also_escapes_0x55_and_0x0a_is_read() {
     // pyScienceMode 1.1.5 escapes 0x55 and 0x0A too; 0x81 followed by any byte un-stuffs
     // to that byte XOR 0x55 (§2.2), so the decoder reads that form as well.
     for (n, escaped) in [(0x0Au8, 0x5Fu8), (0x55, 0x00)] {
-        let data = [0x81, escaped, 0x25, 0x00];
-        let wire = [
-            0xF0,
-            0x81,
-            crc8(&data) ^ 0x55,
-            0x81,
-            4 ^ 0x55,
-            0x81,
-            escaped,
-            0x25,
-            0x00,
-            0x0F,
-        ];
+        let wire = wrap(&[0x81, escaped, 0x25, 0x00]);
         assert_eq!(decode_all(&wire), [Ok(single_pulse_ack(n))]);
     }
 }

@@ -19,7 +19,7 @@ use fes_sciencemode::{
     Packet, PulseMode, SinglePulse, StimulationError, StimulationMode, crc8,
 };
 
-use super::support::{check, decode_all, encode};
+use super::support::{check, decode_all, encode, wrap};
 
 #[test]
 fn crc8_is_the_smbus_crc() {
@@ -226,18 +226,7 @@ fn pyscience_modes_in_place_xor_of_a_special_command_is_not_our_packet() {
         [0xF0, 0x81, 0x76, 0x81, 0x57, 0x01, 0x0A, 0x0F]
     );
     // And reads it stuffed as well: 0x81 0x5F is 0x0A.
-    let data = [0x01, 0x81, 0x5F];
-    let stuffed = [
-        0xF0,
-        0x81,
-        crc8(&data) ^ 0x55,
-        0x81,
-        3 ^ 0x55,
-        0x01,
-        0x81,
-        0x5F,
-        0x0F,
-    ];
+    let stuffed = wrap(&[0x01, 0x81, 0x5F]);
     assert_eq!(
         decode_all(&stuffed),
         [Ok(Packet::new(1, Message::GetStimulationMode))]
@@ -302,18 +291,7 @@ fn errors_are_typed() {
         ]
     );
     // A stuffing byte at the end of the packet data: nothing to un-stuff.
-    let data = [0x03, 0x02, 0x81];
-    let forged = [
-        0xF0,
-        0x81,
-        crc8(&data) ^ 0x55,
-        0x81,
-        3 ^ 0x55,
-        0x03,
-        0x02,
-        0x81,
-        0x0F,
-    ];
+    let forged = wrap(&[0x03, 0x02, 0x81]);
     assert_eq!(
         decode_all(&forged),
         [Err(DecodeError::BadStuffing {
@@ -322,17 +300,7 @@ fn errors_are_typed() {
         })]
     );
     // An unknown command (a MOTOmed command), and a known one with the wrong data length.
-    let data = [0x03, 50];
-    let forged = [
-        0xF0,
-        0x81,
-        crc8(&data) ^ 0x55,
-        0x81,
-        2 ^ 0x55,
-        0x03,
-        50,
-        0x0F,
-    ];
+    let forged = wrap(&[0x03, 50]);
     assert_eq!(
         decode_all(&forged),
         [Err(DecodeError::UnknownCommand {
@@ -340,18 +308,7 @@ fn errors_are_typed() {
             command: 50
         })]
     );
-    let data = [0x03, 0x04, 0x00];
-    let forged = [
-        0xF0,
-        0x81,
-        crc8(&data) ^ 0x55,
-        0x81,
-        3 ^ 0x55,
-        0x03,
-        0x04,
-        0x00,
-        0x0F,
-    ];
+    let forged = wrap(&[0x03, 0x04, 0x00]);
     assert!(matches!(
         decode_all(&forged)[..],
         [Err(DecodeError::WrongDataLength {
