@@ -37,8 +37,10 @@
 //! the ticks pass; the search goes on within each tick's budget on the pulses not yet
 //! fired. When the state the generator hands in differs from the one the plan predicted
 //! (the measured-force mode's estimator corrected it, or the causal loop decided before a
-//! plan existed), the plan is re-evaluated from the state now; when the preview changes
-//! (the outer loop moved the next level, an operator's change, a stall), it is made again.
+//! plan existed, or a pulse it wanted fell in a period the caller skipped), the plan is
+//! re-evaluated from the state now; when the announced contraction changes (the outer
+//! loop moved the next level, an operator's change), it is made again. A stall is not a
+//! change: the clock counts the periods skipped ([`Planner::skip`]).
 //!
 //! **Budget.** Work is counted in network steps: at most `budget_steps` per tick (plus one
 //! rollout already started), and a caller's deadline ([`Deadline`], rt-core's clock) is
@@ -331,6 +333,8 @@ struct Window {
     pa: usize,
     /// End of the horizon (exclusive).
     e: usize,
+    /// The contraction's level: the highest target over `a..b`.
+    level: f64,
     /// First tick a pulse may come after the last one fired (the minimum interval).
     first_ok: usize,
     /// Tick of the base state (rollouts start here; earlier pulses are history).
@@ -495,6 +499,11 @@ impl Clone for Planner {
             stats: self.stats,
         }
     }
+}
+
+/// A contraction's level: the highest of its targets `r`.
+fn level(r: &[f64]) -> f64 {
+    r.iter().fold(0.0f64, |m, &v| m.max(v))
 }
 
 /// Tolerance on a contraction's level when deciding that a window is the one planned.
@@ -722,7 +731,6 @@ impl Planner {
         if let Some(w) = self.win {
             let jn = (now - w.h0) as usize;
             if jn < w.b {
-                let level = |r: &[f64]| r.iter().fold(0.0f64, |m, &v| m.max(v));
                 // An onset announced up to two ticks from the planned one is still to come.
                 let onset_due =
                     a_new.is_some_and(|a| a > 0 && (jn + a).abs_diff(w.a) <= EDGE_TICKS);
@@ -744,8 +752,7 @@ impl Planner {
                             };
                             onset_ok
                                 && (jn + bb).abs_diff(w.b) <= EDGE_TICKS
-                                && (level(&b.r_now[a..bb]) - level(&b.r[w.a..w.b])).abs()
-                                    <= SAME_REFERENCE
+                                && (level(&b.r_now[a..bb]) - w.level).abs() <= SAME_REFERENCE
                         }
                         _ => false,
                     };
@@ -799,6 +806,7 @@ impl Planner {
             b: bb,
             pa,
             e,
+            level: level(&b.r[a..bb]),
             first_ok,
             base_at: 0,
             base: *st,
