@@ -100,6 +100,12 @@ pub struct FitArgs {
     /// [0, 1]; every unit the same shifted spline). docs/model.md.
     #[arg(long, value_enum, default_value_t = KnotsArg::Clamped)]
     pub knots: KnotsArg,
+    /// Scheduling range LO,HI the validity functions span (phi; a constant f Hz train
+    /// has mean phi f/100). Units beyond the range the data reach are fitted to little
+    /// information (pitfall d): put them where the data are; outside the range phi is
+    /// clamped into it, so the edge units extrapolate. docs/model.md.
+    #[arg(long, value_parser = parse_range, default_value = "0,1")]
+    pub range: (f64, f64),
     /// Number of network starts for Levenberg-Marquardt (best training error wins).
     #[arg(long, default_value_t = 1)]
     pub starts: usize,
@@ -121,6 +127,19 @@ pub struct FitArgs {
     /// model's provenance then records how many differed (`undelivered_pulses`).
     #[arg(long)]
     pub allow_undelivered: bool,
+}
+
+/// `--range LO,HI`: two finite numbers (their order is checked with the other options).
+fn parse_range(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (lo, hi) = s
+        .split_once(',')
+        .ok_or_else(|| format!("`{s}`: expected LO,HI (e.g. 0,0.7)"))?;
+    let num = |t: &str| {
+        t.trim()
+            .parse::<f64>()
+            .map_err(|e| format!("`{t}` in `{s}`: {e}"))
+    };
+    Ok((num(lo)?, num(hi)?))
 }
 
 /// `--knots`.
@@ -185,7 +204,7 @@ impl FitArgs {
             max_iter: self.max_iter,
             seed: self.seed,
             prior: self.prior,
-            ..IdentOptions::default()
+            range: self.range,
         };
         opts.validate()?;
         Ok(opts)

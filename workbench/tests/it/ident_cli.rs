@@ -722,3 +722,73 @@ fn common_eigenvector_network_beats_the_linear_model_by_the_thesis_ratios() {
         file::to_json_string(&lmn.lmn).expect("serialisable");
     }
 }
+
+/// Each unit's share of the training validity weight, from the model's provenance.
+fn validity_shares(model: &Path) -> Vec<f64> {
+    let lmn = file::load(model).expect("model");
+    lmn.provenance.extra["unit_validity_share"]
+        .as_array()
+        .expect("shares")
+        .iter()
+        .map(|v| v.as_f64().expect("number"))
+        .collect()
+}
+
+/// `identify --range LO,HI` spans the validity functions over where the data are: on the
+/// thesis protocol's fast data (whose random trains seldom reach phi = 0.6, a 60 Hz mean)
+/// eight units over [0, 1] leave the top three under 0.5 % of the training validity weight
+/// each (pitfall d), over [0, 0.5] every unit gets more than 2 %. Input scheduling makes the
+/// shares a function of the pulses alone, so two iterations suffice. A range that is not
+/// two numbers, or inverted, is refused naming the flag.
+#[test]
+fn identify_range_puts_every_unit_where_the_data_are() {
+    let dir = tmp("identify_range");
+    let data = data_dir(Preset::Fast).to_str().expect("utf8");
+    let fit = |range: &str, name: &str| {
+        let out = dir.join(name);
+        let o = run(&[
+            "identify",
+            "--data",
+            data,
+            "--structure",
+            "ss-eig-common",
+            "--units",
+            "8",
+            "--zero-offsets",
+            "--max-iter",
+            "2",
+            "--range",
+            range,
+            "--out",
+            out.to_str().expect("utf8"),
+        ]);
+        (o, out)
+    };
+    let (o, whole) = fit("0,1", "whole.lmn.json");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let shares = validity_shares(&whole);
+    assert!(
+        shares[5..].iter().all(|&s| s < 0.005),
+        "over [0, 1] the top units get little: {shares:?}"
+    );
+    assert!(stderr(&o).contains("unit 7 gets only"), "{}", stderr(&o));
+    let (o, low) = fit("0,0.5", "low.lmn.json");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let shares = validity_shares(&low);
+    assert!(
+        shares.iter().all(|&s| s > 0.02),
+        "over [0, 0.5] every unit is reached: {shares:?}"
+    );
+    assert!(!stderr(&o).contains("gets only"), "{}", stderr(&o));
+    let lmn = file::load(&low).expect("model");
+    assert_eq!(
+        lmn.provenance.extra["options"]["range"],
+        serde_json::json!([0.0, 0.5])
+    );
+    for (bad, says) in [("0.5", "LO,HI"), ("0,x", "`x`"), ("0.5,0.2", "lo < hi")] {
+        let (o, _) = fit(bad, "bad.lmn.json");
+        assert!(!o.status.success(), "--range {bad} accepted");
+        let err = stderr(&o);
+        assert!(err.contains(says), "--range {bad}: {err}");
+    }
+}
