@@ -518,6 +518,35 @@ impl Message {
         )
     }
 
+    /// Whether the device answers this host command (§2.3, §5.1: every command but
+    /// Watchdog and InitAck has a response packet carrying its packet number). The host
+    /// sends its next such command only after that answer: one arriving while the device
+    /// still processes the last is answered -8 busy and not executed.
+    pub const fn expects_answer(&self) -> bool {
+        matches!(
+            self,
+            Message::GetStimulationMode
+                | Message::InitChannelListMode(_)
+                | Message::StartChannelListMode(_)
+                | Message::StopChannelListMode
+                | Message::SinglePulse(_)
+        )
+    }
+
+    /// Whether this device packet answers a host command ([`Self::expects_answer`]): an
+    /// acknowledgement, or UnknownCommand (§4.1), both with the command's packet number.
+    pub const fn is_answer(&self) -> bool {
+        matches!(
+            self,
+            Message::GetStimulationModeAck { .. }
+                | Message::InitChannelListModeAck { .. }
+                | Message::StartChannelListModeAck { .. }
+                | Message::StopChannelListModeAck { .. }
+                | Message::SinglePulseAck { .. }
+                | Message::UnknownCommand { .. }
+        )
+    }
+
     /// The acknowledgement's result, for the device's answers that carry one.
     pub const fn ack_result(&self) -> Option<AckResult> {
         match *self {

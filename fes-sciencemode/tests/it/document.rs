@@ -207,3 +207,87 @@ fn motomed_information_packets_decode() {
         assert!(!m.is_motomed_information());
     }
 }
+
+#[test]
+fn every_host_command_but_watchdog_and_init_ack_is_answered() {
+    // §2.3 and §5.1: the device answers each command with a response packet carrying the
+    // command's packet number (an acknowledgement, §4.2-4.3, or UnknownCommand, §4.1);
+    // Watchdog (§4.2) and InitAck (§4.1, itself the host's answer to Init) have none.
+    // The host's stop-and-wait rests on this table.
+    let ack = AckResult::Ok;
+    let pulse = fes_sciencemode::SinglePulse {
+        channel: 0,
+        pulse_width_us: 200,
+        current_ma: 20,
+    };
+    let init = fes_sciencemode::ChannelListInit {
+        low_frequency_factor: 0,
+        active_channels: 1,
+        low_frequency_channels: 0,
+        inter_pulse_interval_code: 0,
+        main_interval_code: 0,
+        channel_execution: 0,
+    };
+    let update = fes_sciencemode::ChannelListUpdate::new(&[fes_sciencemode::ChannelPulse {
+        mode: fes_sciencemode::PulseMode::Single,
+        pulse_width_us: 200,
+        current_ma: 20,
+    }])
+    .unwrap();
+    let table: [(Message, Option<Message>); 7] = [
+        (Message::Watchdog, None),
+        (Message::InitAck { result: ack }, None),
+        (
+            Message::GetStimulationMode,
+            Some(Message::GetStimulationModeAck {
+                result: ack,
+                mode: Some(StimulationMode::Start),
+            }),
+        ),
+        (
+            Message::InitChannelListMode(init),
+            Some(Message::InitChannelListModeAck { result: ack }),
+        ),
+        (
+            Message::StartChannelListMode(update),
+            Some(Message::StartChannelListModeAck { result: ack }),
+        ),
+        (
+            Message::StopChannelListMode,
+            Some(Message::StopChannelListModeAck { result: ack }),
+        ),
+        (
+            Message::SinglePulse(pulse),
+            Some(Message::SinglePulseAck { result: ack }),
+        ),
+    ];
+    for (command, answer) in table {
+        assert_eq!(command.expects_answer(), answer.is_some(), "{command:?}");
+        assert!(!command.is_answer(), "{command:?}");
+        if let Some(a) = answer {
+            assert!(a.is_answer() && !a.expects_answer(), "{a:?}");
+            // The acknowledgement's command id follows the command's (§4, Table 7).
+            assert_eq!(a.command().id(), command.command().id() + 1, "{a:?}");
+        }
+    }
+    assert!(Message::UnknownCommand { command: 50 }.is_answer());
+    // What the device sends unasked answers nothing: Init (§4.1), StimulationError
+    // (§4.3), the MOTOmed information packets (§4.4).
+    for unasked in [
+        Message::Init { version: 1 },
+        Message::StimulationError {
+            error: fes_sciencemode::StimulationError::Electrode,
+        },
+        Message::ActualValues {
+            angle_deg: 0,
+            speed_rpm: 0,
+            torque_dnm: 0,
+        },
+        Message::MotomedError { code: -4 },
+    ] {
+        assert!(
+            !unasked.is_answer() && !unasked.expects_answer(),
+            "{unasked:?}"
+        );
+    }
+}
