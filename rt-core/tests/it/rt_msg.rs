@@ -90,7 +90,7 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v2");
     assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");
     assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
-    assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v1");
+    assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v2");
 }
 
 /// A PulseOutcome from another process is validated like every message: its fate is one of
@@ -105,6 +105,7 @@ fn pulse_outcome_validation() {
         PulseFate::Refused,
         PulseFate::NotArmed,
         PulseFate::NotWritten,
+        PulseFate::Late,
     ] {
         assert_eq!(PulseFate::try_from(fate as u8), Ok(fate));
     }
@@ -112,7 +113,7 @@ fn pulse_outcome_validation() {
         PulseOutcome { seq: 0, ..ok },
         PulseOutcome { tick_seq: 0, ..ok },
         PulseOutcome { fate: 0, ..ok },
-        PulseOutcome { fate: 5, ..ok },
+        PulseOutcome { fate: 6, ..ok },
         PulseOutcome {
             reserved: [0, 0, 1, 0, 0, 0, 0],
             ..ok

@@ -11,7 +11,7 @@ use super::validate::{ValidationError, int_in_range, nonzero_seq, reserved_zero}
 /// and why. Published for every such tick the driver received, in tick order.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("fes::PulseOutcome::v1")]
+#[type_name("fes::PulseOutcome::v2")]
 pub struct PulseOutcome {
     /// Sequence number, 1, 2, ... per publisher.
     pub seq: u64,
@@ -40,6 +40,10 @@ pub enum PulseFate {
     NotArmed = 3,
     /// The frame could not be written (the bus): not sent.
     NotWritten = 4,
+    /// The transport was still waiting for the stimulator's answer to its previous
+    /// command (ScienceMode 2 is stop-and-wait) beyond the driver's lateness bound, or a
+    /// newer pulse decision took its place: not sent.
+    Late = 5,
 }
 
 impl TryFrom<u8> for PulseFate {
@@ -51,11 +55,12 @@ impl TryFrom<u8> for PulseFate {
             2 => Ok(PulseFate::Refused),
             3 => Ok(PulseFate::NotArmed),
             4 => Ok(PulseFate::NotWritten),
+            5 => Ok(PulseFate::Late),
             _ => Err(ValidationError::IntOutOfRange {
                 field: "fate",
                 value: u64::from(v),
                 min: 1,
-                max: 4,
+                max: 5,
             }),
         }
     }
@@ -69,6 +74,7 @@ impl PulseFate {
             PulseFate::Refused => "refused",
             PulseFate::NotArmed => "not_armed",
             PulseFate::NotWritten => "not_written",
+            PulseFate::Late => "late",
         }
     }
 }
@@ -108,7 +114,7 @@ impl Contract for PulseOutcome {
     fn validate(&self) -> Result<(), ValidationError> {
         nonzero_seq(self.seq)?;
         nonzero_seq(self.tick_seq)?;
-        int_in_range("fate", u64::from(self.fate), 1, 4)?;
+        int_in_range("fate", u64::from(self.fate), 1, 5)?;
         reserved_zero("reserved", &self.reserved)
     }
 }
