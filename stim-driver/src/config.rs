@@ -10,7 +10,11 @@
 //! kind = "can"                   # "can" (default) or "sciencemode" (a RehaStim 2 on a
 //!                                # serial line, docs/sciencemode.md), which then needs:
 //! # device = "/dev/ttyUSB0"      # the serial device (sciencemode only)
-//! # poll_ms = 20                 # liveness query period (sciencemode only), 5..=1000
+//! # poll_ms = 50                 # a liveness query this long after the last answer
+//!                                # (sciencemode only), 5..=1000
+//! # max_lateness_ms = 3          # a pulse waits at most this for the device's answer to
+//!                                # the previous command, else it is dropped as late
+//!                                # (sciencemode only), 0..=20
 //!
 //! [can]
 //! iface = "can0"                 # required with kind "can", absent with "sciencemode";
@@ -45,7 +49,8 @@
 //! tick_period_us = 1000          # rt-core's period
 //! timeout_ticks = 3              # no StimTick for this many periods -> NMT stop
 //! stale_after_ticks = 3          # a StimTick this old on arrival -> NMT stop
-//! stimulator_timeout_ms = 100    # no STATUS for this long -> NMT stop (and no arming)
+//! stimulator_timeout_ms = 100    # no STATUS for this long -> NMT stop (and no arming);
+//!                                # default 100, with sciencemode 100 + 2 x poll_ms
 //! arm_confirm_ms = 100           # NMT start must show in STATUS (and the supervisor be seen) within this
 //! command_max_age_ms = 100       # an older Arm is refused
 //! liveness_check_ms = 20         # how often the publishers' nodes are checked
@@ -231,14 +236,30 @@ pub struct TransportConfig {
     /// The serial device, e.g. `/dev/ttyUSB0` (ScienceMode only, required there).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub device: Option<PathBuf>,
-    /// Period of the liveness query (GetStimulationMode), whose answer stands for STATUS,
-    /// ms (ScienceMode only; 5..=1000, default [`DEFAULT_POLL_MS`]).
+    /// The liveness query (GetStimulationMode), whose answer stands for STATUS, goes this
+    /// long after the last answer that did, ms (ScienceMode only; 5..=1000, default
+    /// [`DEFAULT_POLL_MS`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub poll_ms: Option<u32>,
+    /// How long a pulse may wait for the device's answer to the previous command before
+    /// it is dropped as late (ScienceMode's stop-and-wait), ms (ScienceMode only; 0..=20,
+    /// default [`DEFAULT_MAX_LATENESS_MS`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_lateness_ms: Option<u32>,
 }
 
+/// Default `[watchdog] stimulator_timeout_ms` on CAN.
+pub const DEFAULT_STIMULATOR_TIMEOUT_MS: u32 = 100;
+
 /// Default `[transport] poll_ms`.
-pub const DEFAULT_POLL_MS: u32 = 20;
+/// 50 ms: a RehaStim 2 answering in 10-20 ms (§2.3) is then busy with queries for a fifth
+/// to a third of the time it is not answering pulses, and a pulse decided meanwhile waits.
+pub const DEFAULT_POLL_MS: u32 = 50;
+
+/// Default `[transport] max_lateness_ms`: a pulse 3 ms late lands within the first tenth
+/// of a twitch (its force peaks 30-60 ms after the pulse); later than that it is another
+/// pattern than the one the generator chose.
+pub const DEFAULT_MAX_LATENESS_MS: u32 = 3;
 
 impl TransportConfig {
     fn is_default(&self) -> bool {
@@ -248,6 +269,11 @@ impl TransportConfig {
     /// The liveness query period, ms (ScienceMode).
     pub fn poll_ms(&self) -> u32 {
         self.poll_ms.unwrap_or(DEFAULT_POLL_MS)
+    }
+
+    /// The lateness bound of a pulse waiting for the device, ms (ScienceMode).
+    pub fn max_lateness_ms(&self) -> u32 {
+        self.max_lateness_ms.unwrap_or(DEFAULT_MAX_LATENESS_MS)
     }
 }
 
@@ -337,8 +363,10 @@ pub struct WatchdogConfig {
     pub timeout_ticks: u32,
     /// A StimTick older than this many periods on arrival trips it (1..=10000).
     pub stale_after_ticks: u32,
-    /// No STATUS from the stimulator for this long trips it, ms (20..=10000).
-    pub stimulator_timeout_ms: u32,
+    /// No STATUS from the stimulator for this long trips it, ms (20..=10000; absent:
+    /// [`DriverConfig::stimulator_timeout_ms`]'s default for the transport).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stimulator_timeout_ms: Option<u32>,
     /// NMT start must show in STATUS, and the supervisor (with `supervisor_watch`) be seen
     /// alive, within this after an Arm, ms (20..=10000).
     pub arm_confirm_ms: u32,
@@ -361,7 +389,7 @@ impl Default for WatchdogConfig {
             tick_period_us: 1000,
             timeout_ticks: 3,
             stale_after_ticks: 3,
-            stimulator_timeout_ms: 100,
+            stimulator_timeout_ms: None,
             arm_confirm_ms: 100,
             command_max_age_ms: 100,
             liveness_check_ms: 20,
@@ -726,9 +754,9 @@ impl DriverConfig {
             "1..=10000",
         )?;
         config_file::range(
-            (20..=10_000).contains(&w.stimulator_timeout_ms),
+            (20..=10_000).contains(&self.stimulator_timeout_ms()),
             "watchdog.stimulator_timeout_ms",
-            w.stimulator_timeout_ms,
+            self.stimulator_timeout_ms(),
             "20..=10000",
         )?;
         config_file::range(
@@ -810,6 +838,12 @@ impl DriverConfig {
                     "absent with kind = \"can\" (the stimulator sends STATUS by itself)",
                 )?;
                 config_file::range(
+                    t.max_lateness_ms.is_none(),
+                    "transport.max_lateness_ms",
+                    t.max_lateness_ms.unwrap_or(0),
+                    "absent with kind = \"can\" (a CAN write never waits for an answer)",
+                )?;
+                config_file::range(
                     !self.can.iface.is_empty(),
                     "can.iface",
                     "",
@@ -837,12 +871,18 @@ impl DriverConfig {
                     poll_ms,
                     "5..=1000",
                 )?;
+                let lateness = t.max_lateness_ms();
                 config_file::range(
-                    self.watchdog.stimulator_timeout_ms
-                        >= crate::serial_rx::DEVICE_LATENCY_MS + 2 * poll_ms,
+                    lateness <= 20,
+                    "transport.max_lateness_ms",
+                    lateness,
+                    "0..=20",
+                )?;
+                config_file::range(
+                    self.stimulator_timeout_ms() >= crate::serial_rx::MAX_RESPONSE_MS + 2 * poll_ms,
                     "watchdog.stimulator_timeout_ms",
-                    self.watchdog.stimulator_timeout_ms,
-                    ">= 24 ms (the RehaStim 2's latency) + 2 x transport.poll_ms with kind = \"sciencemode\"",
+                    self.stimulator_timeout_ms(),
+                    ">= 100 ms (the RehaStim 2's longest answer, §2.3) + 2 x transport.poll_ms with kind = \"sciencemode\"",
                 )?;
                 let limits = self.stim_limits()?;
                 if let Err(field) = crate::serial_rx::limits_within_device(&limits) {
@@ -876,6 +916,20 @@ impl DriverConfig {
         Ok(())
     }
 
+    /// `[watchdog] stimulator_timeout_ms`, or its default: 100 ms on CAN (STATUS every
+    /// 10 ms), and on ScienceMode the RehaStim 2's longest answer (100 ms, §2.3) plus two
+    /// liveness periods, so that a slow answer is not taken for a silent device.
+    pub fn stimulator_timeout_ms(&self) -> u32 {
+        self.watchdog
+            .stimulator_timeout_ms
+            .unwrap_or(match self.transport.kind {
+                TransportKind::Can => DEFAULT_STIMULATOR_TIMEOUT_MS,
+                TransportKind::Sciencemode => {
+                    crate::serial_rx::MAX_RESPONSE_MS + 2 * self.transport.poll_ms()
+                }
+            })
+    }
+
     /// The forward path's settings (call after [`Self::validate`]).
     pub fn forward_settings(&self) -> Result<ForwardSettings, ConfigError> {
         let w = &self.watchdog;
@@ -887,13 +941,17 @@ impl DriverConfig {
             heartbeat_ns: u64::from(self.can.heartbeat_ms) * MS,
             tick_timeout_ns: u64::from(w.timeout_ticks) * period_ns,
             stale_after_ns: u64::from(w.stale_after_ticks) * period_ns,
-            stimulator_timeout_ns: u64::from(w.stimulator_timeout_ms) * MS,
+            stimulator_timeout_ns: u64::from(self.stimulator_timeout_ms()) * MS,
             arm_confirm_ns: u64::from(w.arm_confirm_ms) * MS,
             command_max_age_ns: u64::from(w.command_max_age_ms) * MS,
             bringup_retry_ns: u64::from(self.can.bringup_retry_ms) * MS,
             max_wait_ns: period_ns,
             supervisor_watch: w.supervisor_watch,
             liveness_unknown_grace_ns: u64::from(w.liveness_unknown_grace_ms) * MS,
+            pulse_lateness_ns: match self.transport.kind {
+                TransportKind::Can => 0,
+                TransportKind::Sciencemode => u64::from(self.transport.max_lateness_ms()) * MS,
+            },
         })
     }
 
@@ -952,6 +1010,8 @@ mod tests {
         expected.interlocks.max_amplitude_ua = 20_000;
         expected.interlocks.max_width_us = 200;
         expected.interlocks.max_charge_nc = 4000;
+        // Stated, at the CAN default.
+        expected.watchdog.stimulator_timeout_ms = Some(DEFAULT_STIMULATOR_TIMEOUT_MS);
         assert_eq!(rig, expected);
         let dose = fes_prescription::Prescription::parse(include_str!(
             "../../deploy/etc/fes/prescription.toml"
@@ -1055,19 +1115,40 @@ prefix = "bench-1"
             "{e}"
         );
         assert!(sm_err("[interlocks]\nchannels = [8]\n").contains("interlocks.channels"));
-        // The stimulator timeout must cover the device's latency and two queries.
+        // The stimulator timeout must cover the device's longest answer and two queries;
+        // left out, it does.
+        assert_eq!(c.stimulator_timeout_ms(), 100 + 2 * DEFAULT_POLL_MS);
+        assert_eq!(
+            DriverConfig::parse(MIN).unwrap().stimulator_timeout_ms(),
+            DEFAULT_STIMULATOR_TIMEOUT_MS
+        );
         let slow = SM.replace(
             "device = \"/dev/ttyUSB0\"\n",
-            "device = \"/dev/ttyUSB0\"\npoll_ms = 50\n",
+            "device = \"/dev/ttyUSB0\"\npoll_ms = 60\n",
         );
-        let e = DriverConfig::parse(&slow).unwrap_err().to_string();
+        let e = DriverConfig::parse(&format!("{slow}[watchdog]\nstimulator_timeout_ms = 219\n"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("watchdog.stimulator_timeout_ms"), "{e}");
         assert!(
-            DriverConfig::parse(&format!("{slow}[watchdog]\nstimulator_timeout_ms = 124\n"))
+            DriverConfig::parse(&format!("{slow}[watchdog]\nstimulator_timeout_ms = 220\n"))
                 .is_ok()
         );
+        // The lateness bound: ScienceMode only, 0..=20 ms.
+        assert_eq!(c.transport.max_lateness_ms(), DEFAULT_MAX_LATENESS_MS);
+        assert!(err("[transport]\nmax_lateness_ms = 3\n").contains("transport.max_lateness_ms"));
+        let late = SM.replace(
+            "device = \"/dev/ttyUSB0\"\n",
+            "device = \"/dev/ttyUSB0\"\nmax_lateness_ms = 21\n",
+        );
         assert!(
-            DriverConfig::parse(&slow.replace("poll_ms = 50", "poll_ms = 2"))
+            DriverConfig::parse(&late)
+                .unwrap_err()
+                .to_string()
+                .contains("transport.max_lateness_ms")
+        );
+        assert!(
+            DriverConfig::parse(&slow.replace("poll_ms = 60", "poll_ms = 2"))
                 .unwrap_err()
                 .to_string()
                 .contains("transport.poll_ms")

@@ -67,6 +67,12 @@ pub enum BusEvent {
     },
     /// A CONFIG_APPLIED page: limits the stimulator says it applied.
     ConfigApplied(fes_can::Config),
+    /// The stimulator answered a command "busy" and did not execute it (ScienceMode 2,
+    /// -8; [`crate::serial_rx`]): waited out, not a fault.
+    DeviceBusy {
+        /// The command was a SinglePulse: that pulse was not delivered.
+        pulse: bool,
+    },
 }
 
 /// Liveness of a service's publisher — the StimTick publisher (rt-core) or the
@@ -326,6 +332,16 @@ pub enum DriverEvent {
     Liveness(Liveness),
     /// The supervisor's (DriverCommand publisher's) liveness changed.
     SupervisorLiveness(Liveness),
+    /// A pulse waited for a busy transport (ScienceMode 2's stop-and-wait): written
+    /// `waited_ns` after its decision, or dropped as late.
+    PulseLate {
+        /// The StimTick that asked for it.
+        tick_seq: u64,
+        /// How long it waited, ns.
+        waited_ns: u64,
+        /// Written in the end (else dropped: outcome `late`).
+        sent: bool,
+    },
     /// A pending NMT stop was (re)sent.
     StopResent,
     /// Shutdown: NMT stop and a final heartbeat.
@@ -393,6 +409,15 @@ pub struct Counters {
     pub pulses_rejected: u64,
     /// Pulse commands that passed the interlocks while the driver was not armed.
     pub pulses_not_armed: u64,
+    /// Pulses written after waiting for a busy transport (within the lateness bound).
+    pub pulses_late: u64,
+    /// Pulses dropped after waiting for a busy transport beyond the lateness bound, or
+    /// replaced by a newer decision (outcome `late`).
+    pub pulses_dropped_late: u64,
+    /// Busy answers from the stimulator (ScienceMode 2, -8): commands not executed.
+    pub device_busy: u64,
+    /// PULSE frames among them: written but not delivered.
+    pub pulses_busy: u64,
     /// Frames that could not be written (dropped after retries, or failed).
     pub can_tx_errors: u64,
     /// Writes retried after a full transmit queue.
@@ -434,6 +459,10 @@ pub struct SharedStatus {
     pulses_sent: AtomicU64,
     pulses_rejected: AtomicU64,
     pulses_not_armed: AtomicU64,
+    pulses_late: AtomicU64,
+    pulses_dropped_late: AtomicU64,
+    device_busy: AtomicU64,
+    pulses_busy: AtomicU64,
     can_tx_errors: AtomicU64,
     tx_retries: AtomicU64,
     watchdog_trips: AtomicU64,
@@ -466,6 +495,10 @@ impl SharedStatus {
         self.pulses_sent.store(c.pulses_sent, r);
         self.pulses_rejected.store(c.pulses_rejected, r);
         self.pulses_not_armed.store(c.pulses_not_armed, r);
+        self.pulses_late.store(c.pulses_late, r);
+        self.pulses_dropped_late.store(c.pulses_dropped_late, r);
+        self.device_busy.store(c.device_busy, r);
+        self.pulses_busy.store(c.pulses_busy, r);
         self.can_tx_errors.store(c.can_tx_errors, r);
         self.tx_retries.store(c.tx_retries, r);
         self.watchdog_trips.store(u64::from(c.watchdog_trips), r);
@@ -498,6 +531,10 @@ impl SharedStatus {
             pulses_sent: self.pulses_sent.load(r),
             pulses_rejected: self.pulses_rejected.load(r),
             pulses_not_armed: self.pulses_not_armed.load(r),
+            pulses_late: self.pulses_late.load(r),
+            pulses_dropped_late: self.pulses_dropped_late.load(r),
+            device_busy: self.device_busy.load(r),
+            pulses_busy: self.pulses_busy.load(r),
             can_tx_errors: self.can_tx_errors.load(r),
             tx_retries: self.tx_retries.load(r),
             watchdog_trips: u32::try_from(self.watchdog_trips.load(r)).unwrap_or(u32::MAX),
@@ -555,6 +592,10 @@ mod tests {
             pulses_sent: 4,
             pulses_rejected: 5,
             pulses_not_armed: 6,
+            pulses_late: 17,
+            pulses_dropped_late: 18,
+            device_busy: 19,
+            pulses_busy: 20,
             can_tx_errors: 7,
             tx_retries: 8,
             watchdog_trips: 9,

@@ -78,6 +78,9 @@ pub struct ForwardSettings {
     pub supervisor_watch: bool,
     /// A liveness that stays [`Liveness::Unknown`] longer than this counts as dead, ns.
     pub liveness_unknown_grace_ns: u64,
+    /// How long a pulse may wait for a busy transport ([`TxError::Busy`]: ScienceMode 2
+    /// waits for each answer) before it is dropped as late, ns.
+    pub pulse_lateness_ns: u64,
 }
 
 /// A liveness [`Liveness::Unknown`] since `since` has lasted beyond the grace period.
@@ -93,6 +96,18 @@ fn outcome(tick: &StimTick, fate: PulseFate, ev: &mut impl EventSink) {
         fate,
     });
 }
+
+/// A pulse that passed the interlocks while the transport was busy ([`TxError::Busy`]),
+/// held until it can be written or is too late.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Deferred {
+    command: PulseCommand,
+    tick: StimTick,
+    since_ns: u64,
+}
+
+/// While a pulse waits for the transport, the loop looks again this often, ns.
+const DEFERRED_RETRY_NS: u64 = 250_000;
 
 /// A pending NMT stop is not re-sent more often than this, ns.
 const STOP_RESEND_NS: u64 = 10_000_000;
@@ -155,6 +170,8 @@ pub struct ForwardPath<T: CanTx> {
     readback: ConfigAssembler,
     /// The limits the stimulator read back for the current attempt (id, limits).
     applied: Option<(u8, StimLimits)>,
+    /// A pulse waiting for a busy transport (at most one: never a burst).
+    deferred: Option<Deferred>,
 }
 
 /// The first limit in which `a` and `b` differ (CONFIG signal name), if any.
@@ -207,6 +224,7 @@ impl<T: CanTx> ForwardPath<T> {
             baseline: None,
             readback: ConfigAssembler::new(),
             applied: None,
+            deferred: None,
         }
     }
 
@@ -343,25 +361,42 @@ impl<T: CanTx> ForwardPath<T> {
                 }
             }
             Verdict::Pulse(command) => {
-                let fate = self.forward(&command, now_ns, ev);
-                outcome(tick, fate, ev);
+                // A newer decision takes the place of a pulse still waiting for the
+                // transport: the two never go out as a burst.
+                self.drop_deferred(PulseFate::Late, now_ns, ev);
+                let written = if self.write_keeps_interval(now_ns) {
+                    self.forward(&command, now_ns, ev)
+                } else {
+                    None
+                };
+                match written {
+                    Some(fate) => outcome(tick, fate, ev),
+                    None => {
+                        self.deferred = Some(Deferred {
+                            command,
+                            tick: *tick,
+                            since_ns: now_ns,
+                        });
+                    }
+                }
             }
         }
         self.finish(before, ev);
     }
 
-    /// Sends an accepted pulse if armed; what became of it.
+    /// Sends an accepted pulse if armed; what became of it, `None` when the transport is
+    /// busy (nothing written: to be tried again).
     fn forward(
         &mut self,
         command: &PulseCommand,
         now_ns: u64,
         ev: &mut impl EventSink,
-    ) -> PulseFate {
+    ) -> Option<PulseFate> {
         let result = match self.output.as_mut() {
             Some(Output::Armed(armed)) => armed.send_pulse(command),
             _ => {
                 self.counters.pulses_not_armed += 1;
-                return PulseFate::NotArmed;
+                return Some(PulseFate::NotArmed);
             }
         };
         match result {
@@ -379,13 +414,79 @@ impl<T: CanTx> ForwardPath<T> {
                     write_ns: sent.done.write_ns,
                     retries: sent.done.retries,
                 });
-                PulseFate::Sent
+                Some(PulseFate::Sent)
             }
+            Err(SendError::Tx(TxError::Busy)) => None,
             Err(error) => {
                 self.tx_problem(FrameKind::Pulse, error, now_ns, ev);
-                PulseFate::NotWritten
+                Some(PulseFate::NotWritten)
             }
         }
+    }
+
+    /// The pulse waiting for the transport, if any: written once the transport is free
+    /// and the interval since the last pulse written is kept
+    /// ([`Self::write_keeps_interval`]), dropped as late past
+    /// [`ForwardSettings::pulse_lateness_ns`], or not armed any more.
+    fn retry_deferred(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        let Some(d) = self.deferred else {
+            return;
+        };
+        if !self.is_armed() {
+            self.drop_deferred(PulseFate::NotArmed, now_ns, ev);
+            return;
+        }
+        if now_ns.saturating_sub(d.since_ns) > self.settings.pulse_lateness_ns {
+            self.drop_deferred(PulseFate::Late, now_ns, ev);
+            return;
+        }
+        if !self.write_keeps_interval(now_ns) {
+            return;
+        }
+        if let Some(fate) = self.forward(&d.command, now_ns, ev) {
+            self.deferred = None;
+            if fate == PulseFate::Sent {
+                self.counters.pulses_late += 1;
+                ev.emit(DriverEvent::PulseLate {
+                    tick_seq: d.tick.seq,
+                    waited_ns: now_ns.saturating_sub(d.since_ns),
+                    sent: true,
+                });
+            }
+            outcome(&d.tick, fate, ev);
+        }
+    }
+
+    /// Whether a PULSE written at `now_ns` keeps the stimulator's minimum inter-pulse
+    /// interval (`[stimulator] min_ipi_ms`) after the last one written. The interlocks
+    /// judge decisions; a transport that makes pulses wait (ScienceMode 2, whose device
+    /// takes no CONFIG and enforces no interval) could otherwise write a late pulse and
+    /// the next one closer than that. On a transport that never waits (CAN, lateness 0)
+    /// the stimulator itself enforces it: always true.
+    fn write_keeps_interval(&self, now_ns: u64) -> bool {
+        let min_ns = u64::from(self.settings.stim_limits.min_ipi_ms) * 1_000_000;
+        self.settings.pulse_lateness_ns == 0
+            || self.counters.last_pulse_ns == 0
+            || now_ns >= self.counters.last_pulse_ns + min_ns
+    }
+
+    /// Gives up the pulse waiting for the transport, if any, with `fate`.
+    fn drop_deferred(&mut self, fate: PulseFate, now_ns: u64, ev: &mut impl EventSink) {
+        let Some(d) = self.deferred.take() else {
+            return;
+        };
+        match fate {
+            PulseFate::NotArmed => self.counters.pulses_not_armed += 1,
+            _ => {
+                self.counters.pulses_dropped_late += 1;
+                ev.emit(DriverEvent::PulseLate {
+                    tick_seq: d.tick.seq,
+                    waited_ns: now_ns.saturating_sub(d.since_ns),
+                    sent: false,
+                });
+            }
+        }
+        outcome(&d.tick, fate, ev);
     }
 
     /// Counts and reports a failed write; a down link or a hard failure trips.
@@ -396,6 +497,10 @@ impl<T: CanTx> ForwardPath<T> {
         now_ns: u64,
         ev: &mut impl EventSink,
     ) {
+        if let SendError::Tx(TxError::Busy) = error {
+            // Not written yet, not a failure: the periodic frames go in the next gap.
+            return;
+        }
         self.counters.can_tx_errors += 1;
         ev.emit(DriverEvent::TxProblem { frame, error });
         match error {
@@ -413,7 +518,7 @@ impl<T: CanTx> ForwardPath<T> {
                     self.trip(Fault::TxFailed { errno }, now_ns, ev);
                 }
             }
-            SendError::Encode(_) => {}
+            SendError::Tx(TxError::Busy) | SendError::Encode(_) => {}
         }
     }
 
@@ -473,6 +578,13 @@ impl<T: CanTx> ForwardPath<T> {
             Ok(()) => {
                 self.stop_pending = false;
                 true
+            }
+            Err(SendError::Tx(TxError::Busy)) => {
+                // The transport awaits the answer to its previous command: the stop goes
+                // as soon as it may (resent from `poll`). Disarmed already: no pulse
+                // leaves meanwhile.
+                self.stop_pending = true;
+                false
             }
             Err(error) => {
                 self.stop_pending = true;
@@ -635,7 +747,7 @@ impl<T: CanTx> ForwardPath<T> {
                     // arm_refusal() required a recent STATUS.
                     self.baseline = self.last_status.map(|(status, _)| Baseline {
                         delivered: status.pulses_delivered,
-                        sent: self.counters.pulses_sent,
+                        sent: self.pulses_to_deliver(),
                         carry: self.pulse_window.count(now_ns),
                     });
                     self.mode = Mode::Armed {
@@ -735,6 +847,15 @@ impl<T: CanTx> ForwardPath<T> {
                 }
             }
             BusEvent::ConfigApplied(page) => self.on_config_applied(&page, ev),
+            BusEvent::DeviceBusy { pulse } => {
+                self.counters.device_busy += 1;
+                if pulse {
+                    // Answered busy: not delivered, and not to be counted as written in
+                    // STATUS reconciliation.
+                    self.counters.pulses_busy += 1;
+                }
+                ev.emit(DriverEvent::Bus(event));
+            }
         }
         self.finish(before, ev);
     }
@@ -777,7 +898,7 @@ impl<T: CanTx> ForwardPath<T> {
                     && let Some(fault) = reconcile::check(
                         &base,
                         status.pulses_delivered,
-                        self.counters.pulses_sent,
+                        self.pulses_to_deliver(),
                         self.pulse_window.count(now_ns),
                     )
                 {
@@ -922,8 +1043,14 @@ impl<T: CanTx> ForwardPath<T> {
         self.finish(before, ev);
     }
 
-    /// Runs the timers due at `now_ns`: watchdogs, bring-up retries, a pending stop, the
-    /// heartbeat.
+    /// PULSE frames written that the stimulator should count as delivered: all but those
+    /// it answered busy.
+    fn pulses_to_deliver(&self) -> u64 {
+        self.counters.pulses_sent - self.counters.pulses_busy
+    }
+
+    /// Runs the timers due at `now_ns`: watchdogs, bring-up retries, a pending stop, a
+    /// pulse waiting for the transport, the heartbeat.
     pub fn poll(&mut self, now_ns: u64, ev: &mut impl EventSink) {
         let before = self.state();
         let s = self.settings;
@@ -995,6 +1122,7 @@ impl<T: CanTx> ForwardPath<T> {
                 _ => {}
             }
         }
+        self.retry_deferred(now_ns, ev);
         if self.stop_pending
             && self.link_up
             && now_ns.saturating_sub(self.last_stop_ns) >= STOP_RESEND_NS
@@ -1028,6 +1156,9 @@ impl<T: CanTx> ForwardPath<T> {
     pub fn next_deadline(&self, now_ns: u64) -> u64 {
         let s = &self.settings;
         let mut d = self.next_heartbeat_ns.min(now_ns + s.max_wait_ns);
+        if self.deferred.is_some() {
+            d = d.min(now_ns + DEFERRED_RETRY_NS);
+        }
         if let Mode::Armed {
             since_ns,
             confirmed,

@@ -610,7 +610,8 @@ fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
     info!(
         "final: {} StimTicks ({} missing, {} refused), {} pulses sent ({} applied by the \
          stimulator since its reset, its last STATUS), {} refused by the interlocks, {} \
-         while not armed, {} CAN write errors, {} trips ({} \
+         while not armed, {} written late and {} dropped late (transport busy), {} busy \
+         answers ({} pulses), {} CAN write errors, {} trips ({} \
          watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
          stamps; hot-path heap allocations {}",
         c.ticks_received,
@@ -620,6 +621,10 @@ fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
         c.stimulator_pulses,
         c.pulses_rejected,
         c.pulses_not_armed,
+        c.pulses_late,
+        c.pulses_dropped_late,
+        c.device_busy,
+        c.pulses_busy,
         c.can_tx_errors,
         c.trips,
         c.watchdog_trips,

@@ -24,7 +24,7 @@ use fes_rt::rt::hlog::HlogWriter;
 use fes_rt::rt::node::{RunError, create_node};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::ipc;
-use tracing::{error, info, warn};
+use tracing::{debug, error, info, warn};
 
 use crate::config::DriverConfig;
 use crate::event::{Counters, DriverEvent, DriverState, Liveness};
@@ -146,6 +146,23 @@ pub fn log_event(event: &DriverEvent) {
             Liveness::Dead => warn!("StimTick publisher's node is DEAD"),
             Liveness::NoPublisher => warn!("no StimTick publisher"),
         },
+        DriverEvent::PulseLate {
+            tick_seq,
+            waited_ns,
+            sent,
+        } => {
+            if sent {
+                debug!(
+                    "pulse of tick {tick_seq} written {:.1} ms late (transport busy)",
+                    waited_ns as f64 / 1e6
+                );
+            } else {
+                warn!(
+                    "pulse of tick {tick_seq} NOT sent: the transport was busy for {:.1} ms",
+                    waited_ns as f64 / 1e6
+                );
+            }
+        }
         DriverEvent::StopResent => info!("NMT stop (re)sent"),
         DriverEvent::Shutdown { stop_sent } => info!(
             "shutdown: {}",

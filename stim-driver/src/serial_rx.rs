@@ -9,9 +9,11 @@
 //! | RehaStim 2 | [`BusEvent`] |
 //! |------------|--------------|
 //! | Init (the device announces itself) | handshake: the transmit side writes InitAck; a second Init after a handshake is [`BusEvent::StimHeartbeat`] `BootUp` (the device restarted) |
-//! | GetStimulationModeAck (the liveness query the transmit side sends in place of every `poll`-th Watchdog) | [`BusEvent::Status`]: `pulses_delivered` = SinglePulse acknowledgements with result 0 so far, `state` from the NMT state the driver commanded (channel list mode running: `Stimulating`), `config_id` = the driver's last CONFIG id once the handshake is done and the device is not in channel list mode (0 otherwise) |
+//! | GetStimulationModeAck (the liveness query the transmit side sends in place of a Watchdog once `poll` has passed since the last answer that stood for STATUS), or SinglePulseAck result 0 (a SinglePulse is executed only in the start mode, §3.6 Fig. 4, so it tells the mode too) | [`BusEvent::Status`]: `pulses_delivered` = SinglePulse acknowledgements with result 0 so far, `state` from the NMT state the driver commanded (channel list mode running: `Stimulating`), `config_id` = the driver's last CONFIG id once the handshake is done and the device is not in channel list mode (0 otherwise) |
 //! | the same, the first time a configuration id shows | [`BusEvent::ConfigApplied`], the driver's configured limits, only when they lie within the device's fixed ones ([`limits_within_device`]) |
 //! | SinglePulseAck result 0 | one pulse delivered |
+//! | any answer (an acknowledgement, UnknownCommand) | the command with its packet number is answered: the transmit side may send the next (stop-and-wait, [`SerialLink::answer_received`]) |
+//! | an acknowledgement with result -8 busy (§5.1) | [`BusEvent::DeviceBusy`] (the command was not executed; a SinglePulse is not delivered), not a fault; the [`BUSY_LIMIT`]-th in a row is [`BusEvent::Emcy`] |
 //! | any acknowledgement with an error result (GetStimulationModeAck's carries no mode, §4.2), UnknownCommand (echoing the command byte it did not know, §4.1), StimulationError | [`BusEvent::Emcy`] ([`device_emcy`]: the CANopen code and a detail naming the ScienceMode command and code) |
 //! | MOTOmed information packets (ActualValues every 20 ms, PhaseResult, MotomedCommandDone, MotomedError; §3.5, §4.4) | nothing: counted ([`Receiver::information_packets`], `BusCounters::information_packets`) and skipped, never a link fault |
 //! | a packet that fails to decode (checksum, stuffing, length, unknown command), a failed read, the port gone (EIO / ENXIO / ENODEV, a hang-up) | [`BusEvent::LinkDown`]; the next good packet is [`BusEvent::LinkUp`] (which never re-arms) |
@@ -23,7 +25,7 @@
 use std::fs::File;
 use std::io::{self, Read as _};
 use std::os::fd::AsRawFd as _;
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU16, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU16, AtomicU32, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
@@ -39,10 +41,16 @@ use crate::reconcile::COUNT_MODULUS;
 /// The longest the thread waits for a byte before looking at `stop` again.
 pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
 
-/// The RehaStim 2's latency in executing a command, worst case, ms (Hasomed's figure:
-/// 10-24 ms; `docs/sciencemode.md`). The in-flight allowance of STATUS reconciliation
-/// (`watchdog.stimulator_timeout_ms`) must cover it plus two liveness queries.
-pub const DEVICE_LATENCY_MS: u32 = 24;
+/// The longest the RehaStim 2 takes to answer a command, ms (§2.3 MaxResponseTime: "up to
+/// 100 ms", on average below 20 ms; Hasomed quotes 10-24 ms elsewhere,
+/// `docs/sciencemode.md`). Past it, an answer is taken as lost. The stimulator timeout
+/// and the in-flight allowance of STATUS reconciliation (`watchdog.stimulator_timeout_ms`)
+/// must cover it plus two liveness periods.
+pub const MAX_RESPONSE_MS: u32 = 100;
+
+/// Answers -8 busy in a row that are still waited out (§5.1: "wait for the response
+/// packet"); the next is a device error ([`device_emcy`]).
+pub const BUSY_LIMIT: u8 = 4;
 
 /// What the driver last commanded over NMT (the device has no such state; the receive
 /// side reports it back in STATUS as a CAN stimulator would).
@@ -71,6 +79,16 @@ pub struct SerialLink {
     config_id: AtomicU8,
     /// [`Commanded`] (transmit side).
     commanded: AtomicU8,
+    /// `0x100 | number` of the command whose answer is awaited (stop-and-wait), 0 for
+    /// none (transmit side sets before the write, receive thread clears on the answer
+    /// carrying that number or on Init).
+    awaiting: AtomicU16,
+    /// When the awaited command was written, CLOCK_MONOTONIC ns (transmit side).
+    awaiting_since_ns: AtomicU64,
+    /// Answers that stood for STATUS after the handshake (a mode query's, a SinglePulse's
+    /// with result 0; receive thread): the transmit side schedules its next query from
+    /// the last of them.
+    status_answers: AtomicU32,
 }
 
 impl SerialLink {
@@ -82,10 +100,58 @@ impl SerialLink {
     /// The device announced itself with Init packet `number`: InitAck is due, the
     /// handshake (and the configuration that came with it) is void.
     pub fn init_received(&self, number: u8) {
+        // A device that announces itself has forgotten any command it was processing.
+        self.awaiting.store(0, Ordering::Release);
         self.handshake.store(false, Ordering::Release);
         self.config_id.store(0, Ordering::Release);
         self.init_pending
             .store(0x100 | u16::from(number), Ordering::Release);
+    }
+
+    /// Command `number`, which the device answers, is about to be written at `now_ns`
+    /// (transmit side; before the write, so that an answer faster than the store cannot
+    /// be missed).
+    pub fn awaiting_answer_to(&self, number: u8, now_ns: u64) {
+        self.awaiting_since_ns.store(now_ns, Ordering::Release);
+        self.awaiting
+            .store(0x100 | u16::from(number), Ordering::Release);
+    }
+
+    /// The write of the awaited command failed: nothing is awaited (transmit side).
+    pub fn not_awaiting(&self) {
+        self.awaiting.store(0, Ordering::Release);
+    }
+
+    /// An answer stood for STATUS (receive thread).
+    pub fn status_answered(&self) {
+        self.status_answers.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// Answers that stood for STATUS so far (wrapping).
+    pub fn status_answers(&self) -> u32 {
+        self.status_answers.load(Ordering::Acquire)
+    }
+
+    /// The device answered packet `number` (receive thread): if that is the awaited
+    /// command, the next may be sent. Returns whether it was.
+    pub fn answer_received(&self, number: u8) -> bool {
+        self.awaiting
+            .compare_exchange(
+                0x100 | u16::from(number),
+                0,
+                Ordering::AcqRel,
+                Ordering::Acquire,
+            )
+            .is_ok()
+    }
+
+    /// Whether a command written less than `timeout_ns` before `now_ns` still awaits its
+    /// answer (transmit side). An answer lost on the line stops the wait after the
+    /// timeout, the device's longest response time; the pulse it belonged to is then
+    /// missing from the device's count, which STATUS reconciliation reports.
+    pub fn awaiting(&self, now_ns: u64, timeout_ns: u64) -> bool {
+        self.awaiting.load(Ordering::Acquire) != 0
+            && now_ns.saturating_sub(self.awaiting_since_ns.load(Ordering::Acquire)) < timeout_ns
     }
 
     /// The number of the Init an InitAck is due for, taken (transmit side).
@@ -184,6 +250,8 @@ pub struct Receiver {
     state: StimState,
     /// MOTOmed information packets skipped.
     information: u64,
+    /// -8 busy answers in a row.
+    busy_streak: u8,
 }
 
 impl Receiver {
@@ -201,6 +269,7 @@ impl Receiver {
             seen_init: false,
             state: StimState::Boot,
             information: 0,
+            busy_streak: 0,
         }
     }
 
@@ -231,6 +300,14 @@ impl Receiver {
             self.link_up = true;
             push(BusEvent::LinkUp);
         }
+        if packet.message.is_answer() {
+            link.answer_received(packet.number);
+            if packet.message.ack_result() == Some(AckResult::BusyError) {
+                self.on_busy(packet.message.command(), push);
+                return;
+            }
+            self.busy_streak = 0;
+        }
         match packet.message {
             Message::Init { .. } => {
                 if link.handshake_done() {
@@ -247,47 +324,19 @@ impl Receiver {
                     self.fault(Command::GetStimulationModeAck, result.code(), push);
                     return;
                 }
-                if !link.handshake_done() {
-                    return;
-                }
-                // §3.6 Fig. 4: the driver's SinglePulse is accepted only in the start
-                // mode; initialised or started, the device is in channel list mode, which
-                // the driver never enters: no configuration shows, so no Arm, and a
-                // disarmed driver stops it.
-                let channel_list = mode != Some(StimulationMode::Start);
-                self.state = if channel_list {
-                    StimState::Stimulating
-                } else {
-                    match link.last_commanded() {
-                        Commanded::Operational => StimState::Armed,
-                        Commanded::Stopped => StimState::Stopped,
-                        Commanded::PreOperational => StimState::PreOperational,
-                    }
-                };
-                let config_id = if !channel_list && self.limits_ok {
-                    link.config_id()
-                } else {
-                    0
-                };
-                self.counter = (self.counter + 1) & 0x0F;
-                push(BusEvent::Status(fes_can::Status {
-                    state: self.state,
-                    counter: self.counter,
-                    last_error: self.last_error,
-                    pulses_delivered: self.delivered,
-                    rejected: self.rejected,
-                    config_id,
-                }));
-                if config_id != 0 && config_id != self.read_back {
-                    self.read_back = config_id;
-                    for page in self.limits.to_pages(config_id) {
-                        push(BusEvent::ConfigApplied(page));
-                    }
+                if link.handshake_done() {
+                    self.status(mode, link, push);
                 }
             }
             Message::SinglePulseAck { result } => {
                 if result.is_ok() {
                     self.delivered = (self.delivered + 1) % COUNT_MODULUS;
+                    // §3.6 Fig. 4: a SinglePulse is executed only in the start mode, so its
+                    // acknowledgement tells the mode as a mode query would; the transmit
+                    // side then leaves the query out, keeping the line free for pulses.
+                    if link.handshake_done() {
+                        self.status(Some(StimulationMode::Start), link, push);
+                    }
                 } else {
                     self.rejected = self.rejected.wrapping_add(1);
                     self.fault(Command::SinglePulseAck, result.code(), push);
@@ -333,6 +382,64 @@ impl Receiver {
             | Message::StartChannelListMode(_)
             | Message::StopChannelListMode
             | Message::SinglePulse(_) => self.on_line_fault(push),
+        }
+    }
+
+    /// The STATUS that stands for the device in `mode` (see the module table).
+    fn status(
+        &mut self,
+        mode: Option<StimulationMode>,
+        link: &SerialLink,
+        push: &mut impl FnMut(BusEvent),
+    ) {
+        // §3.6 Fig. 4: the driver's SinglePulse is accepted only in the start mode;
+        // initialised or started, the device is in channel list mode, which the driver
+        // never enters: no configuration shows, so no Arm, and a disarmed driver stops it.
+        link.status_answered();
+        let channel_list = mode != Some(StimulationMode::Start);
+        self.state = if channel_list {
+            StimState::Stimulating
+        } else {
+            match link.last_commanded() {
+                Commanded::Operational => StimState::Armed,
+                Commanded::Stopped => StimState::Stopped,
+                Commanded::PreOperational => StimState::PreOperational,
+            }
+        };
+        let config_id = if !channel_list && self.limits_ok {
+            link.config_id()
+        } else {
+            0
+        };
+        self.counter = (self.counter + 1) & 0x0F;
+        push(BusEvent::Status(fes_can::Status {
+            state: self.state,
+            counter: self.counter,
+            last_error: self.last_error,
+            pulses_delivered: self.delivered,
+            rejected: self.rejected,
+            config_id,
+        }));
+        if config_id != 0 && config_id != self.read_back {
+            self.read_back = config_id;
+            for page in self.limits.to_pages(config_id) {
+                push(BusEvent::ConfigApplied(page));
+            }
+        }
+    }
+
+    /// A -8 busy answer to `command` (§5.1: the device was still processing the last
+    /// command; this one was not executed). The driver waits for each answer, so a busy
+    /// device is one whose processing outlasted the wait or that is busy by itself: waited
+    /// out ([`BusEvent::DeviceBusy`]), and the [`BUSY_LIMIT`]-th in a row is a device error.
+    fn on_busy(&mut self, command: Command, push: &mut impl FnMut(BusEvent)) {
+        push(BusEvent::DeviceBusy {
+            pulse: command == Command::SinglePulseAck,
+        });
+        self.busy_streak = self.busy_streak.saturating_add(1);
+        if self.busy_streak >= BUSY_LIMIT {
+            self.busy_streak = 0;
+            self.fault(command, AckResult::BusyError.code(), push);
         }
     }
 
@@ -486,20 +593,24 @@ mod tests {
             run(&mut r, &link, mode_ack(StimulationMode::Start)).len(),
             1
         );
-        // Armed: pulses acknowledged count, an error result is an EMCY.
+        // Armed: pulses acknowledged count; each acknowledgement tells the start mode
+        // (§3.6 Fig. 4) and is a STATUS too, and tells the transmit side so.
         link.commanded(Commanded::Operational);
-        for _ in 0..5 {
-            assert!(
-                run(
-                    &mut r,
-                    &link,
-                    Message::SinglePulseAck {
-                        result: AckResult::Ok
-                    }
-                )
-                .is_empty()
+        for n in 1..=5 {
+            let s = status(&run(
+                &mut r,
+                &link,
+                Message::SinglePulseAck {
+                    result: AckResult::Ok,
+                },
+            ));
+            assert_eq!(
+                (s.state, s.pulses_delivered, s.config_id),
+                (StimState::Armed, n, 7)
             );
         }
+        // Each stood for STATUS (3 mode answers after the handshake, 5 pulses).
+        assert_eq!(link.status_answers(), 8);
         let s = status(&run(&mut r, &link, mode_ack(StimulationMode::Start)));
         assert_eq!((s.state, s.pulses_delivered), (StimState::Armed, 5));
     }
@@ -558,13 +669,13 @@ mod tests {
                 0x0332,
             ),
             (
-                // §4.2: an error acknowledgement without a mode (busy, -8).
+                // §4.2: an error acknowledgement without a mode (-1 transfer error).
                 Message::GetStimulationModeAck {
-                    result: AckResult::BusyError,
+                    result: AckResult::TransferError,
                     mode: None,
                 },
-                ErrorCode::Generic,
-                0x0BF8,
+                ErrorCode::Communication,
+                0x0BFF,
             ),
             (
                 Message::StimulationError {
@@ -572,13 +683,6 @@ mod tests {
                 },
                 ErrorCode::Generic,
                 0x26FE,
-            ),
-            (
-                Message::StopChannelListModeAck {
-                    result: AckResult::BusyError,
-                },
-                ErrorCode::Generic,
-                0x23F8,
             ),
         ];
         for (m, code, detail) in cases {
@@ -598,6 +702,72 @@ mod tests {
             )
             .is_empty()
         );
+    }
+
+    #[test]
+    fn an_answer_frees_the_awaited_command_and_busy_is_waited_out_up_to_the_limit() {
+        let link = SerialLink::new();
+        link.init_acknowledged();
+        let mut r = Receiver::new(StimLimits::DEFAULT);
+        let feed = |r: &mut Receiver, number: u8, m: Message| {
+            let mut out = Vec::new();
+            r.on_packet(&Packet::new(number, m), &link, &mut |e| out.push(e));
+            out
+        };
+        // §2.3: the answer carries the command's packet number; another number (a late
+        // answer to an earlier command) or an unasked packet frees nothing.
+        link.awaiting_answer_to(7, 1_000);
+        assert!(link.awaiting(2_000, 100_000_000));
+        feed(&mut r, 6, mode_ack(StimulationMode::Start));
+        feed(&mut r, 0, Message::MotomedError { code: -4 });
+        assert!(link.awaiting(2_000, 100_000_000));
+        feed(&mut r, 7, mode_ack(StimulationMode::Start));
+        assert!(!link.awaiting(2_000, 100_000_000));
+        // A lost answer stops the wait after the timeout; an Init ends it at once.
+        link.awaiting_answer_to(8, 1_000);
+        assert!(!link.awaiting(1_000 + 100_000_000, 100_000_000));
+        link.init_received(0);
+        assert!(!link.awaiting(2_000, 100_000_000));
+        link.init_acknowledged();
+        // §5.1 -8: the command was not executed. Waited out, a pulse not delivered; the
+        // BUSY_LIMIT-th in a row is a device error naming the command and -8.
+        let busy_pulse = Message::SinglePulseAck {
+            result: AckResult::BusyError,
+        };
+        let busy_poll = Message::GetStimulationModeAck {
+            result: AckResult::BusyError,
+            mode: None,
+        };
+        assert_eq!(
+            feed(&mut r, 9, busy_pulse),
+            [BusEvent::DeviceBusy { pulse: true }]
+        );
+        assert_eq!(
+            feed(&mut r, 10, busy_poll),
+            [BusEvent::DeviceBusy { pulse: false }]
+        );
+        // Any other answer ends the run of busy answers.
+        let ok = Message::SinglePulseAck {
+            result: AckResult::Ok,
+        };
+        assert!(matches!(
+            feed(&mut r, 11, ok).as_slice(),
+            [BusEvent::Status(_)]
+        ));
+        for n in 1..BUSY_LIMIT {
+            assert_eq!(
+                feed(&mut r, 11 + n, busy_pulse),
+                [BusEvent::DeviceBusy { pulse: true }]
+            );
+        }
+        match feed(&mut r, 20, busy_pulse).as_slice() {
+            [BusEvent::DeviceBusy { pulse: true }, BusEvent::Emcy(e)] => {
+                assert_eq!((e.code, e.detail), (ErrorCode::Generic, 0x25F8));
+            }
+            other => panic!("{other:?}"),
+        }
+        // Busy answers deliver nothing.
+        assert_eq!(r.delivered(), 1);
     }
 
     #[test]

@@ -39,7 +39,7 @@ use nix::sys::termios::{
     tcsetattr,
 };
 
-use crate::serial_rx::{Commanded, SerialLink};
+use crate::serial_rx::{Commanded, MAX_RESPONSE_MS, SerialLink};
 use crate::tx::{CanTx, RetryPolicy, TxDone, TxError, write_with_retry};
 
 /// The ScienceMode 2 command for a driver frame (see the module table); `Ok(None)` when
@@ -99,6 +99,8 @@ pub struct ScienceModeTx<W> {
     link: Option<Arc<SerialLink>>,
     poll_ns: u64,
     next_poll_ns: u64,
+    /// [`SerialLink::status_answers`] when the poll was last scheduled.
+    seen_answers: u32,
 }
 
 impl<W: Write> ScienceModeTx<W> {
@@ -113,6 +115,7 @@ impl<W: Write> ScienceModeTx<W> {
             link: None,
             poll_ns: 0,
             next_poll_ns: 0,
+            seen_answers: 0,
         }
     }
 
@@ -120,7 +123,10 @@ impl<W: Write> ScienceModeTx<W> {
     /// `link`: answers the device's Init with InitAck before the next frame, tells the
     /// receive side the NMT state and CONFIG id the driver commanded, and sends
     /// GetStimulationMode (the liveness query whose answer becomes STATUS) in place of the
-    /// Watchdog for a host heartbeat at most every `poll_ns` once the handshake is done.
+    /// Watchdog for a host heartbeat once the handshake is done and `poll_ns` has passed
+    /// since the last answer that stood for STATUS (a query's, or a pulse's: it tells the
+    /// same). Each command the device answers waits for the answer to the last
+    /// ([`CanTx::send`]).
     pub fn with_link(
         port: W,
         nodes: Nodes,
@@ -179,11 +185,13 @@ impl<W: Write> ScienceModeTx<W> {
     }
 
     /// The receive side's part of a frame (see [`Self::with_link`]): the InitAck due, the
-    /// commanded state, and the message to send in place of `message`.
+    /// commanded state, and the message to send in place of `message` (none for a host
+    /// heartbeat while a command awaits its answer: keep-alives go in the gaps).
     fn link_side(
         &mut self,
         frame: &Frame,
         message: Option<Message>,
+        now_ns: u64,
     ) -> Result<Option<Message>, TxError> {
         let Some(link) = self.link.clone() else {
             return Ok(message);
@@ -214,10 +222,24 @@ impl<W: Write> ScienceModeTx<W> {
                 | NmtCommand::ResetCommunication => Commanded::PreOperational,
             }),
             CanMessage::Config(c) => link.config_written(c.config_id),
+            CanMessage::HostHeartbeat(_) if link.awaiting(now_ns, MAX_RESPONSE_NS) => {
+                // The awaited command fed the device's watchdog less than MaxResponseTime
+                // ago (1200 ms, §2.3): this keep-alive waits for the next gap.
+                return Ok(None);
+            }
             CanMessage::HostHeartbeat(_) if link.handshake_done() => {
-                let now = fes_rt::rt::clock::monotonic_ns();
-                if now >= self.next_poll_ns {
-                    self.next_poll_ns = now + self.poll_ns;
+                // The next query comes `poll` after the last answer that told the mode
+                // and the device's liveness (a query's own, or a pulse acknowledged:
+                // §3.6 Fig. 4, a SinglePulse runs only in the start mode). The line is
+                // then free for `poll` after each answer, and pulses, not queries, hold
+                // it while stimulating.
+                let answers = link.status_answers();
+                if answers != self.seen_answers {
+                    self.seen_answers = answers;
+                    self.next_poll_ns = now_ns.saturating_add(self.poll_ns);
+                }
+                if now_ns >= self.next_poll_ns {
+                    self.next_poll_ns = now_ns.saturating_add(self.poll_ns);
                     return Ok(Some(Message::GetStimulationMode));
                 }
             }
@@ -228,21 +250,45 @@ impl<W: Write> ScienceModeTx<W> {
 }
 
 impl<W: Write> CanTx for ScienceModeTx<W> {
+    /// Stop-and-wait with a receive side (§2.3, §5.1): a command the device answers is
+    /// written only when the previous one has been answered (or MaxResponseTime has
+    /// passed); until then a pulse or a stop is [`TxError::Busy`] (not written, to be tried
+    /// again) and a keep-alive is skipped. Without a receive side nothing is awaited.
     fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
+        let now = fes_rt::rt::clock::monotonic_ns();
         let message = translate(&self.nodes, frame)?;
-        let Some(message) = self.link_side(frame, message)? else {
-            let now = fes_rt::rt::clock::monotonic_ns();
+        let Some(message) = self.link_side(frame, message, now)? else {
             return Ok(TxDone {
                 retries: 0,
                 written_ns: now,
                 write_ns: 0,
             });
         };
-        let done = self.write_packet(Packet::new(self.number, message))?;
+        let awaits = match &self.link {
+            Some(link) if message.expects_answer() => {
+                if link.awaiting(now, MAX_RESPONSE_NS) {
+                    return Err(TxError::Busy);
+                }
+                link.awaiting_answer_to(self.number, now);
+                true
+            }
+            _ => false,
+        };
+        let result = self.write_packet(Packet::new(self.number, message));
+        if result.is_err()
+            && awaits
+            && let Some(link) = &self.link
+        {
+            link.not_awaiting();
+        }
+        let done = result?;
         self.number = self.number.wrapping_add(1);
         Ok(done)
     }
 }
+
+/// [`MAX_RESPONSE_MS`] in ns.
+const MAX_RESPONSE_NS: u64 = MAX_RESPONSE_MS as u64 * 1_000_000;
 
 /// Sets `t` to ScienceMode 2's line settings: raw, 460 800 baud, 8 data bits, even parity,
 /// one stop bit, no flow control (neither RTS/CTS nor XON/XOFF), modem lines ignored.
@@ -528,6 +574,8 @@ mod tests {
                 Ok(Packet::new(1, Message::GetStimulationMode)),
             ]
         );
+        // The device answers the mode query.
+        assert!(link.answer_received(1));
         // The device end hung up: EIO is the link down (without a receive side, a failure).
         let dead = |errno| Stingy {
             out: Vec::new(),
@@ -545,6 +593,94 @@ mod tests {
             tx.send(&pulse(0, 200, 200)),
             Err(TxError::Failed { errno: libc::EIO })
         );
+    }
+
+    #[test]
+    fn with_a_receive_side_each_command_waits_for_the_answer_to_the_last() {
+        // §2.3 / §5.1: a command sent while the device still processes the last one is
+        // answered -8 busy and not executed. The host sends one and waits.
+        // (Before the handshake, so that a host heartbeat is a Watchdog, not a mode query.)
+        let link = Arc::new(SerialLink::new());
+        let mut tx =
+            ScienceModeTx::with_link(Vec::new(), Nodes::DEFAULT, RETRY, link.clone(), u64::MAX);
+        let heartbeat = frame(CanMessage::HostHeartbeat(Heartbeat {
+            state: NmtState::Operational,
+        }));
+        let stop = frame(CanMessage::Nmt(Nmt {
+            command: NmtCommand::Stop,
+            node: Nodes::DEFAULT.stim(),
+        }));
+        tx.send(&pulse(0, 200, 200)).unwrap();
+        // Unanswered: a pulse and a stop are not written (Busy, to be tried again), a
+        // keep-alive is skipped (the pulse fed the device's watchdog).
+        assert_eq!(tx.send(&pulse(1, 200, 200)), Err(TxError::Busy));
+        assert_eq!(tx.send(&stop), Err(TxError::Busy));
+        assert!(tx.send(&heartbeat).is_ok());
+        assert_eq!(written(&tx).len(), 1);
+        // An answer to another packet number frees nothing; the pulse's own does.
+        assert!(!link.answer_received(5));
+        assert_eq!(tx.send(&pulse(1, 200, 200)), Err(TxError::Busy));
+        assert!(link.answer_received(0));
+        tx.send(&pulse(1, 200, 200)).unwrap();
+        assert!(link.answer_received(1));
+        // A Watchdog has no answer (§4.2): nothing is awaited after it.
+        tx.send(&heartbeat).unwrap();
+        tx.send(&stop).unwrap();
+        let numbers: Vec<_> = written(&tx)
+            .into_iter()
+            .map(|p| {
+                let p = p.unwrap();
+                (p.number, p.message.command())
+            })
+            .collect();
+        assert_eq!(
+            numbers,
+            [
+                (0, fes_sciencemode::Command::SinglePulse),
+                (1, fes_sciencemode::Command::SinglePulse),
+                (2, fes_sciencemode::Command::Watchdog),
+                (3, fes_sciencemode::Command::StopChannelListMode),
+            ]
+        );
+        // A command whose write failed awaits nothing.
+        assert!(link.answer_received(3));
+        let dead = Stingy {
+            out: Vec::new(),
+            chunk: 64,
+            calls: 0,
+            errno: Some(libc::EIO),
+        };
+        let mut tx = ScienceModeTx::with_link(dead, Nodes::DEFAULT, RETRY, link.clone(), 0);
+        assert!(tx.send(&pulse(0, 200, 200)).is_err());
+        assert!(!link.awaiting(fes_rt::rt::clock::monotonic_ns(), u64::MAX));
+    }
+
+    #[test]
+    fn the_mode_query_waits_a_poll_period_after_the_last_status_answer() {
+        // A SinglePulse acknowledged with result 0 tells the mode (§3.6 Fig. 4) and the
+        // device's liveness: a query then would only hold the line a pulse may need.
+        let link = Arc::new(SerialLink::new());
+        link.init_acknowledged();
+        let poll_ns = 30_000_000;
+        let mut tx =
+            ScienceModeTx::with_link(Vec::new(), Nodes::DEFAULT, RETRY, link.clone(), poll_ns);
+        let heartbeat = frame(CanMessage::HostHeartbeat(Heartbeat {
+            state: NmtState::Operational,
+        }));
+        let pause = || std::thread::sleep(std::time::Duration::from_nanos(poll_ns + 5_000_000));
+        tx.send(&heartbeat).unwrap();
+        assert!(link.answer_received(0));
+        pause();
+        link.status_answered();
+        tx.send(&heartbeat).unwrap();
+        pause();
+        tx.send(&heartbeat).unwrap();
+        let commands: Vec<_> = written(&tx)
+            .into_iter()
+            .map(|p| p.unwrap().message.command())
+            .collect();
+        use fes_sciencemode::Command::{GetStimulationMode, Watchdog};
+        assert_eq!(commands, [GetStimulationMode, Watchdog, GetStimulationMode]);
     }
 
     #[test]

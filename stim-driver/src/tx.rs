@@ -32,6 +32,11 @@ pub enum TxError {
         /// errno.
         errno: i32,
     },
+    /// The stimulator has not yet answered the transport's previous command (ScienceMode
+    /// 2 is stop-and-wait: a command sent meanwhile would be answered -8 busy and not
+    /// executed). Nothing was written; the caller may try again once it has answered.
+    #[error("stimulator busy with the previous command: not written yet")]
+    Busy,
     /// Any other failure.
     #[error("CAN write failed (errno {errno})")]
     Failed {

@@ -716,7 +716,7 @@ max_charge_nc = 4000
 [watchdog]
 timeout_ticks = {drv_ticks}
 stale_after_ticks = {drv_ticks}
-stimulator_timeout_ms = {stim_wd}
+stimulator_timeout_ms = {stim_timeout}
 arm_confirm_ms = {arm_ms}
 command_max_age_ms = {cmd_age}
 
@@ -734,6 +734,12 @@ hlog = "{dir}/stim-driver.hlog"
 prefix = "{prefix}"
 "#,
         stim_wd = t.stimulator_watchdog_ms,
+        stim_timeout = match opts.stimulator {
+            StimulatorKind::Can => t.stimulator_watchdog_ms,
+            // The driver's rule for a RehaStim 2: the longest answer (100 ms, §2.3 of the
+            // protocol) plus two liveness periods (50 ms each by default).
+            StimulatorKind::Sciencemode => t.stimulator_watchdog_ms.max(200),
+        },
         drv_ticks = t.driver_tick_ticks,
         arm_ms = t.arm_confirm_ms,
         late_us = t.max_pulse_delay_us,

@@ -1682,3 +1682,128 @@ max_pulses_per_s = 100
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// ScienceMode 2's stop-and-wait reaches the forward path as a busy transport
+/// (`TxError::Busy`): a pulse waits for it within the lateness bound and is written then;
+/// past the bound, or when a newer decision comes, it is dropped as `late`; a pulse after
+/// a late one keeps the stimulator's minimum interval at the write; none of it is a fault.
+#[test]
+fn a_pulse_waits_for_a_busy_transport_within_the_lateness_bound() {
+    let mut s = settings();
+    s.pulse_lateness_ns = 4 * MS;
+    s.stim_limits.min_ipi_ms = 2;
+    let mut r = Rig::armed(s);
+    r.bus.clear();
+    r.ev.clear();
+    let outcomes = |r: &Rig| -> Vec<(u64, PulseFate)> {
+        r.ev.iter()
+            .filter_map(|e| match e {
+                DriverEvent::Outcome { tick_seq, fate, .. } => Some((*tick_seq, *fate)),
+                _ => None,
+            })
+            .collect()
+    };
+    let quiet = |r: &mut Rig, n: u32| {
+        for _ in 0..n {
+            r.advance(MS);
+            r.tick(false);
+        }
+    };
+    // Busy when decided, free 2 ms later: written then, no outcome before.
+    r.bus.fail.set(Some(TxError::Busy));
+    r.advance(MS);
+    r.tick(true);
+    let first = r.tick_seq;
+    let decided = r.now;
+    quiet(&mut r, 1);
+    assert!(outcomes(&r).is_empty() && r.bus.pulses().is_empty());
+    // While it waits the loop looks again within a fraction of a tick.
+    assert!(r.fp.next_deadline(r.now) <= r.now + MS / 2);
+    r.bus.fail.set(None);
+    r.advance(MS);
+    r.poll();
+    assert_eq!(r.bus.pulses().len(), 1);
+    assert_eq!(r.bus.pulses()[0].0, decided + 2 * MS);
+    assert_eq!(outcomes(&r), [(first, PulseFate::Sent)]);
+    // A pulse decided 1 ms after that late write (3 ms after the first decision: the
+    // interlocks pass it) waits until the interval is kept.
+    r.advance(MS);
+    r.tick(true);
+    let second = r.tick_seq;
+    assert_eq!(r.bus.pulses().len(), 1, "held: 1 ms after the last write");
+    r.advance(MS);
+    r.poll();
+    assert_eq!(r.bus.pulses().len(), 2);
+    assert_eq!(r.bus.pulses()[1].0 - r.bus.pulses()[0].0, 2 * MS);
+    // Busy beyond the bound: dropped as late.
+    quiet(&mut r, 5);
+    r.bus.fail.set(Some(TxError::Busy));
+    r.advance(MS);
+    r.tick(true);
+    let third = r.tick_seq;
+    quiet(&mut r, 5);
+    // A newer decision takes the place of a waiting one (never a burst).
+    r.advance(MS);
+    r.tick(true);
+    let fourth = r.tick_seq;
+    quiet(&mut r, 2);
+    r.advance(MS);
+    r.tick(true);
+    let fifth = r.tick_seq;
+    r.bus.fail.set(None);
+    r.advance(MS);
+    r.poll();
+    assert_eq!(
+        outcomes(&r),
+        [
+            (first, PulseFate::Sent),
+            (second, PulseFate::Sent),
+            (third, PulseFate::Late),
+            (fourth, PulseFate::Late),
+            (fifth, PulseFate::Sent),
+        ],
+        "{:?}",
+        r.ev
+    );
+    assert_eq!(r.bus.pulses().len(), 3);
+    let c = r.fp.counters();
+    assert_eq!((c.pulses_late, c.pulses_dropped_late), (3, 2));
+    assert_eq!((c.can_tx_errors, c.trips), (0, 0));
+    assert_eq!(r.fp.state(), DriverState::Armed);
+    // The stimulator answered one of the written pulses busy (not executed): it is not
+    // owed in STATUS reconciliation, past the in-flight window too.
+    r.bus_event(BusEvent::DeviceBusy { pulse: true });
+    status_for(&mut r, 2, s.stimulator_timeout_ns * 2);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+    assert_eq!(r.fp.counters().pulses_busy, 1);
+}
+
+/// Ticks every 1 ms and a STATUS showing `delivered` pulses every 10 ms, for `span_ns`.
+fn status_for(r: &mut Rig, delivered: u32, span_ns: u64) {
+    let end = r.now + span_ns;
+    while r.now < end && r.fault().is_none() {
+        r.advance(MS);
+        r.tick(false);
+        if (r.now / MS).is_multiple_of(10) {
+            r.bus_event(status_delivered(StimState::Armed, r.config_id, delivered));
+        }
+    }
+}
+
+/// Without the busy answer's correction, the same STATUS is a delivery mismatch: the test
+/// above would fail if busy pulses were still counted as owed.
+#[test]
+fn a_pulse_missing_from_status_without_a_busy_answer_still_trips() {
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    for k in 0..3 {
+        r.advance(5 * MS);
+        r.tick(k < 3);
+    }
+    status_for(&mut r, 2, settings().stimulator_timeout_ns * 2);
+    assert!(
+        matches!(r.fault(), Some(Fault::DeliveryMismatch { .. })),
+        "{:?}",
+        r.ev
+    );
+}

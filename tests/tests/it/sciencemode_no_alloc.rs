@@ -33,6 +33,9 @@ fn the_serial_sides_allocate_nothing_per_packet() {
         Message::SinglePulseAck {
             result: AckResult::ParameterError,
         },
+        Message::SinglePulseAck {
+            result: AckResult::BusyError,
+        },
         Message::UnknownCommand { command: 50 },
         Message::ActualValues {
             angle_deg: 90,
@@ -78,7 +81,7 @@ fn the_serial_sides_allocate_nothing_per_packet() {
         interval_ns: 0,
     };
     let mut tx = ScienceModeTx::with_link(std::io::sink(), nodes, retry, link.clone(), 0);
-    let (mut events, mut emcys, mut packets) = (0u64, 0u64, 0u64);
+    let (mut events, mut emcys, mut packets, mut busy) = (0u64, 0u64, 0u64, 0u64);
 
     alloc::track_current_thread(true);
     let before = alloc::current_thread_allocations();
@@ -87,6 +90,7 @@ fn the_serial_sides_allocate_nothing_per_packet() {
             let mut push = |e: BusEvent| {
                 events += 1;
                 emcys += u64::from(matches!(e, BusEvent::Emcy(_)));
+                busy += u64::from(matches!(e, BusEvent::DeviceBusy { .. }));
             };
             match r {
                 Ok(p) => {
@@ -98,6 +102,8 @@ fn the_serial_sides_allocate_nothing_per_packet() {
         }
         for f in &frames {
             tx.send(f).unwrap();
+            // The device's answer to what was just written (stop-and-wait).
+            link.answer_received(tx.next_number().wrapping_sub(1));
         }
     }
     let after = alloc::current_thread_allocations();
@@ -112,6 +118,7 @@ fn the_serial_sides_allocate_nothing_per_packet() {
     // an EMCY, the handshake done by the transmit side.
     assert_eq!(packets, 2_000 * device.len() as u64);
     assert_eq!(emcys, 2_000 * 3);
+    assert_eq!(busy, 2_000);
     assert!(events > emcys);
     assert!(link.handshake_done());
     assert_eq!(receiver.delivered(), 2_000);

@@ -33,6 +33,19 @@ pub struct LoggedPulse {
     pub current_ma: u32,
 }
 
+/// How the virtual RehaStim 2 behaves beyond the document's defaults.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DeviceOptions {
+    /// A fault to inject.
+    pub test_fault: Option<TestFault>,
+    /// Every command executed and answered this late (a pipelined device), ms.
+    pub latency_ms: u16,
+    /// ActualValues every 20 ms (a MOTOmed attached).
+    pub motomed: bool,
+    /// Mean processing time per command, answering -8 busy meanwhile (§5.1), ms.
+    pub processing_ms: u16,
+}
+
 /// The virtual RehaStim 2 in a thread of this process.
 pub struct Device {
     stop: Arc<AtomicBool>,
@@ -42,12 +55,13 @@ pub struct Device {
 }
 
 impl Device {
-    pub fn start(
-        dir: &Path,
-        test_fault: Option<TestFault>,
-        latency_ms: u16,
-        motomed: bool,
-    ) -> Self {
+    pub fn start(dir: &Path, options: DeviceOptions) -> Self {
+        let DeviceOptions {
+            test_fault,
+            latency_ms,
+            motomed,
+            processing_ms,
+        } = options;
         let link = dir.join("ttyUSB0");
         let log = dir.join("pulses.csv");
         let args = Rehastim2Args {
@@ -60,7 +74,7 @@ impl Device {
             test_fault,
             latency_ms,
             motomed,
-            processing_ms: 0,
+            processing_ms,
             force_prefix: None,
             force_max_n: None,
         };
@@ -178,22 +192,48 @@ impl Rig {
     /// [`Rig::start`] with a device that injects `fault` and takes `latency_ms` to execute
     /// a command.
     pub fn start_with(name: &str, fault: Option<TestFault>, latency_ms: u16) -> Self {
-        Self::start_device(name, fault, latency_ms, false)
+        Self::start_device(
+            name,
+            DeviceOptions {
+                test_fault: fault,
+                latency_ms,
+                ..DeviceOptions::default()
+            },
+        )
     }
 
     /// [`Rig::start`] with a MOTOmed attached to the device: ActualValues every 20 ms
     /// (`sim-muscle rehastim2 --motomed`).
     pub fn start_with_motomed(name: &str) -> Self {
-        Self::start_device(name, None, 0, true)
+        Self::start_device(
+            name,
+            DeviceOptions {
+                motomed: true,
+                ..DeviceOptions::default()
+            },
+        )
     }
 
-    fn start_device(name: &str, fault: Option<TestFault>, latency_ms: u16, motomed: bool) -> Self {
+    /// [`Rig::start`] with a device that processes each command for `processing_ms` on
+    /// average and answers -8 busy to any command meanwhile (§5.1; `sim-muscle rehastim2
+    /// --processing-ms`).
+    pub fn start_with_processing(name: &str, processing_ms: u16) -> Self {
+        Self::start_device(
+            name,
+            DeviceOptions {
+                processing_ms,
+                ..DeviceOptions::default()
+            },
+        )
+    }
+
+    fn start_device(name: &str, options: DeviceOptions) -> Self {
         let pid = std::process::id();
         let prefix = format!("sds{pid}{name}");
         let dir = std::env::temp_dir().join(format!("stim-driver-serial-{name}-{pid}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let device = Device::start(&dir, fault, latency_ms, motomed);
+        let device = Device::start(&dir, options);
         let config = write_config(&dir, &device.link, &prefix);
         let log = dir.join("driver.log");
         let log_file = std::fs::File::create(&log).unwrap();
@@ -239,6 +279,16 @@ impl Rig {
     /// The driver's log.
     pub fn log_text(&self) -> String {
         std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// The decisions the driver's log reports dropped as late (the device still busy
+    /// with the previous command beyond the lateness bound).
+    pub fn reported_late(&self, decisions: &[Decision]) -> u64 {
+        let log = self.log_text();
+        decisions
+            .iter()
+            .filter(|d| log.contains(&format!("pulse of tick {} NOT sent", d.seq)))
+            .count() as u64
     }
 
     /// Stops the driver (SIGTERM) and returns the count of acknowledged pulses its final
