@@ -207,12 +207,15 @@ pub fn run_rehastim2(
     rt_core::rt::logging::init("sim-muscle");
     let summary = rehastim2_pty::run_rehastim2_until(&args, plant.as_mut(), &SIGNALLED)?;
     tracing::info!(
-        "virtual RehaStim 2 stopped: {} ticks, {} packets, {} bad, {} pulses, {} answer bytes dropped",
+        "virtual RehaStim 2 stopped: {} ticks, {} packets, {} bad, {} pulses, {} answer bytes dropped, {} -8 busy and {} -3 wrong-mode answers sent, {} commands processed slowly",
         summary.ticks,
         summary.packets_rx,
         summary.bad_packets,
         summary.pulses,
-        summary.tx_dropped
+        summary.tx_dropped,
+        summary.busy_sent,
+        summary.wrong_mode_sent,
+        summary.slow_commands
     );
     Ok(())
 }

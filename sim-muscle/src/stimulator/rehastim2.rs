@@ -230,6 +230,8 @@ pub struct Rehastim2 {
     rng: ChaCha8Rng,
     /// -8 busy acknowledgements sent.
     busy_sent: u64,
+    /// Commands processed for [`SLOW_PROCESSING_MS`].
+    slow_commands: u64,
     /// -3 wrong-mode acknowledgements sent.
     wrong_mode_sent: u64,
 }
@@ -260,6 +262,7 @@ impl Rehastim2 {
             busy_until: 0,
             rng: ChaCha8Rng::seed_from_u64(0x9E37_79B9_7F4A_7C15),
             busy_sent: 0,
+            slow_commands: 0,
             wrong_mode_sent: 0,
         }
     }
@@ -268,6 +271,11 @@ impl Rehastim2 {
     /// provokes none).
     pub const fn busy_sent(&self) -> u64 {
         self.busy_sent
+    }
+
+    /// Commands that took [`SLOW_PROCESSING_MS`] to process.
+    pub const fn slow_commands(&self) -> u64 {
+        self.slow_commands
     }
 
     /// -3 wrong-mode acknowledgements the device has sent.
@@ -279,6 +287,7 @@ impl Rehastim2 {
     fn draw_processing_ticks(&mut self) -> u64 {
         let mean = u64::from(self.settings.processing_mean_ms);
         if self.rng.random_ratio(SLOW_PROCESSING_PERCENT, 100) {
+            self.slow_commands += 1;
             SLOW_PROCESSING_MS
         } else {
             (mean / 2 + self.rng.random_range(0..=mean)).max(1)

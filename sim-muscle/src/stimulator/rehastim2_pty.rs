@@ -236,6 +236,8 @@ pub struct PtyRunSummary {
     pub tx_dropped: u64,
     /// -8 busy acknowledgements sent (§5.1).
     pub busy_sent: u64,
+    /// Commands that took the slow processing time (`--processing-ms`).
+    pub slow_commands: u64,
     /// -3 wrong-mode acknowledgements sent.
     pub wrong_mode_sent: u64,
 }
@@ -403,6 +405,7 @@ pub fn run_rehastim2_until(
         }
         let mut wrote = false;
         summary.busy_sent = device.busy_sent();
+        summary.slow_commands = device.slow_commands();
         summary.wrong_mode_sent = device.wrong_mode_sent();
         for e in device.drain_events() {
             match e {
