@@ -30,6 +30,8 @@ pub struct PatternLoop<S> {
     degraded: bool,
     seq: u64,
     rejected_since_last_tick: bool,
+    /// [`StimTick::CONTRACTION_AHEAD_MS`] in ticks of the loop's period.
+    ahead_ticks: u32,
 }
 
 /// What happened in one [`PatternLoop::step`], besides the tick itself.
@@ -49,7 +51,9 @@ impl<S: TickSource> PatternLoop<S> {
         pulse: PulseSettings,
         degraded: bool,
     ) -> Self {
+        let ahead_ns = u64::from(StimTick::CONTRACTION_AHEAD_MS) * 1_000_000;
         Self {
+            ahead_ticks: ahead_ns.div_ceil(reference_policy.tick_ns.max(1)) as u32,
             source,
             references: ReferenceTracker::new(reference_policy),
             feedback: feedback_max_age_ns.map(FeedbackTracker::new),
@@ -138,6 +142,10 @@ impl<S: TickSource> PatternLoop<S> {
         set(target.none, StimTick::FLAG_NO_REFERENCE);
         set(target.stop, StimTick::FLAG_STOP);
         set(target.resting, StimTick::FLAG_RESTING);
+        set(
+            !target.resting || target.preview.contraction_within(self.ahead_ticks),
+            StimTick::FLAG_CONTRACTION_AHEAD,
+        );
         set(wake.missed_periods > 0, StimTick::FLAG_OVERRUN);
         set(
             self.rejected_since_last_tick,

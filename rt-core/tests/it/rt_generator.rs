@@ -169,3 +169,60 @@ fn skipped_periods_are_told_to_the_source_before_its_one_decision() {
     assert_eq!(t.missed_periods, 3);
     assert_eq!(l.source().0, [(0, 1), (3, 0), (0, 1)]);
 }
+
+/// `FLAG_CONTRACTION_AHEAD`: set while the target contracts and from
+/// `CONTRACTION_AHEAD_MS` before a contraction the preview announces, clear at rest
+/// otherwise (a transport carrying one command at a time keeps its line free meanwhile).
+#[test]
+fn contraction_ahead_is_flagged_from_the_preview_and_while_contracting() {
+    use rt_core::msg::{PreviewEdge, ReferencePreview};
+    let mut l = loop_of(TestPattern::new(1000).unwrap(), TINY, false);
+    let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
+    let edge = |ms: u64, force| PreviewEdge {
+        t_ns: ms * MS,
+        force,
+        max_rate_per_s: 0.0,
+    };
+    l.offer_reference(&Reference::new(1, MS, 0.0), MS).unwrap();
+    l.offer_preview(
+        &ReferencePreview::new(1, MS, 1, &[edge(500, 0.4), edge(700, 0.0)]),
+        MS,
+    )
+    .unwrap();
+    let ahead = u64::from(StimTick::CONTRACTION_AHEAD_MS);
+    let mut flagged = Vec::new();
+    for k in 1..=650u64 {
+        let now = k * MS;
+        if k % 50 == 0 {
+            // The supervisor's periodic reference: the schedule's setpoint now.
+            let force = if (500..700).contains(&k) { 0.4 } else { 0.0 };
+            l.offer_reference(&Reference::new(1 + k, now, force), now)
+                .unwrap();
+            let edges: Vec<_> = [edge(500, 0.4), edge(700, 0.0)]
+                .into_iter()
+                .filter(|e| e.t_ns > now)
+                .collect();
+            l.offer_preview(&ReferencePreview::new(1 + k, now, 1 + k, &edges), now)
+                .unwrap();
+        }
+        let (t, _) = l.step(&sched.advance(now + 20_000));
+        t.validate().unwrap();
+        if t.has(StimTick::FLAG_CONTRACTION_AHEAD) {
+            flagged.push(k);
+        }
+    }
+    // From 120 ms before the onset (the edge at 500 ms is `ceil` ticks ahead) through
+    // the contraction.
+    assert_eq!(flagged.first(), Some(&(500 - ahead)), "{flagged:?}");
+    assert!(flagged.windows(2).all(|w| w[1] == w[0] + 1), "{flagged:?}");
+    assert_eq!(flagged.last(), Some(&650));
+    // Without a preview only a running contraction is flagged.
+    let mut l = loop_of(TestPattern::new(1000).unwrap(), TINY, false);
+    l.offer_reference(&Reference::new(1, MS, 0.0), MS).unwrap();
+    let (t, _) = l.step(&sched.advance(700 * MS));
+    assert!(!t.has(StimTick::FLAG_CONTRACTION_AHEAD));
+    l.offer_reference(&Reference::new(2, 701 * MS, 0.3), 701 * MS)
+        .unwrap();
+    let (t, _) = l.step(&sched.advance(701 * MS + 20_000));
+    assert!(t.has(StimTick::FLAG_CONTRACTION_AHEAD));
+}

@@ -85,7 +85,7 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<Reference>(), "fes::Reference::v1");
     assert_eq!(type_name::<ReferencePreview>(), "fes::ReferencePreview::v1");
     assert_eq!(type_name::<PreviewEdge>(), "fes::PreviewEdge::v1");
-    assert_eq!(type_name::<StimTick>(), "fes::StimTick::v1");
+    assert_eq!(type_name::<StimTick>(), "fes::StimTick::v2");
     assert_eq!(type_name::<ForceSample>(), "fes::ForceSample::v1");
     assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v2");
     assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");

@@ -123,6 +123,13 @@ impl Preview {
         &self.points[..self.len as usize]
     }
 
+    /// Whether a setpoint above zero takes effect within `ticks` from now (the one in
+    /// effect now included): a contraction is running or announced to start that soon.
+    /// False without a preview.
+    pub fn contraction_within(&self, ticks: u32) -> bool {
+        self.points().iter().any(|p| p.at <= ticks && p.force > 0.0)
+    }
+
     /// The targets of the ticks `0..r.len()` from now: `r[0] = target_now` (the target in
     /// use this tick), then each tick's target slewed towards the setpoint in effect at it
     /// by that setpoint's rate ([`slew`], `ts` seconds per tick), as rt-core's tracker

@@ -16,7 +16,7 @@ use super::validate::{
 /// means that receiver lost samples.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("fes::StimTick::v1")]
+#[type_name("fes::StimTick::v2")]
 pub struct StimTick {
     /// Sequence number, 1, 2, ... without gaps.
     pub seq: u64,
@@ -79,8 +79,17 @@ impl StimTick {
     /// The target is heading to rest (a zero reference still ramping down): the pattern
     /// generator rested (added 2026-12, issue 17).
     pub const FLAG_RESTING: u16 = 1 << 9;
+    /// A contraction is running (the target is not resting) or a scheduled one starts
+    /// within [`Self::CONTRACTION_AHEAD_MS`] (the reference preview says so): pulses may
+    /// come. A transport that carries one command at a time (ScienceMode 2) keeps its line
+    /// free of liveness queries meanwhile, so that a pulse does not wait behind one.
+    pub const FLAG_CONTRACTION_AHEAD: u16 = 1 << 10;
+    /// How far ahead [`Self::FLAG_CONTRACTION_AHEAD`] looks, ms: longer than a RehaStim
+    /// 2's longest answer (100 ms, protocol §2.3), so that a query started before it is
+    /// answered before the contraction.
+    pub const CONTRACTION_AHEAD_MS: u32 = 120;
     /// All flags defined.
-    pub const KNOWN_FLAGS: u16 = (1 << 10) - 1;
+    pub const KNOWN_FLAGS: u16 = (1 << 11) - 1;
     /// Highest stimulator channel index.
     pub const MAX_CHANNEL: u8 = 15;
     /// Contract ceiling of the amplitude, µA (a sanity bound; the driver and the stimulator
