@@ -343,6 +343,9 @@ impl<T: CanTx> ForwardPath<T> {
             return;
         }
         self.last_valid_tick_ns = Some(now_ns);
+        if let Some(o) = self.output.as_mut() {
+            o.contraction_ahead(tick.has(StimTick::FLAG_CONTRACTION_AHEAD));
+        }
         self.generator_stopped = tick.has(StimTick::FLAG_FINAL);
         if self.generator_stopped && self.is_armed() {
             self.trip(Fault::GeneratorStopped, now_ns, ev);

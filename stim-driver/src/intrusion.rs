@@ -192,6 +192,10 @@ impl<T: CanTx> CanTx for LoggingTx<'_, T> {
         self.log.record(frame);
         self.inner.send(frame)
     }
+
+    fn contraction_ahead(&mut self, ahead: bool) {
+        self.inner.contraction_ahead(ahead);
+    }
 }
 
 #[cfg(test)]

@@ -185,6 +185,14 @@ impl<T: CanTx> Output<T> {
         matches!(self, Output::Armed(_))
     }
 
+    /// Tells the transmit side whether pulses may come soon ([`CanTx::contraction_ahead`]).
+    pub fn contraction_ahead(&mut self, ahead: bool) {
+        match self {
+            Output::Disarmed(d) => d.port.tx.contraction_ahead(ahead),
+            Output::Armed(a) => a.port.tx.contraction_ahead(ahead),
+        }
+    }
+
     /// Sends a control frame in either state.
     pub fn send_control(&mut self, frame: &ControlFrame) -> Result<TxDone, SendError> {
         match self {

@@ -48,6 +48,12 @@ pub const READ_TIMEOUT: Duration = Duration::from_millis(5);
 /// must cover it plus two liveness periods.
 pub const MAX_RESPONSE_MS: u32 = 100;
 
+/// How long the transport waits for an answer before taking it as lost, ms: the longest
+/// answer ([`MAX_RESPONSE_MS`]) plus the USB adapter's latency timer at its Linux default
+/// (16 ms, §2.1) and a margin, so that a command answered at the limit is never followed
+/// by one the device would refuse -8 busy.
+pub const ANSWER_TIMEOUT_MS: u32 = MAX_RESPONSE_MS + 20;
+
 /// Answers -8 busy in a row that are still waited out (§5.1: "wait for the response
 /// packet"); the next is a device error ([`device_emcy`]).
 pub const BUSY_LIMIT: u8 = 4;

@@ -39,7 +39,7 @@ use nix::sys::termios::{
     tcsetattr,
 };
 
-use crate::serial_rx::{Commanded, MAX_RESPONSE_MS, SerialLink};
+use crate::serial_rx::{ANSWER_TIMEOUT_MS, Commanded, SerialLink};
 use crate::tx::{CanTx, RetryPolicy, TxDone, TxError, write_with_retry};
 
 /// The ScienceMode 2 command for a driver frame (see the module table); `Ok(None)` when
@@ -101,6 +101,13 @@ pub struct ScienceModeTx<W> {
     next_poll_ns: u64,
     /// [`SerialLink::status_answers`] when the poll was last scheduled.
     seen_answers: u32,
+    /// When that count last changed (seen at a host heartbeat), ns; 0: never.
+    last_answer_ns: u64,
+    /// Pulses may come soon ([`CanTx::contraction_ahead`]).
+    contraction_ahead: bool,
+    /// The driver changed the state or configuration and waits for a STATUS showing it:
+    /// the next heartbeat is a query.
+    query_due: bool,
 }
 
 impl<W: Write> ScienceModeTx<W> {
@@ -116,6 +123,9 @@ impl<W: Write> ScienceModeTx<W> {
             poll_ns: 0,
             next_poll_ns: 0,
             seen_answers: 0,
+            last_answer_ns: 0,
+            contraction_ahead: false,
+            query_due: false,
         }
     }
 
@@ -214,15 +224,23 @@ impl<W: Write> ScienceModeTx<W> {
             return Ok(message);
         };
         match decoded {
-            CanMessage::Nmt(n) => link.commanded(match n.command {
-                NmtCommand::Start => Commanded::Operational,
-                NmtCommand::Stop => Commanded::Stopped,
-                NmtCommand::EnterPreOperational
-                | NmtCommand::ResetNode
-                | NmtCommand::ResetCommunication => Commanded::PreOperational,
-            }),
-            CanMessage::Config(c) => link.config_written(c.config_id),
-            CanMessage::HostHeartbeat(_) if link.awaiting(now_ns, MAX_RESPONSE_NS) => {
+            CanMessage::Nmt(n) => {
+                link.commanded(match n.command {
+                    NmtCommand::Start => Commanded::Operational,
+                    NmtCommand::Stop => Commanded::Stopped,
+                    NmtCommand::EnterPreOperational
+                    | NmtCommand::ResetNode
+                    | NmtCommand::ResetCommunication => Commanded::PreOperational,
+                });
+                // The driver waits for a STATUS showing the new state (bring-up, arming):
+                // the query goes with the next heartbeat, not a period later.
+                self.query_due = true;
+            }
+            CanMessage::Config(c) => {
+                link.config_written(c.config_id);
+                self.query_due = true;
+            }
+            CanMessage::HostHeartbeat(_) if link.awaiting(now_ns, ANSWER_TIMEOUT_NS) => {
                 // The awaited command fed the device's watchdog less than MaxResponseTime
                 // ago (1200 ms, §2.3): this keep-alive waits for the next gap.
                 return Ok(None);
@@ -236,9 +254,17 @@ impl<W: Write> ScienceModeTx<W> {
                 let answers = link.status_answers();
                 if answers != self.seen_answers {
                     self.seen_answers = answers;
+                    self.last_answer_ns = now_ns;
                     self.next_poll_ns = now_ns.saturating_add(self.poll_ns);
                 }
-                if now_ns >= self.next_poll_ns {
+                // While a contraction runs or a scheduled one is near, the query waits
+                // (a pulse would wait behind it) until two periods have passed since the
+                // last answer: the stimulator timeout (>= 100 ms + 2 periods) still holds.
+                let quiet = self.contraction_ahead
+                    && self.last_answer_ns != 0
+                    && now_ns < self.last_answer_ns.saturating_add(2 * self.poll_ns);
+                if self.query_due || (now_ns >= self.next_poll_ns && !quiet) {
+                    self.query_due = false;
                     self.next_poll_ns = now_ns.saturating_add(self.poll_ns);
                     return Ok(Some(Message::GetStimulationMode));
                 }
@@ -250,9 +276,13 @@ impl<W: Write> ScienceModeTx<W> {
 }
 
 impl<W: Write> CanTx for ScienceModeTx<W> {
+    fn contraction_ahead(&mut self, ahead: bool) {
+        self.contraction_ahead = ahead;
+    }
+
     /// Stop-and-wait with a receive side (§2.3, §5.1): a command the device answers is
-    /// written only when the previous one has been answered (or MaxResponseTime has
-    /// passed); until then a pulse or a stop is [`TxError::Busy`] (not written, to be tried
+    /// written only when the previous one has been answered (or [`ANSWER_TIMEOUT_MS`]
+    /// has passed); until then a pulse or a stop is [`TxError::Busy`] (not written, to be tried
     /// again) and a keep-alive is skipped. Without a receive side nothing is awaited.
     fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError> {
         let now = fes_rt::rt::clock::monotonic_ns();
@@ -266,7 +296,7 @@ impl<W: Write> CanTx for ScienceModeTx<W> {
         };
         let awaits = match &self.link {
             Some(link) if message.expects_answer() => {
-                if link.awaiting(now, MAX_RESPONSE_NS) {
+                if link.awaiting(now, ANSWER_TIMEOUT_NS) {
                     return Err(TxError::Busy);
                 }
                 link.awaiting_answer_to(self.number, now);
@@ -287,8 +317,8 @@ impl<W: Write> CanTx for ScienceModeTx<W> {
     }
 }
 
-/// [`MAX_RESPONSE_MS`] in ns.
-const MAX_RESPONSE_NS: u64 = MAX_RESPONSE_MS as u64 * 1_000_000;
+/// [`ANSWER_TIMEOUT_MS`] in ns.
+const ANSWER_TIMEOUT_NS: u64 = ANSWER_TIMEOUT_MS as u64 * 1_000_000;
 
 /// Sets `t` to ScienceMode 2's line settings: raw, 460 800 baud, 8 data bits, even parity,
 /// one stop bit, no flow control (neither RTS/CTS nor XON/XOFF), modem lines ignored.
@@ -681,6 +711,58 @@ mod tests {
             .collect();
         use fes_sciencemode::Command::{GetStimulationMode, Watchdog};
         assert_eq!(commands, [GetStimulationMode, Watchdog, GetStimulationMode]);
+    }
+
+    #[test]
+    fn with_a_contraction_ahead_the_query_waits_two_periods_after_the_last_answer() {
+        // A pulse must not wait behind a query: while a contraction runs or a scheduled
+        // one is near (StimTick FLAG_CONTRACTION_AHEAD), the query waits until two periods
+        // have passed since the last answer (the stimulator timeout allows that).
+        let link = Arc::new(SerialLink::new());
+        link.init_acknowledged();
+        let poll_ns = 20_000_000;
+        let mut tx =
+            ScienceModeTx::with_link(Vec::new(), Nodes::DEFAULT, RETRY, link.clone(), poll_ns);
+        let heartbeat = frame(CanMessage::HostHeartbeat(Heartbeat {
+            state: NmtState::Operational,
+        }));
+        let ms = |n: u64| std::thread::sleep(std::time::Duration::from_millis(n));
+        tx.send(&heartbeat).unwrap(); // the first query
+        assert!(link.answer_received(0));
+        link.status_answered();
+        tx.contraction_ahead(true);
+        tx.send(&heartbeat).unwrap(); // the answer seen: a Watchdog
+        ms(25);
+        tx.send(&heartbeat).unwrap(); // one period passed, contraction ahead: a Watchdog
+        ms(20);
+        tx.send(&heartbeat).unwrap(); // two periods: the query (packet 3)
+        assert!(link.answer_received(3));
+        link.status_answered();
+        tx.contraction_ahead(false);
+        tx.send(&heartbeat).unwrap(); // the answer seen: a Watchdog
+        ms(25);
+        tx.send(&heartbeat).unwrap(); // at rest, one period: the query (packet 5)
+        assert!(link.answer_received(5));
+        link.status_answered();
+        tx.send(&heartbeat).unwrap(); // the answer seen: a Watchdog
+        // A CONFIG (or an NMT command) waits for a STATUS showing it: the query goes with
+        // the next heartbeat, whatever the period.
+        let config = frame(CanMessage::Config(Config {
+            config_id: 3,
+            page: fes_can::ConfigPage::OutputLimits {
+                max_amplitude_100ua: 300,
+                max_width_us: 400,
+                min_ipi_ms: 10,
+            },
+        }));
+        tx.send(&config).unwrap();
+        tx.send(&heartbeat).unwrap();
+        let commands: Vec<_> = written(&tx)
+            .into_iter()
+            .map(|p| p.unwrap().message.command())
+            .collect();
+        use fes_sciencemode::Command::{GetStimulationMode as Q, Watchdog as W};
+        assert_eq!(commands, [Q, W, W, Q, W, Q, W, Q]);
     }
 
     #[test]

@@ -62,6 +62,12 @@ pub struct TxDone {
 pub trait CanTx {
     /// Writes one frame.
     fn send(&mut self, frame: &Frame) -> Result<TxDone, TxError>;
+
+    /// Whether pulses may come soon: the newest StimTick's
+    /// `FLAG_CONTRACTION_AHEAD` (a contraction running, or a scheduled one starting within
+    /// `StimTick::CONTRACTION_AHEAD_MS`). A transport that carries one command at a time
+    /// keeps its line free of optional traffic meanwhile. A bus needs nothing (default).
+    fn contraction_ahead(&mut self, _ahead: bool) {}
 }
 
 /// How long a full transmit queue is retried.

@@ -1807,3 +1807,22 @@ fn a_pulse_missing_from_status_without_a_busy_answer_still_trips() {
         r.ev
     );
 }
+
+/// The newest valid tick's `FLAG_CONTRACTION_AHEAD` reaches the transmit side (which keeps
+/// a one-command line free of queries meanwhile), armed or not.
+#[test]
+fn a_contraction_ahead_is_passed_to_the_transport() {
+    let mut r = Rig::configured(settings());
+    r.advance(MS);
+    r.tick_seq += 1;
+    let t = tick(r.tick_seq, r.now - 20_000, false);
+    let ahead = StimTick {
+        flags: StimTick::FLAG_CONTRACTION_AHEAD,
+        ..t
+    };
+    r.fp.on_tick(&ahead, r.now, &mut r.ev);
+    assert!(r.bus.ahead.get());
+    r.advance(MS);
+    r.tick(false);
+    assert!(!r.bus.ahead.get());
+}

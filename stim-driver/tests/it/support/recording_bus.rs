@@ -16,6 +16,8 @@ pub struct Bus {
     pub now: Rc<Cell<u64>>,
     pub frames: Rc<RefCell<Vec<(u64, Frame)>>>,
     pub fail: Rc<Cell<Option<TxError>>>,
+    /// The last `contraction_ahead` the driver passed on.
+    pub ahead: Rc<Cell<bool>>,
 }
 
 impl CanTx for Bus {
@@ -29,6 +31,10 @@ impl CanTx for Bus {
             written_ns: self.now.get(),
             write_ns: 0,
         })
+    }
+
+    fn contraction_ahead(&mut self, ahead: bool) {
+        self.ahead.set(ahead);
     }
 }
 
