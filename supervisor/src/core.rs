@@ -473,6 +473,15 @@ impl SupervisorCore {
         self.driver_refusals = Some((s.t_ns, s.pulses_rejected));
     }
 
+    /// The driver dropped the pulse of the tick at `tick_t_ns` as late (its transport was
+    /// still busy with the previous command; PulseOutcome `late`): charged to its beat
+    /// like a refused one, so the outer loop does not learn from a beat that did not get
+    /// the train the inner loop planned. (Interlock refusals come counted in
+    /// DriverStatus instead.)
+    pub fn on_pulse_late(&mut self, tick_t_ns: u64) {
+        self.contraction.add_refused(tick_t_ns, tick_t_ns, 1);
+    }
+
     /// Advances the profile and the outer loop to `now_ns`.
     pub fn advance(&mut self, now_ns: u64) -> Option<Setpoint> {
         let run = self.profile.as_mut()?;
@@ -800,6 +809,20 @@ mod tests {
             c.take_beats()
         };
         let (reported, unreported) = (run(true), run(false));
+        // A pulse dropped as late (PulseOutcome) is charged to its beat the same way.
+        let late = {
+            let mut c = armed_with_cardiac(0.4);
+            for k in 0..(10 * 800u64) {
+                let t = k * MS;
+                let r = c.reference(t);
+                let hit = (4800..5600).contains(&k);
+                c.on_force(t + 7 * MS, if hit { 0.4 } else { 0.8 } * r.force);
+                if k == 4950 {
+                    c.on_pulse_late(t);
+                }
+            }
+            c.take_beats()
+        };
         let six = |beats: &[BeatRecord]| {
             *beats
                 .iter()
@@ -807,6 +830,8 @@ mod tests {
                 .unwrap()
         };
         let (with, without) = (six(&reported), six(&unreported));
+        assert_eq!(six(&late).measurement.pulses_refused, 1);
+        assert_eq!(six(&late).update.measured, None, "skipped");
         assert_eq!(with.measurement.pulses_refused, 1);
         assert_eq!(without.measurement.pulses_refused, 0);
         // The weak beat is measured alike in both runs; only the reported one is skipped.

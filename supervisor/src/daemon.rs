@@ -19,8 +19,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use rt_core::msg::service::{ServiceError, open_pubsub};
 use rt_core::msg::{
-    Contract, DriverCommand, DriverStatus, ForceSample, PreviewEdge, PulseOutcome, Reference,
-    ReferencePreview, StimTick, TimingReport,
+    Contract, DriverCommand, DriverStatus, ForceSample, PreviewEdge, PulseFate, PulseOutcome,
+    Reference, ReferencePreview, StimTick, TimingReport,
 };
 use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
@@ -373,12 +373,15 @@ impl<'a> Daemon<'a> {
     }
 
     /// The PulseOutcomes received (valid ones): recording, so that the data set says what
-    /// was delivered.
+    /// was delivered; a pulse dropped as late is charged to its beat.
     fn read_outcomes(&mut self, now: u64) {
         while let Ok(Some(s)) = self.ports.outcomes.receive() {
             let o = *s.payload();
             drop(s);
             if o.validate().is_ok() {
+                if o.fate() == Ok(PulseFate::Late) {
+                    self.core.on_pulse_late(o.tick_t_ns);
+                }
                 self.run.record(&mut self.core, Item::Outcome(o, now));
             }
         }
