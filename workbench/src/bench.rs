@@ -97,6 +97,18 @@ pub struct StackOptions {
     /// The stimulator the driver drives: the CAN virtual stimulator on `iface`, or the
     /// virtual RehaStim 2 on a pty (ScienceMode 2; `iface` unused).
     pub stimulator: StimulatorKind,
+    /// How the virtual RehaStim 2 behaves (ScienceMode only).
+    pub rehastim2: Rehastim2Options,
+}
+
+/// The virtual RehaStim 2's behaviour beyond its defaults (`sim-muscle rehastim2`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Rehastim2Options {
+    /// `--processing-ms`: mean time to process a command, answering -8 busy meanwhile
+    /// (protocol §2.3, §5.1); 0 = answered at once.
+    pub processing_ms: u16,
+    /// `--motomed`: ActualValues every 20 ms, unasked (§3.5).
+    pub motomed: bool,
 }
 
 /// Which virtual stimulator a stack runs (`fes bench --stimulator`).
@@ -625,6 +637,13 @@ fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<
         if opts.fatigue {
             args.push("--fatigue".into());
         }
+        if opts.rehastim2.processing_ms > 0 {
+            args.push("--processing-ms".into());
+            args.push(opts.rehastim2.processing_ms.to_string());
+        }
+        if opts.rehastim2.motomed {
+            args.push("--motomed".into());
+        }
         return args;
     }
     let mut args: Vec<String> = vec![
@@ -716,8 +735,7 @@ max_charge_nc = 4000
 [watchdog]
 timeout_ticks = {drv_ticks}
 stale_after_ticks = {drv_ticks}
-stimulator_timeout_ms = {stim_timeout}
-arm_confirm_ms = {arm_ms}
+{stim_timeout}arm_confirm_ms = {arm_ms}
 command_max_age_ms = {cmd_age}
 
 [force]
@@ -735,10 +753,11 @@ prefix = "{prefix}"
 "#,
         stim_wd = t.stimulator_watchdog_ms,
         stim_timeout = match opts.stimulator {
-            StimulatorKind::Can => t.stimulator_watchdog_ms,
-            // The driver's rule for a RehaStim 2: the longest answer (100 ms, §2.3 of the
-            // protocol) plus two liveness periods (50 ms each by default).
-            StimulatorKind::Sciencemode => t.stimulator_watchdog_ms.max(200),
+            StimulatorKind::Can =>
+                format!("stimulator_timeout_ms = {}\n", t.stimulator_watchdog_ms),
+            // The driver's default for a RehaStim 2: its longest answer (100 ms, §2.3 of
+            // the protocol) plus two liveness periods.
+            StimulatorKind::Sciencemode => String::new(),
         },
         drv_ticks = t.driver_tick_ticks,
         arm_ms = t.arm_confirm_ms,

@@ -158,6 +158,10 @@ pub struct Summary {
     /// Beats with a pulse refused by the driver (the outer loop skips them).
     #[serde(default)]
     pub beats_with_refused_pulses: u64,
+    /// Pulses decided over the complete beats that the driver did not send: refused by its
+    /// interlocks, or dropped as late by a busy transport (the beats' `pulses_refused`).
+    #[serde(default)]
+    pub pulses_not_sent: u64,
     /// Pulses the stimulator applied (DriverStatus `pulses_sent`, last), if known.
     pub pulses_sent: Option<u64>,
     /// Skipped periods of rt-core (its final TimingReport).
@@ -451,6 +455,7 @@ pub fn summarise(
         worst_deviation_after_10: worst,
         worst_deviation_after_10_delivered: worst_delivered,
         beats_with_refused_pulses: s.beats.iter().filter(|b| b.pulses_refused > 0).count() as u64,
+        pulses_not_sent: s.beats.iter().map(|b| b.pulses_refused).sum(),
         pulses_sent,
         deadline_misses: rt.misses,
         rt_wake_p99_us: rt.wake_us[1],

@@ -98,6 +98,17 @@ pub struct Args {
     /// muscle's measured force itself as the rig's separate force sensor would.
     #[arg(long, value_enum, default_value_t = StimulatorKind::Can)]
     pub stimulator: StimulatorKind,
+    /// With `--stimulator sciencemode`: the virtual RehaStim 2 processes each command for
+    /// this long on average (0.5-1.5 x, 3 % of them 100 ms) and answers -8 busy to any
+    /// command meanwhile, as HASOMED documents the device (protocol §2.3, §5.1); 0: it
+    /// answers at once. The driver waits for each answer; pulses it could not send in time
+    /// are counted in the summary.
+    #[arg(long, default_value_t = 0, value_name = "MS")]
+    pub device_processing_ms: u16,
+    /// With `--stimulator sciencemode`: a MOTOmed attached to the virtual RehaStim 2 (it
+    /// sends ActualValues every 20 ms, unasked).
+    #[arg(long)]
+    pub device_motomed: bool,
     /// Format of the figures: png (raster) or svg (vector, for papers).
     #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
     pub format: workbench::plots::FigureFormat,
@@ -324,9 +335,15 @@ fn inside(a: &Args, bin_dir: &Path, out: &Path, iface: String, uml: bool) -> any
 fn announce(a: &Args, iface: &str, uml: bool) {
     if a.stimulator == StimulatorKind::Sciencemode {
         println!(
-            "bench: sim-muscle rehastim2 ({}{}; a virtual RehaStim 2 on a pty, ScienceMode 2), stim-driver, rt-core ({}), supervisor",
+            "bench: sim-muscle rehastim2 ({}{}; a virtual RehaStim 2 on a pty, ScienceMode 2{}{}), stim-driver, rt-core ({}), supervisor",
             a.muscle.name(),
             if a.fatigue { ", fatigue" } else { "" },
+            if a.device_processing_ms > 0 {
+                format!(", processing {} ms per command", a.device_processing_ms)
+            } else {
+                String::new()
+            },
+            if a.device_motomed { ", MOTOmed" } else { "" },
             a.controller().display()
         );
         return;
@@ -373,6 +390,10 @@ fn start_healthy(
         env: Vec::new(),
         pulse_amplitude_ua: None,
         stimulator: a.stimulator,
+        rehastim2: workbench::bench::Rehastim2Options {
+            processing_ms: a.device_processing_ms,
+            motomed: a.device_motomed,
+        },
     })?;
     let healthy = stack.wait_healthy(Duration::from_secs(if uml { 120 } else { 30 }));
     if let Err(e) = healthy {
@@ -763,11 +784,17 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
         );
     }
     println!(
-        "  pulses delivered           {} ({} per contraction){}",
+        "  pulses decided             {} ({} per contraction), {} not sent by the driver (refused or late, {} %){}",
         s.pulses,
         fmt(s.pulses_per_contraction, 2),
-        s.pulses_sent
-            .map_or(String::new(), |p| format!("; stimulator driver sent {p}"))
+        s.pulses_not_sent,
+        fmt(
+            100.0 * s.pulses_not_sent as f64 / (s.pulses.max(1)) as f64,
+            1
+        ),
+        s.pulses_sent.map_or(String::new(), |p| format!(
+            "; stimulator driver sent {p} in all"
+        ))
     );
     if let Some(v) = &s.front {
         let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));

@@ -1215,6 +1215,7 @@ fn start_unarmed(
         env,
         pulse_amplitude_ua,
         stimulator: workbench::bench::StimulatorKind::Can,
+        rehastim2: workbench::bench::Rehastim2Options::default(),
     });
     (stack, dir)
 }

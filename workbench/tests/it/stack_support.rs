@@ -47,6 +47,7 @@ pub fn start_armed(
         env,
         pulse_amplitude_ua: None,
         stimulator: workbench::bench::StimulatorKind::Can,
+        rehastim2: workbench::bench::Rehastim2Options::default(),
     })
     .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
     let healthy_s = if timing == ChainTiming::Uml { 90 } else { 20 };
