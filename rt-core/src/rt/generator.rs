@@ -175,7 +175,7 @@ impl<S: TickSource> PatternLoop<S> {
             flags,
             pulse: u8::from(fire),
             channel: self.pulse.channel,
-            reserved: [0; 2],
+            min_gap_ticks: self.source.min_pulse_gap_ticks().min(u32::from(u16::MAX)) as u16,
         };
         (tick, events)
     }

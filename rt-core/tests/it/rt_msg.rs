@@ -87,7 +87,7 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<PreviewEdge>(), "fes::PreviewEdge::v1");
     assert_eq!(type_name::<StimTick>(), "fes::StimTick::v2");
     assert_eq!(type_name::<ForceSample>(), "fes::ForceSample::v1");
-    assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v2");
+    assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v3");
     assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");
     assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
     assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v2");
@@ -143,7 +143,7 @@ fn tick() -> StimTick {
         flags: 0,
         pulse: 1,
         channel: 0,
-        reserved: [0; 2],
+        min_gap_ticks: 0,
     }
 }
 
@@ -480,9 +480,12 @@ fn stim_tick_validation_table() {
                 }),
             ),
             (
-                "reserved",
-                |t| t.reserved[0] = 9,
-                Some(ReservedNotZero { field: "reserved" }),
+                "the first flag not defined",
+                |t| t.flags = 1 << 11,
+                Some(UnknownFlags {
+                    field: "flags",
+                    bits: 1 << 11,
+                }),
             ),
         ],
     );

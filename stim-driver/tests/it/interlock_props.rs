@@ -110,14 +110,14 @@ fn build(steps: &[Step]) -> Vec<(StimTick, u64)> {
             flags: 0,
             pulse: u8::from(s.pulse),
             channel: s.channel,
-            reserved: [0; 2],
+            min_gap_ticks: 0,
         };
         match s.corrupt {
             1 => tick.phi = f64::NAN,
             2 => tick.flags = 1 << 12,
             3 => tick.pulse = 2,
             4 => tick.t_wake_ns = tick.t_ns.saturating_sub(1),
-            5 => tick.reserved = [1, 0],
+            5 => tick.channel = StimTick::MAX_CHANNEL + 1,
             _ => {}
         }
         out.push((tick, now));

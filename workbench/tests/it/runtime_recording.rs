@@ -52,7 +52,7 @@ fn tick(k: u64) -> StimTick {
         flags: 0,
         pulse: u8::from(pulse),
         channel: 0,
-        reserved: [0; 2],
+        min_gap_ticks: 0,
     }
 }
 

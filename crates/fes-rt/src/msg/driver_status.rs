@@ -91,11 +91,15 @@ pub enum CommandRefusal {
     /// The stimulator does not read back the limits the driver configured (or read back
     /// none).
     StimulatorLimitsMismatch = 12,
+    /// The pattern generator's minimum pulse interval (StimTick `min_gap_ticks`) is
+    /// shorter than the transport can deliver (a RehaStim 2 answers one command at a
+    /// time): its pulses would wait and be dropped.
+    GeneratorGapTooShort = 13,
 }
 
 impl CommandRefusal {
     /// Every reason, in code order.
-    pub const ALL: [CommandRefusal; 12] = [
+    pub const ALL: [CommandRefusal; 13] = [
         Self::NotConfigured,
         Self::LinkDown,
         Self::StimulatorSilent,
@@ -108,6 +112,7 @@ impl CommandRefusal {
         Self::TxFailed,
         Self::InvalidCommand,
         Self::StimulatorLimitsMismatch,
+        Self::GeneratorGapTooShort,
     ];
 
     /// The reason's name (logs, `supervisor status`).
@@ -125,6 +130,9 @@ impl CommandRefusal {
             Self::TxFailed => "the NMT start could not be written",
             Self::InvalidCommand => "the command was invalid",
             Self::StimulatorLimitsMismatch => "the stimulator reports other limits",
+            Self::GeneratorGapTooShort => {
+                "the pattern generator's minimum pulse interval is shorter than the transport delivers"
+            }
         }
     }
 }
@@ -167,7 +175,7 @@ pub enum CommandAck {
 /// acknowledgement of the last DriverCommand it handled.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("fes::DriverStatus::v2")]
+#[type_name("fes::DriverStatus::v3")]
 pub struct DriverStatus {
     /// Sequence number, 1, 2, ... per publisher.
     pub seq: u64,

@@ -5,7 +5,6 @@ use iceoryx2::prelude::ZeroCopySend;
 use super::service::{Contract, PubSubQos, TOPIC_STIM_TICK};
 use super::validate::{
     ValidationError, finite, in_range, int_in_range, known_flags, nonzero_seq, ordered,
-    reserved_zero,
 };
 
 /// One tick of the pattern generator (thesis Fig. 6.8), published every period whether or
@@ -53,8 +52,10 @@ pub struct StimTick {
     pub pulse: u8,
     /// Stimulator output channel, 0..=[`StimTick::MAX_CHANNEL`].
     pub channel: u8,
-    /// Zero.
-    pub reserved: [u8; 2],
+    /// The generator's minimum interval between two pulses, ticks (its pulse shaper's
+    /// `min_gap` + 1); 0 = not stated. A transport that cannot deliver pulses that close
+    /// refuses to arm (stim-driver, `[transport] min_interval_ms`).
+    pub min_gap_ticks: u16,
 }
 
 impl StimTick {
@@ -118,7 +119,7 @@ impl StimTick {
             flags: 0,
             pulse: 0,
             channel: 0,
-            reserved: [0; 2],
+            min_gap_ticks: 0,
         }
     }
 
@@ -179,7 +180,6 @@ impl Contract for StimTick {
             Self::MAX_AMPLITUDE_UA.into(),
         )?;
         known_flags("flags", self.flags.into(), Self::KNOWN_FLAGS.into())?;
-        reserved_zero("reserved", &self.reserved)?;
         if self.fires() {
             if self.amplitude_ua == 0 || self.width_us == 0 {
                 return Err(ValidationError::Inconsistent(

@@ -173,7 +173,7 @@ impl TickRecord {
                 flags: int(f[6], "flags")?,
                 pulse: int(f[5], "pulse")?,
                 channel: int(f[14], "channel")?,
-                reserved: [0; 2],
+                min_gap_ticks: 0,
             },
             t_recv_ns: int(f[4], "t_recv_ns")?,
         })
