@@ -12,6 +12,8 @@
 //! # device = "/dev/ttyUSB0"      # the serial device (sciencemode only)
 //! # poll_ms = 150                # a liveness query this long after the last answer
 //!                                # (sciencemode only), 5..=1000
+//! # min_interval_ms = 20         # shortest pulse interval the device delivers; an Arm
+//!                                # is refused while the generator's is shorter
 //! # max_lateness_ms = 3          # a pulse waits at most this for the device's answer to
 //!                                # the previous command, else it is dropped as late
 //!                                # (sciencemode only), 0..=20
@@ -246,6 +248,12 @@ pub struct TransportConfig {
     /// default [`DEFAULT_MAX_LATENESS_MS`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_lateness_ms: Option<u32>,
+    /// The shortest interval between two pulses the transport delivers, ms: the device's
+    /// answer time, which a pulse closer to the last one waits for (ScienceMode only;
+    /// 1..=200, default [`DEFAULT_MIN_INTERVAL_MS`]; `stim-driver probe` measures it). The
+    /// driver refuses to arm while the generator states a shorter minimum interval.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_interval_ms: Option<u32>,
 }
 
 /// Default `[watchdog] stimulator_timeout_ms` on CAN.
@@ -259,6 +267,10 @@ pub const DEFAULT_STIMULATOR_TIMEOUT_MS: u32 = 100;
 /// 5.1 % of pulses not sent with 150 ms, 4.9 % with 1000 ms (the rest is the device's slow
 /// answers); 50 ms without the flag lost 6-10 %.
 pub const DEFAULT_POLL_MS: u32 = 150;
+
+/// Default `[transport] min_interval_ms`: HASOMED's "on average below 20 ms" answer time
+/// (protocol §2.3); `stim-driver probe` measures a device's.
+pub const DEFAULT_MIN_INTERVAL_MS: u32 = 20;
 
 /// Default `[transport] max_lateness_ms`: a pulse 3 ms late lands within the first tenth
 /// of a twitch (its force peaks 30-60 ms after the pulse); later than that it is another
@@ -278,6 +290,11 @@ impl TransportConfig {
     /// The lateness bound of a pulse waiting for the device, ms (ScienceMode).
     pub fn max_lateness_ms(&self) -> u32 {
         self.max_lateness_ms.unwrap_or(DEFAULT_MAX_LATENESS_MS)
+    }
+
+    /// The shortest pulse interval the transport delivers, ms (ScienceMode).
+    pub fn min_interval_ms(&self) -> u32 {
+        self.min_interval_ms.unwrap_or(DEFAULT_MIN_INTERVAL_MS)
     }
 }
 
@@ -848,6 +865,12 @@ impl DriverConfig {
                     "absent with kind = \"can\" (a CAN write never waits for an answer)",
                 )?;
                 config_file::range(
+                    t.min_interval_ms.is_none(),
+                    "transport.min_interval_ms",
+                    t.min_interval_ms.unwrap_or(0),
+                    "absent with kind = \"can\" (the stimulator takes a PULSE any tick)",
+                )?;
+                config_file::range(
                     !self.can.iface.is_empty(),
                     "can.iface",
                     "",
@@ -874,6 +897,13 @@ impl DriverConfig {
                     "transport.poll_ms",
                     poll_ms,
                     "5..=1000",
+                )?;
+                let min_interval = t.min_interval_ms();
+                config_file::range(
+                    (1..=200).contains(&min_interval),
+                    "transport.min_interval_ms",
+                    min_interval,
+                    "1..=200",
                 )?;
                 let lateness = t.max_lateness_ms();
                 config_file::range(
@@ -956,6 +986,11 @@ impl DriverConfig {
                 TransportKind::Can => 0,
                 TransportKind::Sciencemode => u64::from(self.transport.max_lateness_ms()) * MS,
             },
+            transport_min_interval_ns: match self.transport.kind {
+                TransportKind::Can => 0,
+                TransportKind::Sciencemode => u64::from(self.transport.min_interval_ms()) * MS,
+            },
+            tick_period_ns: period_ns,
         })
     }
 

@@ -237,6 +237,15 @@ pub enum ArmRefusal {
         /// The first differing limit (CONFIG signal name).
         field: &'static str,
     },
+    /// The pattern generator's minimum pulse interval (StimTick `min_gap_ticks`, not
+    /// stated: 0) is shorter than the transport delivers (`[transport] min_interval_ms`):
+    /// its closer pulses would wait for the device and be dropped.
+    GeneratorGapTooShort {
+        /// The generator's minimum interval, us.
+        generator_us: u64,
+        /// The transport's shortest interval, us.
+        transport_us: u64,
+    },
 }
 
 impl ArmRefusal {
@@ -257,6 +266,7 @@ impl ArmRefusal {
             ArmRefusal::StimulatorLimitsDiffer { .. } | ArmRefusal::LimitsNotReadBack => {
                 R::StimulatorLimitsMismatch
             }
+            ArmRefusal::GeneratorGapTooShort { .. } => R::GeneratorGapTooShort,
         }
     }
 }
@@ -285,6 +295,18 @@ impl core::fmt::Display for ArmRefusal {
             ArmRefusal::StimulatorLimitsDiffer { field } => write!(
                 f,
                 "the stimulator applied another {field} than the configuration sent"
+            ),
+            ArmRefusal::GeneratorGapTooShort {
+                generator_us,
+                transport_us,
+            } => write!(
+                f,
+                "the pattern generator may fire pulses {} ms apart, the transport delivers \
+                 them at least {} ms apart ([transport] min_interval_ms): design the \
+                 controller with `fes design --min-interval-ms {}` or more",
+                generator_us as f64 / 1000.0,
+                transport_us as f64 / 1000.0,
+                transport_us.div_ceil(1000)
             ),
         }
     }

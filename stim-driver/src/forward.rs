@@ -81,6 +81,11 @@ pub struct ForwardSettings {
     /// How long a pulse may wait for a busy transport ([`TxError::Busy`]: ScienceMode 2
     /// waits for each answer) before it is dropped as late, ns.
     pub pulse_lateness_ns: u64,
+    /// The shortest interval between pulses the transport delivers, ns (0: no limit, CAN).
+    /// An Arm is refused while the generator states a shorter minimum interval.
+    pub transport_min_interval_ns: u64,
+    /// rt-core's tick period, ns (StimTick `min_gap_ticks` is in ticks).
+    pub tick_period_ns: u64,
 }
 
 /// A liveness [`Liveness::Unknown`] since `since` has lasted beyond the grace period.
@@ -172,6 +177,8 @@ pub struct ForwardPath<T: CanTx> {
     applied: Option<(u8, StimLimits)>,
     /// A pulse waiting for a busy transport (at most one: never a burst).
     deferred: Option<Deferred>,
+    /// The newest valid StimTick's `min_gap_ticks` (the generator's minimum interval).
+    generator_gap_ticks: u16,
 }
 
 /// The first limit in which `a` and `b` differ (CONFIG signal name), if any.
@@ -225,6 +232,7 @@ impl<T: CanTx> ForwardPath<T> {
             readback: ConfigAssembler::new(),
             applied: None,
             deferred: None,
+            generator_gap_ticks: 0,
         }
     }
 
@@ -343,6 +351,7 @@ impl<T: CanTx> ForwardPath<T> {
             return;
         }
         self.last_valid_tick_ns = Some(now_ns);
+        self.generator_gap_ticks = tick.min_gap_ticks;
         if let Some(o) = self.output.as_mut() {
             o.contraction_ahead(tick.has(StimTick::FLAG_CONTRACTION_AHEAD));
         }
@@ -730,6 +739,13 @@ impl<T: CanTx> ForwardPath<T> {
         }
         if self.generator_stopped {
             return Some(ArmRefusal::GeneratorStopped);
+        }
+        let generator_ns = u64::from(self.generator_gap_ticks) * s.tick_period_ns;
+        if generator_ns < s.transport_min_interval_ns {
+            return Some(ArmRefusal::GeneratorGapTooShort {
+                generator_us: generator_ns / 1000,
+                transport_us: s.transport_min_interval_ns / 1000,
+            });
         }
         None
     }

@@ -1826,3 +1826,57 @@ fn a_contraction_ahead_is_passed_to_the_transport() {
     r.tick(false);
     assert!(!r.bus.ahead.get());
 }
+
+/// A transport that delivers pulses at least `transport_min_interval_ns` apart (a RehaStim
+/// 2 answering one command at a time) refuses to arm while the generator states a shorter
+/// minimum interval (StimTick `min_gap_ticks`; 0, not stated, is shorter than any), naming
+/// both; a generator designed with the interval arms.
+#[test]
+fn an_arm_is_refused_while_the_generator_fires_closer_than_the_transport_delivers() {
+    let mut s = settings();
+    s.transport_min_interval_ns = 20 * MS;
+    s.tick_period_ns = MS;
+    let mut r = Rig::configured(s);
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    let ticks = |r: &mut Rig, gap: u16| {
+        for _ in 0..3 {
+            r.advance(MS);
+            r.tick_seq += 1;
+            let t = StimTick {
+                min_gap_ticks: gap,
+                ..tick(r.tick_seq, r.now - 20_000, false)
+            };
+            r.fp.on_tick(&t, r.now, &mut r.ev);
+            r.poll();
+        }
+    };
+    for gap in [0, 2, 19] {
+        ticks(&mut r, gap);
+        r.command(DriverCommandKind::Arm);
+        assert_eq!(r.fp.state(), DriverState::Disarmed, "gap {gap}");
+        let refusal = r.ev.iter().rev().find_map(|e| match e {
+            DriverEvent::ArmRefused { refusal, .. } => Some(*refusal),
+            _ => None,
+        });
+        assert_eq!(
+            refusal,
+            Some(ArmRefusal::GeneratorGapTooShort {
+                generator_us: u64::from(gap) * 1000,
+                transport_us: 20_000
+            })
+        );
+        assert_eq!(
+            r.fp.counters().command_reason,
+            CommandRefusal::GeneratorGapTooShort as u8
+        );
+        let text = refusal.unwrap().to_string();
+        assert!(
+            text.contains("20 ms") && text.contains("--min-interval-ms 20"),
+            "{text}"
+        );
+    }
+    ticks(&mut r, 20);
+    r.command(DriverCommandKind::Arm);
+    assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+}

@@ -117,6 +117,13 @@ pub fn run_publisher(spec: &str) {
     // LATE_WAKE_NS after their grid time, counted from "go" (printed at END).
     let late_wakes = std::cell::Cell::new(0u64);
     let scripted = std::cell::Cell::new(false);
+    // The generator's minimum interval, as rt-core states it: the script's closest pulses
+    // (the smallest E of its `pE` segments).
+    let min_gap_ticks = script
+        .split(',')
+        .filter_map(|s| s.strip_prefix('p')?.split_once(':')?.0.parse::<u16>().ok())
+        .min()
+        .unwrap_or(0);
     let mut publish = |seq: u64, pulse: Option<u32>, flags: u16| {
         let w = clock.wait();
         if scripted.get() && w.wake_ns.saturating_sub(w.grid_ns) > LATE_WAKE_NS {
@@ -126,11 +133,16 @@ pub fn run_publisher(spec: &str) {
         if w.missed_periods > 0 {
             flags |= StimTick::FLAG_OVERRUN;
         }
+        if scripted.get() {
+            // Stimulating, as rt-core flags a running contraction.
+            flags |= StimTick::FLAG_CONTRACTION_AHEAD;
+        }
         let quiet = StimTick {
             t_wake_ns: w.wake_ns,
             t_publish_ns: 0,
             missed_periods: w.missed_periods,
             flags,
+            min_gap_ticks,
             ..StimTick::quiet(seq, w.grid_ns)
         };
         let tick = match pulse {
