@@ -42,6 +42,13 @@ pub struct Args {
     /// why the loop then switches between neighbouring controllers).
     #[arg(long)]
     pub allow_negative_gain: bool,
+    /// Shortest interval between two pulses, ms (the pulse shaper's `min_gap` + 1 samples;
+    /// thesis: 2 at Ts = 1 ms). A transport that delivers one command at a time needs its
+    /// answer time here: a RehaStim 2 over ScienceMode 2 answers in under 20 ms on average
+    /// (its driver's `[transport] min_interval_ms`, which refuses to arm a generator with a
+    /// shorter interval). The plan and the causal loop both keep it.
+    #[arg(long, default_value_t = 2.0, value_name = "MS")]
+    pub min_interval_ms: f64,
     /// Pulse decisions: `receding-horizon` plans each contraction the reference preview
     /// announces over the model (docs/control.md, section 11), `off` leaves every pulse to
     /// the causal LCN + shaper.
@@ -181,6 +188,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let specs = UnitSpec::for_rise_times(&tr, args.damping, p3);
     let mut settings = args.variant.settings();
+    settings.shaper.min_gap = min_gap(args.min_interval_ms, lmn.ts)?;
     settings.design.allow_negative_gain = args.allow_negative_gain;
     if args.planning == PlanningArg::RecedingHorizon {
         settings.planning = PlanningConfig {
@@ -206,6 +214,21 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("writing {}", args.out.display()))?;
     println!("controller written to {}", args.out.display());
     Ok(())
+}
+
+/// The pulse shaper's `min_gap` (empty samples after a pulse) for pulses at least
+/// `interval_ms` apart at the model's period `ts` (s): the interval in whole samples, less
+/// the pulse's own.
+pub fn min_gap(interval_ms: f64, ts: f64) -> Result<u32> {
+    // (Less a rounding error's worth, so that 20 ms at 1 ms is 20 samples, not 21.)
+    let samples = (interval_ms * 1e-3 / ts - 1e-9).ceil();
+    if !(interval_ms.is_finite() && (2.0..=1000.0).contains(&samples)) {
+        bail!(
+            "--min-interval-ms {interval_ms}: must span 2 to 1000 model samples of {} ms (a pulse and at least one empty sample)",
+            ts * 1e3
+        );
+    }
+    Ok(samples as u32 - 1)
 }
 
 /// Tables 6.1 / 6.2: one column per unit.

@@ -237,3 +237,40 @@ fn refusals_name_the_problem() {
 fn fixtures_unstable() -> rt_core::model::Lmn {
     fixtures::unstable()
 }
+
+/// `--min-interval-ms`: the shaper's `min_gap` is the interval in model samples less the
+/// pulse's own (thesis: 2 ms, `min_gap` 1, the default); a RehaStim 2's 20 ms is 19; an
+/// interval of less than two samples is refused naming the option.
+#[test]
+fn the_minimum_interval_becomes_the_shapers_gap() {
+    let dir = tmp("design-gap");
+    let model = save_model(&dir, "m.json", &fast_muscle(6));
+    let m = model.to_str().unwrap();
+    let out = dir.join("c.json");
+    let o = out.to_str().unwrap();
+    let gap = |extra: &[&str]| {
+        let mut args = vec!["design", "--model", m, "--rise-ms", "auto", "--out", o];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let c: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        c["shaper"]["min_gap"].as_u64().unwrap()
+    };
+    assert_eq!(gap(&[]), 1);
+    assert_eq!(gap(&["--min-interval-ms", "20"]), 19);
+    assert_eq!(gap(&["--min-interval-ms", "2.5"]), 2);
+    fails(
+        &[
+            "design",
+            "--model",
+            m,
+            "--rise-ms",
+            "auto",
+            "--min-interval-ms",
+            "1",
+            "--out",
+            o,
+        ],
+        &["--min-interval-ms 1"],
+    );
+}
