@@ -56,6 +56,7 @@ fn exact(outer_on: bool) -> SimSettings {
         contraction: ContractionSettings::default(),
         limits: ReferenceLimits::default(),
         seconds: 60.0,
+        max_train_hz: 100,
     }
 }
 

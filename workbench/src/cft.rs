@@ -128,6 +128,9 @@ pub struct FrontPoint {
 /// The verdict of a run against the CFT front (module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrontVerdict {
+    /// The trains compared: every frequency of `min_hz..=max_hz`.
+    #[serde(default = "default_hz_range")]
+    pub hz_range: (u32, u32),
     /// Every train of the front, by frequency.
     pub cft_front: Vec<FrontPoint>,
     /// The LCN's point.
@@ -146,6 +149,11 @@ pub struct FrontVerdict {
     pub pulses_vs_equal_rms_cft: Option<f64>,
     /// LCN FTIpP / the best FTIpP of the CFTs of equal FTI.
     pub ftipp_vs_best_cft: Option<f64>,
+}
+
+/// Summaries written before the range was recorded compared 5-100 Hz.
+fn default_hz_range() -> (u32, u32) {
+    (5, 100)
 }
 
 impl FrontSettings {
@@ -335,6 +343,7 @@ impl FrontSettings {
         let n = run.pulse.len();
         let Some(first) = beats.first() else {
             return Ok(FrontVerdict {
+                hz_range: (self.min_hz, self.max_hz),
                 cft_front: Vec::new(),
                 lcn: FrontPoint {
                     hz: None,
@@ -411,6 +420,7 @@ impl FrontSettings {
                 .filter(no_more)
                 .all(|p| p.rms_error > lcn.rms_error);
         Ok(FrontVerdict {
+            hz_range: (self.min_hz, self.max_hz),
             beats_every_cft,
             best_cft_no_more_pulses,
             pulses_vs_equal_rms_cft: cheapest

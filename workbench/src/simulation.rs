@@ -44,6 +44,17 @@ pub struct SimSettings {
     pub limits: ReferenceLimits,
     /// Simulated time, s.
     pub seconds: f64,
+    /// The fastest constant-frequency train the front compares against: 100 Hz, or less
+    /// when the controller's minimum pulse interval is longer (a controller designed for a
+    /// transport that cannot deliver closer pulses is compared with trains it could).
+    pub max_train_hz: u32,
+}
+
+/// 100 Hz, or the rate of the controller's minimum pulse interval (its shaper's `min_gap`
+/// + 1 model samples) when that is lower.
+pub fn max_train_hz(controller: &Controller) -> u32 {
+    let interval_s = f64::from(controller.settings.shaper.min_gap + 1) * controller.lmn.ts;
+    ((1.0 / interval_s + 1e-9).floor() as u32).clamp(1, 100)
 }
 
 impl SimSettings {
@@ -94,14 +105,11 @@ impl SimSettings {
             outer_loop,
             contraction: ContractionSettings {
                 delay_ms: controller.lmn.delay as f64,
-                plateau_start: std::env::var("XPS")
-                    .ok()
-                    .and_then(|v| v.parse().ok())
-                    .unwrap_or(0.5),
                 ..Default::default()
             },
             limits: ReferenceLimits::default(),
             seconds,
+            max_train_hz: max_train_hz(controller),
         })
     }
 }
@@ -120,7 +128,7 @@ impl SimSettings {
             amplitude,
             edge_rate_per_s: self.limits.max_rate_per_s,
             min_hz: 5,
-            max_hz: 100,
+            max_hz: self.max_train_hz.max(5),
             lead_ms,
         }
     }

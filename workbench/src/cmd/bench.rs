@@ -69,7 +69,9 @@ pub struct Args {
     /// muscles), with its shipped controller unless --controller names another.
     #[arg(long, value_enum, default_value_t = MuscleChoice::Fast)]
     pub muscle: MuscleChoice,
-    /// Controller file for rt-core (fes-lcn/1); default `models/<muscle>.lcn.json`.
+    /// Controller file for rt-core (fes-lcn/1); default `models/<muscle>.lcn.json`, with
+    /// `--stimulator sciencemode` `models/<muscle>-rehastim2.lcn.json` (designed with the
+    /// RehaStim 2's 20 ms minimum pulse interval).
     #[arg(long)]
     pub controller: Option<PathBuf>,
     /// Output directory (configurations, logs, recording, plots); default
@@ -140,6 +142,16 @@ impl MuscleChoice {
         })
     }
 
+    /// The muscle's shipped controller for a RehaStim 2: designed with the transport's
+    /// minimum pulse interval (20 ms, `fes design --min-interval-ms 20`), which its driver
+    /// requires before it arms.
+    pub fn rehastim2_controller(self) -> PathBuf {
+        PathBuf::from(match self {
+            Self::Fast => "models/fast-rehastim2.lcn.json",
+            Self::Slow => "models/slow-rehastim2.lcn.json",
+        })
+    }
+
     fn name(self) -> &'static str {
         match self {
             Self::Fast => "fast",
@@ -196,11 +208,15 @@ fn check(a: &Args) -> anyhow::Result<()> {
 }
 
 impl Args {
-    /// The controller file: `--controller`, else the muscle's shipped one.
+    /// The controller file: `--controller`, else the muscle's shipped one for the
+    /// stimulator.
     pub fn controller(&self) -> PathBuf {
         self.controller
             .clone()
-            .unwrap_or_else(|| self.muscle.controller())
+            .unwrap_or_else(|| match self.stimulator {
+                StimulatorKind::Can => self.muscle.controller(),
+                StimulatorKind::Sciencemode => self.muscle.rehastim2_controller(),
+            })
     }
 }
 
@@ -806,8 +822,9 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
                 a.pulses_per_contraction
                     .total_cmp(&b.pulses_per_contraction)
             });
+        let (low_hz, top_hz) = v.hz_range;
         println!(
-            "  CFT front (every 5-100 Hz train from each onset, whole or stopped after n pulses; same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
+            "  CFT front (every {low_hz}-{top_hz} Hz train from each onset, whole or stopped after n pulses; same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
             fmt(v.lcn.pulses_per_contraction, 2),
             fmt(v.lcn.rms_error, 4),
             fmt(v.lcn.ftipp, 3),

@@ -45,6 +45,7 @@ fn settings(fatigue: bool, outer: bool, scale_n: f64, seconds: f64) -> SimSettin
         contraction: ContractionSettings::default(),
         limits: ReferenceLimits::default(),
         seconds,
+        max_train_hz: 100,
     }
 }
 
