@@ -21,7 +21,8 @@
 //! - [`runner`] (the real-time forward thread), [`report`] (logs, DriverStatus,
 //!   TimingReport), [`telemetry`], [`liveness`], [`txstamp`]: the process. systemd
 //!   notification is rt-core's ([`fes_rt::rt::notify`]).
-//! - [`safe_stop`]: the `safe-stop` subcommand.
+//! - [`safe_stop`]: the `safe-stop` subcommand; [`probe`]: the `probe` subcommand (a
+//!   RehaStim 2's answer times).
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
@@ -34,6 +35,7 @@ pub mod interlock;
 pub mod intrusion;
 pub mod liveness;
 pub mod output;
+pub mod probe;
 pub mod reconcile;
 pub mod report;
 pub mod runner;

@@ -45,6 +45,8 @@ SUBCOMMANDS
   safe-stop --iface IFACE  send NMT stop (to the stimulator's node and to all nodes) and
                            exit; systemd's ExecStopPost runs it whenever the driver stops
   example-config           print a configuration with every default
+  probe --device PATH      time a RehaStim 2's answers and print the [transport]
+                           min_interval_ms to use (the driver stopped)
 
 WHAT `run` DOES: brings the stimulator up (NMT pre-operational, CONFIG with the run's
 limits from [stimulator], waits until STATUS shows them), sends the host heartbeat, and
@@ -116,6 +118,23 @@ enum Command {
     },
     /// Print a configuration with every default (interface vcan0, max_n 40 N).
     ExampleConfig,
+    /// Time a RehaStim 2's answers (ScienceMode 2) and print the `[transport]
+    /// min_interval_ms` to configure. Sends GetStimulationMode (and with
+    /// --zero-current-pulses SinglePulse of 0 mA, 0 us) one at a time, each after the
+    /// answer to the last, as the driver does; starts no stimulation. Stop the driver
+    /// first: the port must be the probe's alone.
+    Probe {
+        /// The serial device (e.g. /dev/rehastim2).
+        #[arg(long, value_name = "PATH")]
+        device: PathBuf,
+        /// Commands to time.
+        #[arg(long, default_value_t = 200)]
+        commands: u32,
+        /// Every other command a SinglePulse of 0 mA and 0 us (no charge): the answer path
+        /// of a pulse, which may be slower than a query's.
+        #[arg(long)]
+        zero_current_pulses: bool,
+    },
 }
 
 /// The environment variable (set by systemd from can.env) that overrides `[can] iface`.
@@ -153,6 +172,11 @@ fn main() -> ExitCode {
             print!("{}", DriverConfig::with_defaults("vcan0", 40.0).to_toml());
             Ok(())
         }
+        Command::Probe {
+            device,
+            commands,
+            zero_current_pulses,
+        } => run_probe(&device, commands, zero_current_pulses),
     };
     let line = |e: &anyhow::Error| fes_rt::rt::error_text::one_line(e.as_ref());
     match result {
@@ -169,6 +193,64 @@ fn main() -> ExitCode {
             error!("{}", line(&e));
             Exit::Fault.into()
         }
+    }
+}
+
+/// `stim-driver probe`: the device's answer times and the minimum interval they ask for.
+fn run_probe(device: &std::path::Path, commands: u32, zero_pulses: bool) -> Result<(), Failure> {
+    use stim_driver::probe::{ProbeSettings, probe};
+    if commands == 0 {
+        return Err(Failure::Config(anyhow!("--commands 0: nothing to time")));
+    }
+    if let Some(ms) = ftdi_latency_timer_ms(std::path::Path::new("/sys"), device)
+        && ms > 1
+    {
+        warn!(
+            "the USB adapter's latency timer is {ms} ms (protocol §2.1 asks for 1): every answer waits up to that long in the adapter; docs/deployment.md sets it with a udev rule"
+        );
+    }
+    let settings = ProbeSettings {
+        commands,
+        zero_pulses,
+        ..ProbeSettings::default()
+    };
+    let r = probe(device, &settings, |k| {
+        if k % 50 == 0 {
+            eprintln!("{k} of {commands} commands timed");
+        }
+    })
+    .map_err(|e| Failure::Config(e.into()))?;
+    let q = |p: f64| {
+        r.quantile_ms(p)
+            .map_or("-".to_owned(), |v| format!("{v:.1}"))
+    };
+    println!(
+        "{} of {commands} commands answered: median {} ms, p90 {} ms, p99 {} ms, longest {} ms; {} answered -8 busy, {} with another error {:?}, {} unanswered within {} ms; {} MOTOmed packets skipped",
+        r.answer_ms.len(),
+        q(0.5),
+        q(0.9),
+        q(0.99),
+        q(1.0),
+        r.busy,
+        r.errors.len(),
+        r.errors,
+        r.lost,
+        stim_driver::serial_rx::ANSWER_TIMEOUT_MS,
+        r.information
+    );
+    match r.min_interval_ms() {
+        Some(ms) => {
+            println!(
+                "[transport]\nmin_interval_ms = {ms}    # the 90th percentile of the answers, rounded up"
+            );
+            println!(
+                "design the controller with `fes design ... --min-interval-ms {ms}` (or more)"
+            );
+            Ok(())
+        }
+        None => Err(Failure::Run(anyhow!(
+            "no command was answered: nothing to suggest"
+        ))),
     }
 }
 

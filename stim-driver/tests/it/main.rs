@@ -16,3 +16,4 @@ mod forward_props;
 mod interlock_props;
 mod serial_device;
 mod serial_driver;
+mod serial_probe;
