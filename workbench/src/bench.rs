@@ -637,10 +637,9 @@ fn sim_muscle_args(opts: &StackOptions, t: &ChainTimeouts, scale_n: f64) -> Vec<
         if opts.fatigue {
             args.push("--fatigue".into());
         }
-        if opts.rehastim2.processing_ms > 0 {
-            args.push("--processing-ms".into());
-            args.push(opts.rehastim2.processing_ms.to_string());
-        }
+        // Always stated: the device's own default is the documented device.
+        args.push("--processing-ms".into());
+        args.push(opts.rehastim2.processing_ms.to_string());
         if opts.rehastim2.motomed {
             args.push("--motomed".into());
         }

@@ -102,10 +102,10 @@ pub struct Args {
     pub stimulator: StimulatorKind,
     /// With `--stimulator sciencemode`: the virtual RehaStim 2 processes each command for
     /// this long on average (0.5-1.5 x, 3 % of them 100 ms) and answers -8 busy to any
-    /// command meanwhile, as HASOMED documents the device (protocol §2.3, §5.1); 0: it
-    /// answers at once. The driver waits for each answer; pulses it could not send in time
-    /// are counted in the summary.
-    #[arg(long, default_value_t = 0, value_name = "MS")]
+    /// command meanwhile, as HASOMED documents the device (protocol §2.3, §5.1; the
+    /// default); 0: it answers at once. The driver waits for each answer; pulses it could
+    /// not send in time are counted in the summary.
+    #[arg(long, default_value_t = sim_muscle::stimulator::rehastim2_pty::DOCUMENTED_PROCESSING_MS, value_name = "MS")]
     pub device_processing_ms: u16,
     /// With `--stimulator sciencemode`: a MOTOmed attached to the virtual RehaStim 2 (it
     /// sends ActualValues every 20 ms, unasked).
