@@ -95,19 +95,33 @@ fn sciencemode_device_latency_is_within_the_in_flight_allowance() {
 /// every pulse it wrote is delivered and acknowledged, a pulse the device could not take
 /// within the lateness bound is reported late (never sent as a burst), and the run ends
 /// on the final tick. How many are late depends on the host's timing as well as on the
-/// device: that figure is [`timing::a_busy_device_gets_most_pulses_on_a_quiet_host`].
+/// device: that figure is [`timing::a_busy_device_loses_pulses_only_behind_its_slow_answers_on_a_quiet_host`].
 #[test]
 fn sciencemode_busy_device_is_never_provoked_and_late_pulses_are_reported() {
-    let (sent, late, refused) = busy_device_run("busy");
+    let run = busy_device_run("busy");
     println!(
-        "ScienceMode, busy device: 100 decisions at 33 Hz, {sent} delivered, {late} dropped \
-         late, {refused} refused; no -8 or -3 provoked"
+        "ScienceMode, busy device: 100 decisions at 33 Hz, {} delivered, {} dropped late, \
+         {} refused, {} slow answers; no -8 or -3 provoked",
+        run.sent, run.late, run.refused, run.slow
     );
 }
 
+/// What one busy-device run delivered and what the device did.
+struct BusyRun {
+    /// Pulses written and delivered.
+    sent: u64,
+    /// Decisions dropped late (reported with their tick).
+    late: u64,
+    /// Decisions refused by the interlocks.
+    refused: u64,
+    /// Commands the device took [`sim_muscle::stimulator::rehastim2::SLOW_PROCESSING_MS`]
+    /// to answer, over the whole run (arming and stopping included).
+    slow: u64,
+}
+
 /// One run of [`sciencemode_busy_device_is_never_provoked_and_late_pulses_are_reported`]:
-/// its functional assertions, and the pulses delivered, dropped late and refused.
-fn busy_device_run(name: &str) -> (u64, u64, u64) {
+/// its functional assertions, and what it delivered.
+fn busy_device_run(name: &str) -> BusyRun {
     let mut rig = Rig::start_with_processing(name, 10);
     let (decisions, before, s, pulses_before) = run_armed(&mut rig, "mA,p30:3000");
     std::thread::sleep(Duration::from_millis(300));
@@ -140,21 +154,36 @@ fn busy_device_run(name: &str) -> (u64, u64, u64) {
         (0, 0),
         "the driver provoked busy or wrong-mode answers"
     );
-    (sent, late, refused)
+    BusyRun {
+        sent,
+        late,
+        refused,
+        slow: device.slow_commands,
+    }
 }
 
 /// Checks that depend on the host's timing (scripts/test runs them one at a time).
 mod timing {
     /// On a quiet host, the pulses lost to the busy device are those behind its slow
-    /// answers: 3 % of commands take 100 ms, each costing the pulses of the next 100 ms
-    /// (94 of 100 delivered in runs on an idle host, 2026-12-05; 69-79 beside the whole
-    /// functional test suite, whose load delays the device's and the driver's threads).
+    /// answers: a 100 ms answer holds the line over at most 4 decisions 30 ms apart (each
+    /// dropped past the 3 ms lateness bound), so the losses stay within 4 per slow answer,
+    /// plus 3 for the host and the query that confirms the arming. How many slow answers
+    /// a run meets is the device's draw (3 % of commands): counting against it keeps the
+    /// check about the driver. 93-94 of 100 were delivered with 2 slow answers on an idle
+    /// host (2026-12-05). With the 20 ms polling of the other scenarios instead of the
+    /// shipped 150 ms, a query landing just before a pulse cost 6-26 pulses on the same
+    /// host, which this check fails.
     #[test]
-    fn a_busy_device_gets_most_pulses_on_a_quiet_host() {
-        let (sent, late, refused) = super::busy_device_run("busy-timing");
+    fn a_busy_device_loses_pulses_only_behind_its_slow_answers_on_a_quiet_host() {
+        let run = super::busy_device_run("busy-timing");
+        let lost = run.late + run.refused;
         assert!(
-            sent >= 85,
-            "{sent} of 100 delivered, {late} dropped late, {refused} refused"
+            lost <= 4 * run.slow + 3,
+            "{} of 100 delivered, {} dropped late, {} refused, {} slow answers",
+            run.sent,
+            run.late,
+            run.refused,
+            run.slow
         );
     }
 }

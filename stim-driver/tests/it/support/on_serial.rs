@@ -132,8 +132,16 @@ impl Drop for Device {
 
 /// The configuration of these scenarios: the host-bus scenarios' generous watchdogs
 /// (a shared 2-core host stalls a 1 ms loop by tens of ms at times), the ScienceMode
-/// transport on the device's pty.
-pub fn write_config(dir: &Path, device: &Path, prefix: &str) -> PathBuf {
+/// transport on the device's pty, polling every 20 ms (a lost device is seen within the
+/// 300 ms stimulator timeout) or, with `shipped_polling`, as shipped (`poll_ms` and the
+/// stimulator timeout left to their defaults: a query only in the pauses between
+/// contractions, as a document-faithful device needs).
+pub fn write_config(dir: &Path, device: &Path, prefix: &str, shipped_polling: bool) -> PathBuf {
+    let (poll, stimulator_timeout) = if shipped_polling {
+        ("", "")
+    } else {
+        ("poll_ms = 20\n", "stimulator_timeout_ms = 300\n")
+    };
     let path = dir.join("stim-driver.toml");
     std::fs::write(dir.join("prescription.toml"), PRESCRIPTION).expect("write the prescription");
     std::fs::write(
@@ -144,8 +152,7 @@ prescription = "prescription.toml"
 [transport]
 kind = "sciencemode"
 device = "{device}"
-poll_ms = 20
-[stimulator]
+{poll}[stimulator]
 min_ipi_ms = 1
 [interlocks]
 min_ipi_us = 2000
@@ -153,8 +160,7 @@ max_pulse_delay_us = 500
 [watchdog]
 timeout_ticks = 100
 stale_after_ticks = 100
-stimulator_timeout_ms = 300
-arm_confirm_ms = 500
+{stimulator_timeout}arm_confirm_ms = 500
 command_max_age_ms = 500
 [force]
 max_n = 40.0
@@ -216,7 +222,7 @@ impl Rig {
 
     /// [`Rig::start`] with a device that processes each command for `processing_ms` on
     /// average and answers -8 busy to any command meanwhile (§5.1; `sim-muscle rehastim2
-    /// --processing-ms`).
+    /// --processing-ms`), and the driver polling it as shipped.
     pub fn start_with_processing(name: &str, processing_ms: u16) -> Self {
         Self::start_device(
             name,
@@ -234,7 +240,7 @@ impl Rig {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let device = Device::start(&dir, options);
-        let config = write_config(&dir, &device.link, &prefix);
+        let config = write_config(&dir, &device.link, &prefix, options.processing_ms > 0);
         let log = dir.join("driver.log");
         let log_file = std::fs::File::create(&log).unwrap();
         let driver = fes_testkit::child::dies_with_parent(&mut Command::new(EXE))
