@@ -27,6 +27,7 @@
 
 use std::fs::File;
 use std::io::{self, Write};
+use std::os::fd::AsRawFd as _;
 use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::Path;
 use std::sync::Arc;
@@ -333,13 +334,36 @@ pub fn line_settings(t: &mut Termios) -> nix::Result<()> {
 }
 
 /// Opens a serial device (`/dev/ttyUSB0`) for ScienceMode 2: read and write, no controlling
-/// terminal, non-blocking, with [`line_settings`].
+/// terminal, non-blocking, with [`line_settings`], and owned by this process alone. The
+/// RehaStim 2 takes a SinglePulse from whoever writes to its port, so the port is locked
+/// two ways: an exclusive advisory lock (`flock`; another driver or `stim-driver probe`
+/// is refused with [`io::ErrorKind::ResourceBusy`] naming it, whoever runs it), and the
+/// tty's exclusive mode (`TIOCEXCL`: any later `open` by an unprivileged process fails
+/// with EBUSY, whatever tool it is). The systemd units add the device cgroup policy
+/// (`DevicePolicy=closed`, the device allowed only to the driver).
 pub fn open_serial(path: &Path) -> io::Result<File> {
     let port = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
         .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
         .open(path)?;
+    // SAFETY: flock on a descriptor this function owns; no memory is passed.
+    if unsafe { libc::flock(port.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+        let e = io::Error::last_os_error();
+        return Err(if e.raw_os_error() == Some(libc::EWOULDBLOCK) {
+            io::Error::new(
+                io::ErrorKind::ResourceBusy,
+                "held by another process (its exclusive lock: another stim-driver, or a \
+                 `stim-driver probe`); one process at a time drives a stimulator",
+            )
+        } else {
+            e
+        });
+    }
+    // SAFETY: TIOCEXCL takes no argument; the descriptor is this function's own.
+    if unsafe { libc::ioctl(port.as_raw_fd(), libc::TIOCEXCL) } != 0 {
+        return Err(io::Error::last_os_error());
+    }
     let mut t = tcgetattr(&port)?;
     line_settings(&mut t)?;
     match tcsetattr(&port, SetArg::TCSANOW, &t) {
@@ -789,6 +813,69 @@ mod tests {
         // No such adapter (a pty, another converter): nothing to say.
         std::fs::write(dir.join("dev/ttyS0"), b"").unwrap();
         assert_eq!(ftdi_latency_timer_ms(&sys, &dir.join("dev/ttyS0")), None);
+    }
+
+    #[test]
+    fn the_port_is_owned_by_the_process_that_opened_it() {
+        // A pseudo-terminal stands in for /dev/ttyUSB0, open to everyone (0666) so that
+        // only the exclusivity can refuse.
+        let pty = nix::pty::openpty(None, None).unwrap();
+        let path = nix::unistd::ttyname(&pty.slave).unwrap();
+        std::fs::set_permissions(&path, std::os::unix::fs::PermissionsExt::from_mode(0o666))
+            .unwrap();
+        let port = open_serial(&path).unwrap();
+        // Another driver or probe (the advisory lock), root or not.
+        let second = open_serial(&path).expect_err("a second open_serial");
+        assert_eq!(second.kind(), io::ErrorKind::ResourceBusy, "{second}");
+        // Any other unprivileged process (the tty's exclusive mode): root may open an
+        // exclusive tty, so the open is tried by a child that has dropped to nobody.
+        let c_path = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
+        let errno = if nix::unistd::geteuid().is_root() {
+            // SAFETY: the child calls only async-signal-safe functions (setgid, setuid,
+            // open, _exit) on memory prepared before the fork.
+            match unsafe { libc::fork() } {
+                // SAFETY: in the forked child, as above: async-signal-safe calls only.
+                0 => unsafe {
+                    let code = if libc::setgid(65534) != 0 || libc::setuid(65534) != 0 {
+                        3
+                    } else if libc::open(c_path.as_ptr(), libc::O_RDWR | libc::O_NOCTTY) >= 0 {
+                        1
+                    } else if *libc::__errno_location() == libc::EBUSY {
+                        0
+                    } else {
+                        2
+                    };
+                    libc::_exit(code)
+                },
+                pid => {
+                    assert!(pid > 0, "fork");
+                    let mut status = 0;
+                    // SAFETY: waits for the child just forked; `status` is a local.
+                    assert_eq!(unsafe { libc::waitpid(pid, &mut status, 0) }, pid);
+                    assert!(libc::WIFEXITED(status));
+                    match libc::WEXITSTATUS(status) {
+                        0 => libc::EBUSY,
+                        1 => 0,
+                        code => panic!("the unprivileged child could not try (exit {code})"),
+                    }
+                }
+            }
+        } else {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&path)
+                .err()
+                .and_then(|e| e.raw_os_error())
+                .unwrap_or(0)
+        };
+        assert_eq!(errno, libc::EBUSY, "an unprivileged open was not refused");
+        // Closed, the lock is free again (the exclusive mode stays while another
+        // descriptor holds the tty, here the pty's own, so only root can show it).
+        drop(port);
+        if nix::unistd::geteuid().is_root() {
+            drop(open_serial(&path).unwrap());
+        }
     }
 
     #[test]

@@ -632,6 +632,74 @@ fn safety_iceoryx2_and_hardening_settings() {
     }
 }
 
+/// The stimulator's serial port (a RehaStim 2 takes a SinglePulse from whoever writes to
+/// it) is open to the driver alone: every unit of the stack has the closed device policy,
+/// no unit but the driver's may name a serial port or the port's group, and the service
+/// user is not in that group (only the driver's unit adds it). With the policy removed
+/// from any unit, or the group given to the user, this fails.
+#[test]
+fn the_stimulators_serial_port_is_closed_to_every_unit_but_the_driver() {
+    let (scratch, units) = staged("--bench");
+    for s in [
+        "fes-stim-driver.service",
+        "fes-rt-core.service",
+        "fes-supervisor.service",
+        "fes-sim-muscle.service",
+    ] {
+        let unit = &units[s];
+        assert!(
+            unit.is("Service", "DevicePolicy", "closed"),
+            "{s}: DevicePolicy=closed"
+        );
+        for allowed in unit.values("Service", "DeviceAllow") {
+            let allowed = allowed.to_string();
+            assert!(
+                !(allowed.contains("tty") || allowed.contains("rehastim")),
+                "{s}: DeviceAllow={allowed} opens a serial port"
+            );
+            assert!(
+                s == "fes-rt-core.service" && allowed == "/dev/cpu_dma_latency rw",
+                "{s}: DeviceAllow={allowed}"
+            );
+        }
+        assert!(
+            !unit.has_word("Service", "SupplementaryGroups", "fes-stim"),
+            "{s}: the port's group"
+        );
+    }
+    let sysusers =
+        std::fs::read_to_string(scratch.path().join("etc/sysusers.d/fes.conf")).expect("sysusers");
+    let lines: Vec<Vec<&str>> = sysusers
+        .lines()
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    assert!(
+        lines
+            .iter()
+            .any(|w| w.len() >= 2 && w[0] == "g" && w[1] == "fes-stim"),
+        "the port's group is created: {sysusers}"
+    );
+    assert!(
+        !lines
+            .iter()
+            .any(|w| w.len() >= 3 && w[0] == "m" && w[1] == "fes" && w[2] == "fes-stim"),
+        "user fes is not in the port's group: {sysusers}"
+    );
+    // The rig's procedure gives the port to the driver's unit alone.
+    let deployment = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/deployment.md"),
+    )
+    .unwrap();
+    assert!(
+        !deployment.contains("usermod -aG fes-stim"),
+        "docs/deployment.md"
+    );
+    assert!(
+        deployment.contains("SupplementaryGroups=fes-stim"),
+        "docs/deployment.md"
+    );
+}
+
 #[test]
 fn installer_keeps_the_operators_configuration() {
     let bins = stack_binaries();
