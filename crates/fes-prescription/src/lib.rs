@@ -124,6 +124,53 @@ pub enum PrescriptionError {
         /// What is wrong.
         why: String,
     },
+    /// The file could be changed by someone other than root or this process's user.
+    #[error(
+        "prescription {path}: {why}; a prescription must be owned by root or by the \
+         user the process runs as (uid {euid}) and writable by its owner only \
+         (e.g. root:root 0644)"
+    )]
+    Untrusted {
+        /// The file.
+        path: PathBuf,
+        /// What allows the change.
+        why: String,
+        /// The process's effective user.
+        euid: u32,
+    },
+}
+
+/// Why the prescription at `path` (its metadata `file`, its directory's `dir`) could be
+/// changed by someone other than root or user `euid`, if it could: the file owned by
+/// another user, or writable by its group or others, or its directory writable by others
+/// without the sticky bit (anyone could replace the file).
+fn untrusted(
+    file: &std::fs::Metadata,
+    dir: Option<&std::fs::Metadata>,
+    euid: u32,
+) -> Option<String> {
+    use std::os::unix::fs::MetadataExt as _;
+    let owner = file.uid();
+    if owner != 0 && owner != euid {
+        return Some(format!("owned by uid {owner}"));
+    }
+    let mode = file.mode() & 0o7777;
+    if mode & 0o022 != 0 {
+        return Some(format!("mode {mode:04o} lets its group or others write it"));
+    }
+    if let Some(d) = dir {
+        let dmode = d.mode() & 0o7777;
+        let downer = d.uid();
+        if downer != 0 && downer != euid {
+            return Some(format!("its directory is owned by uid {downer}"));
+        }
+        if dmode & 0o022 != 0 && dmode & 0o1000 == 0 {
+            return Some(format!(
+                "its directory (mode {dmode:04o}) lets its group or others replace it"
+            ));
+        }
+    }
+    None
 }
 
 /// A limit of some layer above the prescription.
@@ -172,11 +219,36 @@ pub fn pulses_per_s(max_pulses: u32, window_ms: u32) -> u64 {
 
 impl Prescription {
     /// Reads and validates the file at `path`.
+    ///
+    /// The file must be one only root or this process's user can change (see
+    /// [`PrescriptionError::Untrusted`]): the prescription bounds the current every layer
+    /// may deliver, so a file another user of the machine could edit is no bound.
     pub fn load(path: &Path) -> Result<Self, PrescriptionError> {
-        let bytes = std::fs::read(path).map_err(|source| PrescriptionError::Read {
+        let read = |source| PrescriptionError::Read {
             path: path.to_owned(),
             source,
-        })?;
+        };
+        let meta = std::fs::metadata(path).map_err(read)?;
+        let dir = path
+            .parent()
+            .map(|d| {
+                if d.as_os_str().is_empty() {
+                    Path::new(".")
+                } else {
+                    d
+                }
+            })
+            .and_then(|d| std::fs::metadata(d).ok());
+        // SAFETY: geteuid has no preconditions and cannot fail.
+        let euid = unsafe { libc::geteuid() };
+        if let Some(why) = untrusted(&meta, dir.as_ref(), euid) {
+            return Err(PrescriptionError::Untrusted {
+                path: path.to_owned(),
+                why,
+                euid,
+            });
+        }
+        let bytes = std::fs::read(path).map_err(read)?;
         let mut p = Self::parse_bytes(&bytes, &format!(" {}", path.display()))?;
         p.path = Some(path.to_owned());
         Ok(p)
@@ -445,6 +517,55 @@ impl Prescription {
 
 #[cfg(test)]
 mod tests {
+    /// A prescription only root or the process's user can change loads; one its group or
+    /// others could write, or another user owns, or in a directory others may write
+    /// without the sticky bit, is refused before it is read.
+    #[test]
+    fn a_prescription_others_could_change_is_refused() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = std::env::temp_dir().join(format!("fes-prescription-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let file = dir.join("prescription.toml");
+        std::fs::write(&file, DOSE).unwrap();
+        let mode = |m: u32| std::fs::set_permissions(&file, std::fs::Permissions::from_mode(m));
+        mode(0o644).unwrap();
+        Prescription::load(&file).unwrap();
+        for m in [0o664, 0o646, 0o666] {
+            mode(m).unwrap();
+            let e = Prescription::load(&file).unwrap_err();
+            assert!(
+                matches!(&e, PrescriptionError::Untrusted { why, .. } if why.contains("mode")),
+                "{m:o}: {e}"
+            );
+        }
+        mode(0o644).unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let e = Prescription::load(&file).unwrap_err();
+        assert!(
+            matches!(&e, PrescriptionError::Untrusted { why, .. } if why.contains("directory")),
+            "{e}"
+        );
+        // /tmp's way: world-writable but sticky (others cannot replace a file they do not own).
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o1777)).unwrap();
+        Prescription::load(&file).unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        // Owned by another user (only root can give a file away, so only root shows it).
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } == 0 {
+            let c = std::ffi::CString::new(file.as_os_str().as_encoded_bytes()).unwrap();
+            // SAFETY: chown on a path this test created; the string outlives the call.
+            assert_eq!(unsafe { libc::chown(c.as_ptr(), 65534, 65534) }, 0);
+            let e = Prescription::load(&file).unwrap_err();
+            assert!(
+                matches!(&e, PrescriptionError::Untrusted { why, .. } if why.contains("owned")),
+                "{e}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     use super::*;
 
     const DOSE: &str = r#"format = "fes-prescription/1"
