@@ -80,6 +80,33 @@ pub enum LinkEvent {
     },
 }
 
+/// Where the newest order stands, as `status` shows it (the operator's `stop` and `arm`
+/// wait on it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// Sent, not acknowledged yet (a stop is re-sent meanwhile).
+    Pending,
+    /// The driver carried it out.
+    Confirmed,
+    /// The driver refused it (a stop is re-sent until carried out).
+    Refused(CommandRefusal),
+    /// Not acknowledged within the timeout (a stop is still re-sent).
+    Unacknowledged,
+    /// Acknowledgements are not watched (`health.watch_stim_driver = false`): unknown.
+    Unwatched,
+}
+
+/// The newest order and where it stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OrderRecord {
+    /// The order.
+    pub order: DriverOrder,
+    /// Its identity: the sequence number of its first send.
+    pub id: u64,
+    /// Where it stands.
+    pub outcome: Outcome,
+}
+
 /// An order waiting for its acknowledgement.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Pending {
@@ -100,6 +127,8 @@ pub struct CommandLink {
     pending: Option<Pending>,
     /// The last order the driver carried out, and the sequence number it acknowledged.
     confirmed: Option<(DriverOrder, u64)>,
+    /// The newest order and where it stands.
+    last: Option<OrderRecord>,
 }
 
 fn kind(order: DriverOrder) -> DriverCommandKind {
@@ -119,6 +148,18 @@ impl CommandLink {
             next_seq: seq_base.clamp(1, DriverCommand::MAX_SEQ / 2),
             pending: None,
             confirmed: None,
+            last: None,
+        }
+    }
+
+    /// The newest order issued and where it stands.
+    pub fn last_order(&self) -> Option<OrderRecord> {
+        self.last
+    }
+
+    fn set_outcome(&mut self, outcome: Outcome) {
+        if let Some(r) = self.last.as_mut() {
+            r.outcome = outcome;
         }
     }
 
@@ -137,6 +178,15 @@ impl CommandLink {
     /// pending (the newer order is what the supervisor wants).
     pub fn issue(&mut self, order: DriverOrder, now_ns: u64) -> DriverCommand {
         let command = self.command(order, now_ns);
+        self.last = Some(OrderRecord {
+            order,
+            id: command.seq,
+            outcome: if self.settings.required {
+                Outcome::Pending
+            } else {
+                Outcome::Unwatched
+            },
+        });
         if self.settings.required {
             // What the driver last confirmed no longer says what it is doing.
             self.confirmed = None;
@@ -181,9 +231,11 @@ impl CommandLink {
                 None => {
                     self.pending = None;
                     self.confirmed = Some((p.order, seq));
+                    self.set_outcome(Outcome::Confirmed);
                     LinkEvent::Confirmed(p.order)
                 }
                 Some(reason) => {
+                    self.set_outcome(Outcome::Refused(reason));
                     // A refused Arm is over; a stop is re-sent until carried out.
                     if p.order == DriverOrder::Arm {
                         self.pending = None;
@@ -223,6 +275,7 @@ impl CommandLink {
         if p.order == DriverOrder::Arm {
             if late {
                 self.pending = None;
+                self.set_outcome(Outcome::Unacknowledged);
                 return (
                     None,
                     Some(LinkEvent::Unacknowledged {
@@ -243,6 +296,7 @@ impl CommandLink {
         let mut event = None;
         if late && !p.alarmed {
             p.alarmed = true;
+            self.set_outcome(Outcome::Unacknowledged);
             event = Some(LinkEvent::Unacknowledged {
                 order: p.order,
                 waited_ns,

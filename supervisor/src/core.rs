@@ -79,6 +79,9 @@ pub enum DriverProblem {
     ArmRefused,
     /// It did not acknowledge the Arm in time.
     Unacknowledged,
+    /// It did not acknowledge a stop (Disarm or SafeStop) in time: whether it stopped
+    /// forwarding pulses is unknown (the stop is still re-sent).
+    StopUnacknowledged,
     /// Its state contradicts the order it confirmed.
     StateMismatch,
 }
@@ -91,7 +94,10 @@ impl FaultCause {
             FaultCause::SelfStall => true,
             FaultCause::Recording => false,
             // The acknowledgement travels through the driver's report thread.
-            FaultCause::Driver { problem } => problem == DriverProblem::Unacknowledged,
+            FaultCause::Driver { problem } => matches!(
+                problem,
+                DriverProblem::Unacknowledged | DriverProblem::StopUnacknowledged
+            ),
         }
     }
 }

@@ -25,13 +25,13 @@ use rt_core::msg::{
 use rt_core::msg::{PortError, port};
 use rt_core::rt::clock::{monotonic_ns, sleep_until};
 
-use crate::command_link::{CommandLink, LinkEvent, LinkSettings};
+use crate::command_link::{self, CommandLink, LinkEvent, LinkSettings, OrderRecord};
 use crate::config::{RecordingConfig, SupervisorConfig};
 use crate::control::{ControlServer, Pending};
 use crate::core::{ArmState, DriverOrder, Fault, FaultCause, SupervisorCore};
 use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
 use crate::pass;
-use crate::protocol::{Command, Response, Status};
+use crate::protocol::{Command, DriverOrderStatus, Response, Status};
 use crate::recording::{RecorderSettings, utc_stamp};
 use crate::recording_thread::{Item, RecorderThread};
 
@@ -451,6 +451,9 @@ impl<'a> Daemon<'a> {
             now,
             &proc_state,
         );
+        // The order the command gave goes out now, so that the status in the answer names
+        // it (the operator's `stop` and `arm` then wait for its acknowledgement).
+        self.send_orders(now);
         let status = self.status(now);
         match result {
             Ok(m) => Response::ok(id, m, Some(status)),
@@ -722,8 +725,31 @@ impl<'a> Daemon<'a> {
                 .as_ref()
                 .map(|r| r.dir().display().to_string())
                 .or_else(|| self.run.dirs.last().map(|d| d.display().to_string())),
+            driver_order: self.link.last_order().map(order_status),
             events: self.core.events().cloned().collect(),
         }
+    }
+}
+
+/// An [`OrderRecord`] as `status` shows it.
+fn order_status(r: OrderRecord) -> DriverOrderStatus {
+    let (outcome, reason) = match r.outcome {
+        command_link::Outcome::Pending => ("pending", None),
+        command_link::Outcome::Confirmed => ("confirmed", None),
+        command_link::Outcome::Refused(why) => ("refused", Some(why.name().to_owned())),
+        command_link::Outcome::Unacknowledged => ("unacknowledged", None),
+        command_link::Outcome::Unwatched => ("unwatched", None),
+    };
+    DriverOrderStatus {
+        order: match r.order {
+            DriverOrder::Arm => "arm",
+            DriverOrder::Disarm => "disarm",
+            DriverOrder::SafeStop => "safe_stop",
+        }
+        .to_owned(),
+        id: r.id,
+        outcome: outcome.to_owned(),
+        reason,
     }
 }
 

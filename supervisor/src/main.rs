@@ -27,9 +27,12 @@ enum Command {
     Set(cmd::client::SetArgs),
     /// Run a reference profile: constant, steps, ramps, cardiac (operator client).
     Profile(cmd::client::ProfileArgs),
-    /// Stop stimulation at once and disarm the driver (operator client).
+    /// Stop stimulation at once and disarm the driver, then wait (up to --timeout-s) for
+    /// the driver's acknowledgement: exit 0 once acknowledged, 4 with an alarm when it is
+    /// missing (operator client).
     Stop(cmd::client::SocketArgs),
-    /// Arm the driver; clears a fault once its cause is gone (operator client).
+    /// Arm the driver and wait for its acknowledgement (exit 1 refused, 4 missing); clears
+    /// a fault once its cause is gone (operator client).
     Arm(cmd::client::SocketArgs),
     /// Show the daemon's state (operator client).
     Status(cmd::client::StatusArgs),
@@ -83,7 +86,8 @@ fn watch(args: &cmd::client::WatchArgs) -> ExitCode {
 
 /// The exit code of a failed command: 3 when no daemon answered at the socket (the
 /// operator's stop did not reach anything: a script must not read that as "refused"),
-/// 1 otherwise (README "Exit codes").
+/// 4 when the driver did not acknowledge a stop or an arm (or a fault overtook it), 1
+/// otherwise (README "Exit codes").
 fn exit_for(e: &anyhow::Error) -> Exit {
     let unreachable = e.chain().any(|c| {
         matches!(
@@ -93,6 +97,11 @@ fn exit_for(e: &anyhow::Error) -> Exit {
     });
     if unreachable {
         Exit::Unreachable
+    } else if let Some(o) = e
+        .chain()
+        .find_map(|c| c.downcast_ref::<cmd::client::OrderError>())
+    {
+        o.exit()
     } else {
         Exit::Failed
     }

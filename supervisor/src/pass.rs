@@ -94,11 +94,15 @@ pub fn on_link_event(core: &mut SupervisorCore, event: LinkEvent) -> Option<Stri
             Some(m)
         }
         LinkEvent::Unacknowledged { order, waited_ns } => {
+            // Whether the driver stopped is unknown: a fault the status and `watch` show
+            // (the stop goes on being re-sent, now as the fault's safe stop).
             let m = format!(
                 "ALARM: stim-driver has not acknowledged the {order:?} for {} ms; re-sending",
                 waited_ns / 1_000_000
             );
-            core.note(m.clone());
+            if !core.fault(driver_fault(DriverProblem::StopUnacknowledged, m.clone())) {
+                core.note(m.clone());
+            }
             Some(m)
         }
         LinkEvent::NotArmed { state } => {

@@ -306,9 +306,36 @@ pub struct Status {
     /// Recording directory of the current run, if recording.
     #[serde(default)]
     pub recording: Option<String>,
+    /// The newest order to the driver and its acknowledgement (absent before the first).
+    #[serde(default)]
+    pub driver_order: Option<DriverOrderStatus>,
     /// Recent events, newest last.
     #[serde(default)]
     pub events: Vec<String>,
+}
+
+/// The newest order to the driver and where it stands: what `supervisor stop` and
+/// `supervisor arm` wait for.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DriverOrderStatus {
+    /// `arm`, `disarm` or `safe_stop`.
+    pub order: String,
+    /// Its identity (the DriverCommand sequence number of its first send): a newer order
+    /// has a larger one.
+    pub id: u64,
+    /// `pending`, `confirmed`, `refused`, `unacknowledged` or `unwatched` (the driver's
+    /// acknowledgements are not watched: unknown).
+    pub outcome: String,
+    /// Why it was refused.
+    #[serde(default)]
+    pub reason: Option<String>,
+}
+
+impl DriverOrderStatus {
+    /// A stop order (`disarm` or `safe_stop`).
+    pub fn is_stop(&self) -> bool {
+        self.order == "disarm" || self.order == "safe_stop"
+    }
 }
 
 #[cfg(test)]

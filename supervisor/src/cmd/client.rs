@@ -9,7 +9,7 @@ use supervisor::cli::OnOff;
 use anyhow::{Context, bail};
 use supervisor::control;
 use supervisor::profile::{CardiacSpec, ProfileSpec, RampPoint, Step};
-use supervisor::protocol::{Command, Response, Status};
+use supervisor::protocol::{Command, DriverOrderStatus, Response, Status};
 
 /// Where the daemon is.
 #[derive(Debug, Clone, clap::Args)]
@@ -329,15 +329,148 @@ pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
 /// `supervisor stop`.
 pub fn stop(a: SocketArgs) -> anyhow::Result<()> {
     check_timeout(&a)?;
-    finish(control::request_stop(
-        &a.socket,
-        Duration::from_secs_f64(a.timeout_s),
-    )?)
+    let r = control::request_stop(&a.socket, Duration::from_secs_f64(a.timeout_s))?;
+    await_order(&a, r, Awaited::Stop)
 }
 
 /// `supervisor arm`.
 pub fn arm(a: SocketArgs) -> anyhow::Result<()> {
-    finish(send(&a, Command::Arm)?)
+    let r = send(&a, Command::Arm)?;
+    await_order(&a, r, Awaited::Arm)
+}
+
+/// Which order the operator's command gave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Awaited {
+    Stop,
+    Arm,
+}
+
+impl Awaited {
+    fn matches(self, o: &DriverOrderStatus) -> bool {
+        match self {
+            Awaited::Stop => o.is_stop(),
+            Awaited::Arm => o.order == "arm",
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Awaited::Stop => "stop",
+            Awaited::Arm => "arm",
+        }
+    }
+}
+
+/// The driver did not carry out the operator's order: what the exit status says.
+#[derive(Debug, thiserror::Error)]
+pub enum OrderError {
+    /// The driver refused the arm (exit 1).
+    #[error("stim-driver refused the arm: {0}")]
+    ArmRefused(String),
+    /// The order was not acknowledged, or a fault took over (exit 4).
+    #[error("ALARM: {0}")]
+    NotAcknowledged(String),
+}
+
+impl OrderError {
+    /// The exit status (README "Exit codes").
+    pub fn exit(&self) -> rt_core::rt::exit::Exit {
+        match self {
+            OrderError::ArmRefused(_) => rt_core::rt::exit::Exit::Failed,
+            OrderError::NotAcknowledged(_) => rt_core::rt::exit::Exit::Fault,
+        }
+    }
+}
+
+/// After the daemon's answer `r` to a stop or an arm: waits (up to `--timeout-s`) until
+/// the driver acknowledged the order the command gave, as the daemon's status shows it
+/// (`driver_order`), and says so. A refused arm is exit 1; a stop or arm the driver did
+/// not acknowledge in time, or a fault meanwhile, exit 4, naming it: the operator must
+/// not read "stopped" where the driver's stop is not known.
+fn await_order(a: &SocketArgs, r: Response, want: Awaited) -> anyhow::Result<()> {
+    if !r.ok {
+        return finish(r);
+    }
+    println!("{}", r.message.clone().unwrap_or_default());
+    let timeout = Duration::from_secs_f64(a.timeout_s);
+    let deadline = std::time::Instant::now() + timeout;
+    let mut status = r.status;
+    // The order the answer names (the daemon sends it before answering).
+    let Some(mut id) = status
+        .as_ref()
+        .and_then(|s| s.driver_order.as_ref())
+        .filter(|o| want.matches(o))
+        .map(|o| o.id)
+    else {
+        println!("no order was sent to stim-driver: nothing to acknowledge");
+        return Ok(());
+    };
+    loop {
+        let s = status
+            .as_ref()
+            .ok_or_else(|| anyhow::anyhow!("the daemon sent no status"))?;
+        let fault = || s.fault.clone().unwrap_or_else(|| "fault".into());
+        match s.driver_order.as_ref() {
+            Some(o) if o.id == id => match o.outcome.as_str() {
+                "confirmed" => {
+                    println!("stim-driver acknowledged the {}", want.name());
+                    return Ok(());
+                }
+                "unwatched" => {
+                    eprintln!(
+                        "warning: stim-driver's acknowledgements are not watched \
+                         (health.watch_stim_driver = false): the {} is not confirmed",
+                        want.name()
+                    );
+                    return Ok(());
+                }
+                "refused" if want == Awaited::Arm => {
+                    return Err(OrderError::ArmRefused(o.reason.clone().unwrap_or_default()).into());
+                }
+                "unacknowledged" => {
+                    return Err(OrderError::NotAcknowledged(format!(
+                        "stim-driver has not acknowledged the {}{}",
+                        want.name(),
+                        if s.state == "fault" {
+                            format!(": {}", fault())
+                        } else {
+                            String::new()
+                        }
+                    ))
+                    .into());
+                }
+                // Pending, or a stop refused for now (it is re-sent).
+                _ => {}
+            },
+            // A newer stop (a fault's safe stop) carries on what a stop asked for.
+            Some(o) if o.id > id && want == Awaited::Stop && o.is_stop() => id = o.id,
+            Some(o) if o.id > id => {
+                return Err(OrderError::NotAcknowledged(format!(
+                    "the {} was overtaken by a {} before stim-driver acknowledged it{}",
+                    want.name(),
+                    o.order,
+                    if s.state == "fault" {
+                        format!(" ({})", fault())
+                    } else {
+                        String::new()
+                    }
+                ))
+                .into());
+            }
+            _ => {}
+        }
+        if std::time::Instant::now() >= deadline {
+            return Err(OrderError::NotAcknowledged(format!(
+                "stim-driver did not acknowledge the {} within {:.1} s (--timeout-s)",
+                want.name(),
+                timeout.as_secs_f64()
+            ))
+            .into());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        status = control::request(&a.socket, Command::Status, timeout)?.status;
+    }
 }
 
 /// `supervisor status`.
@@ -392,6 +525,18 @@ pub fn render(s: &Status) -> String {
         s.driver_state.as_deref().unwrap_or("not heard"),
         s.stimulator_state.as_deref().unwrap_or("not heard")
     );
+    if let Some(d) = &s.driver_order {
+        let _ = writeln!(
+            o,
+            "last order:   {} {}{}",
+            d.order,
+            d.outcome,
+            d.reason
+                .as_deref()
+                .map(|r| format!(" ({r})"))
+                .unwrap_or_default()
+        );
+    }
     for p in &s.processes {
         let _ = writeln!(
             o,

@@ -10,7 +10,7 @@ use rt_core::msg::{
     CommandRefusal, CommandResult, Contract, DeviceState, DriverCommand, DriverCommandKind,
     DriverStatus,
 };
-use supervisor::command_link::{CommandLink, LinkEvent, LinkSettings};
+use supervisor::command_link::{CommandLink, LinkEvent, LinkSettings, OrderRecord, Outcome};
 use supervisor::core::DriverOrder;
 
 const MS: u64 = 1_000_000;
@@ -209,6 +209,11 @@ fn a_refused_or_unanswered_arm_is_never_armed() {
         ..Driver::default()
     };
     let c = link.issue(DriverOrder::Arm, 0);
+    let shown = |link: &CommandLink| link.last_order().map(|r| (r.order, r.id, r.outcome));
+    assert_eq!(
+        shown(&link),
+        Some((DriverOrder::Arm, c.seq, Outcome::Pending))
+    );
     d.handle(&c);
     assert!(!link.armed_confirmed());
     assert_eq!(
@@ -220,8 +225,17 @@ fn a_refused_or_unanswered_arm_is_never_armed() {
     );
     assert!(!link.armed_confirmed());
     assert_eq!(link.pending(), None);
+    assert_eq!(
+        shown(&link),
+        Some((
+            DriverOrder::Arm,
+            c.seq,
+            Outcome::Refused(CommandRefusal::NoTicks)
+        ))
+    );
     // Lost: no answer at all.
-    let _ = link.issue(DriverOrder::Arm, 10 * MS);
+    let lost = link.issue(DriverOrder::Arm, 10 * MS);
+    assert!(lost.seq > c.seq, "a newer order, a larger id");
     assert_eq!(link.poll(10 * MS + s.ack_timeout_ns - 1), (None, None));
     assert_eq!(
         link.poll(10 * MS + s.ack_timeout_ns),
@@ -235,6 +249,10 @@ fn a_refused_or_unanswered_arm_is_never_armed() {
     );
     assert_eq!(link.pending(), None);
     assert!(!link.armed_confirmed());
+    assert_eq!(
+        shown(&link),
+        Some((DriverOrder::Arm, lost.seq, Outcome::Unacknowledged))
+    );
 }
 
 /// A stop is re-sent with a new seq every resend period until acknowledged, with one alarm
@@ -259,6 +277,15 @@ fn a_stop_is_resent_until_acknowledged_and_alarms_once() {
     }
     assert_eq!(alarms, 1);
     assert_eq!(seqs.len() as u64, 1 + 2 * s.ack_timeout_ns / s.resend_ns);
+    // Shown as one order (its first send's id), unacknowledged, while it is re-sent.
+    assert_eq!(
+        link.last_order(),
+        Some(OrderRecord {
+            order: DriverOrder::SafeStop,
+            id: first.seq,
+            outcome: Outcome::Unacknowledged
+        })
+    );
     // The driver handled an early send only: that acknowledges it.
     let mut d = Driver::default();
     d.handle(&DriverCommand::new(seqs[3], t, DriverCommandKind::SafeStop));
@@ -268,6 +295,10 @@ fn a_stop_is_resent_until_acknowledged_and_alarms_once() {
     );
     assert_eq!(link.pending(), None);
     assert_eq!(link.poll(t + s.resend_ns), (None, None));
+    assert_eq!(
+        link.last_order().map(|r| (r.id, r.outcome)),
+        Some((first.seq, Outcome::Confirmed))
+    );
 }
 
 /// With nothing pending, a status contradicting the confirmed order is a mismatch: a
@@ -312,7 +343,8 @@ fn a_driver_contradicting_its_confirmation_is_a_mismatch() {
     );
 }
 
-/// Without a watched driver, orders are sent once and taken as confirmed.
+/// Without a watched driver, orders are sent once and taken as confirmed by the link; the
+/// operator is shown `unwatched`, not `confirmed`.
 #[test]
 fn without_acknowledgements_orders_are_fire_and_forget() {
     let mut link = CommandLink::new(
@@ -326,4 +358,8 @@ fn without_acknowledgements_orders_are_fire_and_forget() {
     assert!(link.armed_confirmed());
     assert_eq!(link.pending(), None);
     assert_eq!(link.poll(10_000 * MS), (None, None));
+    assert_eq!(
+        link.last_order().map(|r| r.outcome),
+        Some(Outcome::Unwatched)
+    );
 }

@@ -31,6 +31,12 @@ impl Drop for Daemon {
 }
 
 fn daemon(tag: &str) -> Daemon {
+    daemon_with(tag, false)
+}
+
+/// The daemon, watching stim-driver's acknowledgements when `watch_driver` (no driver
+/// runs in these tests: nothing acknowledges).
+fn daemon_with(tag: &str, watch_driver: bool) -> Daemon {
     let dir = std::env::temp_dir().join(format!("sv-ctl-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -52,7 +58,7 @@ node_name = "supervisor-test"
 socket = "run/supervisor.sock"
 [health]
 watch_rt_core = false
-watch_stim_driver = false
+watch_stim_driver = {watch_driver}
 watch_stimulator = false
 [recording]
 dir = "rec"
@@ -213,6 +219,54 @@ fn invalid_commands_are_refused_clearly_and_change_nothing() {
     let s = status(&d.socket);
     assert_eq!(s.state, "disarmed");
     assert!(s.reference_stop);
+}
+
+/// The operator's stop waits for the driver's acknowledgement: with none (no driver
+/// answers here), `supervisor stop` does not say "stopped" and exit 0; it exits 4 with
+/// the alarm naming the missing acknowledgement, and the daemon is in a fault the status
+/// shows (an unacknowledged stop is not a quiet "disarmed"). With the acknowledgement
+/// not awaited (the earlier client) or the unacknowledged stop only a note (the earlier
+/// daemon), this fails.
+#[test]
+fn a_stop_the_driver_never_acknowledges_is_an_alarm_not_a_success() {
+    let d = daemon_with("noack", true);
+    let started = Instant::now();
+    let o = cli(&d.socket, &["stop"]);
+    let waited = started.elapsed();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(
+        o.status.code(),
+        Some(4),
+        "stdout: {stdout}\nstderr: {stderr}"
+    );
+    assert!(stdout.contains("stimulation stopped"), "{stdout}");
+    assert!(!stdout.contains("acknowledged the stop"), "{stdout}");
+    assert!(
+        stderr.contains("ALARM") && stderr.contains("has not acknowledged"),
+        "{stderr}"
+    );
+    // The link's acknowledgement timeout (1 s), not the client's (5 s), ended the wait.
+    assert!(waited < Duration::from_secs(4), "{waited:?}");
+    let s = status(&d.socket);
+    assert_eq!(s.state, "fault", "{s:?}");
+    assert!(
+        s.fault
+            .as_deref()
+            .is_some_and(|f| f.contains("not acknowledged")),
+        "{s:?}"
+    );
+    let order = s.driver_order.expect("the order is shown");
+    assert!(order.is_stop(), "{order:?}");
+    assert_ne!(order.outcome, "confirmed", "{order:?}");
+    // An arm is refused while the driver is not there; the refusal is the daemon's (1).
+    let o = cli(&d.socket, &["arm"]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 #[test]

@@ -518,12 +518,12 @@ fn an_injected_bus_off_stops_stimulation() {
 }
 
 /// `supervisor watch`, waiting while stimulation runs, tells a planned stop from an
-/// unplanned one by its exit status (issue 19, item 2): the operator's stop ends it with 0;
-/// a fault (an injected bus-off) with 4 and the alarm, naming the fault, on stderr.
+/// unplanned one by its exit status: the operator's stop (`supervisor stop`, which exits 0
+/// only once the driver acknowledged it) ends it with 0; a fault (an injected bus-off)
+/// with 4 and the alarm, naming the fault, on stderr.
 #[test]
 fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
     use std::process::{Command, Stdio};
-    use supervisor::protocol::Command as Cmd;
     repeat_void("watch", |attempt| {
         let bench = Bench::start(&format!("watch{attempt}"));
         let tap = tap(&bench);
@@ -554,7 +554,27 @@ fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
         // Planned: the operator's stop.
         let planned = watch();
         std::thread::sleep(Duration::from_millis(500));
-        bench.stack.must(Cmd::Stop).expect("stop");
+        // The operator's `supervisor stop`: it ends only once stim-driver acknowledged the
+        // stop, and says so.
+        let asked = Instant::now();
+        let stop = Command::new(stack_binaries().join("supervisor"))
+            .args(["stop", "--socket"])
+            .arg(&socket)
+            .output()
+            .expect("supervisor stop");
+        let stop_ms = asked.elapsed().as_secs_f64() * 1e3;
+        let stop_out = String::from_utf8_lossy(&stop.stdout).into_owned();
+        assert_eq!(
+            stop.status.code(),
+            Some(0),
+            "supervisor stop: {stop_out}{}",
+            String::from_utf8_lossy(&stop.stderr)
+        );
+        assert!(
+            stop_out.contains("stim-driver acknowledged the stop"),
+            "{stop_out}"
+        );
+        eprintln!("supervisor stop: acknowledged, {stop_ms:.0} ms after it was run");
         let out = finish(planned);
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
         assert_eq!(
