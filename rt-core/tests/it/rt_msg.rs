@@ -803,3 +803,61 @@ fn a_second_publisher_of_a_commanding_service_is_refused() {
     second_is_refused::<DriverCommand>(&prefix);
     second_is_refused::<StimTick>(&prefix);
 }
+
+/// A service squatted before the stack starts: another process of the same user creates
+/// `reference` (or `driver_command`, or `stim_tick`) first, with room for four publishers.
+/// iceoryx2 opens it for our one-publisher request without complaint, and the squatter
+/// could then publish beside the supervisor; the stack's open reads the limit back and
+/// refuses the service, naming it. Without the read-back, the open succeeds and a second
+/// publisher is admitted.
+#[test]
+fn a_service_another_process_created_with_more_publishers_is_refused() {
+    use rt_core::msg::service::{ServiceError, open_pubsub};
+    use rt_core::msg::{DriverCommand, PortError, port};
+    use rt_core::rt::runner::create_node;
+    fn squatted_is_refused<M: Contract + std::fmt::Debug>(prefix: &str) {
+        let squatter = create_node("test-squatter").unwrap();
+        let name = service_name(prefix, M::TOPIC).unwrap();
+        let service = squatter
+            .service_builder(&name)
+            .publish_subscribe::<M>()
+            .enable_safe_overflow(true)
+            .max_publishers(4)
+            .max_subscribers(M::QOS.max_subscribers)
+            .subscriber_max_buffer_size(M::QOS.subscriber_buffer)
+            .history_size(M::QOS.history)
+            .create()
+            .unwrap();
+        let _squatting = service.publisher_builder().create().unwrap();
+        let node = create_node("test-stack").unwrap();
+        let opened = open_pubsub::<M>(&node, prefix);
+        assert!(
+            matches!(
+                opened,
+                Err(ServiceError::Foreign {
+                    found: 4,
+                    expected: 1,
+                    ..
+                })
+            ),
+            "{}: {:?}",
+            M::TOPIC,
+            opened.as_ref().err()
+        );
+        let publisher = port::publisher::<M>(&node, prefix);
+        assert!(
+            matches!(
+                publisher,
+                Err(PortError::Service(ServiceError::Foreign { .. }))
+            ),
+            "{}: the stack made its publisher on a squatted service",
+            M::TOPIC
+        );
+        let e = publisher.err().unwrap().to_string();
+        assert!(e.contains(M::TOPIC) && e.contains("another process"), "{e}");
+    }
+    let prefix = format!("t{}squat", std::process::id());
+    squatted_is_refused::<Reference>(&prefix);
+    squatted_is_refused::<DriverCommand>(&prefix);
+    squatted_is_refused::<StimTick>(&prefix);
+}

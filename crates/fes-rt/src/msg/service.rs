@@ -96,6 +96,39 @@ pub enum ServiceError {
         /// iceoryx2's reason.
         error: PublishSubscribeOpenOrCreateError,
     },
+    /// The service exists with another publisher limit or without safe overflow: it was
+    /// not created by this stack (iceoryx2 opens a service whose limit is larger than
+    /// asked without complaint, so a process that created it first with room for more
+    /// publishers could add a second commander beside ours).
+    #[error(
+        "publish-subscribe service {topic} exists with max_publishers {found} and safe \
+         overflow {safe_overflow}; this stack creates it with max_publishers {expected} \
+         and safe overflow: another process created it (remove its files under \
+         /dev/shm and /tmp/iceoryx2, or use another prefix)"
+    )]
+    Foreign {
+        /// Topic that failed.
+        topic: &'static str,
+        /// The existing service's publisher limit.
+        found: usize,
+        /// This stack's.
+        expected: usize,
+        /// Whether the existing service has safe overflow.
+        safe_overflow: bool,
+    },
+    /// The event service exists with another notifier limit (see [`Self::Foreign`]).
+    #[error(
+        "event service {topic} exists with max_notifiers {found}; this stack creates it \
+         with {expected}: another process created it"
+    )]
+    ForeignEvent {
+        /// Topic that failed.
+        topic: &'static str,
+        /// The existing service's notifier limit.
+        found: usize,
+        /// This stack's.
+        expected: usize,
+    },
     /// The event service could not be opened or created.
     #[error("cannot open or create event service {topic}: {error}")]
     Event {
@@ -130,13 +163,15 @@ pub fn service_name(prefix: &str, topic: &str) -> Result<ServiceName, ServiceErr
 }
 
 /// Opens (or creates) the publish-subscribe service of contract `M` under `prefix` with the
-/// contract's [`PubSubQos`] and safe overflow.
+/// contract's [`PubSubQos`] and safe overflow, and checks that the service admits exactly
+/// the contract's publishers ([`ServiceError::Foreign`] otherwise).
 pub fn open_pubsub<M: Contract>(
     node: &Node<ipc::Service>,
     prefix: &str,
 ) -> Result<publish_subscribe::PortFactory<ipc::Service, M, ()>, ServiceError> {
     let name = service_name(prefix, M::TOPIC)?;
-    node.service_builder(&name)
+    let factory = node
+        .service_builder(&name)
         .publish_subscribe::<M>()
         .enable_safe_overflow(true)
         .max_publishers(M::QOS.max_publishers)
@@ -148,7 +183,19 @@ pub fn open_pubsub<M: Contract>(
         .map_err(|error| ServiceError::PubSub {
             topic: M::TOPIC,
             error,
-        })
+        })?;
+    // iceoryx2 treats the limits asked on open as minimums: read back what the service
+    // really admits.
+    let config = factory.static_config();
+    if config.max_publishers() != M::QOS.max_publishers || !config.has_safe_overflow() {
+        return Err(ServiceError::Foreign {
+            topic: M::TOPIC,
+            found: config.max_publishers(),
+            expected: M::QOS.max_publishers,
+            safe_overflow: config.has_safe_overflow(),
+        });
+    }
+    Ok(factory)
 }
 
 /// Opens (or creates) the event service that rt-core notifies after each StimTick.
@@ -157,16 +204,30 @@ pub fn open_stim_tick_event(
     prefix: &str,
 ) -> Result<event::PortFactory<ipc::Service>, ServiceError> {
     let name = service_name(prefix, TOPIC_STIM_TICK_EVENT)?;
-    node.service_builder(&name)
+    let factory = node
+        .service_builder(&name)
         .event()
-        .max_notifiers(2)
+        .max_notifiers(STIM_TICK_EVENT_NOTIFIERS)
         .max_listeners(8)
         .open_or_create()
         .map_err(|error| ServiceError::Event {
             topic: TOPIC_STIM_TICK_EVENT,
             error,
-        })
+        })?;
+    let found = factory.static_config().max_notifiers();
+    if found != STIM_TICK_EVENT_NOTIFIERS {
+        return Err(ServiceError::ForeignEvent {
+            topic: TOPIC_STIM_TICK_EVENT,
+            found,
+            expected: STIM_TICK_EVENT_NOTIFIERS,
+        });
+    }
+    Ok(factory)
 }
+
+/// Notifiers the StimTick event service admits (rt-core, and a restarted rt-core while
+/// the old one's port is reclaimed).
+const STIM_TICK_EVENT_NOTIFIERS: usize = 2;
 
 /// Back-pressure strategy every publisher uses. With safe overflow it is never consulted;
 /// it is set anyway so that a service created elsewhere without safe overflow still cannot
