@@ -268,7 +268,7 @@ fn stop_now(iface: &str, stim_node: u8) -> Result<(), Failure> {
 }
 
 fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(), Failure> {
-    let config = load_config(path, iface)?;
+    let (config, prescription) = load_config(path, iface)?;
     if check {
         println!("{}: ok", path.display());
         return Ok(());
@@ -292,6 +292,7 @@ fn run(path: &std::path::Path, iface: Option<String>, check: bool) -> Result<(),
         .context("installing SIGINT/SIGTERM handlers")
         .map_err(Failure::Run)?;
     let shared = Shared::new(&config);
+    let _ = shared.prescription.set(prescription);
     let (outputs, rx_port) = Outputs::open(&config, &shared)?;
     let nodes = config
         .nodes()
@@ -327,7 +328,12 @@ enum Receive {
 
 /// Loads and validates the configuration; `iface` (`--iface`, or `FES_CAN_IFACE` from the
 /// unit's can.env, which ExecStopPost's safe-stop also uses) overrides `[can] iface`.
-fn load_config(path: &std::path::Path, iface: Option<String>) -> Result<DriverConfig, Failure> {
+/// The configuration, checked against the prescription, and the prescription's
+/// fingerprint (what the TimingReports carry).
+fn load_config(
+    path: &std::path::Path,
+    iface: Option<String>,
+) -> Result<(DriverConfig, [u8; 6]), Failure> {
     let mut config = DriverConfig::load(path)
         .context("configuration")
         .map_err(Failure::Config)?;
@@ -383,7 +389,7 @@ fn load_config(path: &std::path::Path, iface: Option<String>) -> Result<DriverCo
         c.interlocks.max_width_us,
         c.ipc.prefix
     );
-    Ok(config)
+    Ok((config, prescription.fingerprint()))
 }
 
 /// What the driver writes to: the bus, the kernel's transmit timestamps of CAN frames

@@ -445,14 +445,17 @@ impl<'a> Reporter<'a> {
         if !fes_rt::rt::alloc::counting_allocator_installed() {
             flags |= TimingReport::FLAG_ALLOCATIONS_UNCOUNTED;
         }
-        let report = self.telemetry.report(
-            self.report_seq,
-            monotonic_ns(),
-            &self.shared.status.load(),
-            self.shared.event_overflows.load(Ordering::Relaxed),
-            self.shared.hot_path_allocations.load(Ordering::Relaxed),
-            flags,
-        );
+        let report = TimingReport {
+            prescription: self.shared.prescription.get().copied().unwrap_or_default(),
+            ..self.telemetry.report(
+                self.report_seq,
+                monotonic_ns(),
+                &self.shared.status.load(),
+                self.shared.event_overflows.load(Ordering::Relaxed),
+                self.shared.hot_path_allocations.load(Ordering::Relaxed),
+                flags,
+            )
+        };
         let _ = self.ports.timing.send_copy(report);
         Ok(report)
     }

@@ -66,6 +66,9 @@ pub struct Shared {
     pub failed: AtomicBool,
     /// The forward thread's real-time status line, once known.
     pub rt_status: OnceLock<RtStatus>,
+    /// The prescription this driver enforces, as its TimingReports carry it
+    /// (`TimingReport::prescription`; set once it is read, zeros before).
+    pub prescription: OnceLock<[u8; 6]>,
 }
 
 impl Shared {
@@ -83,6 +86,7 @@ impl Shared {
             forward_ended: AtomicBool::new(false),
             failed: AtomicBool::new(false),
             rt_status: OnceLock::new(),
+            prescription: OnceLock::new(),
         }
     }
 

@@ -170,7 +170,7 @@ impl DriverTelemetry {
             ipc: self.ipc.summary(),
             source: TimingSource::StimDriver as u8,
             flags,
-            reserved: [0; 6],
+            prescription: [0; 6],
         }
     }
 }

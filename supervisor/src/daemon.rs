@@ -269,7 +269,10 @@ impl<'a> Daemon<'a> {
         let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
         let watchdog = sd_notify::watchdog_enabled();
         let core = SupervisorCore::new(cfg.reference.limits(), cfg.outer_loop, cfg.contraction);
-        let health = HealthMonitor::new(cfg.health.clone());
+        let mut health = HealthMonitor::new(cfg.health.clone());
+        if let Some(sha256) = &prescription_sha256 {
+            health.set_prescription(fes_prescription::fingerprint_of(sha256));
+        }
         let start_ns = monotonic_ns();
         let last_state = core.state().clone();
         Ok(Self {

@@ -321,6 +321,21 @@ pub enum Unready {
         /// The fault's message (starts with the process's name).
         reason: String,
     },
+    /// It enforces another prescription than the supervisor (or than the other process).
+    #[error(
+        "{}: enforces prescription {found} (first 12 hex digits of its SHA-256) where the \
+         stack's is {expected} (the supervisor's, or the other process's when the \
+         supervisor reads none): after a prescription change restart every process",
+        .process.name()
+    )]
+    Prescription {
+        /// The process.
+        process: Process,
+        /// Its fingerprint, hex.
+        found: String,
+        /// The one expected, hex.
+        expected: String,
+    },
 }
 
 /// What a stream of messages says about a process.
@@ -379,6 +394,8 @@ pub struct HealthMonitor {
     /// silence between two StimTicks, for blaming a driver watchdog trip.
     ticks: TickGaps,
     events: Vec<HealthEvent>,
+    /// The supervisor's own prescription fingerprint, if it read one.
+    prescription: Option<[u8; 6]>,
 }
 
 /// The StimTick stream by the ticks' own grid times (CLOCK_MONOTONIC, shared by every
@@ -534,7 +551,45 @@ impl HealthMonitor {
             last_tick_seq: 0,
             ticks: TickGaps::default(),
             events: Vec::new(),
+            prescription: None,
         }
+    }
+
+    /// The prescription the supervisor records under (its fingerprint): rt-core and
+    /// stim-driver must enforce the same one to be armed ([`Self::ready`]).
+    pub fn set_prescription(&mut self, fingerprint: [u8; 6]) {
+        self.prescription = Some(fingerprint);
+    }
+
+    /// The watched pattern generator and driver whose last TimingReport names another
+    /// prescription than the supervisor's (or, without one, than each other's). A process
+    /// reporting zeros enforces none (rt-core's prescription is optional) and is not
+    /// compared; one not reported yet is not known to differ.
+    fn prescription_mismatches(&self) -> Vec<Unready> {
+        let reported: Vec<(Process, [u8; 6])> = [
+            (Process::RtCore, TimingSource::RtCore),
+            (Process::StimDriver, TimingSource::StimDriver),
+        ]
+        .into_iter()
+        .filter(|(p, _)| self.settings.watched(*p))
+        .filter_map(|(p, s)| self.timing.get(&(s as u8)).map(|r| (p, r.prescription)))
+        .filter(|(_, f)| *f != [0; 6])
+        .collect();
+        let Some(expected) = self
+            .prescription
+            .or_else(|| reported.first().map(|(_, f)| *f))
+        else {
+            return Vec::new();
+        };
+        reported
+            .into_iter()
+            .filter(|(_, f)| *f != expected)
+            .map(|(process, f)| Unready::Prescription {
+                process,
+                found: fes_prescription::fingerprint_hex(&f),
+                expected: fes_prescription::fingerprint_hex(&expected),
+            })
+            .collect()
     }
 
     /// The settings.
@@ -1030,6 +1085,7 @@ impl HealthMonitor {
                 Condition::Ok => {}
             }
         }
+        problems.extend(self.prescription_mismatches());
         if problems.is_empty() {
             Ok(())
         } else {
@@ -1193,6 +1249,64 @@ mod tests {
         h.check(20 * MS, &running);
         assert!(h.ready().is_ok());
         assert!(h.take_events().is_empty());
+    }
+
+    /// One prescription across the stack: with rt-core's or stim-driver's TimingReport
+    /// naming another prescription than the supervisor's, the arm is refused, naming the
+    /// process and both fingerprints; once it reports the same one (restarted), it is not.
+    /// A process that reports none (zeros) is not compared. Without a prescription of its
+    /// own the supervisor compares the two processes with each other.
+    #[test]
+    fn a_process_enforcing_another_prescription_keeps_the_stack_from_arming() {
+        use rt_core::msg::LatencySummary;
+        let report = |source: TimingSource, seq: u64, prescription: [u8; 6]| TimingReport {
+            seq,
+            t_ns: seq,
+            ticks: 0,
+            misses: 0,
+            overruns: 0,
+            queue_overflows: 0,
+            hot_path_allocations: 0,
+            rejected_inputs: 0,
+            wake: LatencySummary::default(),
+            input: LatencySummary::default(),
+            compute: LatencySummary::default(),
+            publish: LatencySummary::default(),
+            ipc: LatencySummary::default(),
+            source: source as u8,
+            flags: 0,
+            prescription,
+        };
+        let ours = [0xd6, 0x87, 0x38, 0xd6, 0x82, 0xb2];
+        let old = [0x11, 0x22, 0x33, 0x44, 0x55, 0x66];
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        h.set_prescription(ours);
+        live(&mut h, 10 * MS);
+        h.check(20 * MS, &running);
+        assert!(h.ready().is_ok());
+        h.on_timing(&report(TimingSource::StimDriver, 1, old));
+        let e = h.ready().unwrap_err();
+        assert!(
+            matches!(
+                e.problems.as_slice(),
+                [Unready::Prescription { process: Process::StimDriver, found, expected }]
+                    if found == "112233445566" && expected == "d68738d682b2"
+            ),
+            "{e:?}"
+        );
+        assert!(e.to_string().contains("restart every process"), "{e}");
+        h.on_timing(&report(TimingSource::StimDriver, 2, ours));
+        h.on_timing(&report(TimingSource::RtCore, 1, [0; 6]));
+        assert!(h.ready().is_ok(), "{:?}", h.ready());
+        // No prescription of the supervisor's: the two processes against each other.
+        let mut h = HealthMonitor::new(HealthSettings::default());
+        live(&mut h, 10 * MS);
+        h.check(20 * MS, &running);
+        h.on_timing(&report(TimingSource::RtCore, 1, ours));
+        h.on_timing(&report(TimingSource::StimDriver, 1, old));
+        assert!(h.ready().is_err());
+        h.on_timing(&report(TimingSource::StimDriver, 2, ours));
+        assert!(h.ready().is_ok());
     }
 
     /// rt-core's verdict on the References: a rejected one and a stale one are faults of

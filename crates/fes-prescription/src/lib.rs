@@ -173,6 +173,24 @@ fn untrusted(
     None
 }
 
+/// The first 6 bytes of a SHA-256 given in hex ([`Prescription::fingerprint`]); zeros
+/// where the text is not hex.
+pub fn fingerprint_of(sha256_hex: &str) -> [u8; 6] {
+    let mut out = [0u8; 6];
+    for (i, b) in out.iter_mut().enumerate() {
+        *b = sha256_hex
+            .get(2 * i..2 * i + 2)
+            .and_then(|h| u8::from_str_radix(h, 16).ok())
+            .unwrap_or(0);
+    }
+    out
+}
+
+/// A fingerprint as 12 hex digits.
+pub fn fingerprint_hex(f: &[u8; 6]) -> String {
+    f.iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// A limit of some layer above the prescription.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error(
@@ -218,6 +236,13 @@ pub fn pulses_per_s(max_pulses: u32, window_ms: u32) -> u64 {
 }
 
 impl Prescription {
+    /// The first 6 bytes of [`Self::sha256`]: what each process publishes as the
+    /// prescription it enforces (`TimingReport::prescription`), so that the supervisor can
+    /// tell one prescription across the stack from several.
+    pub fn fingerprint(&self) -> [u8; 6] {
+        fingerprint_of(&self.sha256)
+    }
+
     /// Reads and validates the file at `path`.
     ///
     /// The file must be one only root or this process's user can change (see

@@ -417,6 +417,9 @@ pub struct TelemetrySettings {
     pub report_period: Duration,
     /// Who is reporting.
     pub source: TimingSource,
+    /// The prescription the process enforces ([`TimingReport::prescription`]; zeros for
+    /// none).
+    pub prescription: [u8; 6],
 }
 
 impl TelemetrySettings {
@@ -427,6 +430,7 @@ impl TelemetrySettings {
             prefix: config.ipc.prefix.clone(),
             report_period: Duration::from_millis(config.telemetry.report_period_ms),
             source: TimingSource::RtCore,
+            prescription: [0; 6],
         }
     }
 }
@@ -463,14 +467,17 @@ pub fn run_telemetry(
         }
         interval_start = now;
         seq += 1;
-        let report = aggregator.report(
-            seq,
-            monotonic_ns(),
-            settings.source,
-            &channel.counters.snapshot(),
-            channel.overflows(),
-            channel.report_flags() | final_flag,
-        );
+        let report = TimingReport {
+            prescription: settings.prescription,
+            ..aggregator.report(
+                seq,
+                monotonic_ns(),
+                settings.source,
+                &channel.counters.snapshot(),
+                channel.overflows(),
+                channel.report_flags() | final_flag,
+            )
+        };
         // A failed report is not fatal: the next one carries the same cumulative numbers.
         let _ = publisher.send_copy(report);
         Ok(report)

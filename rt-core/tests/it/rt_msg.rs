@@ -88,7 +88,7 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<StimTick>(), "fes::StimTick::v2");
     assert_eq!(type_name::<ForceSample>(), "fes::ForceSample::v1");
     assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v3");
-    assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v1");
+    assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v2");
     assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
     assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v2");
 }
@@ -693,7 +693,7 @@ fn timing_report_validation_table() {
         ipc: LatencySummary::default(),
         source: TimingSource::RtCore as u8,
         flags: TimingReport::FLAG_FINAL,
-        reserved: [0; 6],
+        prescription: [0; 6],
     };
     table(
         base,

@@ -4,7 +4,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_TIMING};
-use super::validate::{ValidationError, known_flags, nonzero_seq, reserved_zero};
+use super::validate::{ValidationError, known_flags, nonzero_seq};
 
 /// Who sent a [`TimingReport`].
 #[repr(u8)]
@@ -82,7 +82,7 @@ impl LatencySummary {
 /// telemetry thread (never by the real-time thread itself).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("fes::TimingReport::v1")]
+#[type_name("fes::TimingReport::v2")]
 pub struct TimingReport {
     /// Sequence number, 1, 2, ... per publisher.
     pub seq: u64,
@@ -116,8 +116,11 @@ pub struct TimingReport {
     pub source: u8,
     /// `TimingReport::FLAG_*` bits.
     pub flags: u8,
-    /// Zero.
-    pub reserved: [u8; 6],
+    /// The prescription the sender enforces: the first 6 bytes of its file's SHA-256, all
+    /// zero for none (a probe, the virtual stimulator). The supervisor refuses to arm
+    /// while rt-core's or stim-driver's differs from its own: one prescription across the
+    /// stack, also after a restart of some processes only (v2; v1 had zero here).
+    pub prescription: [u8; 6],
 }
 
 impl TimingReport {
@@ -150,7 +153,6 @@ impl Contract for TimingReport {
         nonzero_seq(self.seq)?;
         self.source()?;
         known_flags("flags", self.flags.into(), Self::KNOWN_FLAGS.into())?;
-        reserved_zero("reserved", &self.reserved)?;
         if self.overruns > self.misses || self.overruns > self.ticks {
             return Err(ValidationError::Inconsistent(
                 "overruns exceed misses or ticks",

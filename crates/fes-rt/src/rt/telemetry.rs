@@ -288,7 +288,7 @@ impl TimingAggregator {
             ipc: LatencySummary::default(),
             source: source as u8,
             flags,
-            reserved: [0; 6],
+            prescription: [0; 6],
         }
     }
 }

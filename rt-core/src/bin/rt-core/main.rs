@@ -157,13 +157,13 @@ fn run(cli: &Cli) -> Result<(), Failure> {
         .config
         .as_deref()
         .ok_or_else(|| anyhow!("--config is required"))?;
-    let (config, source) = load_configuration(path)?;
+    let (config, source, prescription) = load_configuration(path)?;
     if cli.check {
         println!("{}: ok", path.display());
         return Ok(());
     }
     let outputs = Outputs::open(&config)?;
-    run_threads(&config, source, outputs)
+    run_threads(&config, source, prescription, outputs)
 }
 
 /// Prints an example configuration: every default, a test-pattern source, an hlog file.
@@ -175,12 +175,18 @@ fn print_example_config() {
 
 /// Configuration phase: reads and validates the configuration file and the source it
 /// names (a controller file is read and checked here), and logs what will run.
-fn load_configuration(path: &Path) -> anyhow::Result<(RtCoreConfig, Source)> {
+fn load_configuration(path: &Path) -> anyhow::Result<(RtCoreConfig, Source, [u8; 6])> {
     let config = RtCoreConfig::load(path).context("configuration")?;
-    match config.check_prescription().context("configuration")? {
-        Some(p) => info!("{}", p.summary()),
-        None => info!("no prescription configured: [pulse] is checked by stim-driver only"),
-    }
+    let prescription = match config.check_prescription().context("configuration")? {
+        Some(p) => {
+            info!("{}", p.summary());
+            p.fingerprint()
+        }
+        None => {
+            info!("no prescription configured: [pulse] is checked by stim-driver only");
+            [0; 6]
+        }
+    };
     let source = Source::load(&config.source, config.period(), config.feedback.enabled)?;
     info!(
         "config {}: period {} us, source {}, prefix {:?}",
@@ -189,7 +195,7 @@ fn load_configuration(path: &Path) -> anyhow::Result<(RtCoreConfig, Source)> {
         source.describe(),
         config.ipc.prefix
     );
-    Ok((config, source))
+    Ok((config, source, prescription))
 }
 
 /// What the process opens before any thread starts (may allocate, may fail).
@@ -255,7 +261,12 @@ type TelemetryThread<'scope> = ScopedJoinHandle<'scope, Result<TimingReport, Run
 /// Threads phase: the telemetry thread (waited for until its port exists), the systemd
 /// notification thread and ONE real-time thread; when the loop ends, the notification
 /// thread and then the telemetry thread are stopped, and the outcome reported.
-fn run_threads(config: &RtCoreConfig, source: Source, outputs: Outputs) -> Result<(), Failure> {
+fn run_threads(
+    config: &RtCoreConfig,
+    source: Source,
+    prescription: [u8; 6],
+    outputs: Outputs,
+) -> Result<(), Failure> {
     let Outputs {
         manager,
         slowdown,
@@ -269,7 +280,10 @@ fn run_threads(config: &RtCoreConfig, source: Source, outputs: Outputs) -> Resul
         rt_status: OnceLock::new(),
         loop_ended: AtomicBool::new(false),
     };
-    let telemetry_settings = TelemetrySettings::for_rt_core(config);
+    let telemetry_settings = TelemetrySettings {
+        prescription,
+        ..TelemetrySettings::for_rt_core(config)
+    };
     std::thread::scope(|scope| -> Result<(), Failure> {
         let telemetry_thread = start_telemetry(scope, &shared, &telemetry_settings, hlog)?;
         let notifier = spawn_notifier(scope, &shared, &manager, stop, slowdown.is_some())?;
