@@ -4,7 +4,9 @@
 //! Access is checked twice: by the socket file's permissions, and on every connection by
 //! the peer's credentials (`SO_PEERCRED`): the peer's uid must be the daemon's own, the
 //! configured `user`, or root (when `allow_root`), or its primary or supplementary groups
-//! must include the configured `group`. Others get one error line and are disconnected.
+//! (`SO_PEERGROUPS`: as the kernel recorded them at connect, not read from /proc by a pid
+//! that may be reused) must include the configured `group`. Others get one error line and
+//! are disconnected.
 //!
 //! The server only reads, parses and checks; commands are carried out by the daemon's main
 //! loop (which owns the state), through a channel, and the response goes back on the same
@@ -104,7 +106,8 @@ pub struct Peer {
     pub uid: u32,
     /// Primary group id.
     pub gid: u32,
-    /// Supplementary groups (from `/proc/<pid>/status`; empty if unreadable).
+    /// Supplementary groups, as the kernel recorded them when the peer connected
+    /// (`SO_PEERGROUPS`).
     pub groups: Vec<u32>,
 }
 
@@ -166,18 +169,40 @@ impl PeerPolicy {
     }
 }
 
-/// Supplementary groups of `pid` from `/proc/<pid>/status`.
-fn supplementary_groups(pid: i32) -> Vec<u32> {
-    std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|s| {
-            s.lines().find_map(|l| l.strip_prefix("Groups:")).map(|g| {
-                g.split_whitespace()
-                    .filter_map(|x| x.parse().ok())
-                    .collect()
-            })
-        })
-        .unwrap_or_default()
+/// Supplementary groups of the peer of `stream`, as the kernel recorded them when it
+/// connected (`SO_PEERGROUPS`, Linux 4.13). Reading `/proc/<pid>/status` after the accept
+/// instead asked about whatever process has that pid by then: a peer that exits after
+/// connecting leaves its pid to be reused, and an admitted group could be read from
+/// another process.
+fn peer_groups(stream: &UnixStream) -> std::io::Result<Vec<u32>> {
+    use std::os::fd::AsRawFd as _;
+    let mut groups: Vec<libc::gid_t> = vec![0; 64];
+    loop {
+        let mut len = libc::socklen_t::try_from(groups.len() * size_of::<libc::gid_t>())
+            .map_err(|_| std::io::Error::from_raw_os_error(libc::ERANGE))?;
+        // SAFETY: `groups` holds `len` bytes, which the kernel fills with at most that
+        // many, and writes the length it needs or used to `len`.
+        let r = unsafe {
+            libc::getsockopt(
+                stream.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_PEERGROUPS,
+                groups.as_mut_ptr().cast(),
+                &raw mut len,
+            )
+        };
+        let count = len as usize / size_of::<libc::gid_t>();
+        if r == 0 {
+            groups.truncate(count);
+            return Ok(groups);
+        }
+        let e = std::io::Error::last_os_error();
+        if e.raw_os_error() == Some(libc::ERANGE) && count > groups.len() {
+            groups.resize(count, 0);
+            continue;
+        }
+        return Err(e);
+    }
 }
 
 /// The credentials of the process at the other end of `stream`.
@@ -188,7 +213,7 @@ pub fn peer_of(stream: &UnixStream) -> std::io::Result<Peer> {
         pid: c.pid(),
         uid: c.uid(),
         gid: c.gid(),
-        groups: supplementary_groups(c.pid()),
+        groups: peer_groups(stream)?,
     })
 }
 
@@ -650,6 +675,79 @@ pub fn request_stop(socket: &Path, timeout: Duration) -> Result<Response, Client
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The peer's supplementary groups are the ones it had when it connected, also once
+    /// it has exited (its pid free for another process): a child with groups 4242 and 4343
+    /// connects and exits before the credentials are read. Read from /proc after the
+    /// accept (the earlier way), they come out empty here, or another process's. Root
+    /// only (setgroups); run as root as CI does.
+    #[test]
+    fn a_peers_groups_are_those_it_connected_with() {
+        let dir = std::env::temp_dir().join(format!("sv-groups-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("s.sock");
+        let listener = std::os::unix::net::UnixListener::bind(&path).unwrap();
+        // Same process: the groups are this process's own.
+        let me = UnixStream::connect(&path).unwrap();
+        let (accepted, _) = listener.accept().unwrap();
+        let mut own: Vec<u32> = nix::unistd::getgroups()
+            .unwrap()
+            .iter()
+            .map(|g| g.as_raw())
+            .collect();
+        let mut seen = peer_of(&accepted).unwrap().groups;
+        own.sort_unstable();
+        seen.sort_unstable();
+        assert_eq!(seen, own);
+        drop((me, accepted));
+        if !nix::unistd::geteuid().is_root() {
+            eprintln!("SKIPPED: setting a child's groups needs root");
+            return;
+        }
+        // A child that connects with groups of its own and exits at once.
+        // SAFETY: sockaddr_un is plain data; all zeros is a valid (empty) address.
+        let mut addr: libc::sockaddr_un = unsafe { std::mem::zeroed() };
+        addr.sun_family = libc::AF_UNIX as libc::sa_family_t;
+        for (d, s) in addr
+            .sun_path
+            .iter_mut()
+            .zip(path.as_os_str().as_encoded_bytes())
+        {
+            *d = *s as libc::c_char;
+        }
+        let groups: [libc::gid_t; 2] = [4242, 4343];
+        // SAFETY: the child calls only async-signal-safe functions (setgroups, socket,
+        // connect, _exit) on memory prepared before the fork.
+        let pid = unsafe { libc::fork() };
+        if pid == 0 {
+            // SAFETY: as above.
+            unsafe {
+                let code = if libc::setgroups(2, groups.as_ptr()) != 0 {
+                    2
+                } else {
+                    let fd = libc::socket(libc::AF_UNIX, libc::SOCK_STREAM, 0);
+                    let len = size_of::<libc::sockaddr_un>() as libc::socklen_t;
+                    if fd < 0 || libc::connect(fd, (&raw const addr).cast(), len) != 0 {
+                        3
+                    } else {
+                        0
+                    }
+                };
+                libc::_exit(code);
+            }
+        }
+        assert!(pid > 0, "fork");
+        let (accepted, _) = listener.accept().unwrap();
+        let mut status = 0;
+        // SAFETY: waits for the child just forked; `status` is a local.
+        assert_eq!(unsafe { libc::waitpid(pid, &mut status, 0) }, pid);
+        assert_eq!(libc::WEXITSTATUS(status), 0, "the child could not connect");
+        let mut seen = peer_of(&accepted).unwrap().groups;
+        seen.sort_unstable();
+        assert_eq!(seen, vec![4242, 4343], "the groups it connected with");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn policy_admits_owner_root_user_and_group_members_only() {
