@@ -3,10 +3,10 @@
 //! preview in every tick so that a file whose `planning` section is on runs the planner.
 #![no_main]
 
+use fes_model::control::file::Controller;
+use fes_model::control::pattern_generator::TickInput;
+use fes_model::control::preview::{Preview, PreviewPoint};
 use libfuzzer_sys::fuzz_target;
-use rt_core::control::file::Controller;
-use rt_core::control::pattern_generator::TickInput;
-use rt_core::control::preview::{Preview, PreviewPoint};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

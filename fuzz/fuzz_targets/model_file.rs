@@ -2,10 +2,10 @@
 //! required and simulates from rest to a finite force (what "accepted" promises).
 #![no_main]
 
+use fes_model::model::file;
+use fes_model::model::lmn::Stability;
+use fes_model::model::simulate::simulate;
 use libfuzzer_sys::fuzz_target;
-use rt_core::model::file;
-use rt_core::model::lmn::Stability;
-use rt_core::model::simulate::simulate;
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

@@ -13,7 +13,7 @@
 //!   the process's 0.48 over the step), and the LCN rose 24 % slower than scheduled on
 //!   the process (docs/heat-transfer.md, E.4.7).
 //! - **LCN**: per unit, the input-output pole placement with integral action of C.1
-//!   ([`fes_ident::control::io_design`]) for a rise time scheduled from 1000 ms nearly
+//!   ([`fes_model::control::io_design`]) for a rise time scheduled from 1000 ms nearly
 //!   closed (phi = 0) to 700 ms fully open (phi = 1) at the unit's peak, damping 1.2 (no
 //!   overshoot, as 6.5.3), interpolated by the same validity functions.
 //! - **Linear controller**: the same design for the interpolated model at alpha = 0.5 with
@@ -27,11 +27,11 @@
 //!   \[0, 1\] (the voltage cannot go negative), with the applied input fed back
 //!   (anti-reset-windup).
 
-use fes_ident::control::io_design::{IoDesignError, PolyController, PolyLcn, design};
 use fes_ident::ident::Learning;
 use fes_ident::ident::miso::MisoRecord;
-use fes_ident::model::miso::{MisoArx, MisoStructure};
-use fes_ident::model::validity::{KnotLayout, ValidityFunctions};
+use fes_model::control::io_design::{IoDesignError, PolyController, PolyLcn, design};
+use fes_model::model::miso::{MisoArx, MisoStructure};
+use fes_model::model::validity::{KnotLayout, ValidityFunctions};
 use serde::Serialize;
 
 use crate::{DELAY_ALPHA, DELAY_U, DelayTable, StudyError};

@@ -14,9 +14,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use fes_ident::control::io_design::PolyLcn;
 use fes_ident::ident::miso;
-use fes_ident::model::miso::MisoArx;
+use fes_model::control::io_design::PolyLcn;
+use fes_model::model::miso::MisoArx;
 use plotters::prelude::*;
 use sim_heat::experiment::{Experiment, Normalisation, all_records};
 use sim_heat::plant::{HeatParams, HeatPlant, TEST_ANGLES_DEG};

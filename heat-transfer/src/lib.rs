@@ -25,8 +25,8 @@ use fes_ident::ident::Learning;
 use fes_ident::ident::lm::LmOptions;
 use fes_ident::ident::miso::{self, MisoRecord};
 use fes_ident::ident::problem::Horizon;
-use fes_ident::model::miso::{MisoArx, MisoStructure};
-use fes_ident::model::validity::{KnotLayout, ValidityFunctions};
+use fes_model::model::miso::{MisoArx, MisoStructure};
+use fes_model::model::validity::{KnotLayout, ValidityFunctions};
 use serde::Serialize;
 use sim_heat::plant::{HeatParams, StepInput, TABLE_E1_DELAY_U, TEST_ANGLES_DEG, step_delay};
 
@@ -41,16 +41,16 @@ pub enum StudyError {
     Ident(#[from] fes_ident::ident::IdentError),
     /// A model structure.
     #[error(transparent)]
-    Model(#[from] fes_ident::model::miso::MisoError),
+    Model(#[from] fes_model::model::miso::MisoError),
     /// Validity functions.
     #[error(transparent)]
-    Validity(#[from] fes_ident::model::validity::ValidityError),
+    Validity(#[from] fes_model::model::validity::ValidityError),
     /// A controller design.
     #[error(transparent)]
-    Control(#[from] fes_ident::control::io_design::IoDesignError),
+    Control(#[from] fes_model::control::io_design::IoDesignError),
     /// The experiments' data set could not be written.
     #[error("writing the data set: {0}")]
-    Dataset(#[from] fes_ident::dataset::WriteError),
+    Dataset(#[from] fes_dataset::WriteError),
     /// A figure could not be drawn or written.
     #[error("{path}: drawing failed: {message}")]
     Figure {
@@ -299,7 +299,7 @@ pub fn records(
 /// `python/fes_io.py`, `matlab/load_fes_dataset.m`; `fes dataset inspect` describes it.
 pub fn write_dataset(p: &HeatParams, seed: u64, dir: &std::path::Path) -> Result<(), StudyError> {
     let set = sim_heat::experiment::dataset(p, seed)?;
-    set.write(dir, fes_ident::dataset::WriteMode::CreateNew)?;
+    set.write(dir, fes_dataset::WriteMode::CreateNew)?;
     Ok(())
 }
 
@@ -359,8 +359,8 @@ pub fn state_space_study(
     train: &[MisoRecord],
     test: &[MisoRecord],
 ) -> Result<Vec<SsRow>, StudyError> {
-    use fes_ident::model::local_model::{eigenvalue_from_eta, eta_from_eigenvalue};
-    use fes_ident::model::miso_ss::{Eigenvectors, MisoSs};
+    use fes_model::model::local_model::{eigenvalue_from_eta, eta_from_eigenvalue};
+    use fes_model::model::miso_ss::{Eigenvectors, MisoSs};
     let ts = arx.ts;
     let fast = -1.0 / 0.15;
     let eta = |e: f64| eta_from_eigenvalue(e, ts).unwrap_or(0.0);
@@ -394,7 +394,7 @@ pub fn state_space_study(
         let units: Vec<_> = (0..arx.units()).collect();
         let off = |i: usize| {
             (if ev == Eigenvectors::Common { 2 } else { 0 })
-                + i * fes_ident::model::miso_ss::unit_params(2, ev)
+                + i * fes_model::model::miso_ss::unit_params(2, ev)
         };
         rows.push(SsRow {
             model: if ev == Eigenvectors::Local {

@@ -8,7 +8,7 @@
 #[path = "../../crates/fes-model/tests/it/control_support.rs"]
 mod control_support;
 
-use rt_core::control::file::{Controller, ControllerSettings};
+use fes_model::control::file::{Controller, ControllerSettings};
 
 fn main() {
     let mut args = std::env::args().skip(1);

@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use rt_core::model::file::{self, FileError};
-use rt_core::model::{Lmn, NetworkError, ThesisForm, lmn::LmnError};
+use fes_model::model::file::{self, FileError};
+use fes_model::model::{Lmn, NetworkError, ThesisForm, lmn::LmnError};
 
 use crate::plant::{MusclePlant, Pulse};
 

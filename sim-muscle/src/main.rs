@@ -5,7 +5,7 @@ use std::io::{self, BufWriter, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use rt_core::rt::exit::Exit;
+use fes_rt::rt::exit::Exit;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -638,7 +638,7 @@ struct StimulatorCmd {
 fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
     // A panicking thread aborts the virtual stimulator (its output ends with it), as a
     // real stimulator's firmware would reset.
-    rt_core::rt::panic::install("sim-muscle stimulator");
+    fes_rt::rt::panic::install("sim-muscle stimulator");
     let ts_s = 1e-3;
     let s = &args.sensor;
     if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
@@ -676,7 +676,7 @@ struct Rehastim2Cmd {
 }
 
 fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
-    rt_core::rt::panic::install("sim-muscle rehastim2");
+    fes_rt::rt::panic::install("sim-muscle rehastim2");
     let s = &args.sensor;
     if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
     {

@@ -1,11 +1,11 @@
 //! Force-time integral of a plant's response (thesis 6.1). FTI and FTIpP themselves
-//! (eq. 6.2-6.3) live in `fes_ident::analysis::osp`, re-exported here.
+//! (eq. 6.2-6.3) live in `fes_ident::analysis::osp`.
 
 use crate::pattern::from_samples;
 use crate::plant::{MusclePlant, Pulse};
 use crate::simulate::simulate;
 
-pub use fes_ident::analysis::osp::{OspError, fti, ftipp};
+use fes_ident::analysis::osp::fti;
 
 /// FTI (eq. 6.2) of the response of `plant`, from rest, to supramaximal pulses at the
 /// sample indices `pulses`, over the window `[0, window ts)`. Choose `window` long enough

@@ -22,7 +22,7 @@
 //! Without a watched driver (`health.watch_stim_driver = false`) orders are sent once and
 //! taken as confirmed.
 
-use rt_core::msg::{
+use fes_rt::msg::{
     CommandAck, CommandRefusal, DeviceState, DriverCommand, DriverCommandKind, DriverStatus,
 };
 

@@ -62,7 +62,7 @@ pub struct IpcConfig {
 impl Default for IpcConfig {
     fn default() -> Self {
         Self {
-            prefix: rt_core::msg::service::DEFAULT_PREFIX.into(),
+            prefix: fes_rt::msg::service::DEFAULT_PREFIX.into(),
             node_name: "supervisor".into(),
         }
     }
@@ -285,7 +285,7 @@ impl SupervisorConfig {
     /// Checks every value; the error is (key, problem).
     pub fn validate(&self) -> Result<(), (String, String)> {
         let key = |section: &str, e: RangeError| (format!("{section}.{}", e.key), e.problem());
-        rt_core::msg::service::validate_prefix(&self.ipc.prefix)
+        fes_rt::msg::service::validate_prefix(&self.ipc.prefix)
             .map_err(|e| ("ipc.prefix".to_string(), e.to_string()))?;
         if self.ipc.node_name.is_empty() || self.ipc.node_name.len() > 64 {
             return Err(("ipc.node_name".into(), "must be 1..=64 characters".into()));

@@ -17,7 +17,7 @@
 
 use std::collections::VecDeque;
 
-use rt_core::msg::{DriverStatus, Reference};
+use fes_rt::msg::{DriverStatus, Reference};
 
 use crate::contraction::{BeatMeasurement, ContractionEstimator, ContractionSettings};
 use crate::health::{Cause, HealthEvent, NotReady, Process};
@@ -543,7 +543,7 @@ impl SupervisorCore {
     /// The setpoint changes scheduled after `now_ns` ([`crate::profile::ProfileRunner::preview`]),
     /// into `out`; none unless armed with a profile. Call after [`Self::reference`] for
     /// the same time.
-    pub fn preview(&self, now_ns: u64, out: &mut [rt_core::msg::PreviewEdge]) -> usize {
+    pub fn preview(&self, now_ns: u64, out: &mut [fes_rt::msg::PreviewEdge]) -> usize {
         match (&self.state, &self.profile) {
             (ArmState::Armed, Some(run)) => run.preview(now_ns, out),
             _ => 0,
@@ -775,7 +775,7 @@ mod tests {
     /// count rising between two 100 ms reports.
     #[test]
     fn a_beat_with_a_refused_pulse_leaves_the_outer_loop_correction_unchanged() {
-        use rt_core::msg::DeviceState;
+        use fes_rt::msg::DeviceState;
         let status = |seq: u64, t_ns: u64, rejected: u64| DriverStatus {
             seq,
             t_ns,

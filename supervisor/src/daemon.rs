@@ -13,17 +13,17 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
+use fes_rt::msg::service::{ServiceError, open_pubsub};
+use fes_rt::msg::{
+    Contract, DriverCommand, DriverStatus, ForceSample, PreviewEdge, PulseFate, PulseOutcome,
+    Reference, ReferencePreview, StimTick, TimingReport,
+};
+use fes_rt::msg::{PortError, port};
+use fes_rt::rt::clock::{monotonic_ns, sleep_until};
 use iceoryx2::node::NodeView;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use rt_core::msg::service::{ServiceError, open_pubsub};
-use rt_core::msg::{
-    Contract, DriverCommand, DriverStatus, ForceSample, PreviewEdge, PulseFate, PulseOutcome,
-    Reference, ReferencePreview, StimTick, TimingReport,
-};
-use rt_core::msg::{PortError, port};
-use rt_core::rt::clock::{monotonic_ns, sleep_until};
 
 use crate::command_link::{self, CommandLink, LinkEvent, LinkSettings, OrderRecord};
 use crate::config::{RecordingConfig, SupervisorConfig};
@@ -43,7 +43,7 @@ pub const POLL_MS: u64 = 5;
 pub enum DaemonError {
     /// The iceoryx2 node.
     #[error("iceoryx2: {0}")]
-    Node(#[from] rt_core::rt::node::RunError),
+    Node(#[from] fes_rt::rt::node::RunError),
     /// An iceoryx2 service.
     #[error("iceoryx2: {0}")]
     Service(#[from] ServiceError),
@@ -261,7 +261,7 @@ impl<'a> Daemon<'a> {
         } else {
             None
         };
-        let node = rt_core::rt::runner::create_node(&cfg.ipc.node_name)?;
+        let node = fes_rt::rt::node::create_node(&cfg.ipc.node_name)?;
         let ports = Ports::open(&node, cfg.ipc.prefix.as_str())?;
         let (tx, requests) = mpsc::channel::<Pending>();
         let server = ControlServer::start(&cfg.control, tx)?;

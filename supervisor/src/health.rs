@@ -16,7 +16,7 @@
 
 use std::collections::BTreeMap;
 
-use rt_core::msg::{
+use fes_rt::msg::{
     Contract, DeviceState, DriverStatus, ForceSample, StimTick, TimingReport, TimingSource,
 };
 use serde::{Deserialize, Serialize};
@@ -519,7 +519,7 @@ fn ms(ns: u64) -> f64 {
     ns as f64 * 1e-6
 }
 
-fn state_name(s: Result<DeviceState, rt_core::msg::ValidationError>) -> String {
+fn state_name(s: Result<DeviceState, fes_rt::msg::ValidationError>) -> String {
     match s {
         Ok(s) => format!("{s:?}"),
         Err(_) => "invalid".into(),
@@ -1258,7 +1258,7 @@ mod tests {
     /// own the supervisor compares the two processes with each other.
     #[test]
     fn a_process_enforcing_another_prescription_keeps_the_stack_from_arming() {
-        use rt_core::msg::LatencySummary;
+        use fes_rt::msg::LatencySummary;
         let report = |source: TimingSource, seq: u64, prescription: [u8; 6]| TimingReport {
             seq,
             t_ns: seq,

@@ -86,7 +86,7 @@ impl ReferenceLimits {
         if !(self.max_force.is_finite() && self.max_force > 0.0 && self.max_force <= 1.0) {
             return bad("max_force", format!("{} must be in (0, 1]", self.max_force));
         }
-        let top = rt_core::msg::Reference::MAX_RATE_PER_S;
+        let top = fes_rt::msg::Reference::MAX_RATE_PER_S;
         if !(self.max_rate_per_s.is_finite()
             && self.max_rate_per_s > 0.0
             && self.max_rate_per_s <= top)

@@ -6,7 +6,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use rt_core::rt::exit::Exit;
+use fes_rt::rt::exit::Exit;
 use supervisor::control::ClientError;
 
 mod cmd;

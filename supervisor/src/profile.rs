@@ -10,7 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use rt_core::msg::PreviewEdge;
+use fes_rt::msg::PreviewEdge;
 
 use crate::limits::{ReferenceLimits, Rejection};
 

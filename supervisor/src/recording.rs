@@ -39,7 +39,7 @@ use std::io::{BufWriter, Write};
 use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
 
-use rt_core::msg::{
+use fes_rt::msg::{
     DriverStatus, ForceSample, PulseFate, PulseOutcome, Reference, ReferencePreview, StimTick,
     TimingReport,
 };

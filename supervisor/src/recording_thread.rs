@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
 use crossbeam::channel::{Sender, TrySendError, bounded};
-use rt_core::msg::{
+use fes_rt::msg::{
     DriverStatus, ForceSample, PulseOutcome, Reference, ReferencePreview, StimTick, TimingReport,
 };
 
@@ -198,7 +198,7 @@ impl RecorderThread {
                         Message::Item(item) => apply(&mut rec, item).map_err(fail)?,
                     }
                 }
-                let now = close_at.unwrap_or_else(rt_core::rt::clock::monotonic_ns);
+                let now = close_at.unwrap_or_else(fes_rt::rt::clock::monotonic_ns);
                 rec.finish(now).map_err(fail)
             })?;
         Ok(Self {
@@ -270,7 +270,7 @@ impl RecorderThread {
 
     /// Waits for the writer (closing the run first if needed) and returns its summary.
     pub fn join(mut self) -> Result<RecordingSummary, JoinError> {
-        self.close(rt_core::rt::clock::monotonic_ns());
+        self.close(fes_rt::rt::clock::monotonic_ns());
         match self.handle.take().map(JoinHandle::join) {
             Some(Ok(Ok(s))) => Ok(s),
             Some(Ok(Err(e))) => Err(e.into()),
@@ -286,7 +286,7 @@ impl RecorderThread {
 
 impl Drop for RecorderThread {
     fn drop(&mut self) {
-        self.close(rt_core::rt::clock::monotonic_ns());
+        self.close(fes_rt::rt::clock::monotonic_ns());
         if let Some(h) = self.handle.take() {
             let _ = h.join();
         }

@@ -7,7 +7,7 @@
 use std::process::Command;
 
 use anyhow::{Context, bail};
-use rt_core::rt::histogram::LatencyHistogram;
+use fes_rt::rt::histogram::LatencyHistogram;
 
 /// cyclictest's result.
 #[derive(Debug, Clone, PartialEq, Eq)]

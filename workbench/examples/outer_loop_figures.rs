@@ -13,7 +13,7 @@ mod control_support;
 
 use std::path::{Path, PathBuf};
 
-use rt_core::control::file::{Controller, ControllerSettings};
+use fes_model::control::file::{Controller, ControllerSettings};
 use sim_muscle::muscle::MuscleConfig;
 use sim_muscle::preset::Preset;
 use supervisor::contraction::ContractionSettings;

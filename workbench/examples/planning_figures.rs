@@ -11,8 +11,8 @@
 
 use std::path::PathBuf;
 
-use rt_core::control::file::Controller;
-use rt_core::control::planner::PlanningMode;
+use fes_model::control::file::Controller;
+use fes_model::control::planner::PlanningMode;
 use sim_muscle::preset::Preset;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};

@@ -11,8 +11,8 @@
 //! pulse count of a 40 Hz train filling the whole contraction D, and the RMS tracking
 //! error of the matched train against the beat's square-wave reference.
 
+use fes_ident::analysis::osp::fti;
 use serde::{Deserialize, Serialize};
-use sim_muscle::metrics::fti;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::pattern::{constant_train, from_samples};
 use sim_muscle::plant::{MusclePlant, Pulse};

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Proc, Stdio};
 use std::time::{Duration, Instant};
 
-use rt_core::control::file::Controller;
+use fes_model::control::file::Controller;
 
 use supervisor::control;
 use supervisor::profile::ProfileSpec;

@@ -58,11 +58,11 @@ fn main() -> std::process::ExitCode {
         Command::Bench(args) => cmd::bench::run(args),
     };
     match result {
-        Ok(()) => rt_core::rt::exit::Exit::Done.into(),
+        Ok(()) => fes_rt::rt::exit::Exit::Done.into(),
         Err(e) => {
             // The format of anyhow's own `main` report: the error and its causes.
             eprintln!("Error: {e:?}");
-            rt_core::rt::exit::Exit::Failed.into()
+            fes_rt::rt::exit::Exit::Failed.into()
         }
     }
 }

@@ -7,9 +7,9 @@
 //! CPU for a minute of stimulation. The outer-loop tests and the fatigue figures of
 //! docs/bench.md use it; the bench checks the same loop across processes.
 
-use rt_core::control::file::Controller;
-use rt_core::control::pattern_generator::TickInput;
-use rt_core::msg::{PreviewEdge, ReferencePreview};
+use fes_model::control::file::Controller;
+use fes_model::control::pattern_generator::TickInput;
+use fes_rt::msg::{PreviewEdge, ReferencePreview};
 use rt_core::rt::reference::{ReferencePolicy, ReferenceTracker};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::plant::{MusclePlant, Pulse};
@@ -139,7 +139,7 @@ impl SimSettings {
 pub enum SimError {
     /// The controller cannot run.
     #[error("pattern generator: {0}")]
-    Generator(#[from] rt_core::control::pattern_generator::PatternGeneratorError),
+    Generator(#[from] fes_model::control::pattern_generator::PatternGeneratorError),
     /// The muscle or sensor settings are invalid.
     #[error("muscle: {0}")]
     Muscle(#[from] sim_muscle::ding::ParamError),
@@ -162,7 +162,7 @@ pub struct SimResult {
     /// Completed beats with the outer loop's reaction.
     pub beats: Vec<BeatRecord>,
     /// The planner's counters at the end (all zero without planning).
-    pub planner: rt_core::control::planner::PlannerStats,
+    pub planner: fes_model::control::planner::PlannerStats,
 }
 
 const MS: u64 = 1_000_000;

@@ -3,11 +3,11 @@
 //! option beside the thesis's reading, defaults as measured there.
 
 use clap::ValueEnum;
-use rt_core::control::file::ControllerSettings;
-use rt_core::control::lcn::AntiWindup;
-use rt_core::control::pattern_generator::FeedbackState;
-use rt_core::control::poles::{RiseTimeRule, ThirdPoleRule};
-use rt_core::control::shaper::ShaperSum;
+use fes_model::control::file::ControllerSettings;
+use fes_model::control::lcn::AntiWindup;
+use fes_model::control::pattern_generator::FeedbackState;
+use fes_model::control::poles::{RiseTimeRule, ThirdPoleRule};
+use fes_model::control::shaper::ShaperSum;
 
 /// `--rise-rule`: how a rise time becomes the dominant poles (docs/control.md, section 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -10,8 +10,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use fes_ident::ident::problem::{Horizon, ModelData, Problem, ThetaMap};
 use fes_ident::ident::{Hooks, IdentOptions, RecordSet, identify};
-use fes_ident::model::params::ParamLayout;
-use fes_ident::model::simulate::simulate;
+use fes_model::model::params::ParamLayout;
+use fes_model::model::simulate::simulate;
 use std::hint::black_box;
 use std::path::PathBuf;
 

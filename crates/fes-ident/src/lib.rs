@@ -6,9 +6,10 @@
 //! - [`ident`]: identification (2.3, 5.3, 5.4, App. B): knots, starts, Levenberg-Marquardt
 //!   with the analytic Jacobian, sweeps over unit counts.
 //! - [`analysis`]: static analysis and optimal stimulation patterns (2.4, 5.4.3, ch. 6).
-//! - [`dataset`]: the on-disk data-set format (the `fes-dataset` crate).
 //!
-//! Nothing here runs in real time or talks to another process.
+//! The equations are `fes_model`'s and the data-set format `fes_dataset`'s, named by those
+//! crates (nothing is re-exported). Nothing here runs in real time or talks to another
+//! process.
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
@@ -22,9 +23,3 @@ extern crate self as fes_ident;
 #[cfg(test)]
 #[path = "../tests/it/main.rs"]
 mod it;
-
-/// The data-set format, from the `fes-dataset` crate (`fes_ident::dataset`).
-pub use fes_dataset as dataset;
-/// The thesis's equations, from the `fes-model` crate (so that `crate::model` paths read
-/// as the thesis's terms).
-pub use fes_model::{control, model, num};

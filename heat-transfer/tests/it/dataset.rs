@@ -1,7 +1,7 @@
 //! `--data DIR`: the E.2 experiments written as the `fes-dataset/2` data set the study
 //! identifies from.
 
-use fes_ident::dataset::signals::SignalSet;
+use fes_dataset::signals::SignalSet;
 use sim_heat::HeatParams;
 
 #[test]

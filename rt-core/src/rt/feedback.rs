@@ -1,7 +1,7 @@
 //! [`FeedbackTracker`]: the newest valid measured force, for the feedback mode of the
 //! pattern generator (thesis Fig. 6.6(a)); too old a sample is not used.
 
-use crate::msg::{Contract, ForceSample, ValidationError};
+use fes_rt::msg::{Contract, ForceSample, ValidationError};
 
 /// Why a received force sample was not used.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

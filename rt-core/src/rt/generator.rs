@@ -2,11 +2,11 @@
 //! source's decision, a [`StimTick`] out. The iceoryx2 adapter ([`super::runner`]) feeds it
 //! and publishes what it returns; tests drive it with mock wake-ups.
 
-use super::clock::Wakeup;
 use super::feedback::{FeedbackRejection, FeedbackTracker};
 use super::reference::{ReferencePolicy, ReferenceRejection, ReferenceTracker};
 use super::source::{TickDecision, TickSource};
-use crate::msg::{ForceSample, Reference, ReferencePreview, StimTick};
+use fes_rt::msg::{ForceSample, Reference, ReferencePreview, StimTick};
+use fes_rt::rt::clock::Wakeup;
 
 /// Pulse parameters of every fired pulse (supramaximal pulses: amplitude and width are
 /// fixed; the generator only decides *when*, thesis 6.5.2).

@@ -47,13 +47,13 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::clock::{MAX_PERIOD, MIN_PERIOD};
-use super::config::{RtConfig, RtConfigError};
-use super::config_file::{self, FileError};
 use super::generator::PulseSettings;
 use super::reference::ReferencePolicy;
-use crate::msg::StimTick;
-use crate::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
+use fes_rt::msg::StimTick;
+use fes_rt::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
+use fes_rt::rt::clock::{MAX_PERIOD, MIN_PERIOD};
+use fes_rt::rt::config::{RtConfig, RtConfigError};
+use fes_rt::rt::config_file::{self, FileError};
 
 /// The schema tag this version reads.
 pub const SCHEMA: &str = "fes-rt-core/1";
@@ -189,7 +189,7 @@ pub struct TelemetryConfig {
     /// Tick records the queue to the telemetry thread holds (16..=1048576).
     pub queue_capacity: usize,
     /// Keep the backtrace of the loop's first heap allocation, if one happens, and log it
-    /// at exit (`rt_core::rt::alloc::trace_first_heap_allocation`; costs nothing until
+    /// at exit (`fes_rt::rt::alloc::trace_first_heap_allocation`; costs nothing until
     /// then). Default true.
     pub trace_allocations: bool,
 }

@@ -2,8 +2,8 @@
 //! tick: it holds the newest valid reference, applies its ramp limit, and ramps the target
 //! to zero when the reference goes stale (the supervisor stopped refreshing it).
 
-use crate::control::preview::{MAX_PREVIEW_POINTS, Preview, PreviewPoint};
-use crate::msg::{Contract, PreviewEdge, Reference, ReferencePreview, ValidationError};
+use fes_model::control::preview::{MAX_PREVIEW_POINTS, Preview, PreviewPoint};
+use fes_rt::msg::{Contract, PreviewEdge, Reference, ReferencePreview, ValidationError};
 
 /// How a reference ages. Read from the process configuration; never changed in the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -259,4 +259,4 @@ impl ReferenceTracker {
     }
 }
 
-use crate::control::preview::slew;
+use fes_model::control::preview::slew;

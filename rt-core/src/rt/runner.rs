@@ -21,19 +21,19 @@ use iceoryx2::prelude::*;
 
 use fes_rt::msg::port;
 use fes_rt::rt::node::connect_err;
-pub use fes_rt::rt::node::{RunError, create_node};
+use fes_rt::rt::node::{RunError, create_node};
 
-use super::alloc;
-use super::clock::{PeriodicClock, Wakeup, monotonic_ns};
 use super::generator::{PatternLoop, StepEvents};
-use super::hlog::HlogWriter;
 use super::process_config::RtCoreConfig;
-use super::realtime::{RtStatus, enter_realtime};
 use super::source::TickSource;
-use super::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
-use crate::msg::{
+use fes_rt::msg::{
     Contract, ForceSample, Reference, ReferencePreview, StimTick, TimingReport, TimingSource,
 };
+use fes_rt::rt::alloc;
+use fes_rt::rt::clock::{PeriodicClock, Wakeup, monotonic_ns};
+use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::realtime::{RtStatus, enter_realtime};
+use fes_rt::rt::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
 
 /// How a finished real-time loop went.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -9,11 +9,11 @@ use std::path::Path;
 use std::time::Duration;
 
 use super::reference::Target;
-use crate::control::file::{Controller, ControllerFileError};
-use crate::control::pattern_generator::{
+use fes_model::control::file::{Controller, ControllerFileError};
+use fes_model::control::pattern_generator::{
     FeedbackMode, PatternGenerator, PatternGeneratorError, TickInput,
 };
-use crate::control::planner::{Deadline, PlannerStats};
+use fes_model::control::planner::{Deadline, PlannerStats};
 
 /// The decision of one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -180,7 +180,7 @@ struct ClockDeadline {
 impl Deadline for ClockDeadline {
     #[inline]
     fn expired(&mut self) -> bool {
-        super::clock::monotonic_ns() >= self.until_ns
+        fes_rt::rt::clock::monotonic_ns() >= self.until_ns
     }
 }
 
@@ -203,7 +203,7 @@ impl TickSource for ControllerSource {
         let out = match self.plan_budget_ns {
             Some(budget) => {
                 let mut deadline = ClockDeadline {
-                    until_ns: super::clock::monotonic_ns().saturating_add(budget),
+                    until_ns: fes_rt::rt::clock::monotonic_ns().saturating_add(budget),
                 };
                 self.generator.tick_within(&input, &mut deadline)
             }

@@ -4,7 +4,7 @@
 //! probe, and does not count its own allocations. The trace is process-wide: the test holds `exclusive_allocator`.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use rt_core::rt::alloc::{
+use fes_rt::rt::alloc::{
     self, current_thread_allocations, take_first_heap_allocation, trace_first_heap_allocation,
     track_current_thread, untraced,
 };

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use rt_core::rt::clock::{PeriodicClock, monotonic_ns};
+use fes_rt::rt::clock::{PeriodicClock, monotonic_ns};
 
 #[test]
 fn wakeups_stay_on_the_grid_without_drift() {

@@ -7,11 +7,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+use fes_rt::rt::probe::{ProbeSummary, TickRecord, read_records};
+use fes_rt::rt::{MissingRightsPolicy, RtConfig};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
-use rt_core::rt::probe::{ProbeSummary, TickRecord, read_records};
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
-use rt_core::rt::{MissingRightsPolicy, RtConfig};
 
 pub const RT_CORE: &str = env!("CARGO_BIN_EXE_rt-core");
 pub const RT_PROBE: &str = env!("CARGO_BIN_EXE_rt-probe");
@@ -178,21 +178,25 @@ use crate::control_support;
 
 /// Designs a controller for the control tests' fast-muscle-like LMN with `units` units
 /// (thesis Table 6.1 rise times, xi = 1.2) through the control library, and writes it.
-pub fn write_controller(path: &Path, units: usize) -> rt_core::control::file::Controller {
+pub fn write_controller(path: &Path, units: usize) -> fes_model::control::file::Controller {
     write_controller_with(
         path,
         units,
-        rt_core::control::file::ControllerSettings::default(),
+        fes_model::control::file::ControllerSettings::default(),
     )
 }
 
 /// [`write_controller`] for the measured-force mode (estimator poles from a 5 ms rise time,
 /// xi = 1.2, as in the control library's benchmark).
-pub fn write_measured_controller(path: &Path, units: usize) -> rt_core::control::file::Controller {
-    use rt_core::control::design::EstimatorPoles;
-    use rt_core::control::file::ControllerSettings;
-    use rt_core::control::pattern_generator::FeedbackMode;
-    let [p1, p2] = rt_core::control::poles::dominant_pair(0.005, 1.2, control_support::TS).unwrap();
+pub fn write_measured_controller(
+    path: &Path,
+    units: usize,
+) -> fes_model::control::file::Controller {
+    use fes_model::control::design::EstimatorPoles;
+    use fes_model::control::file::ControllerSettings;
+    use fes_model::control::pattern_generator::FeedbackMode;
+    let [p1, p2] =
+        fes_model::control::poles::dominant_pair(0.005, 1.2, control_support::TS).unwrap();
     write_controller_with(
         path,
         units,
@@ -207,9 +211,9 @@ pub fn write_measured_controller(path: &Path, units: usize) -> rt_core::control:
 fn write_controller_with(
     path: &Path,
     units: usize,
-    settings: rt_core::control::file::ControllerSettings,
-) -> rt_core::control::file::Controller {
-    use rt_core::control::file::Controller;
+    settings: fes_model::control::file::ControllerSettings,
+) -> fes_model::control::file::Controller {
+    use fes_model::control::file::Controller;
     let controller = Controller::design(
         control_support::fast_muscle(units),
         &control_support::table_6_1_specs(units),

@@ -3,9 +3,9 @@
 
 use std::path::PathBuf;
 
-use rt_core::rt::config_file::FileError;
+use fes_rt::rt::config_file::FileError;
+use fes_rt::rt::{MissingRightsPolicy, RtConfig};
 use rt_core::rt::process_config::{ConfigError, RtCoreConfig, SCHEMA, SourceConfig};
-use rt_core::rt::{MissingRightsPolicy, RtConfig};
 
 #[test]
 fn a_minimal_file_gets_the_documented_defaults() {

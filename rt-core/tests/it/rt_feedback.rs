@@ -1,6 +1,6 @@
 //! `rt_core::rt::feedback` (moved from its unit tests: the crate has one test binary).
 
-use rt_core::msg::ForceSample;
+use fes_rt::msg::ForceSample;
 use rt_core::rt::feedback::*;
 
 fn sample(seq: u64, t_ns: u64, force: f64) -> ForceSample {

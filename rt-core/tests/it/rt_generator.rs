@@ -1,9 +1,9 @@
 //! `rt_core::rt::generator` (moved from its unit tests: the crate has one test binary).
 
 use core::time::Duration;
-use rt_core::msg::Contract;
-use rt_core::msg::{Reference, StimTick};
-use rt_core::rt::clock::PeriodicSchedule;
+use fes_rt::msg::Contract;
+use fes_rt::msg::{Reference, StimTick};
+use fes_rt::rt::clock::PeriodicSchedule;
 use rt_core::rt::generator::*;
 use rt_core::rt::reference::ReferencePolicy;
 use rt_core::rt::reference::Target;
@@ -175,7 +175,7 @@ fn skipped_periods_are_told_to_the_source_before_its_one_decision() {
 /// otherwise (a transport carrying one command at a time keeps its line free meanwhile).
 #[test]
 fn contraction_ahead_is_flagged_from_the_preview_and_while_contracting() {
-    use rt_core::msg::{PreviewEdge, ReferencePreview};
+    use fes_rt::msg::{PreviewEdge, ReferencePreview};
     let mut l = loop_of(TestPattern::new(1000).unwrap(), TINY, false);
     let mut sched = PeriodicSchedule::new(Duration::from_millis(1), MS).unwrap();
     let edge = |ms: u64, force| PreviewEdge {

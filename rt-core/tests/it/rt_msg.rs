@@ -4,8 +4,8 @@
 
 use core::mem::{align_of, offset_of, size_of};
 
-use rt_core::msg::service::{TOPIC_STIM_TICK, service_name, validate_prefix};
-use rt_core::msg::*;
+use fes_rt::msg::service::{TOPIC_STIM_TICK, service_name, validate_prefix};
+use fes_rt::msg::*;
 
 fn type_name<T: ZeroCopySend>() -> &'static str {
     // SAFETY: only reads the constant name string of the derive.
@@ -785,15 +785,15 @@ fn quiet_and_firing_ticks_are_valid_and_say_what_they_are() {
 /// References and DriverCommands and only rt-core sends StimTicks.
 #[test]
 fn a_second_publisher_of_a_commanding_service_is_refused() {
-    use rt_core::msg::{DriverCommand, port};
-    use rt_core::rt::runner::create_node;
+    use fes_rt::msg::{DriverCommand, port};
+    use fes_rt::rt::node::create_node;
     fn second_is_refused<M: Contract + std::fmt::Debug>(prefix: &str) {
         let node = create_node("test-publishers").unwrap();
         let first = port::publisher::<M>(&node, prefix);
         assert!(first.is_ok(), "{}: {:?}", M::TOPIC, first.err());
         let second = port::publisher::<M>(&node, prefix);
         assert!(
-            matches!(second, Err(rt_core::msg::PortError::Publisher { .. })),
+            matches!(second, Err(fes_rt::msg::PortError::Publisher { .. })),
             "{}: a second publisher was made",
             M::TOPIC
         );
@@ -812,9 +812,9 @@ fn a_second_publisher_of_a_commanding_service_is_refused() {
 /// publisher is admitted.
 #[test]
 fn a_service_another_process_created_with_more_publishers_is_refused() {
-    use rt_core::msg::service::{ServiceError, open_pubsub};
-    use rt_core::msg::{DriverCommand, PortError, port};
-    use rt_core::rt::runner::create_node;
+    use fes_rt::msg::service::{ServiceError, open_pubsub};
+    use fes_rt::msg::{DriverCommand, PortError, port};
+    use fes_rt::rt::node::create_node;
     fn squatted_is_refused<M: Contract + std::fmt::Debug>(prefix: &str) {
         let squatter = create_node("test-squatter").unwrap();
         let name = service_name(prefix, M::TOPIC).unwrap();

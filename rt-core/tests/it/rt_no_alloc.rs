@@ -6,15 +6,16 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use rt_core::msg::port;
-use rt_core::msg::service::{open_pubsub, open_stim_tick_event};
-use rt_core::msg::{Contract, Reference, StimTick};
-use rt_core::rt::clock::monotonic_ns;
+use fes_rt::msg::port;
+use fes_rt::msg::service::{open_pubsub, open_stim_tick_event};
+use fes_rt::msg::{Contract, Reference, StimTick};
+use fes_rt::rt::clock::monotonic_ns;
+use fes_rt::rt::node::create_node;
+use fes_rt::rt::telemetry::TelemetryChannel;
+use fes_rt::rt::{MissingRightsPolicy, RtConfig};
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
-use rt_core::rt::runner::{create_node, run_pattern_loop};
+use rt_core::rt::runner::run_pattern_loop;
 use rt_core::rt::source::{ControllerSource, TestPattern, TickSource};
-use rt_core::rt::telemetry::TelemetryChannel;
-use rt_core::rt::{MissingRightsPolicy, RtConfig};
 
 use crate::rt_common;
 
@@ -165,7 +166,7 @@ fn peers_connecting_while_the_loop_runs_are_counted_apart_from_the_hot_path() {
         counters.hot_path_allocations,
         0,
         "heap allocation on the hot path: {:?}",
-        rt_core::rt::alloc::take_first_heap_allocation().map(|t| t.to_string())
+        fes_rt::rt::alloc::take_first_heap_allocation().map(|t| t.to_string())
     );
     assert!(
         counters.connection_allocations > 0,

@@ -8,17 +8,17 @@ use crate::rt_common;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use fes_model::control::file::Controller;
+use fes_model::control::pattern_generator::TickInput;
+use fes_rt::msg::port;
+use fes_rt::msg::{Contract, ForceSample, Reference, StimTick, TimingReport};
+use fes_rt::rt::clock::monotonic_ns;
+use fes_rt::rt::hlog::merge_by_tag;
+use fes_rt::rt::node::create_node;
+use fes_rt::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE};
 use nix::sys::signal::Signal;
 use rt_common::*;
-use rt_core::control::file::Controller;
-use rt_core::control::pattern_generator::TickInput;
-use rt_core::msg::port;
-use rt_core::msg::{Contract, ForceSample, Reference, StimTick, TimingReport};
-use rt_core::rt::clock::monotonic_ns;
-use rt_core::rt::hlog::merge_by_tag;
 use rt_core::rt::process_config::{PulseConfig, RtCoreConfig, SourceConfig};
-use rt_core::rt::runner::create_node;
-use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -470,7 +470,7 @@ fn a_missing_core_is_refused_in_one_line_or_run_best_effort_as_configured() {
     let prefix = prefix("nocore");
     let mut config = config(&prefix, 4);
     config.rt.core = Some(512);
-    config.rt.on_missing_rights = rt_core::rt::MissingRightsPolicy::Refuse;
+    config.rt.on_missing_rights = fes_rt::rt::MissingRightsPolicy::Refuse;
     let path = write_config(&dir, &config);
     let (status, stderr) = start_rt_core(&path, false).finish(Duration::from_secs(10));
     assert_eq!(status.code(), Some(1), "{stderr}");
@@ -482,7 +482,7 @@ fn a_missing_core_is_refused_in_one_line_or_run_best_effort_as_configured() {
         refusal[0]
     );
 
-    config.rt.on_missing_rights = rt_core::rt::MissingRightsPolicy::BestEffort;
+    config.rt.on_missing_rights = fes_rt::rt::MissingRightsPolicy::BestEffort;
     let path = write_config(&dir, &config);
     let probe = start_probe(&dir, &prefix);
     let rt = start_rt_core(&path, false);
@@ -507,7 +507,7 @@ fn without_sched_fifo_rights_it_refuses_or_runs_best_effort_as_configured() {
     let dir = Scratch::new("norights");
     let prefix = prefix("norights");
     let mut config = config(&prefix, 4);
-    config.rt.on_missing_rights = rt_core::rt::MissingRightsPolicy::Refuse;
+    config.rt.on_missing_rights = fes_rt::rt::MissingRightsPolicy::Refuse;
     let path = write_config(&dir, &config);
     let (status, stderr) = start_rt_core(&path, true).finish(Duration::from_secs(10));
     assert_eq!(status.code(), Some(1), "{stderr}");
@@ -519,7 +519,7 @@ fn without_sched_fifo_rights_it_refuses_or_runs_best_effort_as_configured() {
         refusal[0]
     );
 
-    config.rt.on_missing_rights = rt_core::rt::MissingRightsPolicy::BestEffort;
+    config.rt.on_missing_rights = fes_rt::rt::MissingRightsPolicy::BestEffort;
     let path = write_config(&dir, &config);
     let probe = start_probe(&dir, &prefix);
     let rt = start_rt_core(&path, true);
@@ -621,9 +621,9 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
 /// stopped one's buffer holds (so the publisher has met a full buffer), then gets SIGTERM.
 pub struct SlowConsumerRun {
     /// What the live probe (rt-probe) recorded.
-    pub summary: rt_core::rt::probe::ProbeSummary,
+    pub summary: fes_rt::rt::probe::ProbeSummary,
     /// Its ticks.
-    pub ticks: Vec<rt_core::rt::probe::TickRecord>,
+    pub ticks: Vec<fes_rt::rt::probe::TickRecord>,
     /// The host's noise over the run, when asked for.
     pub noise: Option<fes_testkit::noise::HostNoise>,
 }

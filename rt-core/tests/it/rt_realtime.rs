@@ -11,8 +11,8 @@ use crate::rt_common;
 
 use std::process::Command;
 
-use rt_core::rt::realtime::RtShortfall;
-use rt_core::rt::{MissingRightsPolicy, RtConfig, RtError, enter_realtime};
+use fes_rt::rt::realtime::RtShortfall;
+use fes_rt::rt::{MissingRightsPolicy, RtConfig, RtError, enter_realtime};
 
 fn policy_and_priority() -> (i32, i32) {
     let mut policy = 0;

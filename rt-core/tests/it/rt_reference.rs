@@ -1,7 +1,7 @@
 //! `rt_core::rt::reference` (moved from its unit tests: the crate has one test binary).
 
-use rt_core::control::preview::PreviewPoint;
-use rt_core::msg::{PreviewEdge, Reference, ReferencePreview};
+use fes_model::control::preview::PreviewPoint;
+use fes_rt::msg::{PreviewEdge, Reference, ReferencePreview};
 use rt_core::rt::reference::*;
 
 const MS: u64 = 1_000_000;

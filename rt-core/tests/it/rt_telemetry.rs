@@ -6,14 +6,14 @@
 use std::time::{Duration, SystemTime};
 
 use base64::Engine;
-use hdrhistogram::serialization::Deserializer;
-use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};
-use rt_core::msg::{Contract, TimingSource};
-use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::{HlogWriter, merge_by_tag, read_intervals};
-use rt_core::rt::telemetry::{
+use fes_rt::msg::{Contract, TimingSource};
+use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::rt::hlog::{HlogWriter, merge_by_tag, read_intervals};
+use fes_rt::rt::telemetry::{
     TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE, TelemetryChannel, TickTiming, TimingAggregator,
 };
+use hdrhistogram::serialization::Deserializer;
+use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};
 
 /// HdrHistogram with 3 significant digits: any reported value is within 0.1 % of the truth.
 fn close(got: u64, exact: u64) -> bool {

@@ -1,6 +1,6 @@
 //! The stimulator's only timing primitives: CLOCK_MONOTONIC now, and an absolute-time
 //! sleep (`clock_nanosleep` with TIMER_ABSTIME). Kept in one place so the loop can move
-//! to the workspace's shared real-time module (`rt_core::rt`) by changing only this file.
+//! to the workspace's shared real-time module (`fes_rt::rt`) by changing only this file.
 
 use nix::errno::Errno;
 use nix::sys::time::TimeSpec;

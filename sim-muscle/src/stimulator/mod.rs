@@ -204,7 +204,7 @@ pub fn run_rehastim2(
     mut plant: Box<dyn MusclePlant>,
 ) -> anyhow::Result<()> {
     install_signal_handlers()?;
-    rt_core::rt::logging::init("sim-muscle");
+    fes_rt::rt::logging::init("sim-muscle");
     let summary = rehastim2_pty::run_rehastim2_until(&args, plant.as_mut(), &SIGNALLED)?;
     tracing::info!(
         "virtual RehaStim 2 stopped: {} ticks, {} packets, {} bad, {} pulses, {} answer bytes dropped, {} -8 busy and {} -3 wrong-mode answers sent, {} commands processed slowly",
@@ -228,7 +228,7 @@ pub fn run_until(
 ) -> anyhow::Result<RunSummary> {
     // The journal with priorities under systemd, stderr otherwise; the filter is RUST_LOG.
     // A subscriber installed already (a test's process) stays.
-    rt_core::rt::logging::init("sim-muscle");
+    fes_rt::rt::logging::init("sim-muscle");
     let settings = args.settings()?;
     let ts = plant.ts();
     if (ts - 1e-3).abs() > 1e-12 {

@@ -24,7 +24,7 @@ use nix::sys::termios::{
 use super::clock::{monotonic_ns, sleep_until};
 use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS, TestFault};
 use crate::plant::MusclePlant;
-use rt_core::msg::{Contract as _, ForceSample};
+use fes_rt::msg::{Contract as _, ForceSample};
 
 /// `sim-muscle rehastim2 --processing-ms`'s default, ms: the device as HASOMED documents it
 /// (answers on average under 20 ms, §2.3; 5-15 ms here, 3 % at 100 ms). The library's
@@ -189,12 +189,12 @@ impl ForceOut {
             )));
         }
         let node =
-            rt_core::rt::node::create_node("sim-muscle-rehastim2").map_err(|e| PtyError::Ipc {
+            fes_rt::rt::node::create_node("sim-muscle-rehastim2").map_err(|e| PtyError::Ipc {
                 what: "the iceoryx2 node for ForceSample",
                 source: Box::new(e),
             })?;
         let publisher =
-            rt_core::msg::port::publisher::<ForceSample>(&node, prefix).map_err(|e| {
+            fes_rt::msg::port::publisher::<ForceSample>(&node, prefix).map_err(|e| {
                 PtyError::Ipc {
                     what: "the ForceSample publisher",
                     source: Box::new(e),

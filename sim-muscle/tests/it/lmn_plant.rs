@@ -1,13 +1,13 @@
 //! An LMN model file as the muscle: the plant's samples equal rt-core's own free-run
-//! simulation of the model (`rt_core::model::simulate::simulate`), scaled to newtons and
+//! simulation of the model (`fes_model::model::simulate::simulate`), scaled to newtons and
 //! aligned to the MusclePlant timing; the CLI runs it with `--model`.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use crate::support;
 
 use fes_dataset::DataSet;
-use rt_core::model::file;
-use rt_core::model::lmn::Stability;
+use fes_model::model::file;
+use fes_model::model::lmn::Stability;
 use sim_muscle::lmn_plant::{LmnPlant, LmnPlantError};
 use sim_muscle::pattern::from_samples;
 use sim_muscle::plant::{MusclePlant, Pulse};
@@ -45,7 +45,7 @@ fn plant_equals_rt_core_simulation() {
     let train = from_samples(&PULSES, n);
     let u: Vec<f64> = train.iter().map(|&p| if p { 1.0 } else { 0.0 }).collect();
     let mut y = vec![0.0; n];
-    rt_core::model::simulate::simulate(&net, &u, &mut y).expect("simulate");
+    fes_model::model::simulate::simulate(&net, &u, &mut y).expect("simulate");
     let mut plant = LmnPlant::new(&lmn).expect("plant");
     let force = simulate(&mut plant, &train, Pulse::SUPRAMAXIMAL);
     for k in 0..n {

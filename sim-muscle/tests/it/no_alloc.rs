@@ -2,7 +2,7 @@
 //! 7.5 ms delay and a sensor) must not allocate. A counting global allocator checks it.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use rt_core::rt::alloc::{self, CountingAllocator};
+use fes_rt::rt::alloc::{self, CountingAllocator};
 use sim_muscle::ding::FatigueParams;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::plant::{MusclePlant, Pulse};

@@ -3,8 +3,9 @@
 //! curves, and, with the fatigue extension, a steady loss of force.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
+use fes_ident::analysis::osp::ftipp;
 use sim_muscle::ding::FatigueParams;
-use sim_muscle::metrics::{ftipp, response_fti};
+use sim_muscle::metrics::response_fti;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::pattern::{constant_train, from_samples};
 use sim_muscle::plant::{MusclePlant, Pulse};

@@ -242,7 +242,7 @@ fn finish(r: Response) -> anyhow::Result<()> {
         Ok(())
     } else {
         eprintln!("refused: {}", r.error.unwrap_or_default());
-        std::process::exit(rt_core::rt::exit::Exit::Failed.code().into());
+        std::process::exit(fes_rt::rt::exit::Exit::Failed.code().into());
     }
 }
 
@@ -375,10 +375,10 @@ pub enum OrderError {
 
 impl OrderError {
     /// The exit status (README "Exit codes").
-    pub fn exit(&self) -> rt_core::rt::exit::Exit {
+    pub fn exit(&self) -> fes_rt::rt::exit::Exit {
         match self {
-            OrderError::ArmRefused(_) => rt_core::rt::exit::Exit::Failed,
-            OrderError::NotAcknowledged(_) => rt_core::rt::exit::Exit::Fault,
+            OrderError::ArmRefused(_) => fes_rt::rt::exit::Exit::Failed,
+            OrderError::NotAcknowledged(_) => fes_rt::rt::exit::Exit::Fault,
         }
     }
 }

@@ -29,7 +29,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     // A panicking thread aborts the daemon: the driver's supervisor watch sees its node
     // dead and stops the stimulator.
-    rt_core::rt::panic::install("supervisor");
+    fes_rt::rt::panic::install("supervisor");
     if args.print_example_config {
         print!("{EXAMPLE}");
         return Ok(());
@@ -40,8 +40,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     // The journal with priorities under systemd, stderr otherwise; the filter is RUST_LOG.
-    rt_core::rt::logging::init("supervisor");
-    let stop = rt_core::rt::signals::install_stop_handler().context("signal handlers")?;
+    fes_rt::rt::logging::init("supervisor");
+    let stop = fes_rt::rt::signals::install_stop_handler().context("signal handlers")?;
     let outcome = daemon::run(&cfg, stop, |socket| {
         tracing::info!("supervisor ready; control socket {}", socket.display());
         eprintln!("supervisor: ready (control socket {})", socket.display());
@@ -52,7 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match outcome.fault {
         Some(f) => {
             eprintln!("supervisor: stopped with fault: {f}");
-            std::process::exit(rt_core::rt::exit::Exit::Fault.code().into());
+            std::process::exit(fes_rt::rt::exit::Exit::Fault.code().into());
         }
         None => {
             eprintln!("supervisor: stopped");

@@ -5,11 +5,11 @@
 //! confirmed. After a final quiet phase (nothing lost): every stop is acknowledged and the
 //! driver is stopped; an unacknowledged arm has ended in an event.
 
-use proptest::prelude::*;
-use rt_core::msg::{
+use fes_rt::msg::{
     CommandRefusal, CommandResult, Contract, DeviceState, DriverCommand, DriverCommandKind,
     DriverStatus,
 };
+use proptest::prelude::*;
 use supervisor::command_link::{CommandLink, LinkEvent, LinkSettings, OrderRecord, Outcome};
 use supervisor::core::DriverOrder;
 

@@ -16,8 +16,8 @@
 //! A liveness companion keeps these from holding by never arming.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
+use fes_rt::msg::{DeviceState, DriverStatus, ForceSample, Reference, StimTick};
 use proptest::prelude::*;
-use rt_core::msg::{DeviceState, DriverStatus, ForceSample, Reference, StimTick};
 use supervisor::contraction::ContractionSettings;
 use supervisor::core::{ArmState, DriverOrder, SupervisorCore};
 use supervisor::health::{

@@ -28,14 +28,14 @@ use std::time::Duration;
 use anyhow::{Context as _, anyhow, bail};
 use clap::Parser;
 use fes_can::Nodes;
-use rt_core::msg::port;
-use rt_core::msg::{DeviceState, DriverCommand, DriverCommandKind, LatencySummary};
-use rt_core::rt::alloc::CountingAllocator;
-use rt_core::rt::clock::{monotonic_ns, sleep_until};
-use rt_core::rt::hlog::HlogWriter;
-use rt_core::rt::runner::create_node;
-use rt_core::rt::signals::install_stop_handler;
-use rt_core::rt::{MissingRightsPolicy, RtConfig, enter_realtime};
+use fes_rt::msg::port;
+use fes_rt::msg::{DeviceState, DriverCommand, DriverCommandKind, LatencySummary};
+use fes_rt::rt::alloc::CountingAllocator;
+use fes_rt::rt::clock::{monotonic_ns, sleep_until};
+use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::node::create_node;
+use fes_rt::rt::signals::install_stop_handler;
+use fes_rt::rt::{MissingRightsPolicy, RtConfig, enter_realtime};
 use serde::Serialize;
 use sim_muscle::stimulator::machine::{Settings, Stimulator, TICK_NS, Tick};
 use sim_muscle::stimulator::outbox::Outbox;
@@ -136,13 +136,13 @@ impl From<LatencySummary> for Latency {
 }
 
 fn main() -> ExitCode {
-    rt_core::rt::logging::init("driver-latency");
+    fes_rt::rt::logging::init("driver-latency");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     match run(&Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
-            rt_core::rt::exit::Exit::Failed.into()
+            tracing::error!("{}", fes_rt::rt::error_text::one_line(e.as_ref()));
+            fes_rt::rt::exit::Exit::Failed.into()
         }
     }
 }

@@ -8,10 +8,10 @@
 use std::sync::Arc;
 
 use fes_can::{Heartbeat, Message as CanMessage, Nmt, NmtCommand, NmtState, Nodes, Pulse};
+use fes_rt::rt::alloc;
 use fes_sciencemode::{
     AckResult, Decoder, MAX_PACKET_LEN, Message, Packet, StimulationError, StimulationMode,
 };
-use rt_core::rt::alloc;
 use stim_driver::event::BusEvent;
 use stim_driver::serial_rx::{Receiver, SerialLink};
 use stim_driver::serial_tx::ScienceModeTx;

@@ -3,7 +3,7 @@
 //! rejected frames (CRC, counter, length, state, rate), a watchdog fault and re-arming.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use rt_core::rt::alloc::{self, CountingAllocator};
+use fes_rt::rt::alloc::{self, CountingAllocator};
 
 /// The project's counting allocator; only the measuring thread is tracked (libtest's own
 /// threads allocate meanwhile). Its small-block pool counts too: zero means zero.

@@ -15,8 +15,8 @@ use fes_ident::analysis::validation::{RecordFit, fit_record, msse};
 use fes_ident::ident::validation::{
     RESID_LAGS, Trace, Validation as FieldValidation, fit_and_rrse, resid,
 };
-use rt_core::model::lmn::UnitStability;
-use rt_core::model::{Lmn, Network, Scheduler};
+use fes_model::model::lmn::UnitStability;
+use fes_model::model::{Lmn, Network, Scheduler};
 use sim_muscle::pattern::constant_train;
 
 use super::inputs::{

@@ -484,7 +484,7 @@ fn summarise_recording(
         );
     };
     // The same muscle and sensor as the stimulator's, simulated for the CFT front.
-    let front = rt_core::control::file::Controller::load(a.controller())
+    let front = fes_model::control::file::Controller::load(a.controller())
         .ok()
         .and_then(|c| {
             workbench::simulation::SimSettings::bench_muscle(
@@ -539,7 +539,7 @@ fn baseline(
 fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     use workbench::simulation::{SimSettings, simulate};
 
-    let controller = rt_core::control::file::Controller::load(a.controller())
+    let controller = fes_model::control::file::Controller::load(a.controller())
         .with_context(|| format!("controller {}", a.controller().display()))?;
     let (scale_n, delay) = (controller.lmn.force_scale_n, controller.lmn.delay);
     println!(
@@ -618,7 +618,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     );
     let plots = draw(&series, out, &summary, a, delay, false)?;
     print_summary(&summary, &plots, &[]);
-    if controller.settings.planning.mode != rt_core::control::planner::PlanningMode::Off {
+    if controller.settings.planning.mode != fes_model::control::planner::PlanningMode::Off {
         let p = &run.planner;
         println!(
             "  planner: {} contractions planned ({} converged, {} replanned), {} ticks decided by a plan, {} causal for want of one, {} cut by a deadline",
@@ -733,7 +733,7 @@ fn draw(
         ("stim-driver.hlog", "stim-driver"),
     ] {
         let path = out.join(file);
-        if let Ok(tags) = rt_core::rt::hlog::merge_by_tag(&path) {
+        if let Ok(tags) = fes_rt::rt::hlog::merge_by_tag(&path) {
             for (tag, h) in tags {
                 if h.count() == 0 {
                     continue;

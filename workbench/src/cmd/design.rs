@@ -5,11 +5,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use rt_core::control::file::Controller;
-use rt_core::control::lcn_design::{THESIS_DAMPING, UnitSpec};
-use rt_core::control::planner::PlanningConfig;
-use rt_core::control::poles::{Pole, third_pole};
-use rt_core::model::file;
+use fes_model::control::file::Controller;
+use fes_model::control::lcn_design::{THESIS_DAMPING, UnitSpec};
+use fes_model::control::planner::PlanningConfig;
+use fes_model::control::poles::{Pole, third_pole};
+use fes_model::model::file;
 
 use super::inputs::{md_table, parse_list};
 use workbench::variant_args::VariantArgs;

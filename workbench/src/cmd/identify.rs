@@ -3,7 +3,7 @@
 use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
 use fes_ident::ident::{IdentOptions, Identified, Learning, RecordSet, Undelivered, identify};
-use rt_core::model::{KnotLayout, file};
+use fes_model::model::{KnotLayout, file};
 use std::path::{Path, PathBuf};
 
 const AFTER_HELP: &str = "\
@@ -230,7 +230,7 @@ pub fn load_delivered(dir: &Path, fit: &FitArgs) -> Result<(RecordSet, Undeliver
 
 /// Says in the model's provenance how many pulses of its data were not as decided (only
 /// when some were: `--allow-undelivered`).
-pub fn stamp_undelivered(lmn: &mut rt_core::model::Lmn, undelivered: Undelivered) {
+pub fn stamp_undelivered(lmn: &mut fes_model::model::Lmn, undelivered: Undelivered) {
     if !undelivered.is_none() {
         lmn.provenance
             .extra

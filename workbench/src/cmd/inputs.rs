@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use fes_dataset::DataSet;
+use fes_model::model::file;
+use fes_model::model::lmn::{Lmn, UnitStability};
 use indicatif::{ProgressBar, ProgressStyle};
-use rt_core::model::file;
-use rt_core::model::lmn::{Lmn, UnitStability};
 
 /// A model opened for analysis, with its per-unit stability.
 pub struct OpenedModel {

@@ -14,10 +14,10 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use fes_ident::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
 use fes_ident::analysis::osp::{ForceResponse, ModelResponse};
-use rt_core::control::file::Controller;
-use rt_core::control::lcn_design::UnitSpec;
-use rt_core::control::poles::third_pole;
-use rt_core::model::file;
+use fes_model::control::file::Controller;
+use fes_model::control::lcn_design::UnitSpec;
+use fes_model::control::poles::third_pole;
+use fes_model::model::file;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
@@ -131,7 +131,7 @@ pub struct Args {
     #[arg(long, default_value = "auto")]
     pub rise_ms: String,
     /// Damping factor xi of the dominant pair.
-    #[arg(long, default_value_t = rt_core::control::lcn_design::THESIS_DAMPING)]
+    #[arg(long, default_value_t = fes_model::control::lcn_design::THESIS_DAMPING)]
     pub damping: f64,
     /// Step reference levels (normalised force), comma-separated.
     #[arg(long, default_value = "0.1,0.15,0.2,0.3,0.5,0.7,0.9")]

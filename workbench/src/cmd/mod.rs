@@ -21,8 +21,8 @@ pub mod validation;
 
 use clap::ValueEnum;
 use fes_ident::ident::{Hooks, Learning, Mode, Progress, SchedulingKind};
+use fes_model::model::Structure;
 use indicatif::{ProgressBar, ProgressStyle};
-use rt_core::model::Structure;
 use std::time::Instant;
 
 /// `--structure` values (the model file's names).
@@ -196,7 +196,7 @@ pub fn fmt_err(v: Option<f64>) -> String {
 }
 
 /// Records the command that made a model in its provenance (`tool`).
-pub fn stamp_tool(lmn: &mut rt_core::model::Lmn, command: &str) {
+pub fn stamp_tool(lmn: &mut fes_model::model::Lmn, command: &str) {
     lmn.provenance.extra.insert(
         "tool".into(),
         serde_json::json!(format!("fes {command} {}", env!("CARGO_PKG_VERSION"))),

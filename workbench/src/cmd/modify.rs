@@ -11,7 +11,7 @@ use anyhow::{Context, Result, bail};
 use fes_ident::analysis::stabilise::{DEFAULT_EIGENVALUE, Stabilised, stabilise};
 use fes_ident::analysis::trace::{Trace, simulate_trace};
 use fes_ident::analysis::validation::msse;
-use rt_core::model::{Lmn, file};
+use fes_model::model::{Lmn, file};
 use sim_muscle::pattern::constant_train;
 
 use super::inputs::{Data, md_table, open_data, open_model, sci};

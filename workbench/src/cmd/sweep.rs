@@ -5,8 +5,8 @@ use super::identify::{FitArgs, load_delivered, stamp_undelivered};
 use super::{Feedback, StructureArg, fmt_err};
 use anyhow::{Context, Result, bail};
 use fes_ident::ident::sweep::{Sweep, SweepRow, sweep};
+use fes_model::model::file;
 use plotters::prelude::*;
-use rt_core::model::file;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
@@ -75,7 +75,7 @@ pub fn parse_units(s: &str) -> Result<RangeInclusive<usize>, UnitsError> {
             (a, a)
         }
     };
-    let max = rt_core::model::validity::MAX_UNITS;
+    let max = fes_model::model::validity::MAX_UNITS;
     if a == 0 || b > max || a > b {
         return Err(UnitsError::OutOfRange {
             from: a,

@@ -5,7 +5,7 @@
 use crate::analysis_support;
 
 use analysis_support::*;
-use rt_core::model::simulate::{mse, simulate};
+use fes_model::model::simulate::{mse, simulate};
 
 /// `--format svg`: the analysis's figures are written as SVG (vector, for papers) under
 /// the same names, and no PNG is.

@@ -5,7 +5,7 @@ use crate::analysis_support;
 
 use analysis_support::control::fast_muscle;
 use analysis_support::*;
-use rt_core::model::lmn::LocalModelSet;
+use fes_model::model::lmn::LocalModelSet;
 
 /// Thesis Table 6.1 (fast muscle): t_r (ms), p1, p2.
 const TABLE_6_1: [(f64, f64, f64); 6] = [
@@ -61,7 +61,7 @@ fn check(table: &[(f64, f64, f64)], rise: &str) {
     );
     let c: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    let lmn = rt_core::model::file::load(&model).unwrap();
+    let lmn = fes_model::model::file::load(&model).unwrap();
     let units = lmn.ss_units().unwrap();
     for (i, &(tr, p1, p2)) in table.iter().enumerate() {
         let u = &c["units"][i];
@@ -234,7 +234,7 @@ fn refusals_name_the_problem() {
     );
 }
 
-fn fixtures_unstable() -> rt_core::model::Lmn {
+fn fixtures_unstable() -> fes_model::model::Lmn {
     fixtures::unstable()
 }
 

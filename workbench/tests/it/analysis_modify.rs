@@ -5,8 +5,8 @@ use crate::analysis_support;
 
 use analysis_support::*;
 use fes_ident::analysis::trace::simulate_trace;
-use rt_core::model::file;
-use rt_core::model::lmn::LocalModelSet;
+use fes_model::model::file;
+use fes_model::model::lmn::LocalModelSet;
 
 /// The unstable model (+9.96 in unit 2) repaired with data from the stable truth: the file
 /// loads with the strict loader, unit 2's slow eigenvalue is -1 and its offsets are the

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use fes_dataset::{DataSet, Header, Record, Split, WriteMode};
-use rt_core::model::{Lmn, file};
+use fes_model::model::{Lmn, file};
 
 /// A fresh empty directory, removed when the test passes (the testkit's).
 pub fn tmp(tag: &str) -> fes_testkit::Scratch {

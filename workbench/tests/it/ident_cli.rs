@@ -6,7 +6,7 @@
 
 use fes_dataset::{DataSet, WriteMode};
 use fes_ident::ident::{Hooks, IdentOptions, RecordSet, identify};
-use rt_core::model::{Structure, file};
+use fes_model::model::{Structure, file};
 use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
 use sim_muscle::plant::MusclePlant;
 use sim_muscle::preset::Preset;

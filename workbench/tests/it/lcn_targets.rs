@@ -11,7 +11,7 @@ use std::path::Path;
 
 use fes_ident::analysis::osp::ForceResponse;
 use fes_ident::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
-use rt_core::control::file::Controller;
+use fes_model::control::file::Controller;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
@@ -172,7 +172,7 @@ fn no_constant_frequency_train_dominates_the_shipped_controller() {
 fn shipped_controller_is_steady_under_fatigue() {
     // The causal loop (planning under fatigue: `planning_bench`).
     let mut c = shipped("fast");
-    c.settings.planning.mode = rt_core::control::planner::PlanningMode::Off;
+    c.settings.planning.mode = fes_model::control::planner::PlanningMode::Off;
     let profile = ProfileSpec::Cardiac(CardiacSpec {
         bpm: 75.0,
         duty: 0.4,

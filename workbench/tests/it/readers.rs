@@ -14,9 +14,9 @@ use std::time::{Duration, UNIX_EPOCH};
 
 use fes_dataset::signals::SignalSet;
 use fes_dataset::{DataSet, Header, Record, Split, WriteMode};
-use rt_core::msg::{ForceSample, StimTick};
-use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::HlogWriter;
+use fes_rt::msg::{ForceSample, StimTick};
+use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::rt::hlog::HlogWriter;
 use serde_json::json;
 use supervisor::recording::{Recorder, RecorderSettings};
 

@@ -10,7 +10,7 @@ use crate::control_support;
 
 use std::path::Path;
 
-use rt_core::control::file::{Controller, ControllerSettings};
+use fes_model::control::file::{Controller, ControllerSettings};
 use sim_muscle::muscle::MuscleConfig;
 use sim_muscle::preset::Preset;
 use supervisor::contraction::ContractionSettings;
@@ -132,7 +132,7 @@ fn shipped_controller_fatigue_outer_loop_on_holds_every_beat_off_decays() {
     // The causal loop's figures (docs/bench.md); planning under fatigue:
     // `planning_bench::planning_under_fatigue_holds_the_target_with_fewer_pulses`.
     let mut c = shipped_controller();
-    c.settings.planning.mode = rt_core::control::planner::PlanningMode::Off;
+    c.settings.planning.mode = fes_model::control::planner::PlanningMode::Off;
     let run = |on: bool| {
         let s = SimSettings::bench(&c, true, cardiac(), outer(on), 60.0).unwrap();
         plateaus(&simulate(&c, &s).unwrap())

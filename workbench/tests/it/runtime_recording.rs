@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use fes_dataset::DataSet;
-use rt_core::msg::{ForceSample, PulseFate, PulseOutcome, Reference, StimTick};
+use fes_rt::msg::{ForceSample, PulseFate, PulseOutcome, Reference, StimTick};
 use supervisor::core::FaultCause;
 use supervisor::health::Cause;
 use supervisor::recording::{Recorder, RecorderSettings};
@@ -402,7 +402,7 @@ fn kill_one(
         return Err(format!("{trip}; driver: {trips}"));
     }
     assert_eq!(before.state, "armed", "{victim}: {before:?}");
-    let killed_ns = rt_core::rt::clock::monotonic_ns();
+    let killed_ns = fes_rt::rt::clock::monotonic_ns();
     stack.signal(victim, Signal::SIGKILL).expect("kill");
     // The chain's reaction: the stimulator watchdog (UML: 1 s) or rt-core's staleness
     // ramp (UML: 1 s + 0.15 s), plus generous slack for a UML guest.

@@ -7,8 +7,8 @@
 //! window tells whether the train drives the model where it was identified (the caller
 //! compares it with the training data's phi range).
 
-use crate::model::Network;
-use crate::model::simulate::RunError;
+use fes_model::model::Network;
+use fes_model::model::simulate::RunError;
 
 use super::trace::simulate_trace;
 

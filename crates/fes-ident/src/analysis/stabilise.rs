@@ -28,11 +28,11 @@
 
 use nalgebra::{Complex, DMatrix, DVector};
 
-use crate::model::lmn::{Lmn, LocalModelSet};
-use crate::model::local_model::eigenvalue_in_region;
-use crate::model::params::{ParamError, ParamLayout};
-use crate::model::simulate::{RunError, simulate};
-use crate::num::Dual;
+use fes_model::model::lmn::{Lmn, LocalModelSet};
+use fes_model::model::local_model::eigenvalue_in_region;
+use fes_model::model::params::{ParamError, ParamLayout};
+use fes_model::model::simulate::{RunError, simulate};
+use fes_model::num::Dual;
 
 /// Default replacement eigenvalue, 1/s (thesis 5.4.3).
 pub const DEFAULT_EIGENVALUE: f64 = -1.0;

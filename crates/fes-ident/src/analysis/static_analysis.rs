@@ -12,10 +12,10 @@
 //! common-eigenvector test (2.4.1): real local eigensystems with common eigenvectors and
 //! every local model stable make the network stable.
 
-use crate::model::arx::{ArxUnit, shift_gain, shift_offset_output, shift_poles};
-use crate::model::lmn::{Lmn, LmnError, UnitStability};
-use crate::model::local_model::SsLocalModel;
-use crate::model::network::{LocalModels, Network};
+use fes_model::model::arx::{ArxUnit, shift_gain, shift_offset_output, shift_poles};
+use fes_model::model::lmn::{Lmn, LmnError, UnitStability};
+use fes_model::model::local_model::SsLocalModel;
+use fes_model::model::network::{LocalModels, Network};
 use nalgebra::Complex;
 
 /// The interpolated (frozen) local model at one phi.
@@ -141,7 +141,7 @@ fn eigenvector_angles(m: &[[f64; 2]; 2]) -> Option<Option<[f64; 2]>> {
         .map(|v| v.abs())
         .fold(0.0, f64::max)
         .max(f64::MIN_POSITIVE);
-    let p = crate::model::local_model::eig2(m);
+    let p = fes_model::model::local_model::eig2(m);
     if p[0].im != 0.0 {
         return None;
     }

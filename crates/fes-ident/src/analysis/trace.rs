@@ -3,10 +3,10 @@
 //! 5.26, 5.31, 5.32).
 //!
 //! It runs the model library's own network step ([`Network::step`]) with the delayed input
-//! exactly as [`crate::model::simulate::simulate`] does, so `y` equals that function's output.
+//! exactly as [`fes_model::model::simulate::simulate`] does, so `y` equals that function's output.
 
-use crate::model::Network;
-use crate::model::simulate::RunError;
+use fes_model::model::Network;
+use fes_model::model::simulate::RunError;
 
 /// Output, scheduling variable and state of one run.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,8 +1,8 @@
 //! Simulated against measured records (thesis 5.3, 5.4.3, Fig. 5.24): free-run simulation
 //! from rest of each record (eq. B.6/B.7) and its mean squared simulation error (eq. B.8).
 
-use crate::model::Network;
-use crate::model::simulate::{RunError, mse, simulate};
+use fes_model::model::Network;
+use fes_model::model::simulate::{RunError, mse, simulate};
 
 /// One record's simulation and error.
 #[derive(Debug, Clone, PartialEq)]

@@ -23,11 +23,11 @@
 //! [`fix_gauge`] maps a model into the gauge (output unchanged) and returns the indices of
 //! the parameters to hold fixed.
 
-use crate::model::lmn::{Lmn, LocalModelSet};
-use crate::model::local_model::{
+use fes_model::model::lmn::{Lmn, LocalModelSet};
+use fes_model::model::local_model::{
     SsLocalModel, eigenvector_matrix, inverse2, mat_mul2, mat_vec2, solve2,
 };
-use crate::model::params::ParamLayout;
+use fes_model::model::params::ParamLayout;
 
 /// The affine state map x' = T x + s applied to a direct-form unit (module docs).
 fn transform(

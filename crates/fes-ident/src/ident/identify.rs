@@ -35,13 +35,13 @@ use super::regression::{Learning, fit_prediction};
 use super::resample::PulseShift;
 use super::start;
 use super::validation::{Validation, validate};
-use crate::model::lmn::{Lmn, LocalModelSet, Provenance, Structure};
-use crate::model::network::MAX_DELAY;
-use crate::model::params::ParamLayout;
-use crate::model::scheduling::{
+use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance, Structure};
+use fes_model::model::network::MAX_DELAY;
+use fes_model::model::params::ParamLayout;
+use fes_model::model::scheduling::{
     SchedulingSpec, THESIS_PREFILTER_GAIN, THESIS_PREFILTER_WN, THESIS_PREFILTER_ZETA,
 };
-use crate::model::validity::{KnotLayout, MAX_UNITS, ValidityFunctions};
+use fes_model::model::validity::{KnotLayout, MAX_UNITS, ValidityFunctions};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
@@ -501,7 +501,7 @@ impl Run<'_> {
             delay: o.delay_samples(ts),
             scheduling,
             validity: ValidityFunctions::with_layout(o.knots, o.units, o.range.0, o.range.1)
-                .map_err(crate::model::params::ParamError::from)?,
+                .map_err(fes_model::model::params::ParamError::from)?,
             local: start::replicate(&one, o.units, 0),
             zero_offsets: o.zero_offsets,
             force_scale_n,
@@ -639,7 +639,7 @@ impl Run<'_> {
         let o = self.opts;
         let mut single = template.clone();
         single.validity = ValidityFunctions::uniform(1, 0.0, 1.0)
-            .map_err(crate::model::params::ParamError::from)?;
+            .map_err(fes_model::model::params::ParamError::from)?;
         let n_poles = if o.structure.is_state_space() {
             2
         } else {
@@ -843,7 +843,7 @@ impl Run<'_> {
                 map.knots(&rep.p)
             };
             out.lmn.validity = ValidityFunctions::from_knots(&knots, order)
-                .map_err(crate::model::params::ParamError::from)?;
+                .map_err(fes_model::model::params::ParamError::from)?;
             (self.hooks.progress)(Progress::Stage(&format!("parameters, round {round}")));
             let rep = self.lm(
                 ThetaMap {

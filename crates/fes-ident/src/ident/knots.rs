@@ -7,13 +7,13 @@
 //! gap_l = (hi - lo) softmax(s)_l with s_q = 0 fixed (q free parameters s_0..s_{q-1}),
 //! knot_j = lo + gap_0 + ... + gap_j. The map is written once, generic over the scalar, so the
 //! knot derivatives come from the same `Dual` machinery as the parameter derivatives
-//! (through [`crate::model::validity::ValidityFunctions::from_knots`] and the network step).
+//! (through [`fes_model::model::validity::ValidityFunctions::from_knots`] and the network step).
 
 use super::problem::ParamMap;
-use crate::model::lmn::Lmn;
-use crate::model::network::Network;
-use crate::model::params::{ParamError, ParamLayout};
-use crate::num::Scalar;
+use fes_model::model::lmn::Lmn;
+use fes_model::model::network::Network;
+use fes_model::model::params::{ParamError, ParamLayout};
+use fes_model::num::Scalar;
 
 /// The interior knots of a model as free parameters (module docs).
 #[derive(Debug, Clone)]

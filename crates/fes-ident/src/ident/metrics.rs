@@ -10,13 +10,13 @@
 //! at a longer period (5.3).
 
 use super::problem::{Horizon, ModelData, ProblemError, run_record_base};
-use crate::model::arx::ArxUnit;
-use crate::model::lmn::Lmn;
-use crate::model::network::Network;
-use crate::model::scheduling::Scheduler;
-use crate::model::simulate::{mse, predict};
-use crate::model::validity::MAX_UNITS;
-use crate::num::Dual;
+use fes_model::model::arx::ArxUnit;
+use fes_model::model::lmn::Lmn;
+use fes_model::model::network::Network;
+use fes_model::model::scheduling::Scheduler;
+use fes_model::model::simulate::{mse, predict};
+use fes_model::model::validity::MAX_UNITS;
+use fes_model::num::Dual;
 
 /// Warn when a unit gets less than this share of the training data's validity weight.
 pub const MIN_UNIT_SHARE: f64 = 0.02;
@@ -84,7 +84,7 @@ pub fn validity_weights(
     let m = template.units();
     let scheduler = Scheduler::new(&template.scheduling, template.ts).map_err(|e| {
         ProblemError::Param(
-            crate::model::lmn::LmnError::Invalid {
+            fes_model::model::lmn::LmnError::Invalid {
                 field: "scheduling".into(),
                 problem: e.to_string(),
             }

@@ -1,4 +1,4 @@
-//! Identification of multi-input ARX networks ([`crate::model::miso`]): the heat-transfer
+//! Identification of multi-input ARX networks ([`fes_model::model::miso`]): the heat-transfer
 //! process of thesis App. E (Examples E.4.2-E.4.4, E.4.6).
 //!
 //! - **Prediction mode** (B.2, eq. B.4): the measured outputs fill the data vector, so the
@@ -12,7 +12,7 @@
 //!   network's output; local learning fits each unit as a model of its own, simulated alone,
 //!   its errors weighted by rho_i(phi_k) (eq. 2.35 in simulation mode).
 //!
-//! Records start with the plant running (the [`crate::model::miso`] convention): the
+//! Records start with the plant running (the [`fes_model::model::miso`] convention): the
 //! simulation starts from the first measured output.
 
 use super::IdentError;
@@ -20,11 +20,11 @@ use super::lm::{LeastSquares, LmOptions, levenberg_marquardt};
 use super::lsq::{self, DEFAULT_RCOND};
 use super::problem::{DUAL_WIDTH, Horizon, Normal, ProblemError};
 use super::regression::Learning;
-use crate::dataset::signals::SignalSet;
-use crate::model::miso::{MisoArx, MisoError, MisoLocal};
-use crate::model::miso_ss::MisoSs;
-use crate::model::validity::ValidityFunctions;
-use crate::num::{Dual, Scalar};
+use fes_dataset::signals::SignalSet;
+use fes_model::model::miso::{MisoArx, MisoError, MisoLocal};
+use fes_model::model::miso_ss::MisoSs;
+use fes_model::model::validity::ValidityFunctions;
+use fes_model::num::{Dual, Scalar};
 use nalgebra::{Complex, DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -307,7 +307,7 @@ impl<'a> SimulationProblem<'a, MisoArx> {
             })
             .collect();
         let one = ValidityFunctions::uniform(1, 0.0, 1.0)
-            .map_err(crate::model::params::ParamError::from)?;
+            .map_err(fes_model::model::params::ParamError::from)?;
         let mut st1 = st.clone();
         st1.scheduling2 = None;
         if let Some(d) = st.unit_delays.get(i) {

@@ -61,7 +61,7 @@ pub enum IdentError {
     Option(String),
     /// A parameter vector does not define a model.
     #[error(transparent)]
-    Param(#[from] crate::model::params::ParamError),
+    Param(#[from] fes_model::model::params::ParamError),
     /// The model could not be evaluated.
     #[error(transparent)]
     Problem(#[from] problem::ProblemError),

@@ -24,11 +24,11 @@ use super::records::IdentRecord;
 use super::resample::{
     PulseShift, ResampleError, coarse_len, downsample_output, downsample_pulses, interpolate,
 };
-use crate::model::lmn::Lmn;
-use crate::model::network::Network;
-use crate::model::params::{ParamError, ParamLayout};
-use crate::model::simulate::{RunError, predict, simulate};
-use crate::num::{Dual, Scalar};
+use fes_model::model::lmn::Lmn;
+use fes_model::model::network::Network;
+use fes_model::model::params::{ParamError, ParamLayout};
+use fes_model::model::simulate::{RunError, predict, simulate};
+use fes_model::num::{Dual, Scalar};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 

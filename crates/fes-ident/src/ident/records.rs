@@ -5,7 +5,7 @@
 //! u is the pulse train (1.0 in the sample where a pulse fires, else 0.0, as the model
 //! expects, docs/model.md convention 1), y the normalised force.
 
-use crate::dataset::{DataSet, ReadError, Record};
+use fes_dataset::{DataSet, ReadError, Record};
 use std::path::Path;
 
 /// Why records could not be prepared for identification.

@@ -20,9 +20,9 @@ use super::IdentError;
 use super::lsq::{self, DEFAULT_RCOND};
 use super::metrics::validity_weights;
 use super::problem::{Horizon, ModelData, Problem, ThetaMap};
-use crate::model::lmn::{Lmn, LocalModelSet};
-use crate::model::params::ParamLayout;
-use crate::model::validity::ValidityFunctions;
+use fes_model::model::lmn::{Lmn, LocalModelSet};
+use fes_model::model::params::ParamLayout;
+use fes_model::model::validity::ValidityFunctions;
 
 /// Global (eq. 2.33) or local (eq. 2.35) learning.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,7 +82,7 @@ pub fn fit_prediction(
             // The one-unit model of each local model (same structure, Ts, delay).
             let mut single = template.clone();
             single.validity = ValidityFunctions::uniform(1, 0.0, 1.0)
-                .map_err(crate::model::params::ParamError::from)?;
+                .map_err(fes_model::model::params::ParamError::from)?;
             single.local = first_unit(&template.local);
             let layout1 = ParamLayout::new(&single);
             let ref1 = layout1.theta(&single)?;

@@ -20,7 +20,7 @@
 //!   coarse samples (held after the last one). The map is linear, so it is applied to
 //!   `Dual` outputs too (exact Jacobians of the base-period error).
 
-use crate::num::Scalar;
+use fes_model::num::Scalar;
 
 /// Largest extra displacement, in coarse samples beyond the nearest one, of a pulse that
 /// collides with another (module docs).

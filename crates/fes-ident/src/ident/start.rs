@@ -10,9 +10,9 @@
 //! unit (the network output equals the linear model's, since the validity functions sum to
 //! one).
 
-use crate::model::arx::ArxUnit;
-use crate::model::lmn::{LocalModelSet, Structure};
-use crate::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
+use fes_model::model::arx::ArxUnit;
+use fes_model::model::lmn::{LocalModelSet, Structure};
+use fes_model::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 
 /// Continuous-time poles (1/s) the linear starts are built from: time constants from
 /// 3 ms to 125 ms, covering fast and slow twitches.
@@ -188,7 +188,7 @@ pub fn set_eigenvalues(set: &mut LocalModelSet, e: [f64; 2]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::arx::{delta_to_shift, shift_poles};
+    use fes_model::model::arx::{delta_to_shift, shift_poles};
 
     #[test]
     fn arx_poles_land_where_asked() {

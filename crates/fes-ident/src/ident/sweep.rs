@@ -9,7 +9,7 @@ use super::identify::{Hooks, IdentOptions, Identified, Mode, SchedulingKind, ide
 use super::metrics::Metrics;
 use super::records::RecordSet;
 use super::regression::Learning;
-use crate::model::lmn::{Lmn, Structure};
+use fes_model::model::lmn::{Lmn, Structure};
 use serde::Serialize;
 use std::ops::RangeInclusive;
 

@@ -16,7 +16,7 @@
 //! what concatenating independent experiments requires.
 
 use super::problem::{Horizon, ModelData, run_record, run_record_base};
-use crate::model::lmn::Lmn;
+use fes_model::model::lmn::Lmn;
 
 /// Lags of the residual tests, each side (MATLAB's `resid` default).
 pub const RESID_LAGS: usize = 25;
@@ -140,7 +140,7 @@ pub struct Validation {
     pub test: Vec<Trace>,
 }
 
-fn traces(net: &crate::model::network::Network<f64>, data: &ModelData) -> Option<Vec<Trace>> {
+fn traces(net: &fes_model::model::network::Network<f64>, data: &ModelData) -> Option<Vec<Trace>> {
     data.records
         .iter()
         .map(|rec| {

@@ -8,7 +8,7 @@ use analysis_support::*;
 use fes_ident::analysis::force_frequency::{ForceFrequencyError, force_frequency};
 use fes_ident::analysis::trace::{phi_range, simulate_trace};
 use fes_ident::analysis::validation::{fit_record, msse};
-use fes_ident::model::simulate::simulate;
+use fes_model::model::simulate::simulate;
 
 /// A linear model under a pulse every `ipi` samples reaches a periodic steady state whose
 /// mean output is G / ipi (one pulse response, summing to G, per period), and the thesis

@@ -12,8 +12,8 @@ use fes_ident::analysis::osp::lcn::{run_pattern_generator, step_reference};
 use fes_ident::analysis::osp::random::{best_and_worst, random_method};
 use fes_ident::analysis::osp::trains::{constant_ipi_train, train_surface};
 use fes_ident::analysis::osp::{Evaluator, ModelResponse, OspError, average_frequency};
-use fes_ident::control::file::{Controller, ControllerSettings};
-use fes_ident::model::lmn::LocalModelSet;
+use fes_model::control::file::{Controller, ControllerSettings};
+use fes_model::model::lmn::LocalModelSet;
 
 /// The twitch FTI of a linear model is G Ts (the sum of the pulse response is the
 /// steady-state gain G = -c'A^-1 b, eq. A.18), to 1e-9 relative with the tail e^{-40 x 2}

@@ -10,10 +10,10 @@ use fes_ident::analysis::stabilise::{
 };
 use fes_ident::analysis::trace::simulate_trace;
 use fes_ident::analysis::validation::msse;
-use fes_ident::model::arx::ArxUnit;
-use fes_ident::model::lmn::{LocalModelSet, Stability};
-use fes_ident::model::local_model::{SsLocalModel, a_from_eigensystem, eig2, eigenvector_matrix};
-use fes_ident::model::{Lmn, SchedulingSpec};
+use fes_model::model::arx::ArxUnit;
+use fes_model::model::lmn::{LocalModelSet, Stability};
+use fes_model::model::local_model::{SsLocalModel, a_from_eigensystem, eig2, eigenvector_matrix};
+use fes_model::model::{Lmn, SchedulingSpec};
 
 fn pairs<'a>(u: &'a [Vec<f64>], y: &'a [Vec<f64>]) -> Vec<(&'a [f64], &'a [f64])> {
     u.iter()

@@ -3,10 +3,10 @@
 //! with closed-form properties.
 #![allow(dead_code)] // shared by path: every includer (tests, benches, examples) uses a part
 
-use fes_ident::model::lmn::{Lmn, LocalModelSet, Provenance};
-use fes_ident::model::local_model::{EigCommonUnit, EigLocalUnit, eigenvector_matrix, inverse2};
-use fes_ident::model::simulate::simulate;
-use fes_ident::model::{SchedulingSpec, ValidityFunctions};
+use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance};
+use fes_model::model::local_model::{EigCommonUnit, EigLocalUnit, eigenvector_matrix, inverse2};
+use fes_model::model::simulate::simulate;
+use fes_model::model::{SchedulingSpec, ValidityFunctions};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

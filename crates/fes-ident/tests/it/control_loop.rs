@@ -6,19 +6,19 @@
 use super::control_support;
 
 use control_support::{DELAY, TS, fast_muscle, fast_muscle_with_offsets, table_6_1_specs};
-use fes_ident::control::design::augmented;
-use fes_ident::control::design::plant_matrices;
-use fes_ident::control::file::{Controller, ControllerSettings};
-use fes_ident::control::lcn::AntiWindup;
-use fes_ident::control::lcn_design::UnitSpec;
-use fes_ident::control::pattern_generator::TickInput;
+use fes_model::control::design::augmented;
+use fes_model::control::design::plant_matrices;
+use fes_model::control::file::{Controller, ControllerSettings};
+use fes_model::control::lcn::AntiWindup;
+use fes_model::control::lcn_design::UnitSpec;
+use fes_model::control::pattern_generator::TickInput;
 use nalgebra::{Matrix3, RowVector3, Vector2, Vector3};
 
-fn controller(lmn: fes_ident::model::Lmn, specs: &[UnitSpec]) -> Controller {
+fn controller(lmn: fes_model::model::Lmn, specs: &[UnitSpec]) -> Controller {
     Controller::design(lmn, specs, ControllerSettings::default()).unwrap()
 }
 
-fn with_rule(lmn: fes_ident::model::Lmn, specs: &[UnitSpec], rule: AntiWindup) -> Controller {
+fn with_rule(lmn: fes_model::model::Lmn, specs: &[UnitSpec], rule: AntiWindup) -> Controller {
     let settings = ControllerSettings {
         anti_windup: rule,
         ..ControllerSettings::default()
@@ -86,7 +86,7 @@ fn one_unit_unshaped_loop_follows_the_linear_closed_loop() {
 }
 
 fn run(
-    pg: &mut fes_ident::control::pattern_generator::PatternGenerator,
+    pg: &mut fes_model::control::pattern_generator::PatternGenerator,
     r: f64,
     n: usize,
 ) -> (Vec<f64>, Vec<usize>) {

@@ -7,11 +7,11 @@ use super::dataset_support;
 use std::path::Path;
 
 use dataset_support::{Scratch, small_dataset};
-use fes_ident::dataset::{DataSet, FORCE_SLACK, WriteMode, parse_record_csv};
+use fes_dataset::{DataSet, FORCE_SLACK, WriteMode, parse_record_csv};
 use proptest::prelude::*;
 
 /// Checks the invariants of an accepted record.
-fn assert_valid(cols: &fes_ident::dataset::Columns) {
+fn assert_valid(cols: &fes_dataset::Columns) {
     let (t, p, f) = (&cols.t_ms, &cols.pulse, &cols.force);
     assert!(t.len() >= 2 && t.len() == p.len() && t.len() == f.len());
     assert!(cols.decided.as_ref().is_none_or(|d| d.len() == t.len()));

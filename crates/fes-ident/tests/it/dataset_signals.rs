@@ -3,10 +3,10 @@
 //! version 1 keeps its reader and opens through `read_any` as signals.
 
 use super::dataset_support::{Scratch, small_dataset};
-use fes_ident::dataset::signals::{
+use fes_dataset::signals::{
     AnyDataSet, Channel, SCHEMA_V2, SignalHeader, SignalRecord, SignalSet, read_any,
 };
-use fes_ident::dataset::{DataSet, FormatError, ReadError, Split, WriteMode};
+use fes_dataset::{DataSet, FormatError, ReadError, Split, WriteMode};
 
 /// Two inputs (valve angle, heater voltage), one output, Ts = 50 ms: the heat-transfer
 /// process's shape (App. E.2).

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use fes_ident::dataset::{DataSet, Header, Record, Split};
+use fes_dataset::{DataSet, Header, Record, Split};
 
 /// A fresh, empty scratch directory, removed on drop.
 pub struct Scratch(pub PathBuf);

@@ -7,12 +7,12 @@
 use fes_ident::ident::knots::KnotMap;
 use fes_ident::ident::problem::{Horizon, ModelData, ParamMap, Problem, ThetaMap};
 use fes_ident::ident::records::IdentRecord;
-use fes_ident::model::arx::ArxUnit;
-use fes_ident::model::lmn::{Lmn, LocalModelSet, Provenance};
-use fes_ident::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
-use fes_ident::model::params::ParamLayout;
-use fes_ident::model::scheduling::SchedulingSpec;
-use fes_ident::model::validity::ValidityFunctions;
+use fes_model::model::arx::ArxUnit;
+use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance};
+use fes_model::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
+use fes_model::model::params::ParamLayout;
+use fes_model::model::scheduling::SchedulingSpec;
+use fes_model::model::validity::ValidityFunctions;
 use nalgebra::DMatrix;
 
 /// Two records of pulse trains (bursts at varying rates) and a smooth measured output.

@@ -7,8 +7,8 @@ use fes_ident::ident::Learning;
 use fes_ident::ident::lm::LmOptions;
 use fes_ident::ident::miso::{self, MisoRecord};
 use fes_ident::ident::problem::Horizon;
-use fes_ident::model::miso::{MisoArx, MisoStructure};
-use fes_ident::model::validity::ValidityFunctions;
+use fes_model::model::miso::{MisoArx, MisoStructure};
+use fes_model::model::validity::ValidityFunctions;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

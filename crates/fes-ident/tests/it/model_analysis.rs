@@ -6,15 +6,15 @@
 use fes_ident::analysis::static_analysis::{
     FrozenModel, analyse, analyse_at, common_eigenvectors, phi_grid,
 };
-use fes_ident::model::arx::ArxUnit;
-use fes_ident::model::lmn::{Lmn, LocalModelSet, Provenance};
-use fes_ident::model::local_model::{
+use fes_model::model::arx::ArxUnit;
+use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance};
+use fes_model::model::local_model::{
     EigCommonUnit, EigLocalUnit, a_from_eigensystem, eigenvector_matrix,
 };
-use fes_ident::model::network::Network;
-use fes_ident::model::scheduling::{Scheduler, SchedulingSpec};
-use fes_ident::model::simulate::simulate;
-use fes_ident::model::validity::ValidityFunctions;
+use fes_model::model::network::Network;
+use fes_model::model::scheduling::{Scheduler, SchedulingSpec};
+use fes_model::model::simulate::simulate;
+use fes_model::model::validity::ValidityFunctions;
 
 const TS: f64 = 1e-3;
 

@@ -4,7 +4,7 @@
 //! the controller, creates the iceoryx2 node, starts the telemetry thread and ONE real-time
 //! thread, and on SIGINT/SIGTERM stops them cleanly (final StimTick, histograms flushed,
 //! iceoryx2 resources released, exit 0). Under systemd it logs to the journal and reports
-//! READY=1 / WATCHDOG=1 through [`rt_core::rt::notify`] while the loop makes progress.
+//! READY=1 / WATCHDOG=1 through [`fes_rt::rt::notify`] while the loop makes progress.
 
 mod slowdown;
 mod source;
@@ -18,22 +18,21 @@ use std::time::SystemTime;
 
 use anyhow::{Context, anyhow};
 use clap::Parser;
-use iceoryx2::prelude::{Node, ipc};
-use rt_core::msg::{LatencySummary, TimingReport};
-use rt_core::rt::RtStatus;
-use rt_core::rt::alloc::CountingAllocator;
-use rt_core::rt::exit::Exit;
-use rt_core::rt::hlog::HlogWriter;
-use rt_core::rt::notify::{
+use fes_rt::msg::{LatencySummary, TimingReport};
+use fes_rt::rt::RtStatus;
+use fes_rt::rt::alloc::CountingAllocator;
+use fes_rt::rt::exit::Exit;
+use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::node::{RunError, create_node};
+use fes_rt::rt::notify::{
     NotifierOutcome, NotifierSettings, ServiceManager, run_progress_notifier,
 };
+use fes_rt::rt::realtime::RtError;
+use fes_rt::rt::signals::install_stop_handler;
+use fes_rt::rt::telemetry::TelemetryChannel;
+use iceoryx2::prelude::{Node, ipc};
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
-use rt_core::rt::realtime::RtError;
-use rt_core::rt::runner::{
-    LoopOutcome, RunError, TelemetrySettings, create_node, run_pattern_loop, run_telemetry,
-};
-use rt_core::rt::signals::install_stop_handler;
-use rt_core::rt::telemetry::TelemetryChannel;
+use rt_core::rt::runner::{LoopOutcome, TelemetrySettings, run_pattern_loop, run_telemetry};
 use tracing::{error, info, warn};
 
 use source::Source;
@@ -126,11 +125,11 @@ impl From<anyhow::Error> for Failure {
 }
 
 fn main() -> ExitCode {
-    rt_core::rt::logging::init("rt-core");
+    fes_rt::rt::logging::init("rt-core");
     // A panicking thread aborts the process: the driver's StimTick watchdog and its
     // liveness check of this node stop the stimulator (a final tick cannot be sent from
     // another thread: the StimTick service has one publisher, the loop's).
-    rt_core::rt::panic::install("rt-core");
+    fes_rt::rt::panic::install("rt-core");
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
     let cli = Cli::parse();
     match run(&cli) {
@@ -140,7 +139,7 @@ fn main() -> ExitCode {
             Exit::Failed.into()
         }
         Err(Failure::Other(e)) => {
-            error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
+            error!("{}", fes_rt::rt::error_text::one_line(e.as_ref()));
             Exit::Failed.into()
         }
     }
@@ -431,7 +430,7 @@ fn stop_telemetry(thread: TelemetryThread<'_>, shared: &Shared) -> anyhow::Resul
         &report,
         shared.telemetry.counters.snapshot().connection_allocations,
     );
-    if let Some(trace) = rt_core::rt::alloc::take_first_heap_allocation() {
+    if let Some(trace) = fes_rt::rt::alloc::take_first_heap_allocation() {
         warn!("{trace}");
     }
     Ok(())

@@ -9,7 +9,7 @@
 //! status. Never set it on a rig.
 
 use anyhow::bail;
-use rt_core::rt::clock::monotonic_ns;
+use fes_rt::rt::clock::monotonic_ns;
 use rt_core::rt::reference::Target;
 use rt_core::rt::source::{TickDecision, TickSource};
 

@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use rt_core::control::pattern_generator::FeedbackMode;
+use fes_model::control::pattern_generator::FeedbackMode;
 use rt_core::rt::process_config::SourceConfig;
 use rt_core::rt::reference::Target;
 use rt_core::rt::source::{ControllerSource, TestPattern, TickDecision, TickSource};

@@ -19,20 +19,20 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::Context;
 use clap::Parser;
+use fes_rt::msg::port;
+use fes_rt::msg::{Contract, StimTick, TimingReport, TimingSource};
+use fes_rt::rt::clock::{NS_PER_S, monotonic_ns};
+use fes_rt::rt::exit::Exit;
+use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::node::create_node;
+use fes_rt::rt::probe::{ProbeSummary, RECORD_HEADER, RtCoreTiming, TickRecord};
+use fes_rt::rt::signals::install_stop_handler;
+use fes_rt::rt::telemetry::{TAG_IPC, TAG_RECEIVE};
+use fes_rt::rt::{MissingRightsPolicy, RtConfig, enter_realtime};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{Node, ipc};
-use rt_core::msg::port;
-use rt_core::msg::{Contract, StimTick, TimingReport, TimingSource};
-use rt_core::rt::clock::{NS_PER_S, monotonic_ns};
-use rt_core::rt::exit::Exit;
-use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::HlogWriter;
-use rt_core::rt::probe::{ProbeSummary, RECORD_HEADER, RtCoreTiming, TickRecord};
-use rt_core::rt::runner::create_node;
-use rt_core::rt::signals::install_stop_handler;
-use rt_core::rt::telemetry::{TAG_IPC, TAG_RECEIVE};
-use rt_core::rt::{MissingRightsPolicy, RtConfig, enter_realtime};
 
 /// Measures StimTick publish-to-receive latency and checks the tick stream.
 #[derive(Debug, Parser)]
@@ -80,7 +80,7 @@ fn main() -> ExitCode {
             Exit::Failed.into()
         }
         Err(e) => {
-            tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
+            tracing::error!("{}", fes_rt::rt::error_text::one_line(e.as_ref()));
             Exit::Failed.into()
         }
     }

@@ -19,12 +19,12 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 
-use rt_core::rt::exit::Exit;
+use fes_rt::rt::exit::Exit;
 
 use anyhow::{Context, bail};
 use clap::Parser;
-use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::{merge_by_tag, read_intervals};
+use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::rt::hlog::{merge_by_tag, read_intervals};
 
 use gate::{Baseline, Check};
 use summary::{

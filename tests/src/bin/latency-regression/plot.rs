@@ -5,8 +5,8 @@
 use std::path::Path;
 
 use anyhow::{Context, anyhow};
+use fes_rt::rt::histogram::LatencyHistogram;
 use plotters::prelude::*;
-use rt_core::rt::histogram::LatencyHistogram;
 
 /// One named curve.
 pub struct Curve {

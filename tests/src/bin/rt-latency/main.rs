@@ -25,18 +25,18 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
 use clap::Parser;
+use fes_rt::msg::Reference;
+use fes_rt::msg::port;
+use fes_rt::rt::MissingRightsPolicy;
+use fes_rt::rt::clock::monotonic_ns;
+use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::rt::hlog::{HlogWriter, merge_by_tag};
+use fes_rt::rt::node::create_node;
+use fes_rt::rt::probe::ProbeSummary;
+use fes_rt::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
-use rt_core::msg::Reference;
-use rt_core::msg::port;
-use rt_core::rt::MissingRightsPolicy;
-use rt_core::rt::clock::monotonic_ns;
-use rt_core::rt::histogram::LatencyHistogram;
-use rt_core::rt::hlog::{HlogWriter, merge_by_tag};
-use rt_core::rt::probe::ProbeSummary;
 use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
-use rt_core::rt::runner::create_node;
-use rt_core::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_PUBLISH, TAG_RECEIVE, TAG_WAKE};
 use serde::Serialize;
 
 /// The driver's hlog tag for StimTick publish → PULSE written (stim-driver's telemetry).
@@ -210,8 +210,8 @@ fn main() -> std::process::ExitCode {
     match run(&Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("{}", rt_core::rt::error_text::one_line(e.as_ref()));
-            rt_core::rt::exit::Exit::Failed.into()
+            tracing::error!("{}", fes_rt::rt::error_text::one_line(e.as_ref()));
+            fes_rt::rt::exit::Exit::Failed.into()
         }
     }
 }

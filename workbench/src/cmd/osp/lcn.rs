@@ -9,7 +9,7 @@ use fes_ident::analysis::osp::lcn::{
     LcnRun, PatternShape, ShapeCriteria, pattern_shape, run_pattern_generator, steady_mean,
     step_reference,
 };
-use rt_core::control::file::Controller;
+use fes_model::control::file::Controller;
 
 use super::super::inputs::{md_table, write_csv};
 use super::super::plots::{self, Figure, Line, Panel, color};

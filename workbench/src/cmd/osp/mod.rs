@@ -28,7 +28,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 use fes_ident::analysis::osp::{Evaluator, ForceResponse, ModelResponse};
-use rt_core::control::file::Controller;
+use fes_model::control::file::Controller;
 use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;

@@ -4,7 +4,7 @@
 //! then a pause, then nearly even pulses).
 
 use super::{ForceResponse, OspError};
-use crate::control::pattern_generator::{PatternGenerator, TickInput};
+use fes_model::control::pattern_generator::{PatternGenerator, TickInput};
 
 /// The closed loop's signals over one run, one value per 1-sample tick.
 #[derive(Debug, Clone, PartialEq)]

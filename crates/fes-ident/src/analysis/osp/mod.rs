@@ -26,8 +26,8 @@ pub mod lcn;
 pub mod random;
 pub mod trains;
 
-use crate::model::simulate::{RunError, simulate};
-use crate::model::{Lmn, Network};
+use fes_model::model::simulate::{RunError, simulate};
+use fes_model::model::{Lmn, Network};
 
 /// Why an FTI, an FTIpP or a pattern evaluation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
