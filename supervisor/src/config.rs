@@ -328,6 +328,23 @@ impl SupervisorConfig {
             .validate()
             .map_err(|e| key("contraction", e))?;
         self.health.validate().map_err(|e| key("health", e))?;
+        if !self.health.test_configuration {
+            for (k, on) in [
+                ("watch_rt_core", self.health.watch_rt_core),
+                ("watch_stim_driver", self.health.watch_stim_driver),
+                ("watch_stimulator", self.health.watch_stimulator),
+            ] {
+                if !on {
+                    return Err((
+                        format!("health.{k}"),
+                        "false turns a safety watch off (no fault when that process stalls \
+                         or dies, no acknowledged stop); only a test configuration may \
+                         (health.test_configuration = true)"
+                            .into(),
+                    ));
+                }
+            }
+        }
         let r = &self.recording;
         if !(100..=1000).contains(&r.flush_period_ms) {
             return Err((

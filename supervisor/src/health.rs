@@ -118,6 +118,11 @@ pub struct HealthSettings {
     pub watch_stimulator: bool,
     /// Process id of the stimulator process, when known (the bench sets it).
     pub stimulator_pid: Option<u32>,
+    /// A test configuration: only then may a `watch_*` be false (a daemon under test
+    /// without the process it would watch). A rig's or a bench's configuration turning a
+    /// watch off is refused: without the driver's watch, no stop or arm is acknowledged.
+    /// Default false.
+    pub test_configuration: bool,
     /// The supervisor itself is stalled when two passes of its loop are further apart
     /// than this, ms (it was stopped by a signal, or starved): while armed, that is a
     /// fault, so stimulation does not resume on its own when it runs again. Default 500
@@ -136,6 +141,7 @@ impl Default for HealthSettings {
             watch_stim_driver: true,
             watch_stimulator: true,
             stimulator_pid: None,
+            test_configuration: false,
             self_stall_ms: 500,
         }
     }

@@ -60,6 +60,8 @@ socket = "run/supervisor.sock"
 watch_rt_core = false
 watch_stim_driver = {watch_driver}
 watch_stimulator = false
+# No rt-core, driver or stimulator runs beside this daemon: the watches may be off.
+test_configuration = true
 [recording]
 dir = "rec"
 prescription = "prescription.toml"
@@ -387,6 +389,11 @@ fn malformed_configurations_are_refused_by_name_and_create_nothing() {
             "world-writable",
             edit("mode = 0o660", "mode = 0o666"),
             "control.mode: 0o666",
+        ),
+        (
+            "driver-unwatched",
+            edit("watch_stim_driver = true", "watch_stim_driver = false"),
+            "health.watch_stim_driver: false turns a safety watch off",
         ),
         (
             "unknown-key",
