@@ -89,6 +89,13 @@ pub enum Fault {
         /// or just before the Arm (more delivered).
         allowed: u32,
     },
+    /// While armed, the stimulator read back (CONFIG_APPLIED) limits other than the ones
+    /// checked at the Arm: a CONFIG the driver did not send, or a stimulator that changed
+    /// what it enforces.
+    LimitsChanged {
+        /// The first limit that differs.
+        field: &'static str,
+    },
 }
 
 impl Fault {
@@ -114,6 +121,7 @@ impl Fault {
             Fault::SupervisorGone => DriverStatus::FAULT_SUPERVISOR_GONE,
             Fault::Intrusion { .. } => DriverStatus::FAULT_INTRUSION,
             Fault::DeliveryMismatch { .. } => DriverStatus::FAULT_DELIVERY_MISMATCH,
+            Fault::LimitsChanged { .. } => DriverStatus::FAULT_LIMITS_CHANGED,
         }
     }
 
@@ -194,6 +202,10 @@ impl core::fmt::Display for Fault {
             } => write!(
                 f,
                 "delivery mismatch: the stimulator applied {delivered} pulses since the Arm, the driver wrote {sent} (allowance {allowed})"
+            ),
+            Fault::LimitsChanged { field } => write!(
+                f,
+                "the stimulator now applies another {field} than the limits checked at the Arm (CONFIG_APPLIED)"
             ),
         }
     }
@@ -342,6 +354,9 @@ mod tests {
                 sent: 1,
                 delivered: 2,
                 allowed: 0,
+            },
+            Fault::LimitsChanged {
+                field: "max_amplitude",
             },
         ];
         let mut codes: Vec<u16> = faults.iter().map(Fault::code).collect();

@@ -865,7 +865,7 @@ impl<T: CanTx> ForwardPath<T> {
                     self.trip(Fault::Intrusion { cob_id, kind }, now_ns, ev);
                 }
             }
-            BusEvent::ConfigApplied(page) => self.on_config_applied(&page, ev),
+            BusEvent::ConfigApplied(page) => self.on_config_applied(&page, now_ns, ev),
             BusEvent::DeviceBusy { pulse } => {
                 self.counters.device_busy += 1;
                 if pulse {
@@ -978,8 +978,10 @@ impl<T: CanTx> ForwardPath<T> {
     }
 
     /// A CONFIG_APPLIED page: collects the read-back of the current attempt; limits that
-    /// differ from the ones sent refuse the configuration.
-    fn on_config_applied(&mut self, page: &fes_can::Config, ev: &mut impl EventSink) {
+    /// differ from the ones sent refuse the configuration, and while armed trip the
+    /// driver (what the stimulator enforces changed under it: a CONFIG another sender
+    /// wrote, or a stimulator that changed its limits).
+    fn on_config_applied(&mut self, page: &fes_can::Config, now_ns: u64, ev: &mut impl EventSink) {
         let id = match self.config {
             ConfigState::Configuring { id, .. } | ConfigState::Confirmed { id, .. } => id,
             _ => return,
@@ -996,8 +998,13 @@ impl<T: CanTx> ForwardPath<T> {
             config_id,
             differs,
         }));
-        if differs.is_some() && !self.is_armed() {
-            self.config = ConfigState::Refused;
+        match differs {
+            Some(field) if self.is_armed() => {
+                self.config = ConfigState::Refused;
+                self.trip(Fault::LimitsChanged { field }, now_ns, ev);
+            }
+            Some(_) => self.config = ConfigState::Refused,
+            None => {}
         }
     }
 

@@ -1502,6 +1502,63 @@ fn a_stimulator_that_applies_a_looser_limit_is_refused_at_arm() {
     assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Start)]);
 }
 
+/// While armed, the limits the stimulator reads back must stay the ones checked at the
+/// Arm: a CONFIG_APPLIED with a looser ceiling (a CONFIG another sender wrote, or a
+/// stimulator that changed what it enforces) trips the driver with 0xFF32 and NMT stop,
+/// naming the limit; it stays in its safe state. The same read-back again changes
+/// nothing. (Before, an armed driver only logged it.)
+#[test]
+fn limits_read_back_changing_while_armed_trip() {
+    let s = settings();
+    let mut r = Rig::new(s);
+    r.auto_readback = false;
+    r.fp.start(r.now, &mut r.ev);
+    r.advance(MS);
+    r.bus_event(status(StimState::PreOperational, 7));
+    for e in recording_bus::applied(&s.stim_limits, 8) {
+        r.bus_event(e);
+    }
+    r.advance(MS);
+    r.bus_event(status(StimState::PreOperational, 8));
+    r.fp.on_liveness(Liveness::Alive, r.now, &mut r.ev);
+    r.fp.on_supervisor_liveness(Liveness::Alive, r.now, &mut r.ev);
+    for _ in 0..3 {
+        r.advance(MS);
+        r.tick(false);
+    }
+    r.command(DriverCommandKind::Arm);
+    assert!(r.fp.is_armed(), "{:?}", r.ev);
+    // The same limits read back again: nothing happens.
+    for e in recording_bus::applied(&s.stim_limits, 8) {
+        r.bus_event(e);
+    }
+    assert!(r.fp.is_armed(), "{:?}", r.ev);
+    r.bus.clear();
+    let looser = StimLimits {
+        max_amplitude_100ua: s.stim_limits.max_amplitude_100ua * 5,
+        ..s.stim_limits
+    };
+    for e in recording_bus::applied(&looser, 8) {
+        r.bus_event(e);
+    }
+    assert!(!r.fp.is_armed());
+    assert_eq!(r.fp.counters().fault_code, 0xFF32);
+    assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+    assert!(
+        r.ev.iter().any(|e| matches!(
+            e,
+            DriverEvent::Tripped {
+                fault: Fault::LimitsChanged {
+                    field: "max_amplitude"
+                },
+                ..
+            }
+        )),
+        "{:?}",
+        r.ev
+    );
+}
+
 /// A lost CONFIG_APPLIED page must not refuse every Arm until a restart: the retry time
 /// after a confirmation whose read-back is incomplete, the configuration starts over with a
 /// fresh id (NMT enter pre-operational, new CONFIG pages), and a complete read-back of that

@@ -249,11 +249,14 @@ impl DriverStatus {
     /// Driver fault: the stimulator's delivered-pulse count (STATUS) does not match the
     /// PULSE frames the driver wrote, beyond the pulses in flight.
     pub const FAULT_DELIVERY_MISMATCH: u16 = 0xFF31;
+    /// Driver fault: while armed, the stimulator read back (CONFIG_APPLIED) limits other
+    /// than the ones checked at the Arm: what it enforces changed under the driver.
+    pub const FAULT_LIMITS_CHANGED: u16 = 0xFF32;
 
     /// The driver's own fault codes (manufacturer-specific EMCY range 0xFF21..=0xFF3F),
     /// with their names: the contract between stim-driver, which reports them, and the
     /// supervisor, which names them (docs/stim-driver.md).
-    pub const DRIVER_FAULTS: [(u16, &'static str); 17] = [
+    pub const DRIVER_FAULTS: [(u16, &'static str); 18] = [
         (Self::FAULT_TICK_TIMEOUT, "tick_timeout"),
         (Self::FAULT_GENERATOR_DEAD, "generator_dead"),
         (Self::FAULT_GENERATOR_GONE, "generator_gone"),
@@ -274,6 +277,7 @@ impl DriverStatus {
         (Self::FAULT_SUPERVISOR_GONE, "supervisor_gone"),
         (Self::FAULT_INTRUSION, "intrusion"),
         (Self::FAULT_DELIVERY_MISMATCH, "delivery_mismatch"),
+        (Self::FAULT_LIMITS_CHANGED, "limits_changed"),
     ];
 
     /// The name of a driver fault code, if it is one.
