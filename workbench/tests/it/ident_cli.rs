@@ -792,3 +792,33 @@ fn identify_range_puts_every_unit_where_the_data_are() {
         assert!(err.contains(says), "--range {bad}: {err}");
     }
 }
+
+/// The shipped slow model (`models/slow.lmn.json`, the model its controllers embed) spans
+/// its units over the scheduling range its training data reach (`--range 0,0.5`): every unit
+/// gets at least `MIN_UNIT_SHARE` (2 %) of the training data's validity weight, recomputed
+/// here from the data set `sim-muscle record --preset slow --seed 1` writes, not read from
+/// the file's provenance. A unit the data barely reach is fitted to little information, and
+/// the receding-horizon planner drives exactly such units (docs/bench.md, "Planning").
+#[test]
+fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
+    use fes_ident::ident::metrics::{MIN_UNIT_SHARE, unit_weights, validity_weights};
+    use fes_ident::ident::problem::ModelData;
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let lmn = file::load(models.join("slow.lmn.json")).unwrap();
+    for controller in ["slow.lcn.json", "slow-rehastim2.lcn.json"] {
+        let c = fes_model::control::file::Controller::load(models.join(controller)).unwrap();
+        assert_eq!(c.lmn, lmn, "{controller} embeds another model");
+    }
+    let records = RecordSet::from_dataset(&record_preset(Preset::Slow, 1)).unwrap();
+    let train = ModelData::new(&records.train, 1).unwrap();
+    let weights = unit_weights(&validity_weights(&lmn, &train).unwrap());
+    assert_eq!(weights.len(), lmn.units());
+    for w in &weights {
+        assert!(
+            w.share >= MIN_UNIT_SHARE,
+            "unit {}: {:.2} % of the validity weight",
+            w.unit,
+            100.0 * w.share
+        );
+    }
+}
