@@ -1,6 +1,8 @@
 //! `fes identify`: one identification run, the model file and its metrics.
 
-use super::{Feedback, LearningArg, ModeArg, SchedulingArg, StructureArg, fmt_err};
+use super::{
+    Feedback, LearningArg, ModeArg, SchedulingArg, SchedulingInputArg, StructureArg, fmt_err,
+};
 use anyhow::{Context, Result, bail};
 use fes_ident::ident::{IdentOptions, Identified, Learning, RecordSet, Undelivered, identify};
 use fes_model::model::{KnotLayout, file};
@@ -86,6 +88,13 @@ pub struct FitArgs {
     /// Scheduling variable.
     #[arg(long, value_enum, default_value_t = SchedulingArg::Input)]
     pub scheduling: SchedulingArg,
+    /// Input scheduling: which pulse train the prefilter filters. `delayed` (ours): u[k-d],
+    /// the input the local models see, so the controller can act on the state d samples
+    /// ahead. `undelayed` (eq. 5.2 as printed): u[k] as applied, the local models still
+    /// seeing u[k-d]; only the thesis's delayed loop runs on such a model
+    /// (docs/model.md, "Scheduling classes").
+    #[arg(long, value_enum, default_value_t = SchedulingInputArg::Delayed)]
+    pub scheduling_input: SchedulingInputArg,
     /// Estimation mode.
     #[arg(long, value_enum, default_value_t = ModeArg::Simulation)]
     pub mode: ModeArg,
@@ -185,6 +194,13 @@ impl FitArgs {
                 "--learning applies to prediction mode only (local learning, eq. 2.35, fits one-step predictors)"
             );
         }
+        if self.scheduling == SchedulingArg::Output
+            && self.scheduling_input == SchedulingInputArg::Undelayed
+        {
+            bail!(
+                "--scheduling-input undelayed applies to input scheduling only (output scheduling has no prefilter)"
+            );
+        }
         let opts = IdentOptions {
             structure: structure.into(),
             units,
@@ -192,6 +208,7 @@ impl FitArgs {
             ts_factor: factor.round() as usize,
             delay,
             scheduling: self.scheduling.into(),
+            scheduling_input: self.scheduling_input.into(),
             zero_offsets: self.zero_offsets,
             mode: self.mode.into(),
             learning: self.learning.map_or(Learning::Local, Into::into),

@@ -98,6 +98,24 @@ pub enum SchedulingArg {
     Output,
 }
 
+/// Which pulse train drives the input-scheduling prefilter (eq. 5.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SchedulingInputArg {
+    /// u[k-d], the input of the local models (ours).
+    Delayed,
+    /// u[k] as applied (eq. 5.2 as printed).
+    Undelayed,
+}
+
+impl From<SchedulingInputArg> for fes_model::model::scheduling::SchedulingInput {
+    fn from(s: SchedulingInputArg) -> Self {
+        match s {
+            SchedulingInputArg::Delayed => Self::Delayed,
+            SchedulingInputArg::Undelayed => Self::Undelayed,
+        }
+    }
+}
+
 impl From<SchedulingArg> for SchedulingKind {
     fn from(s: SchedulingArg) -> Self {
         match s {

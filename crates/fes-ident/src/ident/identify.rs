@@ -39,7 +39,8 @@ use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance, Structure};
 use fes_model::model::network::MAX_DELAY;
 use fes_model::model::params::ParamLayout;
 use fes_model::model::scheduling::{
-    SchedulingSpec, THESIS_PREFILTER_GAIN, THESIS_PREFILTER_WN, THESIS_PREFILTER_ZETA,
+    SchedulingInput, SchedulingSpec, THESIS_PREFILTER_GAIN, THESIS_PREFILTER_WN,
+    THESIS_PREFILTER_ZETA,
 };
 use fes_model::model::validity::{KnotLayout, MAX_UNITS, ValidityFunctions};
 use rand::{RngExt, SeedableRng};
@@ -94,6 +95,9 @@ pub struct IdentOptions {
     pub delay: Option<usize>,
     /// Scheduling variable.
     pub scheduling: SchedulingKind,
+    /// Input scheduling: which pulse train the prefilter filters (eq. 5.2 as printed:
+    /// [`SchedulingInput::Undelayed`]; ours: [`SchedulingInput::Delayed`]).
+    pub scheduling_input: SchedulingInput,
     /// Offsets fixed at zero (6.5.3).
     pub zero_offsets: bool,
     /// Estimation mode.
@@ -134,6 +138,7 @@ impl Default for IdentOptions {
             ts_factor: 1,
             delay: None,
             scheduling: SchedulingKind::Input,
+            scheduling_input: SchedulingInput::Delayed,
             zero_offsets: false,
             mode: Mode::Simulation,
             learning: Learning::Local,
@@ -218,6 +223,7 @@ impl IdentOptions {
             "ts_factor": self.ts_factor,
             "delay_samples": self.delay,
             "scheduling": match self.scheduling { SchedulingKind::Input => "input", SchedulingKind::Output => "output" },
+            "scheduling_input": self.scheduling_input.name(),
             "zero_offsets": self.zero_offsets,
             "mode": match self.mode { Mode::Prediction => "prediction", Mode::Simulation => "simulation" },
             "learning": match self.learning { Learning::Global => "global", Learning::Local => "local" },
@@ -492,6 +498,7 @@ impl Run<'_> {
                 gain: THESIS_PREFILTER_GAIN * 1e-3 / ts,
                 natural_frequency_rad_s: THESIS_PREFILTER_WN,
                 damping: THESIS_PREFILTER_ZETA,
+                scheduling_input: o.scheduling_input,
             },
             SchedulingKind::Output => SchedulingSpec::Output,
         };

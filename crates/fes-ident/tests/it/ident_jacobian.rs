@@ -1,5 +1,6 @@
 //! Exact (dual-number) Jacobians of the identification problem against central finite
-//! differences, relative 1e-6, for every structure, both scheduling kinds, both horizons,
+//! differences, relative 1e-6, for every structure, every scheduling class (input scheduling
+//! of the delayed and the undelayed input, eq. 5.2; output scheduling), both horizons,
 //! a down-sampled model period, and the interior knots.
 #![allow(clippy::needless_range_loop)] // index loops mirror the matrices
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
@@ -11,7 +12,7 @@ use fes_model::model::arx::ArxUnit;
 use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance};
 use fes_model::model::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 use fes_model::model::params::ParamLayout;
-use fes_model::model::scheduling::SchedulingSpec;
+use fes_model::model::scheduling::{SchedulingInput, SchedulingSpec};
 use fes_model::model::validity::ValidityFunctions;
 use nalgebra::DMatrix;
 
@@ -243,6 +244,15 @@ fn dual_jacobian_matches_finite_differences_for_every_structure() {
     let recs = records();
     for (sched_name, sched) in [
         ("input", SchedulingSpec::default()),
+        (
+            "input undelayed",
+            SchedulingSpec::Input {
+                gain: 25_000.0,
+                natural_frequency_rad_s: 50.0,
+                damping: 1.0,
+                scheduling_input: SchedulingInput::Undelayed,
+            },
+        ),
         ("output", SchedulingSpec::Output),
     ] {
         let data = ModelData::new(&recs, 1).expect("factor 1");
@@ -286,6 +296,7 @@ fn dual_jacobian_through_down_sampling_and_interpolation() {
         gain: 5000.0,
         natural_frequency_rad_s: 50.0,
         damping: 1.0,
+        scheduling_input: SchedulingInput::Undelayed,
     })
     .remove(4);
     let m = Lmn {

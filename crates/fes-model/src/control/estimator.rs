@@ -108,6 +108,9 @@ impl ForceEstimator {
         if net.delay() == 0 {
             return Err(EstimatorError::NoDelay);
         }
+        if !net.can_run_ahead() {
+            return Err(NetworkError::CannotRunAhead { delay: net.delay() }.into());
+        }
         let mut g = [Gain::default(); MAX_UNITS];
         for (i, l) in gains.iter().enumerate() {
             if !l.iter().all(|v| v.is_finite()) {

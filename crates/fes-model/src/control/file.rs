@@ -228,6 +228,15 @@ impl Controller {
                 "planning needs feedback_state advanced (the warm start runs the advanced loop)",
             ));
         }
+        if !network.can_run_ahead()
+            && (settings.mode, settings.feedback_state)
+                != (FeedbackMode::Model, FeedbackState::Delayed)
+        {
+            return Err(invalid(
+                "feedback_state",
+                "the model's scheduling_input is undelayed (eq. 5.2): the state d samples ahead depends on pulses not yet decided, so only mode model with feedback_state delayed (the thesis's loop) runs on it",
+            ));
+        }
         let min_rcond = settings.design.min_rcond;
         if !(min_rcond.is_finite() && min_rcond >= 0.0) {
             return Err(invalid(

@@ -35,7 +35,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::{AdvancedForm, CoreState, DelayLine, Network, NetworkError};
+use crate::model::{AdvancedForm, CoreState, DelayLine, Network, NetworkError, ThesisForm};
 
 use super::design::LocalGains;
 use super::estimator::{EstimatorError, ForceEstimator};
@@ -70,7 +70,9 @@ pub enum FeedbackState {
     Advanced,
     /// The model state now, `x[k] = z[k-d]`, integrating `y[k] - r`: the thesis's loop
     /// (Fig. 6.8, designed "assuming T_d = 0", C.2), whose `d`-sample delay the design
-    /// ignores. The controller sees a pulse's effect only `d` samples after it fired.
+    /// ignores. The controller sees a pulse's effect only `d` samples after it fired. On a
+    /// model of the undelayed scheduling class (eq. 5.2) the model runs in the thesis's form
+    /// and the gains are scheduled on phi(t) = Gamma{u(t)}, as the thesis schedules them.
     Delayed,
 }
 
@@ -116,7 +118,8 @@ pub struct TickOutput {
     pub energy: f64,
     /// Model force now, `y[k]` (measured mode: the estimator's `ŷ[k]`).
     pub model_force: f64,
-    /// Predicted force `y[k+d]` (the core output).
+    /// Predicted force `y[k+d]` (the core output; on a model of the undelayed scheduling
+    /// class, which cannot be run ahead, the model force `y[k]`).
     pub predicted_force: f64,
     /// Scheduling value `phi` used for this tick.
     pub phi: f64,
@@ -201,11 +204,30 @@ pub struct PatternGeneratorStats {
     pub planner: PlannerStats,
 }
 
+/// The model the loop runs.
+#[derive(Debug, Clone)]
+enum Core {
+    /// Ahead of the pulses (module docs); every mode and state.
+    Advanced(AdvancedForm<f64>),
+    /// In the thesis's form, `x[k]`: the delayed loop on a model of the undelayed scheduling
+    /// class, which cannot run ahead ([`Network::can_run_ahead`]).
+    Thesis(ThesisForm<f64>),
+}
+
+impl Core {
+    fn network(&self) -> &Network<f64> {
+        match self {
+            Self::Advanced(c) => c.network(),
+            Self::Thesis(c) => c.network(),
+        }
+    }
+}
+
 /// The pattern generator (thesis Fig. 6.8 in the advanced form).
 #[derive(Debug, Clone)]
 pub struct PatternGenerator {
-    core: AdvancedForm<f64>,
-    initial_core: AdvancedForm<f64>,
+    core: Core,
+    initial_core: Core,
     lcn: LocalControllerNetwork,
     shaper: PulseShaper,
     measured: Option<MeasuredLoop>,
@@ -244,6 +266,27 @@ impl PatternGenerator {
         }
         let lcn = LocalControllerNetwork::new(gains, net.ts(), anti_windup)?;
         let shaper = PulseShaper::new(shaper)?;
+        if !net.can_run_ahead() {
+            // The undelayed class (eq. 5.2): only the thesis's delayed loop, on the model in
+            // the thesis's form.
+            if (mode, feedback_state) != (FeedbackMode::Model, FeedbackState::Delayed) {
+                return Err(NetworkError::CannotRunAhead { delay: net.delay() }.into());
+            }
+            let core = Core::Thesis(ThesisForm::new(net)?);
+            return Ok(Self {
+                initial_core: core.clone(),
+                core,
+                lcn,
+                shaper,
+                measured: None,
+                initial_delayed: None,
+                delayed: None,
+                planner: None,
+                ticks: 0,
+                references_clamped: 0,
+                integrator_held: 0,
+            });
+        }
         let core = AdvancedForm::new(net)?;
         let measured = match mode {
             FeedbackMode::Model => None,
@@ -272,6 +315,7 @@ impl PatternGenerator {
                 Some(DelayLine::new(d, *core.state()).ok_or(NetworkError::Delay(d))?)
             }
         };
+        let core = Core::Advanced(core);
         Ok(Self {
             initial_core: core.clone(),
             core,
@@ -295,7 +339,7 @@ impl PatternGenerator {
             self.planner = None;
             return Ok(self);
         }
-        if self.delayed.is_some() {
+        if self.delayed.is_some() || matches!(self.core, Core::Thesis(_)) {
             return Err(PatternGeneratorError::PlanningDelayed);
         }
         let min_ipi = self.shaper.config().min_gap as usize + 1;
@@ -429,18 +473,20 @@ impl PatternGenerator {
         let x_i = self.lcn.x_i();
         let out = match self.measured.as_mut() {
             None => {
-                let act_core = self.core.activation();
+                let (act_core, core_now) = match &self.core {
+                    Core::Advanced(c) => (c.activation(), *c.state()),
+                    Core::Thesis(c) => (c.activation(), *c.state()),
+                };
                 // The state fed back: the advanced core state, or the model state now.
                 let (act, state) = match self.delayed.as_mut() {
-                    None => (act_core, *self.core.state()),
+                    None => (act_core, core_now),
                     Some(ring) => {
-                        let x = ring.push(*self.core.state());
+                        let x = ring.push(core_now);
                         (self.core.network().activation(&x), x)
                     }
                 };
                 let (phi, z) = (state.phi, state.ss_state());
                 let action = self.lcn.control(&act, z, clamp);
-                let core_now = *self.core.state();
                 let planned = match self.planner.as_mut() {
                     _ if withheld => Some(false),
                     Some(p) if shaped => {
@@ -458,20 +504,26 @@ impl PatternGenerator {
                         p.commit(self.core.network(), &core_now, u);
                     }
                 }
-                let step = self.core.step_with_activation(&act_core, u);
-                let y_fed_back = if self.delayed.is_some() {
-                    step.y
-                } else {
-                    step.y_ahead
+                // The thesis's form has no prediction: its y[k] stands in for y[k+d].
+                let (y, y_ahead, ahead_fed_back) = match &mut self.core {
+                    Core::Advanced(c) => {
+                        let step = c.step_with_activation(&act_core, u);
+                        (step.y, step.y_ahead, self.delayed.is_none())
+                    }
+                    Core::Thesis(c) => {
+                        let y = c.step_with_activation(&act_core, u);
+                        (y, y, false)
+                    }
                 };
+                let y_fed_back = if ahead_fed_back { y_ahead } else { y };
                 let integrated = self.lcn.integrate(&action, y_fed_back - r);
                 TickOutput {
                     pulse,
                     u_cont: action.u_cont,
                     u_raw: action.u_raw,
                     energy: self.shaper.energy(),
-                    model_force: step.y,
-                    predicted_force: step.y_ahead,
+                    model_force: y,
+                    predicted_force: y_ahead,
                     phi,
                     x_i,
                     z,

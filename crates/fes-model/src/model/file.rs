@@ -25,7 +25,7 @@ use super::lmn::{
     Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure, UnknownStructure,
 };
 use super::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
-use super::scheduling::SchedulingSpec;
+use super::scheduling::{SchedulingInput, SchedulingSpec};
 use super::validity::ValidityFunctions;
 use alloc::{
     format,
@@ -334,6 +334,11 @@ struct SchedulingDoc {
     #[serde(default, deserialize_with = "present")]
     #[serde(skip_serializing_if = "Option::is_none")]
     damping: Option<Num>,
+    /// Input scheduling: which pulse train the prefilter filters; absent = `delayed` (every
+    /// file written before the choice existed), written only when `undelayed`.
+    #[serde(default, deserialize_with = "present")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scheduling_input: Option<SchedulingInput>,
 }
 
 /// `scheduling.kind`.
@@ -353,17 +358,21 @@ impl From<SchedulingSpec> for SchedulingDoc {
                 gain,
                 natural_frequency_rad_s,
                 damping,
+                scheduling_input,
             } => Self {
                 kind: SchedulingKind::Input,
                 gain: Some(Num(gain)),
                 natural_frequency_rad_s: Some(Num(natural_frequency_rad_s)),
                 damping: Some(Num(damping)),
+                scheduling_input: (scheduling_input != SchedulingInput::Delayed)
+                    .then_some(scheduling_input),
             },
             SchedulingSpec::Output => Self {
                 kind: SchedulingKind::Output,
                 gain: None,
                 natural_frequency_rad_s: None,
                 damping: None,
+                scheduling_input: None,
             },
         }
     }
@@ -378,6 +387,12 @@ impl SchedulingDoc {
             ("damping", self.damping),
         ];
         if self.kind == SchedulingKind::Output {
+            if self.scheduling_input.is_some() {
+                return Err(bad(
+                    "scheduling.scheduling_input",
+                    "unknown field for kind \"output\" (it has no other field)",
+                ));
+            }
             return match fields.iter().find(|(_, v)| v.is_some()) {
                 Some((name, _)) => Err(bad(
                     format!("scheduling.{name}"),
@@ -394,6 +409,7 @@ impl SchedulingDoc {
             gain: gain?,
             natural_frequency_rad_s: natural_frequency_rad_s?,
             damping: damping?,
+            scheduling_input: self.scheduling_input.unwrap_or_default(),
         })
     }
 }

@@ -1,11 +1,14 @@
 //! Two equivalent ways to run a network with input delay d (thesis 2.2.2).
 //!
-//! - [`ThesisForm`]: a delay line on the input, as in eq. 2.14: the core (local models and
-//!   scheduler) is driven by u\[k-d\]; its state is the thesis's x\[k\]. Used for simulation and
-//!   identification, and wherever a plant is simulated.
+//! - [`ThesisForm`]: a delay line on the input, as in eq. 2.14: the local models (and, in the
+//!   delayed class, the scheduler) are driven by u\[k-d\]; its state is the thesis's x\[k\]. Used
+//!   for simulation and identification, wherever a plant is simulated, and by the thesis's
+//!   delayed loop on the undelayed class.
 //! - [`AdvancedForm`]: the core driven by u\[k\] directly, followed by a ring buffer of the last
 //!   d core outputs. Its state is z\[k\] = x\[k+d\], known exactly at time k because every input
-//!   that reaches it is already decided. The pattern generator's controller acts on z.
+//!   that reaches it is already decided. The pattern generator's controller acts on z. It
+//!   exists only where the core can run ahead ([`Network::can_run_ahead`]): in the undelayed
+//!   class (eq. 5.2) phi at k+d depends on the pulses of k..k+d-1.
 //!
 //! Both start "from rest" (see [`Network::rest_state`]); the advanced form's ring holds the
 //! outputs of the first d thesis-form steps (whose delayed input is zero), computed by running
@@ -102,8 +105,21 @@ impl<S: Scalar> ThesisForm<S> {
     /// One sample: pulse input u\[k\] in, model output y\[k\] out.
     #[inline]
     pub fn step(&mut self, u: f64) -> S {
+        let act = self.net.activation(&self.state);
+        self.step_with_activation(&act, u)
+    }
+
+    /// [`Self::step`] reusing an activation already evaluated at the state's phi.
+    #[inline]
+    pub fn step_with_activation(&mut self, act: &Activation<S>, u: f64) -> S {
         let v = self.input_delay.push(u);
-        self.net.step(&mut self.state, v)
+        self.net.step_inputs(&mut self.state, act, v, u)
+    }
+
+    /// The activation of the validity functions at the state's phi (phi\[k\]).
+    #[inline]
+    pub fn activation(&self) -> Activation<S> {
+        self.net.activation(&self.state)
     }
 
     /// The core state before the next step (x\[k\], prefilter state, phi\[k\]).
@@ -138,7 +154,11 @@ pub struct AdvancedForm<S: Scalar = f64> {
 
 impl<S: Scalar> AdvancedForm<S> {
     /// Starts at rest: the core runs d steps with zero input, filling the output ring.
+    /// Refused for a network that cannot run ahead ([`Network::can_run_ahead`]).
     pub fn new(net: Network<S>) -> Result<Self, NetworkError> {
+        if !net.can_run_ahead() {
+            return Err(NetworkError::CannotRunAhead { delay: net.delay() });
+        }
         let mut state = net.rest_state()?;
         let mut outputs =
             DelayLine::new(net.delay(), S::zero()).ok_or(NetworkError::Delay(net.delay()))?;

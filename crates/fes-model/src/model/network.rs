@@ -1,16 +1,19 @@
 //! The Local Model Network core: an undelayed LPV system (thesis 2.2.2, eq. 2.14-2.16, 2.24).
 //!
-//! The network with input delay d (eq. 2.14: the local models and, by our convention, the
-//! scheduler see u\[k-d\]) is exactly this core driven by v\[k\] = u\[k-d\]. Equivalently it is the
-//! core driven by u\[k\] followed by a pure d-sample output delay. [`super::forms`] runs it both
-//! ways.
+//! The network with input delay d (eq. 2.14: the local models and, in the delayed scheduling
+//! class, the scheduler see u\[k-d\]) is exactly this core driven by v\[k\] = u\[k-d\].
+//! Equivalently it is the core driven by u\[k\] followed by a pure d-sample output delay.
+//! [`super::forms`] runs it both ways. In the undelayed class (eq. 5.2 read literally,
+//! [`SchedulingInput::Undelayed`]) the prefilter is driven by u\[k\] itself while the local
+//! models see v\[k\]: [`Network::step_inputs`] takes both, and only the first way exists.
 //!
 //! One core step at (core) time j, with scheduling value phi_j known before the input:
 //! - state space: y_j = c(phi_j)' x_j + d^y(phi_j),
 //!   x_{j+1} = x_j + Ts (A(phi_j) x_j + b(phi_j) v_j + d^x(phi_j)) (eq. 2.15-2.16, D.2.2);
 //! - ARX: y_j = sum_i rho_i(phi_j) [psi_j' Theta_i + d_i] (eq. 2.24) with
 //!   psi_j = [v_j..v_{j-n+1}, y_{j-1}..y_{j-n}];
-//! - then the scheduler advances: phi_{j+1} = prefilter(v_0..v_j) or y_j.
+//! - then the scheduler advances: phi_{j+1} = prefilter(v_0..v_j) (undelayed class:
+//!   prefilter(u_0..u_j)) or y_j.
 //!
 //! Only the (at most 3) active units are interpolated, so a step costs the same for any M.
 //! The step is generic over [`Scalar`]: `f64` for the real-time path and simulation,
@@ -18,7 +21,7 @@
 
 use super::arx::{ArxUnit, MAX_ARX_ORDER};
 use super::local_model::SsLocalModel;
-use super::scheduling::Scheduler;
+use super::scheduling::{Scheduler, SchedulingInput};
 use super::validity::{Activation, MAX_UNITS, ValidityFunctions};
 use crate::num::Scalar;
 #[cfg(not(feature = "std"))]
@@ -52,6 +55,15 @@ pub enum NetworkError {
     NonFinite {
         /// The unit.
         unit: usize,
+    },
+    /// The advanced form (state d samples ahead) of an undelayed-class network: its phi d
+    /// samples ahead depends on pulses not yet decided.
+    #[error(
+        "the model's scheduling_input is undelayed (eq. 5.2) with a {delay}-sample delay: the state {delay} samples ahead depends on pulses not yet decided, so only the delayed loop (feedback_state delayed) can run on it"
+    )]
+    CannotRunAhead {
+        /// The input delay d.
+        delay: usize,
     },
     /// The rest state does not exist: the interpolated A (or ARX A(1)) is singular at the
     /// rest scheduling value.
@@ -193,6 +205,21 @@ impl<S: Scalar> Network<S> {
         &self.scheduler
     }
 
+    /// Which input drives phi.
+    #[inline]
+    pub fn scheduling_input(&self) -> SchedulingInput {
+        self.scheduler.input()
+    }
+
+    /// The core can run ahead of the pulses: every scheduling value of the next d core steps
+    /// is fixed by pulses already decided. True for the delayed class (and for d = 0);
+    /// false for the undelayed class with d > 0, whose phi d samples ahead depends on the
+    /// pulses of those d samples.
+    #[inline]
+    pub fn can_run_ahead(&self) -> bool {
+        self.delay == 0 || self.scheduling_input() == SchedulingInput::Delayed
+    }
+
     /// The local models.
     #[inline]
     pub fn local_models(&self) -> &LocalModels<S> {
@@ -239,8 +266,10 @@ impl<S: Scalar> Network<S> {
         self.validity.eval(st.phi)
     }
 
-    /// One core step with input v (the delayed pulse input): returns the core output y_j and
-    /// advances `st` to j + 1 (module docs).
+    /// One core step with input v, the scheduler driven by v as well: returns the core output
+    /// y_j and advances `st` to j + 1 (module docs). This is the delayed class's step, and the
+    /// step of any core run ahead of the pulses ([`Self::can_run_ahead`]); the undelayed class
+    /// with d > 0 steps with [`Self::step_inputs`].
     #[inline]
     pub fn step(&self, st: &mut CoreState<S>, v: f64) -> S {
         let act = self.activation(st);
@@ -251,6 +280,14 @@ impl<S: Scalar> Network<S> {
     /// controller that interpolates its gains with the same weights).
     #[inline(always)]
     pub fn step_with_activation(&self, st: &mut CoreState<S>, act: &Activation<S>, v: f64) -> S {
+        self.step_inputs(st, act, v, v)
+    }
+
+    /// One core step of either class: the local models see v = u\[k-d\]; the prefilter is
+    /// driven by v in the delayed class and by `u_now` = u\[k\] in the undelayed class (eq.
+    /// 5.2). Output scheduling ignores both.
+    #[inline(always)]
+    pub fn step_inputs(&self, st: &mut CoreState<S>, act: &Activation<S>, v: f64, u_now: f64) -> S {
         let y = match &self.local {
             LocalModels::StateSpace(units) => {
                 let m: SsLocalModel<S> = act.interpolate(|i| units[i]);
@@ -269,8 +306,12 @@ impl<S: Scalar> Network<S> {
             }
         };
         st.phi = match &self.scheduler {
-            Scheduler::Input(pf) => {
-                pf.advance(&mut st.w, v);
+            Scheduler::Input(pf, input) => {
+                let s = match input {
+                    SchedulingInput::Delayed => v,
+                    SchedulingInput::Undelayed => u_now,
+                };
+                pf.advance(&mut st.w, s);
                 S::from_f64(pf.output(&st.w))
             }
             Scheduler::Output => y,
@@ -313,7 +354,7 @@ impl<S: Scalar> Network<S> {
     /// [`crate::num::Dual`] one Newton step in S carries the implicit derivative.
     pub fn rest_state(&self) -> Result<CoreState<S>, NetworkError> {
         let phi0 = match self.scheduler {
-            Scheduler::Input(_) => S::zero(),
+            Scheduler::Input(..) => S::zero(),
             Scheduler::Output => self.output_fixed_point()?,
         };
         let (_y, x) = self

@@ -8,9 +8,16 @@
 //!   phi of (K / w_n^2) f Ts = f / 100 for the thesis values.
 //! - **Output scheduling** (eq. 5.1): phi_k = y_{k-1}.
 //!
-//! Convention (docs/model.md): the scheduler is driven by the DELAYED input u\[k-d\], the same
-//! input the local models see, so the whole network is an undelayed LPV core followed by a
-//! pure d-sample output delay (see [`super::network`]).
+//! Which input drives the prefilter is a property of the model class ([`SchedulingInput`]):
+//! - [`SchedulingInput::Delayed`] (ours, the default): the DELAYED input u\[k-d\], the same
+//!   input the local models see, so the whole network is an undelayed LPV core followed by a
+//!   pure d-sample output delay (see [`super::network`]), and the controller can act on the
+//!   state d samples ahead.
+//! - [`SchedulingInput::Undelayed`] (eq. 5.2 as printed): phi(t) = Gamma{u(t)} filters the
+//!   pulse train as it is applied, while the local models see u\[k-d\]. A pulse then reaches
+//!   the local models when phi already carries its own contribution (a 2 ms doublet's second
+//!   pulse lands at phi ~ 0.26 instead of ~ 0.035). The state d samples ahead depends on
+//!   pulses not yet decided, so only the thesis's delayed loop runs on this class.
 
 #[cfg(not(feature = "std"))]
 use crate::num::math::FloatMath as _;
@@ -54,6 +61,29 @@ pub enum SchedulingError {
     },
 }
 
+/// Which pulse train drives the prefilter (module docs). Stored in the model file as
+/// `scheduling.scheduling_input`; a file without the field is [`SchedulingInput::Delayed`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SchedulingInput {
+    /// phi filters u\[k-d\], the local models' input (ours; every file written before the
+    /// choice was stored).
+    #[default]
+    Delayed,
+    /// phi filters u\[k\] (eq. 5.2 read literally); the local models still see u\[k-d\].
+    Undelayed,
+}
+
+impl SchedulingInput {
+    /// The file's name of the choice.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Delayed => "delayed",
+            Self::Undelayed => "undelayed",
+        }
+    }
+}
+
 /// How phi is obtained, as stored in the model file (`scheduling`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
@@ -66,6 +96,9 @@ pub enum SchedulingSpec {
         natural_frequency_rad_s: f64,
         /// zeta (1 = critically damped).
         damping: f64,
+        /// Which pulse train the prefilter filters.
+        #[serde(default)]
+        scheduling_input: SchedulingInput,
     },
     /// Output scheduling: phi_k = y_{k-1} (eq. 5.1).
     Output,
@@ -78,6 +111,20 @@ impl Default for SchedulingSpec {
             gain: THESIS_PREFILTER_GAIN,
             natural_frequency_rad_s: THESIS_PREFILTER_WN,
             damping: THESIS_PREFILTER_ZETA,
+            scheduling_input: SchedulingInput::Delayed,
+        }
+    }
+}
+
+impl SchedulingSpec {
+    /// Which input drives phi ([`SchedulingInput::Delayed`] for output scheduling, whose
+    /// phi_k = y_{k-1} is delayed with the output).
+    pub fn scheduling_input(&self) -> SchedulingInput {
+        match self {
+            Self::Input {
+                scheduling_input, ..
+            } => *scheduling_input,
+            Self::Output => SchedulingInput::Delayed,
         }
     }
 }
@@ -85,8 +132,9 @@ impl Default for SchedulingSpec {
 /// The run-time scheduler: a discretised prefilter, or output feedback.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Scheduler {
-    /// Input scheduling through the exactly discretised prefilter.
-    Input(Prefilter),
+    /// Input scheduling through the exactly discretised prefilter, driven by the input the
+    /// [`SchedulingInput`] names.
+    Input(Prefilter, SchedulingInput),
     /// Output scheduling, phi_k = y_{k-1}.
     Output,
 }
@@ -99,18 +147,25 @@ impl Scheduler {
                 gain,
                 natural_frequency_rad_s,
                 damping,
-            } => Ok(Self::Input(Prefilter::new(
-                gain,
-                natural_frequency_rad_s,
-                damping,
-                ts,
-            )?)),
+                scheduling_input,
+            } => Ok(Self::Input(
+                Prefilter::new(gain, natural_frequency_rad_s, damping, ts)?,
+                scheduling_input,
+            )),
             SchedulingSpec::Output => {
                 if !(ts.is_finite() && ts > 0.0) {
                     return Err(SchedulingError::SamplingPeriod(ts));
                 }
                 Ok(Self::Output)
             }
+        }
+    }
+
+    /// Which input drives phi.
+    pub fn input(&self) -> SchedulingInput {
+        match self {
+            Self::Input(_, i) => *i,
+            Self::Output => SchedulingInput::Delayed,
         }
     }
 }

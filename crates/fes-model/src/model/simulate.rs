@@ -43,7 +43,8 @@ pub fn simulate<S: Scalar>(net: &Network<S>, u: &[f64], y: &mut [S]) -> Result<(
     let d = net.delay();
     for (k, yk) in y.iter_mut().enumerate() {
         let v = if k >= d { u[k - d] } else { 0.0 };
-        *yk = net.step(&mut st, v);
+        let act = net.activation(&st);
+        *yk = net.step_inputs(&mut st, &act, v, u[k]);
     }
     Ok(())
 }
@@ -95,7 +96,8 @@ pub fn predict<S: Scalar>(
             st.phi = S::from_f64(meas(k_i - 1));
         }
         let v = if k >= d { u[k - d] } else { 0.0 };
-        *yk = net.step(&mut st, v);
+        let act = net.activation(&st);
+        *yk = net.step_inputs(&mut st, &act, v, u[k]);
     }
     Ok(())
 }

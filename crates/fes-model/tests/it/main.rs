@@ -23,4 +23,5 @@ mod model_network;
 mod model_no_alloc;
 mod model_params;
 mod model_scheduling;
+mod model_scheduling_class;
 mod model_validity;
