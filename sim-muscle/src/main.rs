@@ -145,6 +145,9 @@ enum PresetArg {
     Fast,
     /// Chronically stimulated muscle: slower, no catch-like gain.
     Slow,
+    /// Fast muscle whose identified local models have the thesis's Table 5.3 poles
+    /// (-87..-256 and -8..-33 1/s): tau_c 3 ms, Ding 2003's tau_1, tau_2.
+    ThesisFast,
 }
 
 impl From<PresetArg> for Preset {
@@ -152,6 +155,7 @@ impl From<PresetArg> for Preset {
         match p {
             PresetArg::Fast => Preset::Fast,
             PresetArg::Slow => Preset::Slow,
+            PresetArg::ThesisFast => Preset::ThesisFast,
         }
     }
 }

@@ -605,10 +605,7 @@ fn config_args(command: Option<&str>, config: &Path) -> Vec<String> {
 
 /// sim-muscle's name of a preset.
 fn preset_name(p: sim_muscle::preset::Preset) -> &'static str {
-    match p {
-        sim_muscle::preset::Preset::Fast => "fast",
-        sim_muscle::preset::Preset::Slow => "slow",
-    }
+    p.name()
 }
 
 /// The virtual stimulator and the muscle on the stack's interface, recording what it

@@ -75,9 +75,13 @@ fn slow_muscle_ftipp_never_exceeds_one() {
 /// rise", as thesis Fig. 5.26), 1..100 Hz. It rises strictly at every 1 Hz step and
 /// saturates: the gain over the top 10 Hz (90 -> 100 Hz) is at most a third of the
 /// largest gain over any 10 Hz band.
+///
+/// The thesis's two muscles only: `thesis-fast` stands in for the identified dynamics of
+/// Table 5.3 (tau_c = 3 ms), and its curve still rises almost linearly at 90-100 Hz
+/// (docs/sim-muscle.md).
 #[test]
 fn force_frequency_curves_rise_and_saturate() {
-    for preset in Preset::ALL {
+    for preset in [Preset::Fast, Preset::Slow] {
         let mut m = muscle(preset);
         let curve: Vec<f64> = (1..=100)
             .map(|hz| {
@@ -115,9 +119,13 @@ fn force_frequency_curves_rise_and_saturate() {
 /// Fatigue (Ding 2003, coefficients carried over per preset): 1 s on at 33 Hz / 1 s off
 /// for 60 s. Every train's peak is below the previous one's, and the last is at most
 /// 80 % of the first.
+///
+/// The thesis's two muscles only: at 33 Hz `thesis-fast` (tau_c = 3 ms) is unfused, so the
+/// slower force decay of fatigue first raises its peaks, and they fall by 6 % in 60 s
+/// (docs/sim-muscle.md).
 #[test]
 fn fatigue_reduces_force_steadily() {
-    for preset in Preset::ALL {
+    for preset in [Preset::Fast, Preset::Slow] {
         let mut cfg = MuscleConfig::preset(preset);
         cfg.fatigue = Some(FatigueParams::for_muscle(&cfg.ding));
         let mut m = Muscle::new(cfg).expect("valid");

@@ -55,6 +55,8 @@ pub enum MuscleArg {
     Fast,
     /// Slow (chronically stimulated) muscle.
     Slow,
+    /// Fast muscle whose identified local models have the thesis's Table 5.3 poles.
+    ThesisFast,
 }
 
 impl From<MuscleArg> for Preset {
@@ -62,6 +64,7 @@ impl From<MuscleArg> for Preset {
         match m {
             MuscleArg::Fast => Preset::Fast,
             MuscleArg::Slow => Preset::Slow,
+            MuscleArg::ThesisFast => Preset::ThesisFast,
         }
     }
 }
