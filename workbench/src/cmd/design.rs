@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use fes_model::control::file::Controller;
 use fes_model::control::lcn_design::{THESIS_DAMPING, UnitSpec};
+use fes_model::control::pattern_generator::FeedbackState;
 use fes_model::control::planner::PlanningConfig;
 use fes_model::control::poles::{Pole, third_pole};
 use fes_model::model::file;
@@ -51,9 +52,10 @@ pub struct Args {
     pub min_interval_ms: f64,
     /// Pulse decisions: `receding-horizon` plans each contraction the reference preview
     /// announces over the model (docs/control.md, section 11), `off` leaves every pulse to
-    /// the causal LCN + shaper.
-    #[arg(long, value_enum, default_value_t = PlanningArg::RecedingHorizon)]
-    pub planning: PlanningArg,
+    /// the causal LCN + shaper. Default: receding-horizon with --feedback-state advanced,
+    /// off with delayed (the plan's warm start runs the advanced loop).
+    #[arg(long, value_enum)]
+    pub planning: Option<PlanningArg>,
     /// Price of a pulse in the plan's objective, in summed squared error (normalised force
     /// squared over 1 ms ticks): higher, fewer pulses.
     #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.lambda)]
@@ -190,7 +192,11 @@ pub fn run(args: Args) -> Result<()> {
     let mut settings = args.variant.settings();
     settings.shaper.min_gap = min_gap(args.min_interval_ms, lmn.ts)?;
     settings.design.allow_negative_gain = args.allow_negative_gain;
-    if args.planning == PlanningArg::RecedingHorizon {
+    let planning = args.planning.unwrap_or(match settings.feedback_state {
+        FeedbackState::Advanced => PlanningArg::RecedingHorizon,
+        FeedbackState::Delayed => PlanningArg::Off,
+    });
+    if planning == PlanningArg::RecedingHorizon {
         settings.planning = PlanningConfig {
             lambda: args.plan_lambda,
             mean_weight: args.plan_mean_weight,

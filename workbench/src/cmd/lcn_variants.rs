@@ -96,25 +96,43 @@ const VARIANTS: &[Variant] = &[
     },
     Variant {
         name: "thesis",
-        what: "every thesis reading: signed unbounded sum, no anti-windup, delayed state",
+        what: "every thesis reading: signed unbounded sum, no anti-windup, delayed state, p3 = -1.9/Ts",
+        apply: thesis_loop,
+    },
+    Variant {
+        name: "thesis-p3-mapped",
+        what: "the thesis's loop with p3 = (exp(-1.9) - 1)/Ts (a continuous pole mapped)",
         apply: |v| {
-            v.shaper_sum = ShaperSumArg::Signed;
-            v.e_min = None;
-            v.anti_windup = AntiWindupArg::None;
-            v.feedback_state = FeedbackStateArg::Delayed;
-            v.rise_rule = RiseRuleArg::Thesis;
-            v.third_pole_rule = ThirdPoleArg::Delta;
+            thesis_loop(v);
+            v.third_pole_rule = ThirdPoleArg::Mapped;
         },
     },
 ];
+
+/// The thesis's loop (6.5, C.2): plain integral action, the signed shaper sum (eq. 6.8),
+/// the model state now fed back (Td = 0 assumed in the design), w_n t_r = 3.2 and
+/// p3 = -1.9/Ts read in the delta domain. On a model of the undelayed scheduling class
+/// (eq. 5.2) its gains are scheduled on phi(t) = Gamma{u(t)}.
+fn thesis_loop(v: &mut VariantArgs) {
+    v.shaper_sum = ShaperSumArg::Signed;
+    v.e_min = None;
+    v.anti_windup = AntiWindupArg::None;
+    v.feedback_state = FeedbackStateArg::Delayed;
+    v.rise_rule = RiseRuleArg::Thesis;
+    v.third_pole_rule = ThirdPoleArg::Delta;
+}
 
 /// Arguments of `fes lcn-variants`.
 #[derive(Debug, clap::Args)]
 #[command(
     after_help = "Variants: default, legacy, integral-sign, output-clamp, signed-sum, \
-    signed-sum-floor, p3-mapped, rise-approximation, delayed-state, thesis (see \
-    docs/control.md, \"Variants\").\n\nExample:\n  fes lcn-variants --model \
-    models/slow.lmn.json --muscle slow --rise-ms auto --out target/variants/slow"
+    signed-sum-floor, p3-mapped, rise-approximation, delayed-state, thesis, \
+    thesis-p3-mapped (see docs/control.md, \"Variants\"). On a model of the undelayed \
+    scheduling class (eq. 5.2) only the delayed-state variants run; the others are listed \
+    as not run.\n\nExamples:\n  fes lcn-variants --model models/slow.lmn.json --muscle \
+    slow --rise-ms auto --out target/variants/slow\n  fes lcn-variants --model \
+    models/thesis-fast.lmn.json --muscle thesis-fast --rise-ms 100,30,30,10,20,30 \
+    --variants thesis,thesis-p3-mapped --out target/variants/thesis-fast"
 )]
 pub struct Args {
     /// The design model (fes-lmn/1, state space, every local model stable).
@@ -205,6 +223,22 @@ pub fn run(args: Args) -> Result<()> {
     ));
     let settings = StepSettings::variant_table(ts);
     out_dir(&args.out)?;
+    // The undelayed class (eq. 5.2) cannot be run ahead: only the delayed loop runs on it.
+    let runs_ahead = lmn
+        .network()
+        .context("the model's network")?
+        .can_run_ahead();
+    let (chosen, not_run): (Vec<_>, Vec<_>) = chosen.into_iter().partition(|v| {
+        let mut opts = VariantArgs::default();
+        (v.apply)(&mut opts);
+        runs_ahead || opts.feedback_state == FeedbackStateArg::Delayed
+    });
+    if chosen.is_empty() {
+        bail!(
+            "{}: the model's scheduling_input is undelayed (eq. 5.2); of the variants asked for, none feeds back the delayed state (try --variants thesis,delayed-state)",
+            args.model.display()
+        );
+    }
     let bar = progress(chosen.len() * levels.len(), "LCN variants");
     let mut scored = Vec::new();
     for v in chosen {
@@ -228,7 +262,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     bar.finish_and_clear();
     let names: Vec<String> = subjects.iter().map(|(n, _, _)| n.clone()).collect();
-    write_outputs(&args, &names, &settings, ts, &scored)
+    write_outputs(&args, &names, &settings, ts, &scored, &not_run)
 }
 
 /// Shape of a pattern in a few words (convention 9).
@@ -265,6 +299,7 @@ fn write_outputs(
     settings: &StepSettings,
     ts: f64,
     scored: &[Scored],
+    not_run: &[&Variant],
 ) -> Result<()> {
     let ms = ts * 1e3;
     let half = settings.second_half();
@@ -281,6 +316,17 @@ fn write_outputs(
         args.rise_ms,
         args.damping
     );
+    if !not_run.is_empty() {
+        let _ = writeln!(
+            md,
+            "Not run: {} (they act on the state d samples ahead, which a model of the undelayed scheduling class, eq. 5.2, cannot predict).\n",
+            not_run
+                .iter()
+                .map(|v| format!("`{}`", v.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let mut csv = Vec::new();
     let mut summary = Vec::new();
     for s in scored {
@@ -305,6 +351,7 @@ fn write_outputs(
                 means.join(" / "),
                 format!("{:+.1} %", 100.0 * err),
                 format!("{:.3}", sc.subjects[last].rms),
+                format!("{:.2}", sc.min_energy),
             ]);
             let sh = sc.shape.as_ref();
             csv.push(vec![
@@ -331,6 +378,7 @@ fn write_outputs(
                 format!("{}", target),
                 format!("{}", sc.loop_rms),
                 format!("{}", sc.subjects[last].rms),
+                format!("{}", sc.min_energy),
             ]);
         }
         let mut header = vec!["r", "pulses", "first IPI (ms)", "shape"];
@@ -339,6 +387,7 @@ fn write_outputs(
         let err_head = format!("{} - r", subjects[last]);
         header.push(&err_head);
         header.push("RMS");
+        header.push("min E");
         md.push_str(&md_table(&header, &rows));
         md.push('\n');
         summary.push(vec![
@@ -384,6 +433,7 @@ fn write_outputs(
             "muscle_mean",
             "loop_rms",
             "muscle_rms",
+            "min_energy",
         ],
         &csv,
     )?;

@@ -173,10 +173,10 @@ fn only_the_delayed_loop_runs_on_the_undelayed_class() {
     );
     let specs = table_6_1_specs(6);
     let advanced = Controller::design(lmn.clone(), &specs, ControllerSettings::default());
-    let err = advanced
-        .err()
-        .expect("the advanced loop is refused")
-        .to_string();
+    let Err(err) = advanced else {
+        panic!("the advanced loop is refused");
+    };
+    let err = err.to_string();
     assert!(err.contains("feedback_state"), "{err}");
     let settings = ControllerSettings {
         feedback_state: FeedbackState::Delayed,

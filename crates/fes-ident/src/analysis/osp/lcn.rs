@@ -19,6 +19,9 @@ pub struct LcnRun {
     pub u_cont: Vec<f64>,
     /// The scheduling variable of each tick.
     pub phi: Vec<f64>,
+    /// The shaper's energy E after each tick (eq. 6.8): bounded below by the clamp, or by
+    /// nothing under the thesis's signed sum.
+    pub energy: Vec<f64>,
 }
 
 impl LcnRun {
@@ -68,6 +71,7 @@ pub fn run_pattern_generator(pg: &mut PatternGenerator, reference: &[f64]) -> Lc
         pulse: Vec::with_capacity(n),
         u_cont: Vec::with_capacity(n),
         phi: Vec::with_capacity(n),
+        energy: Vec::with_capacity(n),
     };
     for &r in reference {
         let out = pg.tick(&TickInput {
@@ -80,6 +84,7 @@ pub fn run_pattern_generator(pg: &mut PatternGenerator, reference: &[f64]) -> Lc
         run.pulse.push(out.pulse);
         run.u_cont.push(out.u_cont);
         run.phi.push(out.phi);
+        run.energy.push(out.energy);
     }
     run
 }
@@ -231,6 +236,8 @@ pub struct StepScore {
     pub loop_mean: f64,
     /// RMS of (loop model force - r) from the onset to the end.
     pub loop_rms: f64,
+    /// The lowest shaper energy E of the run (how far the signed sum winds down).
+    pub min_energy: f64,
     /// One score per subject, in the order given.
     pub subjects: Vec<SubjectScore>,
 }
@@ -294,6 +301,7 @@ pub fn evaluate_step(
         shape: pattern_shape(&pulses, &settings.criteria),
         loop_mean: steady_mean(&run.model_force, &pulses, half).unwrap_or(f64::NAN),
         loop_rms: rms(&run.model_force),
+        min_energy: run.energy.iter().copied().fold(f64::INFINITY, f64::min),
         pulses,
         subjects: scores,
     };
