@@ -46,9 +46,11 @@ fn record_preset(preset: Preset, seed: u64) -> DataSet {
 fn data_dir(preset: Preset) -> &'static Path {
     static FAST: OnceLock<PathBuf> = OnceLock::new();
     static SLOW: OnceLock<PathBuf> = OnceLock::new();
+    static THESIS_FAST: OnceLock<PathBuf> = OnceLock::new();
     let cell = match preset {
         Preset::Fast => &FAST,
         Preset::Slow => &SLOW,
+        Preset::ThesisFast => &THESIS_FAST,
     };
     cell.get_or_init(|| {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -821,4 +823,78 @@ fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
             100.0 * w.share
         );
     }
+}
+
+/// The shipped model of eq. 5.2's class (`models/thesis-fast.lmn.json`, `scheduling_input =
+/// "undelayed"`) is reproduced by `fes identify` with the options its provenance records, on
+/// the data set `sim-muscle record --preset thesis-fast --seed 1` writes: the same train and
+/// test MSSE (relative 1e-6) and the same class. Its local models have the thesis's kind of
+/// dynamics (Table 5.3: a fast pole beside a slow one): every unit a pole faster than
+/// -87 1/s and one between -8 and -33 1/s. The model of today's class identified with the
+/// same options fits the same data better (a lower test MSSE), as docs/model.md reports.
+#[test]
+fn the_undelayed_class_reproduces_its_stored_fit() {
+    use fes_model::model::LocalModelSet;
+    use fes_model::model::scheduling::SchedulingInput;
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let stored = file::load(models.join("thesis-fast.lmn.json")).unwrap();
+    assert_eq!(
+        stored.scheduling.scheduling_input(),
+        SchedulingInput::Undelayed
+    );
+    let LocalModelSet::SsEigCommon { units, .. } = &stored.local else {
+        panic!("ss-eig-common expected");
+    };
+    for (i, u) in units.iter().enumerate() {
+        let (fast, slow) = (
+            u.eigenvalues[0].min(u.eigenvalues[1]),
+            u.eigenvalues[0].max(u.eigenvalues[1]),
+        );
+        assert!(fast < -87.0, "unit {i}: fast pole {fast}");
+        assert!((-33.0..=-8.0).contains(&slow), "unit {i}: slow pole {slow}");
+    }
+    let dir = tmp("undelayed_class");
+    let data = data_dir(Preset::ThesisFast).to_str().expect("utf8");
+    let fit = |class: &str| {
+        let out = dir.join(format!("{class}.lmn.json"));
+        let o = run(&[
+            "identify",
+            "--data",
+            data,
+            "--structure",
+            "ss-eig-common",
+            "--units",
+            "6",
+            "--knots",
+            "uniform",
+            "--zero-offsets",
+            "--starts",
+            "4",
+            "--scheduling-input",
+            class,
+            "--out",
+            out.to_str().expect("utf8"),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        file::load(&out).unwrap()
+    };
+    let again = fit("undelayed");
+    assert_eq!(again.scheduling, stored.scheduling);
+    let (a, b) = (&again.provenance, &stored.provenance);
+    for (what, x, y) in [
+        ("train", a.train_msse.unwrap(), b.train_msse.unwrap()),
+        ("test", a.test_msse.unwrap(), b.test_msse.unwrap()),
+    ] {
+        assert!(
+            (x - y).abs() <= 1e-6 * y,
+            "{what} MSSE {x:e} vs stored {y:e}"
+        );
+    }
+    let ours = fit("delayed");
+    assert!(
+        ours.provenance.test_msse.unwrap() < b.test_msse.unwrap(),
+        "delayed class test MSSE {:e} vs undelayed {:e}",
+        ours.provenance.test_msse.unwrap(),
+        b.test_msse.unwrap()
+    );
 }

@@ -199,3 +199,95 @@ fn shipped_controller_is_steady_under_fatigue() {
         100.0 * worst
     );
 }
+
+/// The thesis's kind of plant (`thesis-fast`: identified local models with a fast pole of
+/// -100 to -311 1/s beside a slow one of -9 to -25 1/s, Table 5.3's kind) and the model
+/// class of eq. 5.2 (`models/thesis-fast.lmn.json`, `scheduling_input = "undelayed"`). Its
+/// shipped controller is the thesis's delayed loop (x[k] fed back, gains scheduled on
+/// phi(t) = Gamma{u(t)}, plain integral action) with slower rise times (30-200 ms) and the
+/// clamped shaper sum: it holds every level within 5 % on the Ding muscle, and the loop's
+/// model within 1 %.
+#[test]
+fn the_delayed_loop_holds_the_thesis_like_plant_at_every_level() {
+    use fes_model::control::pattern_generator::FeedbackState;
+    use fes_model::model::scheduling::SchedulingInput;
+    let c = shipped("thesis-fast");
+    assert_eq!(
+        c.lmn.scheduling.scheduling_input(),
+        SchedulingInput::Undelayed
+    );
+    assert_eq!(c.settings.feedback_state, FeedbackState::Delayed);
+    for s in scores(&c, Preset::ThesisFast) {
+        assert_held(&s);
+        assert!(
+            (s.loop_mean - s.level).abs() <= 0.01 * s.level,
+            "r = {}: loop {}",
+            s.level,
+            s.loop_mean
+        );
+    }
+}
+
+/// The thesis's loop exactly on the thesis-like plant (`models/thesis-fast-thesis.lcn.json`:
+/// the signed shaper sum of eq. 6.8, no anti-windup, delayed state, Table 6.1's rise times,
+/// p3 = -1.9/Ts) does not hold: the 7 ms delay inside loops of 10-30 ms rise time makes
+/// bursts at every level, and the signed sum winds E down by thousands (below -10^4 at some
+/// level) while the muscle misses by more than 5 % at every level. With the same loop and
+/// 30-200 ms rise times E stays within a few hundred and the loop holds its model within
+/// 2.5 %, but the Ding muscle sits 15-25 % low: the signed sum's patterns are where the
+/// identified model over-predicts the muscle (docs/control.md, section 10).
+#[test]
+fn the_thesis_loop_exactly_fails_on_the_thesis_like_plant_where_the_docs_say() {
+    let exact = shipped("thesis-fast-thesis");
+    let runs = scores(&exact, Preset::ThesisFast);
+    let lowest = runs
+        .iter()
+        .map(|s| s.min_energy)
+        .fold(f64::INFINITY, f64::min);
+    assert!(lowest < -1e4, "E wound down only to {lowest}");
+    for s in &runs {
+        let e = (s.subjects[0].mean - s.level) / s.level;
+        assert!(
+            e.abs() > 0.05,
+            "r = {}: held ({:+.1} %)",
+            s.level,
+            100.0 * e
+        );
+        assert!(
+            s.short_ipis_after_opening(10) > 0,
+            "r = {}: no bursts",
+            s.level
+        );
+    }
+    let slower = Controller::design(
+        exact.lmn.clone(),
+        &fes_model::control::lcn_design::UnitSpec::for_rise_times(
+            &[0.030, 0.064, 0.098, 0.132, 0.166, 0.200],
+            fes_model::control::lcn_design::THESIS_DAMPING,
+            exact.units[0].spec.p3,
+        ),
+        exact.settings,
+    )
+    .unwrap();
+    for s in scores(&slower, Preset::ThesisFast) {
+        assert!(
+            s.min_energy > -1000.0,
+            "r = {}: E {}",
+            s.level,
+            s.min_energy
+        );
+        assert!(
+            (s.loop_mean - s.level).abs() <= 0.025 * s.level,
+            "r = {}: loop {}",
+            s.level,
+            s.loop_mean
+        );
+        let e = (s.subjects[0].mean - s.level) / s.level;
+        assert!(
+            (-0.25..=-0.15).contains(&e),
+            "r = {}: muscle {:+.1} %",
+            s.level,
+            100.0 * e
+        );
+    }
+}
