@@ -88,10 +88,10 @@ pub struct FitArgs {
     /// Scheduling variable.
     #[arg(long, value_enum, default_value_t = SchedulingArg::Input)]
     pub scheduling: SchedulingArg,
-    /// Input scheduling: which pulse train the prefilter filters. `delayed` (ours): u[k-d],
+    /// Input scheduling: which pulse train the prefilter filters. `delayed` (ours): u(t - Td),
     /// the input the local models see, so the controller can act on the state d samples
-    /// ahead. `undelayed` (eq. 5.2 as printed): u[k] as applied, the local models still
-    /// seeing u[k-d]; only the thesis's delayed loop runs on such a model
+    /// ahead. `undelayed` (eq. 5.2 as printed): u(t) as applied, the local models still
+    /// seeing u(t - Td); only the thesis's delayed loop runs on such a model
     /// (docs/model.md, "Scheduling classes").
     #[arg(long, value_enum, default_value_t = SchedulingInputArg::Delayed)]
     pub scheduling_input: SchedulingInputArg,

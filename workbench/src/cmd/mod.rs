@@ -101,9 +101,9 @@ pub enum SchedulingArg {
 /// Which pulse train drives the input-scheduling prefilter (eq. 5.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SchedulingInputArg {
-    /// u[k-d], the input of the local models (ours).
+    /// u(t - Td), the input of the local models (ours).
     Delayed,
-    /// u[k] as applied (eq. 5.2 as printed).
+    /// u(t) as applied (eq. 5.2 as printed).
     Undelayed,
 }
 

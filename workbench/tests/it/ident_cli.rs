@@ -830,8 +830,10 @@ fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
 /// the data set `sim-muscle record --preset thesis-fast --seed 1` writes: the same train and
 /// test MSSE (relative 1e-6) and the same class. Its local models have the thesis's kind of
 /// dynamics (Table 5.3: a fast pole beside a slow one): every unit a pole faster than
-/// -87 1/s and one between -8 and -33 1/s. The model of today's class identified with the
-/// same options fits the same data better (a lower test MSSE), as docs/model.md reports.
+/// -87 1/s and one between -8 and -33 1/s, and every unit at least `MIN_UNIT_SHARE` of
+/// the training validity weight. The model of today's class identified with the same
+/// options fits the same data within 5 % of its test MSSE (docs/model.md: 9.22e-5 against
+/// 9.11e-5).
 #[test]
 fn the_undelayed_class_reproduces_its_stored_fit() {
     use fes_model::model::LocalModelSet;
@@ -864,9 +866,9 @@ fn the_undelayed_class_reproduces_its_stored_fit() {
             "--structure",
             "ss-eig-common",
             "--units",
-            "6",
-            "--knots",
-            "uniform",
+            "4",
+            "--range",
+            "0,0.6",
             "--zero-offsets",
             "--starts",
             "4",
@@ -890,11 +892,19 @@ fn the_undelayed_class_reproduces_its_stored_fit() {
             "{what} MSSE {x:e} vs stored {y:e}"
         );
     }
-    let ours = fit("delayed");
+    for (i, share) in validity_shares(&models.join("thesis-fast.lmn.json"))
+        .iter()
+        .enumerate()
+    {
+        assert!(
+            *share >= fes_ident::ident::metrics::MIN_UNIT_SHARE,
+            "unit {i}: {share}"
+        );
+    }
+    let ours = fit("delayed").provenance.test_msse.unwrap();
+    let theirs = b.test_msse.unwrap();
     assert!(
-        ours.provenance.test_msse.unwrap() < b.test_msse.unwrap(),
-        "delayed class test MSSE {:e} vs undelayed {:e}",
-        ours.provenance.test_msse.unwrap(),
-        b.test_msse.unwrap()
+        (ours - theirs).abs() <= 0.05 * theirs,
+        "delayed class test MSSE {ours:e} vs undelayed {theirs:e}"
     );
 }

@@ -201,10 +201,10 @@ fn shipped_controller_is_steady_under_fatigue() {
 }
 
 /// The thesis's kind of plant (`thesis-fast`: identified local models with a fast pole of
-/// -100 to -311 1/s beside a slow one of -9 to -25 1/s, Table 5.3's kind) and the model
+/// -97 to -238 1/s beside a slow one of -11 to -20 1/s, Table 5.3's kind) and the model
 /// class of eq. 5.2 (`models/thesis-fast.lmn.json`, `scheduling_input = "undelayed"`). Its
 /// shipped controller is the thesis's delayed loop (x[k] fed back, gains scheduled on
-/// phi(t) = Gamma{u(t)}, plain integral action) with slower rise times (30-200 ms) and the
+/// phi(t) = Gamma{u(t)}, plain integral action) with slower rise times (120-300 ms) and the
 /// clamped shaper sum: it holds every level within 5 % on the Ding muscle, and the loop's
 /// model within 1 %.
 #[test]
@@ -229,13 +229,14 @@ fn the_delayed_loop_holds_the_thesis_like_plant_at_every_level() {
 }
 
 /// The thesis's loop exactly on the thesis-like plant (`models/thesis-fast-thesis.lcn.json`:
-/// the signed shaper sum of eq. 6.8, no anti-windup, delayed state, Table 6.1's rise times,
-/// p3 = -1.9/Ts) does not hold: the 7 ms delay inside loops of 10-30 ms rise time makes
-/// bursts at every level, and the signed sum winds E down by thousands (below -10^4 at some
-/// level) while the muscle misses by more than 5 % at every level. With the same loop and
-/// 30-200 ms rise times E stays within a few hundred and the loop holds its model within
-/// 2.5 %, but the Ding muscle sits 15-25 % low: the signed sum's patterns are where the
-/// identified model over-predicts the muscle (docs/control.md, section 10).
+/// the signed shaper sum of eq. 6.8, no anti-windup, delayed state, Table 6.1's rise times
+/// of the units at the same scheduling values, p3 = -1.9/Ts) does not hold: the 7 ms delay
+/// inside loops of 10-30 ms rise time opens every level with a burst of 7 or more pulses,
+/// and the signed sum winds E down by thousands (below -10^4 at some level) while the
+/// muscle misses by more than 5 % at every level. With the same loop and 120-300 ms rise
+/// times E stays within a few hundred and the loop holds its model within 2.5 %, but the
+/// Ding muscle sits more than 15 % low at every level: the signed sum's patterns are where
+/// the identified model over-predicts the muscle (docs/control.md, section 10).
 #[test]
 fn the_thesis_loop_exactly_fails_on_the_thesis_like_plant_where_the_docs_say() {
     let exact = shipped("thesis-fast-thesis");
@@ -253,16 +254,13 @@ fn the_thesis_loop_exactly_fails_on_the_thesis_like_plant_where_the_docs_say() {
             s.level,
             100.0 * e
         );
-        assert!(
-            s.short_ipis_after_opening(10) > 0,
-            "r = {}: no bursts",
-            s.level
-        );
+        let shape = s.shape.as_ref().expect("pulses");
+        assert!(shape.burst_pulses >= 7, "r = {}: {shape:?}", s.level);
     }
     let slower = Controller::design(
         exact.lmn.clone(),
         &fes_model::control::lcn_design::UnitSpec::for_rise_times(
-            &[0.030, 0.064, 0.098, 0.132, 0.166, 0.200],
+            &[0.120, 0.180, 0.240, 0.300],
             fes_model::control::lcn_design::THESIS_DAMPING,
             exact.units[0].spec.p3,
         ),
@@ -283,11 +281,6 @@ fn the_thesis_loop_exactly_fails_on_the_thesis_like_plant_where_the_docs_say() {
             s.loop_mean
         );
         let e = (s.subjects[0].mean - s.level) / s.level;
-        assert!(
-            (-0.25..=-0.15).contains(&e),
-            "r = {}: muscle {:+.1} %",
-            s.level,
-            100.0 * e
-        );
+        assert!(e < -0.15, "r = {}: muscle {:+.1} %", s.level, 100.0 * e);
     }
 }
