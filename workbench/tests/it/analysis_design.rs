@@ -274,3 +274,78 @@ fn the_minimum_interval_becomes_the_shapers_gap() {
         &["--min-interval-ms 1"],
     );
 }
+
+/// A model of eq. 5.2's undelayed scheduling class cannot be run ahead: `fes design` refuses
+/// the advanced loop naming `feedback_state` and designs the thesis's delayed loop (with no
+/// planning by default, whose warm start is the advanced loop); `fes lcn-variants` runs only
+/// the delayed-state variants on it, says which it did not run and why, reports the shaper's
+/// lowest energy, and refuses a list with no delayed-state variant.
+#[test]
+fn the_undelayed_class_runs_only_the_delayed_loop() {
+    use fes_model::model::scheduling::{SchedulingInput, SchedulingSpec};
+    let dir = tmp("undelayed");
+    let mut lmn = fast_muscle(4);
+    let SchedulingSpec::Input {
+        scheduling_input, ..
+    } = &mut lmn.scheduling
+    else {
+        panic!("input scheduling");
+    };
+    *scheduling_input = SchedulingInput::Undelayed;
+    let model = save_model(&dir, "m.json", &lmn);
+    let m = model.to_str().unwrap();
+    let out = dir.join("c.json");
+    let o = out.to_str().unwrap();
+    fails(
+        &["design", "--model", m, "--rise-ms", "auto", "--out", o],
+        &["feedback_state", "undelayed"],
+    );
+    ok(&[
+        "design",
+        "--model",
+        m,
+        "--rise-ms",
+        "auto",
+        "--feedback-state",
+        "delayed",
+        "--out",
+        o,
+    ]);
+    let c = fes_model::control::file::Controller::load(&out).unwrap();
+    assert_eq!(
+        c.settings.planning.mode,
+        fes_model::control::planner::PlanningMode::Off
+    );
+    let variants = dir.join("variants");
+    let v = variants.to_str().unwrap();
+    let common = [
+        "lcn-variants",
+        "--model",
+        m,
+        "--muscle",
+        "fast",
+        "--levels",
+        "0.3",
+        "--out",
+        v,
+    ];
+    fails(
+        &[&common[..], &["--variants", "default,p3-mapped"]].concat(),
+        &["undelayed", "delayed-state"],
+    );
+    ok(&[&common[..], &["--variants", "default,thesis,delayed-state"]].concat());
+    let md = std::fs::read_to_string(variants.join("variants.md")).unwrap();
+    assert!(md.contains("Not run: `default`"), "{md}");
+    assert!(
+        md.contains("## `thesis`") && md.contains("## `delayed-state`"),
+        "{md}"
+    );
+    let (h, rows) = csv(&variants.join("variants.csv"));
+    assert_eq!(rows.len(), 2);
+    let min_e = column(&h, &rows, "min_energy");
+    assert!(
+        min_e[0] < 0.0 || min_e[1] < 0.0,
+        "the signed sum goes below 0: {min_e:?}"
+    );
+    assert!(min_e.iter().all(|e| e.is_finite()));
+}
