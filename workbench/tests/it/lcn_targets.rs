@@ -39,6 +39,16 @@ fn scores(c: &Controller, preset: Preset) -> Vec<StepScore> {
         .collect()
 }
 
+/// The loop's own model's mean over the second half within `within` (relative) of the level.
+fn assert_loop_holds(s: &StepScore, within: f64) {
+    assert!(
+        (s.loop_mean - s.level).abs() <= within * s.level,
+        "r = {}: loop {}",
+        s.level,
+        s.loop_mean
+    );
+}
+
 /// The Ding muscle's mean over the second half within 5 % of the level.
 fn assert_held(s: &StepScore) {
     let e = (s.subjects[0].mean - s.level) / s.level;
@@ -59,12 +69,7 @@ fn assert_held(s: &StepScore) {
 fn slow_muscle_is_held_at_every_level_without_a_doublet() {
     for s in scores(&shipped("slow"), Preset::Slow) {
         assert_held(&s);
-        assert!(
-            (s.loop_mean - s.level).abs() <= 0.01 * s.level,
-            "r = {}: loop {}",
-            s.level,
-            s.loop_mean
-        );
+        assert_loop_holds(&s, 0.01);
         let first = s.first_ipi().expect("at least two pulses");
         assert!(first > 10, "r = {}: first IPI {first} ms", s.level);
         let shape = s.shape.as_ref().unwrap();
@@ -219,12 +224,7 @@ fn the_delayed_loop_holds_the_thesis_like_plant_at_every_level() {
     assert_eq!(c.settings.feedback_state, FeedbackState::Delayed);
     for s in scores(&c, Preset::ThesisFast) {
         assert_held(&s);
-        assert!(
-            (s.loop_mean - s.level).abs() <= 0.01 * s.level,
-            "r = {}: loop {}",
-            s.level,
-            s.loop_mean
-        );
+        assert_loop_holds(&s, 0.01);
     }
 }
 
@@ -274,12 +274,7 @@ fn the_thesis_loop_exactly_fails_on_the_thesis_like_plant_where_the_docs_say() {
             s.level,
             s.min_energy
         );
-        assert!(
-            (s.loop_mean - s.level).abs() <= 0.025 * s.level,
-            "r = {}: loop {}",
-            s.level,
-            s.loop_mean
-        );
+        assert_loop_holds(&s, 0.025);
         let e = (s.subjects[0].mean - s.level) / s.level;
         assert!(e < -0.15, "r = {}: muscle {:+.1} %", s.level, 100.0 * e);
     }

@@ -49,6 +49,21 @@ fn bench(c: &Controller, preset: Preset, amplitude: f64) -> (FrontVerdict, u64) 
     (verdict, run.planner.causal_fallbacks)
 }
 
+/// The run beats every train with no more pulses per contraction; the message names the
+/// best such train.
+fn assert_beats_every_train(v: &FrontVerdict, amplitude: f64) {
+    let best = v.best_cft_no_more_pulses.unwrap();
+    assert!(
+        v.beats_every_cft,
+        "{amplitude}: planned {} pulses, RMS {:.4}; {} Hz x {} tracks at RMS {:.4}",
+        v.lcn.pulses_per_contraction,
+        v.lcn.rms_error,
+        best.hz.unwrap(),
+        best.n.unwrap(),
+        best.rms_error
+    );
+}
+
 fn off(mut c: Controller) -> Controller {
     c.settings.planning.mode = PlanningMode::Off;
     c
@@ -64,16 +79,7 @@ fn planning_beats_every_train_on_the_fast_muscle() {
     let mut causal_beaten = 0;
     for amplitude in [0.2, 0.3, 0.4, 0.5, 0.7, 0.9] {
         let (v, fallbacks) = bench(&c, Preset::Fast, amplitude);
-        let best = v.best_cft_no_more_pulses.unwrap();
-        assert!(
-            v.beats_every_cft,
-            "{amplitude}: planned {} pulses, RMS {:.4}; {} Hz x {} tracks at RMS {:.4}",
-            v.lcn.pulses_per_contraction,
-            v.lcn.rms_error,
-            best.hz.unwrap(),
-            best.n.unwrap(),
-            best.rms_error
-        );
+        assert_beats_every_train(&v, amplitude);
         // Only the first beat, which starts with the profile (nothing announced ahead).
         assert!(fallbacks < 320, "{amplitude}: {fallbacks} causal ticks");
         let (v_off, _) = bench(&off(c.clone()), Preset::Fast, amplitude);
@@ -109,16 +115,7 @@ fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
             v_off.lcn
         );
         let (v, _) = bench(&c, Preset::Slow, amplitude);
-        let best = v.best_cft_no_more_pulses.unwrap();
-        assert!(
-            v.beats_every_cft,
-            "{amplitude}: planned {} pulses, RMS {:.4}; {} Hz x {} tracks at RMS {:.4}",
-            v.lcn.pulses_per_contraction,
-            v.lcn.rms_error,
-            best.hz.unwrap(),
-            best.n.unwrap(),
-            best.rms_error
-        );
+        assert_beats_every_train(&v, amplitude);
         assert!(
             v.lcn.rms_error < v_off.lcn.rms_error,
             "{amplitude}: planned RMS {} vs causal {}",
