@@ -52,7 +52,7 @@ impl StimLimits {
     /// CONFIG makes it the prescription's).
     ///
     /// The minimum IPI is the stimulator's ceiling against a runaway host (1000 Hz), judged
-    /// on the pulses' arrival: the pattern's own 2 ms minimum (DESIGN.md) is the driver's,
+    /// on the pulses' arrival: the pattern's own 2 ms minimum (the prescription's) is the driver's,
     /// on the generator's grid times, and a pulse the driver lets through may leave up to
     /// its `max_pulse_delay` late, so two legal pulses can arrive 1.5 ms apart. A 2 ms
     /// stimulator minimum refused such pairs now and then (a CI run of the kill test).

@@ -1,8 +1,8 @@
 //! The driver's own interlocks: a pure struct, StimTicks in, decisions out, time passed in.
 //!
 //! They are independent of rt-core's pulse shaper (thesis 6.5.2, which already spaces pulses)
-//! and of the stimulator's interlocks, and configured separately (DESIGN.md "Safety
-//! interlocks are enforced in two independent places"). A command that violates one is
+//! and of the stimulator's interlocks, and configured separately (docs/safety.md,
+//! hazard H2: the interlocks are enforced in two independent places). A command that violates one is
 //! **not** sent and is reported; it is never clamped or otherwise changed.
 //!
 //! Checks, in order, on every tick:

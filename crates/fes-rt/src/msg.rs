@@ -1,4 +1,4 @@
-//! iceoryx2 message contracts shared by every process (DESIGN.md "Message contracts").
+//! iceoryx2 message contracts shared by every process (docs/realtime.md, "Message contracts").
 //!
 //! Every payload is `#[repr(C)]`, `Copy`, free of pointers, derives [`ZeroCopySend`] with an
 //! explicit, versioned `#[type_name("fes::<Name>::v1")]`, and carries a sequence number `seq`

@@ -1,5 +1,5 @@
-//! The real-time loop takes nothing from the system heap after start-up (DESIGN.md
-//! "Real-time rules"), proven with the counting global allocator over hundreds of ticks of the
+//! The real-time loop takes nothing from the system heap after start-up (docs/realtime.md,
+//! "The rules and where each is kept"), proven with the counting global allocator over hundreds of ticks of the
 //! real loop with real iceoryx2 ports, references flowing in and ticks flowing out.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
