@@ -498,15 +498,7 @@ fn read_table(
     skip: usize,
     header: Option<bool>,
 ) -> Result<Table, ImportError> {
-    // Byte offset after the skipped lines.
-    let mut start = 0;
-    for _ in 0..skip {
-        match text[start..].find('\n') {
-            Some(i) => start += i + 1,
-            None => start = text.len(),
-        }
-    }
-    let body = &text[start..];
+    let body = &text[skipped_offset(text, skip)..];
     let first_line = body
         .lines()
         .map(str::trim)
@@ -515,69 +507,104 @@ fn read_table(
             path: path.to_path_buf(),
             skipped: skip,
         })?;
-    let delimiter = match delimiter {
+    let rows = match resolve_delimiter(delimiter, first_line) {
+        Delimiter::Whitespace | Delimiter::Auto => whitespace_rows(body, skip),
+        Delimiter::Comma => csv_rows(path, body, skip, b',')?,
+        Delimiter::Semicolon => csv_rows(path, body, skip, b';')?,
+        Delimiter::Tab => csv_rows(path, body, skip, b'\t')?,
+    };
+    table_from_rows(path, skip, rows, header)
+}
+
+/// Byte offset in `text` after its first `skip` lines (its length if it has fewer).
+fn skipped_offset(text: &str, skip: usize) -> usize {
+    let mut start = 0;
+    for _ in 0..skip {
+        match text[start..].find('\n') {
+            Some(i) => start += i + 1,
+            None => start = text.len(),
+        }
+    }
+    start
+}
+
+/// The delimiter to split by: `delimiter`, or for `Auto` the first of `,`, `;` and tab
+/// that `first_line` holds, else whitespace.
+fn resolve_delimiter(delimiter: Delimiter, first_line: &str) -> Delimiter {
+    match delimiter {
         Delimiter::Auto if first_line.contains(',') => Delimiter::Comma,
         Delimiter::Auto if first_line.contains(';') => Delimiter::Semicolon,
         Delimiter::Auto if first_line.contains('\t') => Delimiter::Tab,
         Delimiter::Auto => Delimiter::Whitespace,
         d => d,
-    };
+    }
+}
+
+/// Rows of whitespace-separated fields of `body` (no quoting), numbered after `skip` lines.
+fn whitespace_rows(body: &str, skip: usize) -> Vec<Row> {
     let mut rows = Vec::new();
-    match delimiter {
-        Delimiter::Whitespace | Delimiter::Auto => {
-            for (i, l) in body.lines().enumerate() {
-                let l = l.trim();
-                if l.is_empty() || l.starts_with('#') {
+    for (i, l) in body.lines().enumerate() {
+        let l = l.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        rows.push(Row {
+            line: skip + i + 1,
+            fields: l.split_whitespace().map(str::to_string).collect(),
+        });
+    }
+    rows
+}
+
+/// Rows of `body` read as CSV with delimiter `byte` (quoting, `#` comments), numbered
+/// after `skip` lines.
+fn csv_rows(path: &Path, body: &str, skip: usize, byte: u8) -> Result<Vec<Row>, ImportError> {
+    let mut rows = Vec::new();
+    let mut reader = csv::ReaderBuilder::new()
+        .delimiter(byte)
+        .has_headers(false)
+        .flexible(true)
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(body.as_bytes());
+    let mut record = csv::StringRecord::new();
+    loop {
+        let line_hint = reader.position().line() as usize;
+        match reader.read_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {
+                let line = record.position().map_or(line_hint, |p| p.line() as usize);
+                if record.len() == 1 && record.get(0).is_some_and(str::is_empty) {
                     continue;
                 }
                 rows.push(Row {
-                    line: skip + i + 1,
-                    fields: l.split_whitespace().map(str::to_string).collect(),
+                    line: skip + line,
+                    fields: record.iter().map(str::to_string).collect(),
+                });
+            }
+            Err(e) => {
+                let line = e.position().map_or(line_hint, |p| p.line() as usize);
+                return Err(ImportError::Value {
+                    path: path.to_path_buf(),
+                    line: skip + line,
+                    column: 0,
+                    name: String::new(),
+                    problem: e.to_string(),
                 });
             }
         }
-        Delimiter::Comma | Delimiter::Semicolon | Delimiter::Tab => {
-            let byte = match delimiter {
-                Delimiter::Comma => b',',
-                Delimiter::Semicolon => b';',
-                _ => b'\t',
-            };
-            let mut reader = csv::ReaderBuilder::new()
-                .delimiter(byte)
-                .has_headers(false)
-                .flexible(true)
-                .comment(Some(b'#'))
-                .trim(csv::Trim::All)
-                .from_reader(body.as_bytes());
-            let mut record = csv::StringRecord::new();
-            loop {
-                let line_hint = reader.position().line() as usize;
-                match reader.read_record(&mut record) {
-                    Ok(false) => break,
-                    Ok(true) => {
-                        let line = record.position().map_or(line_hint, |p| p.line() as usize);
-                        if record.len() == 1 && record.get(0).is_some_and(str::is_empty) {
-                            continue;
-                        }
-                        rows.push(Row {
-                            line: skip + line,
-                            fields: record.iter().map(str::to_string).collect(),
-                        });
-                    }
-                    Err(e) => {
-                        let line = e.position().map_or(line_hint, |p| p.line() as usize);
-                        return Err(ImportError::Value {
-                            path: path.to_path_buf(),
-                            line: skip + line,
-                            column: 0,
-                            name: String::new(),
-                            problem: e.to_string(),
-                        });
-                    }
-                }
-            }
-        }
     }
+    Ok(rows)
+}
+
+/// The table of `rows`: the first is the header when `header` says so (when `None`,
+/// unless it holds a number), and every data row must be as wide as the first.
+fn table_from_rows(
+    path: &Path,
+    skip: usize,
+    mut rows: Vec<Row>,
+    header: Option<bool>,
+) -> Result<Table, ImportError> {
     let Some(first) = rows.first() else {
         return Err(ImportError::Empty {
             path: path.to_path_buf(),
@@ -734,6 +761,20 @@ struct Segment {
     lines: Vec<usize>,
     /// Index in `Table::rows` of the first row.
     first_row: usize,
+    /// Samples on the record's grid (set by [`Importer::set_grid_lengths`]).
+    ticks: usize,
+}
+
+impl Segment {
+    /// Time of the last tick of the record's grid, ms.
+    fn grid_end(&self, ts_ms: f64) -> f64 {
+        self.t[0] + (self.ticks - 1) as f64 * ts_ms
+    }
+
+    /// Time of the record's last input sample, ms.
+    fn last_t(&self) -> f64 {
+        self.t[self.t.len() - 1]
+    }
 }
 
 /// A pulse on a record's grid: the line and column it came from.
@@ -745,190 +786,300 @@ struct Placed {
     shift_ms: f64,
 }
 
+/// Where the pulses come from, as errors name it: the file, the column (1-based, 0 for
+/// none) and its name, and the hint for two pulses on one tick.
+struct PulseSource {
+    path: PathBuf,
+    column: usize,
+    name: String,
+    hint: &'static str,
+}
+
+/// One import's shared context: the input, the options, the table and its columns.
+struct Importer<'a> {
+    path: &'a Path,
+    opts: &'a ImportOptions,
+    table: Table,
+    /// The grid's sample period, ms.
+    ts_ms: f64,
+    /// Milliseconds per unit of the input's times.
+    unit_ms: f64,
+    time_col: Option<usize>,
+    force_col: usize,
+    pulse_col: Option<usize>,
+    record_col: Option<usize>,
+}
+
 /// Imports the table in `bytes` (`path` names it in errors).
 pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Imported, ImportError> {
     check_options(opts)?;
     let text = utf8(path, bytes)?;
     let table = read_table(path, text, opts.delimiter, opts.skip_lines, opts.header)?;
-    let ts_ms = opts.ts_s * 1e3;
-    let unit_ms = opts.time_unit.ms();
-    let time_col = match &opts.time {
-        TimeSource::Column(c) => Some(table.resolve(path, "time column", c)?),
-        TimeSource::Rate { .. } => None,
-    };
-    let force_col = table.resolve(path, "force column", &opts.force)?;
-    let pulse_col = match &opts.pulses {
-        Pulses::Column { column, .. } => Some(table.resolve(path, "pulse column", column)?),
-        Pulses::Times { .. } => None,
-    };
-    let record_col = opts
-        .record_column
-        .as_ref()
-        .map(|c| table.resolve(path, "record column", c))
-        .transpose()?;
-    let value_err = |row: &Row, col: usize, problem: String| ImportError::Value {
-        path: path.to_path_buf(),
-        line: row.line,
-        column: col + 1,
-        name: table.names[col].clone(),
-        problem,
-    };
-    let number = |row: &Row, col: usize| -> Result<f64, ImportError> {
+    let im = Importer::new(path, opts, table)?;
+    let mut segments = im.segments()?;
+    im.set_grid_lengths(&mut segments)?;
+    let source = im.pulse_source();
+    let placed = im.place_pulses(&source, &segments)?;
+    let grid = im.pulse_grid(source, &segments, &placed)?;
+    // Normalisation (on the input samples, so every grid value, a convex combination of
+    // them, is in range when they are).
+    let offset_n = im.offset(&segments, &grid)?;
+    let scale_n = im.scale(&segments, offset_n)?;
+    im.check_force_range(&segments, offset_n, scale_n)?;
+    let records = im.resample(&segments, &grid, offset_n, scale_n);
+    im.assemble(&segments, records, &placed, offset_n, scale_n)
+}
+
+impl<'a> Importer<'a> {
+    /// The context of importing `table`: the columns the options name, resolved.
+    fn new(
+        path: &'a Path,
+        opts: &'a ImportOptions,
+        table: Table,
+    ) -> Result<Importer<'a>, ImportError> {
+        let time_col = match &opts.time {
+            TimeSource::Column(c) => Some(table.resolve(path, "time column", c)?),
+            TimeSource::Rate { .. } => None,
+        };
+        let force_col = table.resolve(path, "force column", &opts.force)?;
+        let pulse_col = match &opts.pulses {
+            Pulses::Column { column, .. } => Some(table.resolve(path, "pulse column", column)?),
+            Pulses::Times { .. } => None,
+        };
+        let record_col = opts
+            .record_column
+            .as_ref()
+            .map(|c| table.resolve(path, "record column", c))
+            .transpose()?;
+        Ok(Importer {
+            path,
+            opts,
+            table,
+            ts_ms: opts.ts_s * 1e3,
+            unit_ms: opts.time_unit.ms(),
+            time_col,
+            force_col,
+            pulse_col,
+            record_col,
+        })
+    }
+
+    /// The error for the field of `row` in column `col` (0-based).
+    fn value_err(&self, row: &Row, col: usize, problem: String) -> ImportError {
+        ImportError::Value {
+            path: self.path.to_path_buf(),
+            line: row.line,
+            column: col + 1,
+            name: self.table.names[col].clone(),
+            problem,
+        }
+    }
+
+    /// The finite number in column `col` (0-based) of `row`.
+    fn number(&self, row: &Row, col: usize) -> Result<f64, ImportError> {
         let s = row.fields[col].as_str();
         match s.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            Ok(v) => Err(value_err(row, col, format!("{v} is not finite"))),
-            Err(_) if s.is_empty() => Err(value_err(row, col, "empty field".into())),
-            Err(_) => Err(value_err(row, col, format!("`{s}` is not a number"))),
+            Ok(v) => Err(self.value_err(row, col, format!("{v} is not finite"))),
+            Err(_) if s.is_empty() => Err(self.value_err(row, col, "empty field".into())),
+            Err(_) => Err(self.value_err(row, col, format!("`{s}` is not a number"))),
         }
-    };
+    }
 
-    // Records.
-    let rate_hz = match opts.time {
-        TimeSource::Rate { hz } => hz,
-        TimeSource::Column(_) => f64::NAN,
-    };
-    let gap_ms = opts.split_gap_s.map(|g| g * 1e3);
-    let mut segments: Vec<Segment> = Vec::new();
-    let mut prev: Option<(f64, &Row, &str)> = None;
-    for (k, row) in table.rows.iter().enumerate() {
-        let t = match time_col {
+    /// Time of data row `k` (`row`), ms: from the time column, or `k / rate`.
+    fn row_time(&self, k: usize, row: &Row) -> Result<f64, ImportError> {
+        match self.time_col {
             Some(c) => {
-                let t = number(row, c)? * unit_ms;
+                let t = self.number(row, c)? * self.unit_ms;
                 if !t.is_finite() {
-                    return Err(value_err(
+                    return Err(self.value_err(
                         row,
                         c,
                         format!("{} is out of range", row.fields[c]),
                     ));
                 }
-                t
+                Ok(t)
             }
-            None => k as f64 * 1e3 / rate_hz,
-        };
-        let f = number(row, force_col)? * opts.force_gain;
-        let key = record_col.map_or("", |c| row.fields[c].as_str());
-        let new_record = match prev {
-            None => true,
-            Some((pt, _, pkey)) => {
-                record_col.is_some() && key != pkey || gap_ms.is_some_and(|g| t - pt > g)
+            None => {
+                let rate_hz = match self.opts.time {
+                    TimeSource::Rate { hz } => hz,
+                    TimeSource::Column(_) => f64::NAN,
+                };
+                Ok(k as f64 * 1e3 / rate_hz)
             }
-        };
-        if let (false, Some((pt, prow, _)), Some(c)) = (new_record, prev, time_col)
-            && t <= pt
-        {
-            let unit = opts.time_unit.name();
-            return Err(value_err(
-                row,
-                c,
-                format!(
-                    "time {} {unit} does not increase (line {}: {} {unit})",
-                    row.fields[c], prow.line, prow.fields[c]
-                ),
-            ));
         }
-        if new_record {
-            segments.push(Segment {
-                kind: if record_col.is_some() {
-                    key.to_string()
-                } else {
-                    opts.kind.clone()
-                },
-                t: Vec::new(),
-                f: Vec::new(),
-                lines: Vec::new(),
-                first_row: k,
+    }
+
+    /// Reads each row's time and force and cuts the rows into records where the time
+    /// jumps by more than the split gap or the record column changes: at least two.
+    fn segments(&self) -> Result<Vec<Segment>, ImportError> {
+        let gap_ms = self.opts.split_gap_s.map(|g| g * 1e3);
+        let mut segments: Vec<Segment> = Vec::new();
+        let mut prev: Option<(f64, &Row, &str)> = None;
+        for (k, row) in self.table.rows.iter().enumerate() {
+            let t = self.row_time(k, row)?;
+            let f = self.number(row, self.force_col)? * self.opts.force_gain;
+            let key = self.record_col.map_or("", |c| row.fields[c].as_str());
+            let new_record = match prev {
+                None => true,
+                Some((pt, _, pkey)) => {
+                    self.record_col.is_some() && key != pkey || gap_ms.is_some_and(|g| t - pt > g)
+                }
+            };
+            if let (false, Some((pt, prow, _)), Some(c)) = (new_record, prev, self.time_col)
+                && t <= pt
+            {
+                let unit = self.opts.time_unit.name();
+                return Err(self.value_err(
+                    row,
+                    c,
+                    format!(
+                        "time {} {unit} does not increase (line {}: {} {unit})",
+                        row.fields[c], prow.line, prow.fields[c]
+                    ),
+                ));
+            }
+            if new_record {
+                segments.push(Segment {
+                    kind: if self.record_col.is_some() {
+                        key.to_string()
+                    } else {
+                        self.opts.kind.clone()
+                    },
+                    t: Vec::new(),
+                    f: Vec::new(),
+                    lines: Vec::new(),
+                    first_row: k,
+                    ticks: 0,
+                });
+            }
+            if let Some(s) = segments.last_mut() {
+                s.t.push(t);
+                s.f.push(f);
+                s.lines.push(row.line);
+            }
+            prev = Some((t, row, key));
+        }
+        if segments.len() < 2 {
+            return Err(ImportError::TooFewRecords {
+                path: self.path.to_path_buf(),
+                count: segments.len(),
+                hint: self.split_hint(),
             });
         }
-        if let Some(s) = segments.last_mut() {
-            s.t.push(t);
-            s.f.push(f);
-            s.lines.push(row.line);
-        }
-        prev = Some((t, row, key));
+        Ok(segments)
     }
-    let split_hint = || -> String {
-        match (gap_ms.is_some(), record_col.is_some()) {
+
+    /// The hint for records that are too few or too short: how records are split.
+    fn split_hint(&self) -> String {
+        match (self.opts.split_gap_s.is_some(), self.record_col.is_some()) {
             (false, false) => {
                 "records are split by a time gap (split gap) or a record column; neither was given"
                     .into()
             }
             _ => "check the split gap or the record column".into(),
         }
-    };
-    if segments.len() < 2 {
-        return Err(ImportError::TooFewRecords {
-            path: path.to_path_buf(),
-            count: segments.len(),
-            hint: split_hint(),
-        });
-    }
-    // Grid length of each record.
-    let mut n_ticks = Vec::with_capacity(segments.len());
-    for (i, s) in segments.iter().enumerate() {
-        let (t0, t1) = (s.t[0], s.t[s.t.len() - 1]);
-        let span = t1 - t0;
-        let steps = (span / ts_ms + 1e-6).floor();
-        if steps.is_nan() || steps >= MAX_GRID_SAMPLES as f64 {
-            return Err(ImportError::RecordTooLong {
-                path: path.to_path_buf(),
-                record: i,
-                first_line: s.lines[0],
-                last_line: s.lines[s.lines.len() - 1],
-                span_ms: span,
-                ts_ms,
-            });
-        }
-        let n = steps as usize + 1;
-        if n < 2 {
-            return Err(ImportError::RecordTooShort {
-                path: path.to_path_buf(),
-                record: i,
-                first_line: s.lines[0],
-                last_line: s.lines[s.lines.len() - 1],
-                span_ms: span,
-                ts_ms,
-                hint: split_hint(),
-            });
-        }
-        n_ticks.push(n);
     }
 
-    // Pulses.
-    let mut placed: Vec<Placed> = Vec::new();
-    let (pulse_path, pulse_column, pulse_name, hint): (PathBuf, usize, String, &'static str) =
-        match &opts.pulses {
-            Pulses::Column { edges, .. } => (
-                path.to_path_buf(),
-                pulse_col.map_or(0, |c| c + 1),
-                pulse_col.map_or_else(String::new, |c| table.names[c].clone()),
-                if *edges {
+    /// Sets each record's grid length, refusing records too long or shorter than 2 ticks.
+    fn set_grid_lengths(&self, segments: &mut [Segment]) -> Result<(), ImportError> {
+        let ts_ms = self.ts_ms;
+        for (i, s) in segments.iter_mut().enumerate() {
+            let (t0, t1) = (s.t[0], s.last_t());
+            let span = t1 - t0;
+            let steps = (span / ts_ms + 1e-6).floor();
+            if steps.is_nan() || steps >= MAX_GRID_SAMPLES as f64 {
+                return Err(ImportError::RecordTooLong {
+                    path: self.path.to_path_buf(),
+                    record: i,
+                    first_line: s.lines[0],
+                    last_line: s.lines[s.lines.len() - 1],
+                    span_ms: span,
+                    ts_ms,
+                });
+            }
+            let n = steps as usize + 1;
+            if n < 2 {
+                return Err(ImportError::RecordTooShort {
+                    path: self.path.to_path_buf(),
+                    record: i,
+                    first_line: s.lines[0],
+                    last_line: s.lines[s.lines.len() - 1],
+                    span_ms: span,
+                    ts_ms,
+                    hint: self.split_hint(),
+                });
+            }
+            s.ticks = n;
+        }
+        Ok(())
+    }
+
+    /// Where the pulses come from, as errors name it.
+    fn pulse_source(&self) -> PulseSource {
+        match &self.opts.pulses {
+            Pulses::Column { edges, .. } => PulseSource {
+                path: self.path.to_path_buf(),
+                column: self.pulse_col.map_or(0, |c| c + 1),
+                name: self
+                    .pulse_col
+                    .map_or_else(String::new, |c| self.table.names[c].clone()),
+                hint: if *edges {
                     "check the pulse column"
                 } else {
                     "count a run of non-zero samples as one pulse (pulse edges) if one pulse spans several samples"
                 },
-            ),
-            Pulses::Times { path: p, .. } => (
-                p.clone(),
-                1,
-                "pulse time".into(),
-                "check the pulse times for duplicates",
-            ),
-        };
-    let place = |record: usize, t: f64, line: usize, text: String| -> Result<Placed, ImportError> {
+            },
+            Pulses::Times { path: p, .. } => PulseSource {
+                path: p.clone(),
+                column: 1,
+                name: "pulse time".into(),
+                hint: "check the pulse times for duplicates",
+            },
+        }
+    }
+
+    /// Places every pulse, from the pulse column or the list of pulse times, on its
+    /// record's grid.
+    fn place_pulses(
+        &self,
+        source: &PulseSource,
+        segments: &[Segment],
+    ) -> Result<Vec<Placed>, ImportError> {
+        match (&self.opts.pulses, self.pulse_col) {
+            (Pulses::Column { edges, .. }, Some(c)) => {
+                self.column_pulses(source, segments, c, *edges)
+            }
+            (Pulses::Times { times, .. }, _) => self.time_pulses(source, segments, times),
+            (Pulses::Column { .. }, None) => Ok(Vec::new()),
+        }
+    }
+
+    /// Places a pulse at time `t` (ms) of record `record` on its nearest tick, refusing
+    /// one outside the record's grid.
+    fn place(
+        &self,
+        source: &PulseSource,
+        segments: &[Segment],
+        record: usize,
+        t: f64,
+        line: usize,
+        text: String,
+    ) -> Result<Placed, ImportError> {
+        let ts_ms = self.ts_ms;
         let s = &segments[record];
         let x = (t - s.t[0]) / ts_ms;
         let tick = x.round();
-        if tick < 0.0 || tick as usize >= n_ticks[record] {
+        if tick < 0.0 || tick as usize >= s.ticks {
             return Err(ImportError::PulseOutside {
-                path: pulse_path.clone(),
+                path: source.path.clone(),
                 line,
                 t: text,
                 problem: format!(
                     "record {record} runs from {} to {} ms on the input's clock, its grid to {} ms",
                     s.t[0],
-                    s.t[s.t.len() - 1],
-                    s.t[0] + (n_ticks[record] - 1) as f64 * ts_ms
+                    s.last_t(),
+                    s.grid_end(ts_ms)
                 ),
             });
         }
@@ -939,243 +1090,316 @@ pub fn import(path: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Importe
             t: text,
             shift_ms: (x - tick).abs() * ts_ms,
         })
-    };
-    match (&opts.pulses, pulse_col) {
-        (Pulses::Column { edges, .. }, Some(c)) => {
-            for (r, s) in segments.iter().enumerate() {
-                let mut was_on = false;
-                for (j, &t) in s.t.iter().enumerate() {
-                    let row = &table.rows[s.first_row + j];
-                    let v = number(row, c)?;
-                    if v < 0.0 {
-                        return Err(value_err(
-                            row,
-                            c,
-                            format!("{v} is negative; a pulse is > 0, no pulse 0"),
-                        ));
-                    }
-                    let on = v > 0.0;
-                    if on && !(*edges && was_on) {
-                        let text = match time_col {
-                            Some(tc) => format!("{} {}", row.fields[tc], opts.time_unit.name()),
-                            None => format!("{t} ms"),
-                        };
-                        placed.push(place(r, t, row.line, text)?);
-                    }
-                    was_on = on;
-                }
-            }
-        }
-        (Pulses::Times { times, .. }, _) => {
-            for &(line, t) in times {
-                let text = format!("{t} {}", opts.time_unit.name());
-                let t = t * unit_ms;
-                let within: Vec<usize> = segments
-                    .iter()
-                    .enumerate()
-                    .filter(|(r, s)| {
-                        let end = s.t[0] + (n_ticks[*r] - 1) as f64 * ts_ms;
-                        t >= s.t[0] - ts_ms / 2.0 && t < end + ts_ms / 2.0
-                    })
-                    .map(|(r, _)| r)
-                    .collect();
-                match within[..] {
-                    [r] => placed.push(place(r, t, line, text)?),
-                    [] => {
-                        let before = segments.iter().rposition(|s| s.t[0] <= t);
-                        let problem = match before {
-                            None => format!(
-                                "it is before the first record (from {} ms)",
-                                segments[0].t[0]
-                            ),
-                            Some(r) if r + 1 < segments.len() => format!(
-                                "it is in the gap after record {r} (to {} ms), before record {} (from {} ms)",
-                                segments[r].t[segments[r].t.len() - 1],
-                                r + 1,
-                                segments[r + 1].t[0]
-                            ),
-                            Some(r) => format!(
-                                "it is after the last record (to {} ms)",
-                                segments[r].t[segments[r].t.len() - 1]
-                            ),
-                        };
-                        return Err(ImportError::PulseOutside {
-                            path: pulse_path.clone(),
-                            line,
-                            t: text,
-                            problem,
-                        });
-                    }
-                    _ => {
-                        return Err(ImportError::PulseOutside {
-                            path: pulse_path.clone(),
-                            line,
-                            t: text,
-                            problem: format!(
-                                "records {within:?} overlap in time there; pulse times need records on one clock (times that restart per record cannot be told apart)"
-                            ),
-                        });
-                    }
-                }
-            }
-        }
-        (Pulses::Column { .. }, None) => {}
-    }
-    let mut grid: Vec<Vec<Option<usize>>> = n_ticks.iter().map(|&n| vec![None; n]).collect();
-    for p in &placed {
-        let slot = &mut grid[p.record][p.tick];
-        if let Some(first) = *slot {
-            return Err(ImportError::PulseCollision(Box::new(PulseCollision {
-                path: pulse_path,
-                line: p.line,
-                first_line: first,
-                column: pulse_column,
-                name: pulse_name,
-                t: p.t.clone(),
-                record: p.record,
-                tick: p.tick,
-                ts_ms,
-                hint,
-            })));
-        }
-        *slot = Some(p.line);
     }
 
-    // Normalisation (on the input samples, so every grid value, a convex combination of
-    // them, is in range when they are).
-    let offset_n = match opts.force_offset {
-        Level::Given(o) => o,
-        Level::Auto => {
-            let (mut sum, mut n) = (0.0, 0usize);
-            for (r, s) in segments.iter().enumerate() {
-                let first_pulse = grid[r].iter().position(Option::is_some);
-                let until = first_pulse.map_or(f64::INFINITY, |k| s.t[0] + k as f64 * ts_ms);
-                for (&t, &f) in s.t.iter().zip(&s.f) {
-                    if t <= until + 1e-9 * ts_ms {
-                        sum += f;
-                        n += 1;
-                    }
+    /// The pulses of pulse column `c`: one in each sample > 0 or, with `edges`, at the
+    /// first sample of each run of them.
+    fn column_pulses(
+        &self,
+        source: &PulseSource,
+        segments: &[Segment],
+        c: usize,
+        edges: bool,
+    ) -> Result<Vec<Placed>, ImportError> {
+        let mut placed = Vec::new();
+        for (r, s) in segments.iter().enumerate() {
+            let mut was_on = false;
+            for (j, &t) in s.t.iter().enumerate() {
+                let row = &self.table.rows[s.first_row + j];
+                let v = self.number(row, c)?;
+                if v < 0.0 {
+                    return Err(self.value_err(
+                        row,
+                        c,
+                        format!("{v} is negative; a pulse is > 0, no pulse 0"),
+                    ));
                 }
+                let on = v > 0.0;
+                if on && !(edges && was_on) {
+                    let text = match self.time_col {
+                        Some(tc) => format!("{} {}", row.fields[tc], self.opts.time_unit.name()),
+                        None => format!("{t} ms"),
+                    };
+                    placed.push(self.place(source, segments, r, t, row.line, text)?);
+                }
+                was_on = on;
             }
-            if n == 0 {
-                return Err(ImportError::Normalise {
-                    path: path.to_path_buf(),
-                    problem: "no sample at rest (before a record's first pulse) to estimate the force offset from; give the offset".into(),
-                });
-            }
-            sum / n as f64
         }
-    };
-    let scale_n = match opts.force_scale {
-        Level::Given(s) => s,
-        Level::Auto => {
-            let peak = segments
+        Ok(placed)
+    }
+
+    /// The pulses of a list of (line, time): each in the one record whose grid holds it.
+    fn time_pulses(
+        &self,
+        source: &PulseSource,
+        segments: &[Segment],
+        times: &[(usize, f64)],
+    ) -> Result<Vec<Placed>, ImportError> {
+        let ts_ms = self.ts_ms;
+        let mut placed = Vec::new();
+        for &(line, t) in times {
+            let text = format!("{t} {}", self.opts.time_unit.name());
+            let t = t * self.unit_ms;
+            let within: Vec<usize> = segments
                 .iter()
-                .flat_map(|s| s.f.iter())
-                .map(|f| f - offset_n)
-                .fold(f64::NEG_INFINITY, f64::max);
-            if peak.is_nan() || peak <= 0.0 {
-                return Err(ImportError::Normalise {
-                    path: path.to_path_buf(),
-                    problem: format!(
-                        "no force above the offset {offset_n} N to scale by; give the scale"
-                    ),
-                });
-            }
-            peak
-        }
-    };
-    for s in &segments {
-        for (j, &f) in s.f.iter().enumerate() {
-            let v = (f - offset_n) / scale_n;
-            if !(-FORCE_SLACK..=1.0 + FORCE_SLACK).contains(&v) {
-                return Err(ImportError::ForceRange {
-                    path: path.to_path_buf(),
-                    line: s.lines[j],
-                    column: force_col + 1,
-                    name: table.names[force_col].clone(),
-                    newtons: f,
-                    normalised: v,
-                    offset_n,
-                    scale_n,
-                });
-            }
-        }
-    }
-
-    // Resampling.
-    let mut records = Vec::with_capacity(segments.len());
-    let width = segments.len().saturating_sub(1).to_string().len().max(3);
-    for (r, s) in segments.iter().enumerate() {
-        let n = n_ticks[r];
-        let mut force = Vec::with_capacity(n);
-        let mut j = 0;
-        let last = s.t.len() - 1;
-        for k in 0..n {
-            let t = (s.t[0] + k as f64 * ts_ms).min(s.t[last]);
-            while j + 1 < last && s.t[j + 1] <= t {
-                j += 1;
-            }
-            let (ta, tb) = (s.t[j], s.t[j + 1]);
-            let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
-            let f = if w == 0.0 {
-                s.f[j]
-            } else if w == 1.0 {
-                s.f[j + 1]
-            } else {
-                s.f[j] + (s.f[j + 1] - s.f[j]) * w
+                .enumerate()
+                .filter(|(_, s)| {
+                    let end = s.grid_end(ts_ms);
+                    t >= s.t[0] - ts_ms / 2.0 && t < end + ts_ms / 2.0
+                })
+                .map(|(r, _)| r)
+                .collect();
+            let problem = match within[..] {
+                [r] => {
+                    placed.push(self.place(source, segments, r, t, line, text)?);
+                    continue;
+                }
+                [] => outside_records(segments, t),
+                _ => format!(
+                    "records {within:?} overlap in time there; pulse times need records on one clock (times that restart per record cannot be told apart)"
+                ),
             };
-            force.push((f - offset_n) / scale_n);
+            return Err(ImportError::PulseOutside {
+                path: source.path.clone(),
+                line,
+                t: text,
+                problem,
+            });
         }
-        let pulse = grid[r].iter().map(Option::is_some).collect();
-        records.push(Record::uniform(
-            format!("record_{r:0width$}.csv"),
-            s.kind.clone(),
-            opts.ts_s,
-            pulse,
-            force,
-        ));
+        Ok(placed)
     }
 
-    let count = records.len();
-    let split = make_split(&opts.split, count)?;
-    let mut steps: Vec<f64> = segments
-        .iter()
-        .flat_map(|s| s.t.windows(2).map(|w| w[1] - w[0]))
-        .collect();
-    steps.sort_by(f64::total_cmp);
-    let input_step_ms = steps.get(steps.len() / 2).copied().unwrap_or(f64::NAN);
-    let max_pulse_shift_ms = placed.iter().map(|p| p.shift_ms).fold(0.0, f64::max);
-    let report = ImportReport {
-        lines: table.rows.len(),
-        input_step_ms,
-        pulses: placed.len(),
-        max_pulse_shift_ms,
-        offset_n,
-        scale_n,
-        record_lines: segments
+    /// Each record's grid with the input line of the pulse on each tick, refusing two
+    /// pulses on one tick.
+    fn pulse_grid(
+        &self,
+        source: PulseSource,
+        segments: &[Segment],
+        placed: &[Placed],
+    ) -> Result<Vec<Vec<Option<usize>>>, ImportError> {
+        let mut grid: Vec<Vec<Option<usize>>> =
+            segments.iter().map(|s| vec![None; s.ticks]).collect();
+        for p in placed {
+            let slot = &mut grid[p.record][p.tick];
+            if let Some(first) = *slot {
+                return Err(ImportError::PulseCollision(Box::new(PulseCollision {
+                    path: source.path,
+                    line: p.line,
+                    first_line: first,
+                    column: source.column,
+                    name: source.name,
+                    t: p.t.clone(),
+                    record: p.record,
+                    tick: p.tick,
+                    ts_ms: self.ts_ms,
+                    hint: source.hint,
+                })));
+            }
+            *slot = Some(p.line);
+        }
+        Ok(grid)
+    }
+
+    /// The force offset, N: given, or the mean force up to each record's first pulse.
+    fn offset(
+        &self,
+        segments: &[Segment],
+        grid: &[Vec<Option<usize>>],
+    ) -> Result<f64, ImportError> {
+        let ts_ms = self.ts_ms;
+        match self.opts.force_offset {
+            Level::Given(o) => Ok(o),
+            Level::Auto => {
+                let (mut sum, mut n) = (0.0, 0usize);
+                for (r, s) in segments.iter().enumerate() {
+                    let first_pulse = grid[r].iter().position(Option::is_some);
+                    let until = first_pulse.map_or(f64::INFINITY, |k| s.t[0] + k as f64 * ts_ms);
+                    for (&t, &f) in s.t.iter().zip(&s.f) {
+                        if t <= until + 1e-9 * ts_ms {
+                            sum += f;
+                            n += 1;
+                        }
+                    }
+                }
+                if n == 0 {
+                    return Err(ImportError::Normalise {
+                        path: self.path.to_path_buf(),
+                        problem: "no sample at rest (before a record's first pulse) to estimate the force offset from; give the offset".into(),
+                    });
+                }
+                Ok(sum / n as f64)
+            }
+        }
+    }
+
+    /// The force scale, N: given, or the largest offset-free sample.
+    fn scale(&self, segments: &[Segment], offset_n: f64) -> Result<f64, ImportError> {
+        match self.opts.force_scale {
+            Level::Given(s) => Ok(s),
+            Level::Auto => {
+                let peak = segments
+                    .iter()
+                    .flat_map(|s| s.f.iter())
+                    .map(|f| f - offset_n)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                if peak.is_nan() || peak <= 0.0 {
+                    return Err(ImportError::Normalise {
+                        path: self.path.to_path_buf(),
+                        problem: format!(
+                            "no force above the offset {offset_n} N to scale by; give the scale"
+                        ),
+                    });
+                }
+                Ok(peak)
+            }
+        }
+    }
+
+    /// Refuses an input sample whose normalised force is out of the format's range.
+    fn check_force_range(
+        &self,
+        segments: &[Segment],
+        offset_n: f64,
+        scale_n: f64,
+    ) -> Result<(), ImportError> {
+        for s in segments {
+            for (j, &f) in s.f.iter().enumerate() {
+                let v = (f - offset_n) / scale_n;
+                if !(-FORCE_SLACK..=1.0 + FORCE_SLACK).contains(&v) {
+                    return Err(ImportError::ForceRange {
+                        path: self.path.to_path_buf(),
+                        line: s.lines[j],
+                        column: self.force_col + 1,
+                        name: self.table.names[self.force_col].clone(),
+                        newtons: f,
+                        normalised: v,
+                        offset_n,
+                        scale_n,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The records on the grid: normalised force resampled, pulses from `grid`.
+    fn resample(
+        &self,
+        segments: &[Segment],
+        grid: &[Vec<Option<usize>>],
+        offset_n: f64,
+        scale_n: f64,
+    ) -> Vec<Record> {
+        let mut records = Vec::with_capacity(segments.len());
+        let width = segments.len().saturating_sub(1).to_string().len().max(3);
+        for (r, s) in segments.iter().enumerate() {
+            let force = resample_force(s, self.ts_ms, offset_n, scale_n);
+            let pulse = grid[r].iter().map(Option::is_some).collect();
+            records.push(Record::uniform(
+                format!("record_{r:0width$}.csv"),
+                s.kind.clone(),
+                self.opts.ts_s,
+                pulse,
+                force,
+            ));
+        }
+        records
+    }
+
+    /// The validated data set of `records` (split as the options say) and its report.
+    fn assemble(
+        &self,
+        segments: &[Segment],
+        records: Vec<Record>,
+        placed: &[Placed],
+        offset_n: f64,
+        scale_n: f64,
+    ) -> Result<Imported, ImportError> {
+        let split = make_split(&self.opts.split, records.len())?;
+        let mut steps: Vec<f64> = segments
             .iter()
-            .map(|s| (s.lines[0], s.lines[s.lines.len() - 1]))
-            .collect(),
-    };
-    let protocol = protocol_json(path, opts, &table, &report);
-    let dataset = DataSet {
-        header: Header {
-            source: opts.source.clone(),
-            preset: None,
-            parameters: BTreeMap::new(),
-            seed: None,
-            noise: serde_json::Value::Null,
-            protocol,
-            scale_n,
+            .flat_map(|s| s.t.windows(2).map(|w| w[1] - w[0]))
+            .collect();
+        steps.sort_by(f64::total_cmp);
+        let input_step_ms = steps.get(steps.len() / 2).copied().unwrap_or(f64::NAN);
+        let max_pulse_shift_ms = placed.iter().map(|p| p.shift_ms).fold(0.0, f64::max);
+        let report = ImportReport {
+            lines: self.table.rows.len(),
+            input_step_ms,
+            pulses: placed.len(),
+            max_pulse_shift_ms,
             offset_n,
-            ts_s: opts.ts_s,
-            split,
-        },
-        records,
-    };
-    dataset.validate(Path::new("."))?;
-    Ok(Imported { dataset, report })
+            scale_n,
+            record_lines: segments
+                .iter()
+                .map(|s| (s.lines[0], s.lines[s.lines.len() - 1]))
+                .collect(),
+        };
+        let protocol = protocol_json(self.path, self.opts, &self.table, &report);
+        let dataset = DataSet {
+            header: Header {
+                source: self.opts.source.clone(),
+                preset: None,
+                parameters: BTreeMap::new(),
+                seed: None,
+                noise: serde_json::Value::Null,
+                protocol,
+                scale_n,
+                offset_n,
+                ts_s: self.opts.ts_s,
+                split,
+            },
+            records,
+        };
+        dataset.validate(Path::new("."))?;
+        Ok(Imported { dataset, report })
+    }
+}
+
+/// Why a pulse at `t` ms is in no record: before the first, in a gap, or after the last.
+fn outside_records(segments: &[Segment], t: f64) -> String {
+    let before = segments.iter().rposition(|s| s.t[0] <= t);
+    match before {
+        None => format!(
+            "it is before the first record (from {} ms)",
+            segments[0].t[0]
+        ),
+        Some(r) if r + 1 < segments.len() => format!(
+            "it is in the gap after record {r} (to {} ms), before record {} (from {} ms)",
+            segments[r].last_t(),
+            r + 1,
+            segments[r + 1].t[0]
+        ),
+        Some(r) => format!(
+            "it is after the last record (to {} ms)",
+            segments[r].last_t()
+        ),
+    }
+}
+
+/// Record `s`'s normalised force on its grid, interpolated linearly between its samples.
+fn resample_force(s: &Segment, ts_ms: f64, offset_n: f64, scale_n: f64) -> Vec<f64> {
+    let n = s.ticks;
+    let mut force = Vec::with_capacity(n);
+    let mut j = 0;
+    let last = s.t.len() - 1;
+    for k in 0..n {
+        let t = (s.t[0] + k as f64 * ts_ms).min(s.t[last]);
+        while j + 1 < last && s.t[j + 1] <= t {
+            j += 1;
+        }
+        let (ta, tb) = (s.t[j], s.t[j + 1]);
+        let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
+        let f = if w == 0.0 {
+            s.f[j]
+        } else if w == 1.0 {
+            s.f[j + 1]
+        } else {
+            s.f[j] + (s.f[j + 1] - s.f[j]) * w
+        };
+        force.push((f - offset_n) / scale_n);
+    }
+    force
 }
 
 fn check_options(o: &ImportOptions) -> Result<(), ImportError> {
