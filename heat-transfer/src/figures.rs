@@ -152,8 +152,23 @@ pub fn draw_all(
 ) -> Result<(), StudyError> {
     std::fs::create_dir_all(dir).map_err(|e| draw_error(dir, e))?;
     crate::rig::fig_e1(dir)?;
+    fig_e2_e3(dir, p, seed)?;
+    // Figs. E.4-E.5: noise-free, normalised.
+    let norm = Normalisation::of(p);
+    let clean = HeatParams {
+        noise_std_k: 0.0,
+        ..*p
+    };
+    fig_e4(dir, clean, &norm)?;
+    fig_e5(dir, clean, &norm)?;
+    fig_e6(dir, state_space)?;
+    fig_e7(dir, sims)?;
+    fig_e8(dir, p, e44, cs)
+}
+
+/// Draws Figs. E.2-E.3: the first record of each E.2 experiment (alpha, u, y).
+fn fig_e2_e3(dir: &Path, p: &HeatParams, seed: u64) -> Result<(), StudyError> {
     let ts = p.ts_s;
-    // Figs. E.2-E.3: the first record of each experiment.
     let recs = all_records(p, seed)?;
     for e in Experiment::ALL {
         if let Some(r) = recs.iter().find(|r| r.experiment == e) {
@@ -173,12 +188,12 @@ pub fn draw_all(
             )?;
         }
     }
-    // Fig. E.4: 3 -> 7 V at each test angle, noise-free, normalised.
-    let norm = Normalisation::of(p);
-    let clean = HeatParams {
-        noise_std_k: 0.0,
-        ..*p
-    };
+    Ok(())
+}
+
+/// Draws Fig. E.4: the responses to a 3 -> 7 V step at each test angle (15 s and 1 s).
+fn fig_e4(dir: &Path, clean: HeatParams, norm: &Normalisation) -> Result<(), StudyError> {
+    let ts = clean.ts_s;
     let mut long = Vec::new();
     let mut short = Vec::new();
     for (i, &deg) in TEST_ANGLES_DEG.iter().enumerate() {
@@ -204,7 +219,12 @@ pub fn draw_all(
             },
         ],
     )?;
-    // Fig. E.5: steps of the valve angle at 6 V.
+    Ok(())
+}
+
+/// Draws Fig. E.5: the responses to steps of the valve angle at 6 V.
+fn fig_e5(dir: &Path, clean: HeatParams, norm: &Normalisation) -> Result<(), StudyError> {
+    let ts = clean.ts_s;
     let mut steps = Vec::new();
     for (i, (from, to)) in [(60.0, 90.0), (90.0, 40.0)].into_iter().enumerate() {
         let mut plant = HeatPlant::new(clean, 0, from)?;
@@ -226,7 +246,11 @@ pub fn draw_all(
             series: steps,
         }],
     )?;
-    // Fig. E.6: eigenvector directions per unit (first solid, second dashed).
+    Ok(())
+}
+
+/// Draws Fig. E.6: the state-space networks' eigenvector directions per unit.
+fn fig_e6(dir: &Path, state_space: &[SsRow]) -> Result<(), StudyError> {
     let panels: Vec<Panel> = state_space
         .iter()
         .map(|row| Panel {
@@ -251,7 +275,11 @@ pub fn draw_all(
         "Fig. E.6: eigenvector directions (first eigenvector solid, second dashed)",
         &panels,
     )?;
-    // Fig. E.7.
+    Ok(())
+}
+
+/// Draws Fig. E.7: the 5- and 10-unit global networks frozen over phi.
+fn fig_e7(dir: &Path, sims: &BTreeMap<(usize, &str), MisoArx>) -> Result<(), StudyError> {
     for units in [5, 10] {
         let Some(m) = sims.get(&(units, "global")) else {
             continue;
@@ -295,7 +323,12 @@ pub fn draw_all(
             ],
         )?;
     }
-    // Fig. E.8.
+    Ok(())
+}
+
+/// Draws Fig. E.8: the LCN and the linear controller at alpha = 0.1, 0.5, 0.9 on each plant.
+fn fig_e8(dir: &Path, p: &HeatParams, e44: &MisoArx, cs: &ControlStudy) -> Result<(), StudyError> {
+    let ts = p.ts_s;
     for (file, title, plant) in [
         (
             "fig-e8a.png",

@@ -449,77 +449,16 @@ pub fn study_with(
     let (delays_u, delays_a) = delays(&p)?;
     let (train, test) = records(&p, seed)?;
 
-    // E.4.2
-    let (pred, sim) = fit_pair(1, Learning::Global, &train)?;
-    let (cp, cs) = (column(&pred, &train, &test)?, column(&sim, &train, &test)?);
-    let arx1 = Arx1 {
-        pole_prediction: cp.pole,
-        pole_simulation: cs.pole,
-        g_alpha: cs.g_alpha,
-        g_u: cs.g_u,
-        prediction: cp.clone(),
-        simulation: cs.clone(),
-    };
-
-    // E.4.3-E.4.4
-    let mut learning = Vec::new();
-    let mut sims = BTreeMap::new();
-    for units in [5, 10] {
-        for l in [Learning::Global, Learning::Local] {
-            let (pm, sm) = fit_pair(units, l, &train)?;
-            let name = if l == Learning::Global {
-                "global"
-            } else {
-                "local"
-            };
-            learning.push(LearningRow {
-                units,
-                learning: name.into(),
-                pred_train_mspe: miso::mse(&pm, &train, Horizon::Prediction)?,
-                pred_train_msse: miso::mse(&pm, &train, Horizon::Simulation)?,
-                pred_test_msse: miso::mse(&pm, &test, Horizon::Simulation)?,
-                sim_train_msse: miso::mse(&sm, &train, Horizon::Simulation)?,
-                sim_test_msse: miso::mse(&sm, &test, Horizon::Simulation)?,
-            });
-            sims.insert((units, name), sm);
-        }
-    }
-    // Rows in the order pushed: 5 global, 5 local, 10 global, 10 local.
-    let [g5, l5, g10, l10] = [0, 1, 2, 3].map(|i| learning[i].clone());
-    let mut orderings = Orderings {
-        simulation_beats_prediction: cs.train_mse < cp.train_mse
-            && cs.test_mse < cp.test_mse
-            && learning
-                .iter()
-                .all(|r| r.sim_train_msse < r.pred_train_msse),
-        global_beats_local_in_simulation: g5.sim_train_msse < l5.sim_train_msse
-            && g10.sim_train_msse < l10.sim_train_msse
-            && g5.sim_test_msse < l5.sim_test_msse,
-        global_beats_local_in_simulation_test_10: g10.sim_test_msse < l10.sim_test_msse,
-        prediction_local_bias_and_regularisation: g5.pred_train_mspe < l5.pred_train_mspe
-            && g10.pred_train_mspe < l10.pred_train_mspe
-            && l10.pred_test_msse < g10.pred_test_msse,
-        ten_units_generalise_worse: g10.sim_train_msse < g5.sim_train_msse
-            && g10.sim_test_msse > g5.sim_test_msse,
-        restricted_close_to_general: None,
-    };
+    let arx1 = arx1_study(&train, &test)?;
+    let (learning, sims) = learning_study(&train, &test)?;
+    let mut orderings = error_orderings(&arx1, &learning);
     let static_of = |u| {
         sims.get(&(u, "global"))
             .map(frozen_rows)
             .unwrap_or_default()
     };
     // E.4.7: the design model sees the channels (w, alpha), w = u^2 the heater power.
-    let swapped: Vec<MisoRecord> = train
-        .iter()
-        .map(|r| MisoRecord {
-            name: r.name.clone(),
-            u: vec![
-                r.u[1].iter().map(|&v| control::power(v)).collect(),
-                r.u[0].clone(),
-            ],
-            y: r.y.clone(),
-        })
-        .collect();
+    let swapped = power_records(&train);
     let e44 = match sims.get(&(5, "global")) {
         Some(m) => m.clone(),
         None => fit_pair(5, Learning::Global, &train)?.1,
@@ -557,6 +496,92 @@ pub fn study_with(
         windup: cs.windup,
         control_gains: cs.gains,
     })
+}
+
+/// E.4.2, Table E.2: the linear 1st-order ARX model fitted in prediction and in simulation mode.
+fn arx1_study(train: &[MisoRecord], test: &[MisoRecord]) -> Result<Arx1, StudyError> {
+    let (pred, sim) = fit_pair(1, Learning::Global, train)?;
+    let (cp, cs) = (column(&pred, train, test)?, column(&sim, train, test)?);
+    Ok(Arx1 {
+        pole_prediction: cp.pole,
+        pole_simulation: cs.pole,
+        g_alpha: cs.g_alpha,
+        g_u: cs.g_u,
+        prediction: cp,
+        simulation: cs,
+    })
+}
+
+/// The fitted networks of E.4.3-E.4.4 by (units, `global` or `local`).
+type Networks = BTreeMap<(usize, &'static str), MisoArx>;
+
+/// E.4.3-E.4.4, Tables E.3-E.4: the 5- and 10-unit networks, global and local learning.
+fn learning_study(
+    train: &[MisoRecord],
+    test: &[MisoRecord],
+) -> Result<(Vec<LearningRow>, Networks), StudyError> {
+    let mut learning = Vec::new();
+    let mut sims = BTreeMap::new();
+    for units in [5, 10] {
+        for l in [Learning::Global, Learning::Local] {
+            let (pm, sm) = fit_pair(units, l, train)?;
+            let name = if l == Learning::Global {
+                "global"
+            } else {
+                "local"
+            };
+            learning.push(LearningRow {
+                units,
+                learning: name.into(),
+                pred_train_mspe: miso::mse(&pm, train, Horizon::Prediction)?,
+                pred_train_msse: miso::mse(&pm, train, Horizon::Simulation)?,
+                pred_test_msse: miso::mse(&pm, test, Horizon::Simulation)?,
+                sim_train_msse: miso::mse(&sm, train, Horizon::Simulation)?,
+                sim_test_msse: miso::mse(&sm, test, Horizon::Simulation)?,
+            });
+            sims.insert((units, name), sm);
+        }
+    }
+    Ok((learning, sims))
+}
+
+/// The orderings of the errors the thesis reports, but the state-space one (set after E.4.5).
+fn error_orderings(arx1: &Arx1, learning: &[LearningRow]) -> Orderings {
+    let (cp, cs) = (&arx1.prediction, &arx1.simulation);
+    // Rows in the order pushed: 5 global, 5 local, 10 global, 10 local.
+    let [g5, l5, g10, l10] = [0, 1, 2, 3].map(|i| learning[i].clone());
+    Orderings {
+        simulation_beats_prediction: cs.train_mse < cp.train_mse
+            && cs.test_mse < cp.test_mse
+            && learning
+                .iter()
+                .all(|r| r.sim_train_msse < r.pred_train_msse),
+        global_beats_local_in_simulation: g5.sim_train_msse < l5.sim_train_msse
+            && g10.sim_train_msse < l10.sim_train_msse
+            && g5.sim_test_msse < l5.sim_test_msse,
+        global_beats_local_in_simulation_test_10: g10.sim_test_msse < l10.sim_test_msse,
+        prediction_local_bias_and_regularisation: g5.pred_train_mspe < l5.pred_train_mspe
+            && g10.pred_train_mspe < l10.pred_train_mspe
+            && l10.pred_test_msse < g10.pred_test_msse,
+        ten_units_generalise_worse: g10.sim_train_msse < g5.sim_train_msse
+            && g10.sim_test_msse > g5.sim_test_msse,
+        restricted_close_to_general: None,
+    }
+}
+
+/// E.4.7: the training records on the channels (w, alpha), w = u^2 the heater power.
+fn power_records(train: &[MisoRecord]) -> Vec<MisoRecord> {
+    train
+        .iter()
+        .map(|r| MisoRecord {
+            name: r.name.clone(),
+            u: vec![
+                r.u[1].iter().map(|&v| control::power(v)).collect(),
+                r.u[0].clone(),
+            ],
+            y: r.y.clone(),
+        })
+        .collect()
 }
 
 // The integration tests (tests/it) compile into this crate's one test binary.

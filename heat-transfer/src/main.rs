@@ -77,7 +77,23 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Prints thesis App. E's tables (Markdown), each beside the thesis's numbers.
 fn print_tables(r: &Report) {
+    print_table_e1(r);
+    print_table_e2(r);
+    print_tables_e3_e4(r);
+    print_table_e5(r);
+    print_fig_e6(r);
+    print_scheduling_2d(r);
+    print_orderings(r);
+    print_fig_e8(r);
+    print_control_gains(r);
+    print_windup(r);
+    print_fig_e7(r);
+}
+
+/// Prints Table E.1: the delays u -> y and alpha -> y per valve angle, beside the thesis's.
+fn print_table_e1(r: &Report) {
     println!("## Table E.1: delays (samples of 50 ms), from the step responses\n");
     println!("| angle (deg) | u->y here | u->y thesis | alpha->y here | alpha->y thesis |");
     println!("|---:|---:|---:|---:|---:|");
@@ -91,6 +107,10 @@ fn print_tables(r: &Report) {
             thesis_alpha[i]
         );
     }
+}
+
+/// Prints Table E.2: the 1st-order ARX model of E.4.2 in prediction and in simulation mode.
+fn print_table_e2(r: &Report) {
     let (p, s) = (&r.arx1.prediction, &r.arx1.simulation);
     println!("\n## Table E.2: 1st-order ARX, psi = [alpha(t-3), u(t-5), y(t-1)]\n");
     println!("| | prediction here | prediction thesis | simulation here | simulation thesis |");
@@ -118,6 +138,10 @@ fn print_tables(r: &Report) {
         p.g_alpha, s.g_alpha
     );
     println!("| G_u | {:.3} | 0.667 | {:.3} | 0.605 |", p.g_u, s.g_u);
+}
+
+/// Prints Tables E.3-E.4: the 5- and 10-unit networks of E.4.3-E.4.4, local vs global.
+fn print_tables_e3_e4(r: &Report) {
     let thesis_e3 = [
         ("4.96e-5", "1.80e-3", "1.79e-3", "1.28e-3", "1.27e-3"),
         ("5.34e-5", "1.87e-3", "1.91e-3", "2.17e-3", "1.78e-3"),
@@ -148,6 +172,10 @@ fn print_tables(r: &Report) {
             t.4
         );
     }
+}
+
+/// Prints Table E.5: the state-space networks of E.4.5, general and restricted.
+fn print_table_e5(r: &Report) {
     println!("\n## Table E.5: state-space networks (5 units, global learning, simulation mode)\n");
     println!("| model | train MSE | thesis | test MSE | thesis |");
     println!("|---|---:|---:|---:|---:|");
@@ -161,6 +189,10 @@ fn print_tables(r: &Report) {
             row.model, row.train_mse, t.0, row.test_mse, t.1
         );
     }
+}
+
+/// Prints Fig. E.6 as numbers: the state-space networks' eigenvector angles and eigenvalues.
+fn print_fig_e6(r: &Report) {
     println!("\n## Fig. E.6: eigenvector angles (deg) and eigenvalues (1/s) per unit\n");
     println!("| model | unit | angle 1 | angle 2 | e1 | e2 |");
     println!("|---|---:|---:|---:|---:|---:|");
@@ -176,6 +208,10 @@ fn print_tables(r: &Report) {
             );
         }
     }
+}
+
+/// Prints E.4.1, eq. E.1: the network over phi = \[alpha, u\] against the one over alpha.
+fn print_scheduling_2d(r: &Report) {
     let t = &r.scheduling_2d;
     println!("\n## E.4.1, eq. E.1: phi = [alpha(t-3), u(t-5)], 3 x 3 tensor-product B-splines\n");
     println!("| network | train MSSE | test MSSE |");
@@ -190,6 +226,10 @@ fn print_tables(r: &Report) {
         "| {} units over [alpha, u] (E.1) | {:.2e} | {:.2e} |",
         t.units, t.train_mse, t.test_mse
     );
+}
+
+/// Prints the orderings of the errors the thesis reports (issue 21's keys).
+fn print_orderings(r: &Report) {
     println!("\n## Orderings\n");
     let o = &r.orderings;
     for (k, v) in [
@@ -220,6 +260,10 @@ fn print_tables(r: &Report) {
             v.map_or("not computed".to_string(), |b| b.to_string())
         );
     }
+}
+
+/// Prints Fig. E.8 (E.4.7): the LCN against the linear controller on each of the three plants.
+fn print_fig_e8(r: &Report) {
     for (title, c) in [
         ("Fig. E.8(a): control of the design model", &r.control),
         (
@@ -245,6 +289,10 @@ fn print_tables(r: &Report) {
             }
         }
     }
+}
+
+/// Prints E.4.7's design model against the process: steady-state gains per alpha.
+fn print_control_gains(r: &Report) {
     println!(
         "\n## E.4.7's design model against the process: steady-state gain over the step {} -> {}\n",
         STEP.0, STEP.1
@@ -257,6 +305,10 @@ fn print_tables(r: &Report) {
             g.alpha, g.model, g.process, g.process_voltage
         );
     }
+}
+
+/// Prints the anti-reset-windup check: the LCN's settling after an unreachable reference.
+fn print_windup(r: &Report) {
     println!(
         "\n## Anti-reset-windup (LCN, design model, alpha = 0.9): reference {} -> {} (unreachable) -> {}\n",
         WINDUP.0, WINDUP.1, WINDUP.2
@@ -265,6 +317,10 @@ fn print_tables(r: &Report) {
         "settling within 0.01 after the return to {}: {:.2} s with, {:.2} s without",
         WINDUP.2, r.windup.with_s, r.windup.without_s
     );
+}
+
+/// Prints Fig. E.7 as numbers: the global simulation-mode networks frozen over phi.
+fn print_fig_e7(r: &Report) {
     println!("\n## Fig. E.7: networks frozen over phi (global learning, simulation mode)\n");
     println!("| phi | G_u (5) | G_alpha (5) | pole (5) | G_u (10) | G_alpha (10) | pole (10) |");
     println!("|---:|---:|---:|---:|---:|---:|---:|");

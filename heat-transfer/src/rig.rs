@@ -101,6 +101,43 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
     let (top, bottom) = (AXIS - HALF, AXIS + HALF);
 
     // Air in, through the inlet duct with the throttle valve.
+    draw_inlet(root, top, bottom)?;
+
+    // The fan: a housing and four blades.
+    let (fx, fy, fr) = (290, AXIS, 58);
+    draw_fan(root, (fx, fy), fr)?;
+
+    // The tube, from the fan to the outlet.
+    let (t0, t1) = (fx + fr - 8, 890);
+    for y in [top, bottom] {
+        path(root, vec![(t0, y), (t1, y)], &WALL, 4)?;
+    }
+    centred(root, "tube", (640, bottom + 22), 17, &BLACK)?;
+
+    // The heating resistor at the tube input, across the air stream, fed with u.
+    let rx = 405;
+    draw_resistor(root, rx, top, bottom)?;
+
+    // Air in the tube: cool before the resistor, heated after it.
+    arrow(root, (t0 + 12, AXIS), (rx - 18, AXIS), &AIR)?;
+    for x in [470, 590, 710] {
+        arrow(root, (x, AXIS), (x + 80, AXIS), &HOT)?;
+    }
+
+    // The thermocouple at the outlet, read as y.
+    draw_thermocouple(root, top)?;
+
+    // Air out.
+    arrow(root, (t1 + 5, AXIS), (975, AXIS), &HOT)?;
+    centred(root, "air out", (940, AXIS + 22), 16, &HOT)?;
+
+    // What the sketch means for the model.
+    draw_notes(root)?;
+    root.present()
+}
+
+/// Draws the air inlet: the duct with the throttle valve at angle alpha.
+fn draw_inlet<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: i32, bottom: i32) -> Res<DB> {
     arrow(root, (20, AXIS), (95, AXIS), &AIR)?;
     centred(root, "air in", (55, AXIS + 22), 16, &AIR)?;
     for y in [top, bottom] {
@@ -142,9 +179,15 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
         15,
         &VALVE,
     )?;
+    Ok(())
+}
 
-    // The fan: a housing and four blades.
-    let (fx, fy, fr) = (290, AXIS, 58);
+/// Draws the fan: a housing of radius `fr` around `(fx, fy)` and four blades.
+fn draw_fan<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    (fx, fy): (i32, i32),
+    fr: i32,
+) -> Res<DB> {
     root.draw(&Circle::new((fx, fy), fr, WALL.stroke_width(4)))?;
     for k in 0..4 {
         let a = std::f64::consts::FRAC_PI_2 * k as f64 + 0.3;
@@ -163,16 +206,16 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
     }
     root.draw(&Circle::new((fx, fy), 7, WALL.filled()))?;
     centred(root, "fan", (fx, fy + fr + 20), 17, &BLACK)?;
+    Ok(())
+}
 
-    // The tube, from the fan to the outlet.
-    let (t0, t1) = (fx + fr - 8, 890);
-    for y in [top, bottom] {
-        path(root, vec![(t0, y), (t1, y)], &WALL, 4)?;
-    }
-    centred(root, "tube", (640, bottom + 22), 17, &BLACK)?;
-
-    // The heating resistor at the tube input, across the air stream, fed with u.
-    let rx = 405;
+/// Draws the heating resistor at `rx` across the tube, fed with the voltage u.
+fn draw_resistor<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    rx: i32,
+    top: i32,
+    bottom: i32,
+) -> Res<DB> {
     let zig: Vec<(i32, i32)> = (0..=8)
         .map(|k| {
             let x = if k == 0 || k == 8 {
@@ -204,14 +247,11 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
         &HOT,
     )?;
     text(root, "heat ∝ u²", (ux + 30, uy + 14), 15, &HOT)?;
+    Ok(())
+}
 
-    // Air in the tube: cool before the resistor, heated after it.
-    arrow(root, (t0 + 12, AXIS), (rx - 18, AXIS), &AIR)?;
-    for x in [470, 590, 710] {
-        arrow(root, (x, AXIS), (x + 80, AXIS), &HOT)?;
-    }
-
-    // The thermocouple at the outlet, read as y.
+/// Draws the thermocouple at the outlet, read as the output y.
+fn draw_thermocouple<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: i32) -> Res<DB> {
     let (cx, cy) = (850, AXIS);
     path(root, vec![(cx, cy), (cx, top - 6)], &SIGNAL, 3)?;
     root.draw(&Circle::new((cx, cy), 6, SIGNAL.filled()))?;
@@ -228,12 +268,11 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
         17,
         &SIGNAL,
     )?;
+    Ok(())
+}
 
-    // Air out.
-    arrow(root, (t1 + 5, AXIS), (975, AXIS), &HOT)?;
-    centred(root, "air out", (940, AXIS + 22), 16, &HOT)?;
-
-    // What the sketch means for the model.
+/// Writes what the sketch means for the model under it.
+fn draw_notes<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
     centred(
         root,
         "inputs α, u; output y; sampled every 50 ms. Opening the valve moves more air: \
@@ -249,7 +288,7 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
         15,
         &BLACK,
     )?;
-    root.present()
+    Ok(())
 }
 
 /// Writes Fig. E.1 as `fig-e1.png` and `fig-e1.svg` into `dir`.
