@@ -21,7 +21,7 @@
 use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -42,9 +42,9 @@ use sim_muscle::stimulator::outbox::Outbox;
 use sim_muscle::stimulator::test_plant::ChargeIntegrator;
 use stim_driver::bus::forward_event;
 use stim_driver::config::DriverConfig;
-use stim_driver::report::run_report;
-use stim_driver::runner::{Shared, run_forward};
-use stim_driver::tx::{DatagramPeer, datagram_bus};
+use stim_driver::report::{ReportOutcome, run_report};
+use stim_driver::runner::{ForwardOutcome, Shared, run_forward};
+use stim_driver::tx::{DatagramPeer, DatagramTx, datagram_bus};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -147,11 +147,44 @@ fn main() -> ExitCode {
     }
 }
 
+/// Runs the driver's threads and the virtual stimulator until SIGINT/SIGTERM, then writes
+/// the summary.
 fn run(cli: &Cli) -> anyhow::Result<()> {
     if !(1..=99).contains(&cli.priority) || !(1..=99).contains(&cli.stim_priority) {
         bail!("--priority and --stim-priority must be in 1..=99");
     }
     let stop = install_stop_handler().context("installing signal handlers")?;
+    let config = driver_config(cli)?;
+    let hlog = open_hlog(cli)?;
+    let settings = stimulator_settings(&config)?;
+    let (tx, peer) = datagram_bus(config.retry_policy()).context("socket pair")?;
+    let shared = Shared::new(&config);
+    let stim = VirtualStim {
+        settings,
+        peer,
+        rt: RtConfig {
+            priority: cli.stim_priority,
+            core: cli.stim_core,
+            on_missing_rights: MissingRightsPolicy::BestEffort,
+            ..RtConfig::default()
+        },
+    };
+    let ended = run_threads(cli, &config, &shared, stop, tx, hlog, stim)?;
+    let summary = summary(&shared, ended)?;
+    log_summary(&summary);
+    if let Some(path) = &cli.summary {
+        std::fs::write(path, serde_json::to_vec_pretty(&summary)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if shared.failed.load(Ordering::Relaxed) {
+        bail!("a driver thread failed");
+    }
+    Ok(())
+}
+
+/// The driver's configuration: the datagram bus, the command line's prefix, real-time
+/// settings and interval log.
+fn driver_config(cli: &Cli) -> anyhow::Result<DriverConfig> {
     let mut config = DriverConfig::with_defaults("datagram", 40.0);
     config.ipc.prefix = cli.prefix.clone();
     config.rt.priority = cli.priority;
@@ -160,7 +193,12 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     config.rt.cpu_dma_latency_us = None;
     config.telemetry.hlog = cli.hlog.clone();
     config.validate().context("driver configuration")?;
-    let hlog = match &cli.hlog {
+    Ok(config)
+}
+
+/// Creates the interval log (`--hlog`), if asked for.
+fn open_hlog(cli: &Cli) -> anyhow::Result<Option<HlogWriter>> {
+    Ok(match &cli.hlog {
         Some(p) => Some(
             HlogWriter::create(
                 p,
@@ -170,7 +208,11 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             .context("--hlog")?,
         ),
         None => None,
-    };
+    })
+}
+
+/// The virtual stimulator's settings, matching the driver's nodes and limits.
+fn stimulator_settings(config: &DriverConfig) -> anyhow::Result<Settings> {
     let nodes = config.nodes()?;
     let settings = Settings {
         nodes,
@@ -181,17 +223,41 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         test_fault_loose_config: false,
     };
     settings.validate().context("virtual stimulator settings")?;
-    let (tx, peer) = datagram_bus(config.retry_policy()).context("socket pair")?;
-    let shared = Shared::new(&config);
-    let (shared, config) = (&shared, &config);
-    let stim_rt = RtConfig {
-        priority: cli.stim_priority,
-        core: cli.stim_core,
-        on_missing_rights: MissingRightsPolicy::BestEffort,
-        ..RtConfig::default()
-    };
+    Ok(settings)
+}
 
-    std::thread::scope(|scope| -> anyhow::Result<()> {
+/// The virtual stimulator thread's part: its settings, its end of the socket pair and
+/// its real-time settings.
+struct VirtualStim {
+    settings: Settings,
+    peer: DatagramPeer,
+    rt: RtConfig,
+}
+
+/// What the driver's threads gave once they all ended.
+struct Ended {
+    outcome: ForwardOutcome,
+    report: ReportOutcome,
+    arms: u64,
+}
+
+/// Runs the virtual stimulator, the report and forward threads and (once they are ready)
+/// the supervisor stand-in; prints `ready`, and joins them all when the forward thread ends.
+fn run_threads(
+    cli: &Cli,
+    config: &DriverConfig,
+    shared: &Shared,
+    stop: &AtomicBool,
+    tx: DatagramTx,
+    hlog: Option<HlogWriter>,
+    stim: VirtualStim,
+) -> anyhow::Result<Ended> {
+    let VirtualStim {
+        settings,
+        peer,
+        rt: stim_rt,
+    } = stim;
+    std::thread::scope(|scope| -> anyhow::Result<Ended> {
         let stimulator = std::thread::Builder::new()
             .name("virtual-stim".to_owned())
             .spawn_scoped(scope, || {
@@ -249,50 +315,58 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
                 .context("supervisor stand-in")?,
             None => 0,
         };
-        let outcome = outcome.context("forward thread")?;
-        let report = report.context("report thread")?;
-        let c = shared.status.load();
-        let summary = Summary {
-            ticks_received: c.ticks_received,
-            ticks_lost: c.ticks_lost,
-            ticks_refused: c.ticks_refused,
-            pulses_sent: c.pulses_sent,
-            pulses_rejected: c.pulses_rejected,
-            pulses_not_armed: c.pulses_not_armed,
-            stimulator_pulses: c.stimulator_pulses,
-            can_tx_errors: c.can_tx_errors,
-            trips: c.trips,
-            watchdog_trips: c.watchdog_trips,
-            fault_code: c.fault_code,
+        Ok(Ended {
+            outcome: outcome.context("forward thread")?,
+            report: report.context("report thread")?,
             arms,
-            hot_path_allocations: outcome
-                .hot_path_allocations
-                .ok_or_else(|| anyhow!("the counting allocator is not installed"))?,
-            tick_to_can: report.timing.publish.into(),
-            rt: outcome.rt.to_string(),
-        };
-        tracing::info!(
-            "{} StimTicks, {} pulses written ({} refused, {} while not armed), stimulator applied {}, {} trips, {} arms; StimTick->write p50/p99/max {:.1}/{:.1}/{:.1} us",
-            summary.ticks_received,
-            summary.pulses_sent,
-            summary.pulses_rejected,
-            summary.pulses_not_armed,
-            summary.stimulator_pulses,
-            summary.trips,
-            summary.arms,
-            summary.tick_to_can.p50_ns as f64 / 1e3,
-            summary.tick_to_can.p99_ns as f64 / 1e3,
-            summary.tick_to_can.max_ns as f64 / 1e3,
-        );
-        if let Some(path) = &cli.summary {
-            std::fs::write(path, serde_json::to_vec_pretty(&summary)?)
-                .with_context(|| format!("writing {}", path.display()))?;
-        }
-        if shared.failed.load(Ordering::Relaxed) {
-            bail!("a driver thread failed");
-        }
-        Ok(())
+        })
     })
+}
+
+/// The summary of a run from the shared counters and what the threads gave.
+fn summary(shared: &Shared, ended: Ended) -> anyhow::Result<Summary> {
+    let Ended {
+        outcome,
+        report,
+        arms,
+    } = ended;
+    let c = shared.status.load();
+    Ok(Summary {
+        ticks_received: c.ticks_received,
+        ticks_lost: c.ticks_lost,
+        ticks_refused: c.ticks_refused,
+        pulses_sent: c.pulses_sent,
+        pulses_rejected: c.pulses_rejected,
+        pulses_not_armed: c.pulses_not_armed,
+        stimulator_pulses: c.stimulator_pulses,
+        can_tx_errors: c.can_tx_errors,
+        trips: c.trips,
+        watchdog_trips: c.watchdog_trips,
+        fault_code: c.fault_code,
+        arms,
+        hot_path_allocations: outcome
+            .hot_path_allocations
+            .ok_or_else(|| anyhow!("the counting allocator is not installed"))?,
+        tick_to_can: report.timing.publish.into(),
+        rt: outcome.rt.to_string(),
+    })
+}
+
+/// Logs the summary's counters and forward latency in one line.
+fn log_summary(summary: &Summary) {
+    tracing::info!(
+        "{} StimTicks, {} pulses written ({} refused, {} while not armed), stimulator applied {}, {} trips, {} arms; StimTick->write p50/p99/max {:.1}/{:.1}/{:.1} us",
+        summary.ticks_received,
+        summary.pulses_sent,
+        summary.pulses_rejected,
+        summary.pulses_not_armed,
+        summary.stimulator_pulses,
+        summary.trips,
+        summary.arms,
+        summary.tick_to_can.p50_ns as f64 / 1e3,
+        summary.tick_to_can.p99_ns as f64 / 1e3,
+        summary.tick_to_can.max_ns as f64 / 1e3,
+    );
 }
 
 /// The virtual stimulator: a 1 ms absolute-time loop over sim-muscle's state machine, fed

@@ -107,10 +107,7 @@ fn main() -> ExitCode {
 /// Runs the suite; `Ok(false)` when the gate failed.
 fn run(cli: &Cli) -> anyhow::Result<bool> {
     if let Some(path) = &cli.compare {
-        let s = Summary::load(path)?;
-        let baseline = Baseline::load(&cli.baseline)?;
-        let checks = gate::compare(&s.conditions, &baseline)?;
-        return Ok(report::print_checks(&checks, &cli.baseline));
+        return compare_stored(cli, path);
     }
     if cli.seconds == 0 {
         bail!("--seconds must be at least 1");
@@ -121,36 +118,9 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
     } else {
         Some(Baseline::load(&cli.baseline)?)
     };
-    let bin_dir = match &cli.bin_dir {
-        Some(d) => d.clone(),
-        None => std::env::current_exe()
-            .context("locating latency-regression")?
-            .parent()
-            .context("latency-regression has no directory")?
-            .to_path_buf(),
-    };
-    let rt_latency = bin_dir.join("rt-latency");
-    if !rt_latency.is_file() {
-        bail!(
-            "{} not found (build it: cargo build --release -p rt-core --bins)",
-            rt_latency.display()
-        );
-    }
-    let conditions: Vec<Condition> = match (cli.load, cli.no_load) {
-        (true, _) => vec![Condition::Load],
-        (_, true) => vec![Condition::NoLoad],
-        _ => vec![Condition::NoLoad, Condition::Load],
-    };
-    // 1 s rounds in a short run (as many alternations as possible, so that both sides
-    // see the same hypervisor stalls), 10 s rounds in a long one.
-    let rounds = cli
-        .rounds
-        .unwrap_or(if cli.seconds <= 20 {
-            cli.seconds
-        } else {
-            cli.seconds.div_ceil(10)
-        })
-        .clamp(1, cli.seconds);
+    let rt_latency = locate_rt_latency(cli)?;
+    let conditions = conditions(cli);
+    let rounds = rounds(cli);
     let slowdown = test_slowdown()?;
     std::fs::create_dir_all(&cli.out_dir)
         .with_context(|| format!("creating {}", cli.out_dir.display()))?;
@@ -161,46 +131,14 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
     let mut panels = Vec::new();
     let mut unconfirmed = Vec::new();
     for &condition in &conditions {
-        let dir = cli.out_dir.join(condition.key());
-        let mut attempt = 1;
-        let (s, panel) = loop {
-            let (s, panel) = measure(cli, &rt_latency, condition, &dir, rounds)?;
-            let Some(b) = &baseline else { break (s, panel) };
-            let alone = BTreeMap::from([(condition, s.clone())]);
-            let failed: Vec<String> = gate::compare(&alone, b)?
-                .into_iter()
-                .filter(|c| !c.passed)
-                .map(|c| c.key)
-                .collect();
-            if failed.is_empty() || attempt > cli.confirm {
-                break (s, panel);
-            }
-            // Keep the failed measurement for inspection and measure again: a regression
-            // of the code fails every measurement, a host stall the one it fell into.
-            let kept = cli
-                .out_dir
-                .join(format!("{}-attempt-{attempt}", condition.key()));
-            if kept.exists() {
-                std::fs::remove_dir_all(&kept)
-                    .with_context(|| format!("removing {}", kept.display()))?;
-            }
-            std::fs::rename(&dir, &kept)
-                .with_context(|| format!("moving {} aside", dir.display()))?;
-            println!(
-                "== {}: attempt {attempt} failed {}; measuring again to confirm ({} of {})",
-                condition.key(),
-                failed.join(", "),
-                attempt,
-                cli.confirm
-            );
-            unconfirmed.push(Unconfirmed {
-                condition,
-                attempt,
-                failed,
-                dir: kept.display().to_string(),
-            });
-            attempt += 1;
-        };
+        let (s, panel) = measure_confirmed(
+            cli,
+            &rt_latency,
+            condition,
+            rounds,
+            baseline.as_ref(),
+            &mut unconfirmed,
+        )?;
         panels.push(panel);
         measured.insert(condition, s);
     }
@@ -222,14 +160,7 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
         Some(b) => Some(gate::compare(&summary.conditions, b)?),
         None => None,
     };
-    let text = serde_json::to_string_pretty(&summary)?;
-    for path in std::iter::once(cli.out_dir.join("summary.json")).chain(cli.json.clone()) {
-        std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
-    }
-    plot::draw(&panels, &cli.out_dir.join("percentiles.png"))?;
-    let md = report::markdown(&summary, checks.as_deref(), &cli.baseline);
-    std::fs::write(cli.out_dir.join("report.md"), md)
-        .with_context(|| format!("writing {}/report.md", cli.out_dir.display()))?;
+    write_report(cli, &summary, checks.as_deref(), &panels)?;
 
     report::print_table(&summary);
     println!("report: {}/report.md", cli.out_dir.display());
@@ -240,6 +171,132 @@ fn run(cli: &Cli) -> anyhow::Result<bool> {
             true
         }
     })
+}
+
+/// `--compare`: judges a stored summary against the baseline and prints the gate.
+fn compare_stored(cli: &Cli, path: &Path) -> anyhow::Result<bool> {
+    let s = Summary::load(path)?;
+    let baseline = Baseline::load(&cli.baseline)?;
+    let checks = gate::compare(&s.conditions, &baseline)?;
+    Ok(report::print_checks(&checks, &cli.baseline))
+}
+
+/// The `rt-latency` binary in `--bin-dir` (default: this program's directory).
+fn locate_rt_latency(cli: &Cli) -> anyhow::Result<PathBuf> {
+    let bin_dir = match &cli.bin_dir {
+        Some(d) => d.clone(),
+        None => std::env::current_exe()
+            .context("locating latency-regression")?
+            .parent()
+            .context("latency-regression has no directory")?
+            .to_path_buf(),
+    };
+    let rt_latency = bin_dir.join("rt-latency");
+    if !rt_latency.is_file() {
+        bail!(
+            "{} not found (build it: cargo build --release -p rt-core --bins)",
+            rt_latency.display()
+        );
+    }
+    Ok(rt_latency)
+}
+
+/// The load conditions to measure (`--load`, `--no-load`, default both).
+fn conditions(cli: &Cli) -> Vec<Condition> {
+    match (cli.load, cli.no_load) {
+        (true, _) => vec![Condition::Load],
+        (_, true) => vec![Condition::NoLoad],
+        _ => vec![Condition::NoLoad, Condition::Load],
+    }
+}
+
+/// The rounds per condition (`--rounds`, else by the run's length).
+fn rounds(cli: &Cli) -> u64 {
+    // 1 s rounds in a short run (as many alternations as possible, so that both sides
+    // see the same hypervisor stalls), 10 s rounds in a long one.
+    cli.rounds
+        .unwrap_or(if cli.seconds <= 20 {
+            cli.seconds
+        } else {
+            cli.seconds.div_ceil(10)
+        })
+        .clamp(1, cli.seconds)
+}
+
+/// Measures a condition, and again (up to `--confirm` times) while it fails the gate;
+/// the failed measurements are set aside and added to `unconfirmed`. Returns the last.
+fn measure_confirmed(
+    cli: &Cli,
+    rt_latency: &Path,
+    condition: Condition,
+    rounds: u64,
+    baseline: Option<&Baseline>,
+    unconfirmed: &mut Vec<Unconfirmed>,
+) -> anyhow::Result<(ConditionSummary, plot::Panel)> {
+    let dir = cli.out_dir.join(condition.key());
+    let mut attempt = 1;
+    loop {
+        let (s, panel) = measure(cli, rt_latency, condition, &dir, rounds)?;
+        let Some(b) = baseline else {
+            return Ok((s, panel));
+        };
+        let alone = BTreeMap::from([(condition, s.clone())]);
+        let failed: Vec<String> = gate::compare(&alone, b)?
+            .into_iter()
+            .filter(|c| !c.passed)
+            .map(|c| c.key)
+            .collect();
+        if failed.is_empty() || attempt > cli.confirm {
+            return Ok((s, panel));
+        }
+        // Keep the failed measurement for inspection and measure again: a regression
+        // of the code fails every measurement, a host stall the one it fell into.
+        let kept = set_aside(cli, condition, &dir, attempt)?;
+        println!(
+            "== {}: attempt {attempt} failed {}; measuring again to confirm ({} of {})",
+            condition.key(),
+            failed.join(", "),
+            attempt,
+            cli.confirm
+        );
+        unconfirmed.push(Unconfirmed {
+            condition,
+            attempt,
+            failed,
+            dir: kept.display().to_string(),
+        });
+        attempt += 1;
+    }
+}
+
+/// Moves a failed measurement's `dir` to `<condition>-attempt-N/`, replacing an old one.
+fn set_aside(cli: &Cli, condition: Condition, dir: &Path, attempt: u32) -> anyhow::Result<PathBuf> {
+    let kept = cli
+        .out_dir
+        .join(format!("{}-attempt-{attempt}", condition.key()));
+    if kept.exists() {
+        std::fs::remove_dir_all(&kept).with_context(|| format!("removing {}", kept.display()))?;
+    }
+    std::fs::rename(dir, &kept).with_context(|| format!("moving {} aside", dir.display()))?;
+    Ok(kept)
+}
+
+/// Writes `summary.json` (and `--json`), `percentiles.png` and `report.md`.
+fn write_report(
+    cli: &Cli,
+    summary: &Summary,
+    checks: Option<&[Check]>,
+    panels: &[plot::Panel],
+) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(summary)?;
+    for path in std::iter::once(cli.out_dir.join("summary.json")).chain(cli.json.clone()) {
+        std::fs::write(&path, &text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    plot::draw(panels, &cli.out_dir.join("percentiles.png"))?;
+    let md = report::markdown(summary, checks, &cli.baseline);
+    std::fs::write(cli.out_dir.join("report.md"), md)
+        .with_context(|| format!("writing {}/report.md", cli.out_dir.display()))?;
+    Ok(())
 }
 
 /// One `rt-latency` run of a condition into `dir`: its summary and its percentile panel.

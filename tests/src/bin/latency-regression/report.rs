@@ -5,7 +5,7 @@ use std::path::Path;
 
 use crate::check_line;
 use crate::gate::Check;
-use crate::summary::{ConditionSummary, Percentiles, Summary, Unconfirmed};
+use crate::summary::{Condition, ConditionSummary, Percentiles, Summary, Unconfirmed};
 
 /// The rows of one condition's table.
 fn rows(s: &ConditionSummary) -> Vec<(&'static str, Option<Percentiles>)> {
@@ -132,6 +132,22 @@ pub fn print_checks(checks: &[Check], baseline: &Path) -> bool {
 /// `report.md`.
 pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) -> String {
     let mut md = String::new();
+    write_header(&mut md, summary);
+    for (c, s) in &summary.conditions {
+        write_condition(&mut md, *c, s);
+    }
+    write_driver_and_logs(&mut md, summary);
+    match checks {
+        Some(checks) => write_gate(&mut md, summary, checks, baseline),
+        None => {
+            let _ = writeln!(md, "No baseline comparison (`--no-baseline`).");
+        }
+    }
+    md
+}
+
+/// The report's title, the run's circumstances and the test-slowdown warning.
+fn write_header(md: &mut String, summary: &Summary) {
     let _ = writeln!(md, "# Latency regression report\n");
     let _ = writeln!(
         md,
@@ -148,52 +164,58 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
             "**TEST SLOWDOWN ON: every tick busy-waited {us} µs (`FES_TEST_TICK_BUSY_US`).**\n"
         );
     }
-    for (c, s) in &summary.conditions {
-        let _ = writeln!(
-            md,
-            "## {}\n\n{} s of rt-core and {} s of cyclictest in {} alternating rounds; load: {}.\n",
-            c.key(),
-            s.seconds,
-            s.seconds,
-            s.rounds,
-            s.load.as_deref().unwrap_or("none")
-        );
-        let _ = writeln!(md, "| latency (µs) | p50 | p99 | p99.9 | max |");
-        let _ = writeln!(md, "|---|---|---|---|---|");
-        for (name, p) in rows(s) {
-            match p {
-                Some(p) => {
-                    let _ = writeln!(
-                        md,
-                        "| {name} | {:.1} | {:.1} | {:.1} | {:.1} |",
-                        p.p50, p.p99, p.p999, p.max
-                    );
-                }
-                None => {
-                    let _ = writeln!(md, "| {name} | absent | | | |");
-                }
+}
+
+/// One condition's section: its table, counters and ratios.
+fn write_condition(md: &mut String, c: Condition, s: &ConditionSummary) {
+    let _ = writeln!(
+        md,
+        "## {}\n\n{} s of rt-core and {} s of cyclictest in {} alternating rounds; load: {}.\n",
+        c.key(),
+        s.seconds,
+        s.seconds,
+        s.rounds,
+        s.load.as_deref().unwrap_or("none")
+    );
+    let _ = writeln!(md, "| latency (µs) | p50 | p99 | p99.9 | max |");
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    for (name, p) in rows(s) {
+        match p {
+            Some(p) => {
+                let _ = writeln!(
+                    md,
+                    "| {name} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                    p.p50, p.p99, p.p999, p.max
+                );
+            }
+            None => {
+                let _ = writeln!(md, "| {name} | absent | | | |");
             }
         }
-        let _ = writeln!(
-            md,
-            "\n{} ticks, {} missed periods in {} late wake-ups; cyclictest {} of {} samples at \
-             or above one period; hot-path heap allocations {}; probe lost {}. \
-             Ratio of wake-up lateness to cyclictest's: **p99 {}, p99.9 {}** (median over the \
-             rounds of the per-round p99 ratio: {}).\n\n\
-             cyclictest: `{}`\n",
-            s.ticks,
-            s.misses,
-            s.overruns,
-            s.cyclictest_over_period,
-            s.cyclictest_samples,
-            s.hot_path_allocations,
-            s.probe_lost,
-            ratio(s.ratio_p99),
-            ratio(s.ratio_p999),
-            ratio(s.ratio_p99_round_median),
-            s.cyclictest_command.as_deref().unwrap_or("not run")
-        );
     }
+    let _ = writeln!(
+        md,
+        "\n{} ticks, {} missed periods in {} late wake-ups; cyclictest {} of {} samples at \
+         or above one period; hot-path heap allocations {}; probe lost {}. \
+         Ratio of wake-up lateness to cyclictest's: **p99 {}, p99.9 {}** (median over the \
+         rounds of the per-round p99 ratio: {}).\n\n\
+         cyclictest: `{}`\n",
+        s.ticks,
+        s.misses,
+        s.overruns,
+        s.cyclictest_over_period,
+        s.cyclictest_samples,
+        s.hot_path_allocations,
+        s.probe_lost,
+        ratio(s.ratio_p99),
+        ratio(s.ratio_p999),
+        ratio(s.ratio_p99_round_median),
+        s.cyclictest_command.as_deref().unwrap_or("not run")
+    );
+}
+
+/// The driver's method note and counters, the plot and the list of interval logs.
+fn write_driver_and_logs(md: &mut String, summary: &Summary) {
     if let Some(note) = &summary.driver_forward_note {
         let _ = writeln!(md, "Driver forward path: {note}.\n");
     }
@@ -210,41 +232,37 @@ pub fn markdown(summary: &Summary, checks: Option<&[Check]>, baseline: &Path) ->
          `<condition>/cyclictest.hlog`, `<condition>/driver-N.hlog` (tick_to_can, can_write, \
          and the driver's own ipc, compute, input, wake).\n"
     );
-    match checks {
-        Some(checks) => {
-            let _ = writeln!(md, "## Gate against `{}`\n", baseline.display());
-            if !summary.unconfirmed.is_empty() {
-                let _ = writeln!(
-                    md,
-                    "The figures above are each condition's last measurement. Measured \
-                     again after failing the gate (`--confirm`):\n"
-                );
-                for u in &summary.unconfirmed {
-                    let _ = writeln!(md, "- {}", unconfirmed_line(u));
-                }
-                let _ = writeln!(md);
-            }
-            let _ = writeln!(md, "| condition | check | value | limit | result |");
-            let _ = writeln!(md, "|---|---|---|---|---|");
-            for c in checks {
-                let _ = writeln!(
-                    md,
-                    "| {} | {} | {:.3} | {:.3} | {} |",
-                    c.condition.key(),
-                    c.key,
-                    c.value,
-                    c.limit,
-                    if c.passed {
-                        crate::verdict(c)
-                    } else {
-                        "**REGRESSED**"
-                    }
-                );
-            }
+}
+
+/// The gate's section: the measurements measured again and the checks' table.
+fn write_gate(md: &mut String, summary: &Summary, checks: &[Check], baseline: &Path) {
+    let _ = writeln!(md, "## Gate against `{}`\n", baseline.display());
+    if !summary.unconfirmed.is_empty() {
+        let _ = writeln!(
+            md,
+            "The figures above are each condition's last measurement. Measured \
+             again after failing the gate (`--confirm`):\n"
+        );
+        for u in &summary.unconfirmed {
+            let _ = writeln!(md, "- {}", unconfirmed_line(u));
         }
-        None => {
-            let _ = writeln!(md, "No baseline comparison (`--no-baseline`).");
-        }
+        let _ = writeln!(md);
     }
-    md
+    let _ = writeln!(md, "| condition | check | value | limit | result |");
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    for c in checks {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.3} | {:.3} | {} |",
+            c.condition.key(),
+            c.key,
+            c.value,
+            c.limit,
+            if c.passed {
+                crate::verdict(c)
+            } else {
+                "**REGRESSED**"
+            }
+        );
+    }
 }

@@ -276,7 +276,72 @@ fn sibling_binary(name: &str) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// The binaries one round starts: rt-core, the probe and (`--driver`) driver-latency.
+struct Binaries {
+    rt_core: PathBuf,
+    probe: PathBuf,
+    driver: Option<PathBuf>,
+}
+
+impl Binaries {
+    /// Finds the binaries next to rt-latency.
+    fn locate(cli: &Cli) -> anyhow::Result<Self> {
+        let rt_core = sibling_binary("rt-core")?;
+        let probe = sibling_binary("rt-probe")?;
+        let driver = if cli.driver {
+            Some(sibling_binary("driver-latency")?)
+        } else {
+            None
+        };
+        Ok(Self {
+            rt_core,
+            probe,
+            driver,
+        })
+    }
+}
+
+/// Measures rt-core and cyclictest in alternating rounds, then prints and writes the results.
 fn run(cli: &Cli) -> anyhow::Result<()> {
+    let cores = check_args(cli)?;
+    std::fs::create_dir_all(&cli.out_dir)
+        .with_context(|| format!("creating {}", cli.out_dir.display()))?;
+    let bins = Binaries::locate(cli)?;
+    let config = rt_core_config(cli)?;
+
+    // Background load, kept for every round of both measurements.
+    let (load, load_desc) = start_load(cli, &cores)?;
+
+    // Rounds: rt-core, then cyclictest, alternating, so that both see the same background.
+    let rounds = cli
+        .rounds
+        .unwrap_or(cli.seconds.div_ceil(10))
+        .clamp(1, cli.seconds);
+    let mut total = RoundTotals::default();
+    let mut cyclic = CyclictestRounds::default();
+    for round in 0..rounds {
+        let seconds =
+            cli.seconds / rounds + u64::from(round + 1 == rounds) * (cli.seconds % rounds);
+        tracing::info!("round {}/{rounds}: rt-core for {seconds} s", round + 1);
+        total.add(measure_rt_core(cli, &config, round, seconds, &bins)?);
+        if !cli.no_cyclictest {
+            cyclic.measure(cli, round, rounds, seconds)?;
+        }
+    }
+    drop(load);
+    cyclic.write_hlog(&cli.out_dir.join("cyclictest.hlog"))?;
+
+    let results = results(cli, total, cyclic, rounds, load_desc);
+    print_table(&results);
+    if let Some(path) = &cli.json {
+        std::fs::write(path, serde_json::to_string_pretty(&results)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Checks the arguments; returns the cores of this machine.
+fn check_args(cli: &Cli) -> anyhow::Result<Vec<core_affinity::CoreId>> {
     if cli.seconds == 0 {
         bail!("--seconds must be at least 1");
     }
@@ -291,18 +356,12 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
             cores.len()
         );
     }
-    std::fs::create_dir_all(&cli.out_dir)
-        .with_context(|| format!("creating {}", cli.out_dir.display()))?;
-    let out = |name: &str| cli.out_dir.join(name);
-    let rt_core_bin = sibling_binary("rt-core")?;
-    let probe_bin = sibling_binary("rt-probe")?;
-    let driver_bin = if cli.driver {
-        Some(sibling_binary("driver-latency")?)
-    } else {
-        None
-    };
+    Ok(cores)
+}
 
-    // rt-core configuration (per round: its own prefix and interval log).
+/// The rt-core configuration common to every round (each round adds its own prefix and
+/// interval log).
+fn rt_core_config(cli: &Cli) -> anyhow::Result<RtCoreConfig> {
     let mut config = match &cli.config {
         Some(path) => RtCoreConfig::load(path).context("--config")?,
         None => RtCoreConfig::with_source(SourceConfig::TestPattern { ipi_ticks: 20 }),
@@ -315,99 +374,108 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     config.telemetry.report_period_ms = 1000;
     config.ipc.notify = true;
     config.validate().context("rt-core configuration")?;
+    Ok(config)
+}
 
-    // Background load, kept for every round of both measurements.
-    let mut load_desc = None;
-    let _load = if cli.load {
-        let other = cores
-            .iter()
-            .map(|c| c.id)
-            .find(|&c| c != cli.core)
-            .ok_or_else(|| anyhow!("--load needs a second core"))?;
-        let timeout = 3 * cli.seconds + 60;
-        let child = Command::new("stress-ng")
-            .args([
-                "--cpu",
-                "1",
-                "--taskset",
-                &other.to_string(),
-                "--timeout",
-                &format!("{timeout}s"),
-                "-q",
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .context("starting stress-ng (install it: scripts/setup)")?;
-        load_desc = Some(format!("stress-ng --cpu 1 --taskset {other}"));
-        std::thread::sleep(Duration::from_millis(500));
-        Some(Guarded {
-            name: "stress-ng",
-            child,
-        })
-    } else {
-        None
-    };
-
-    // Rounds: rt-core, then cyclictest, alternating, so that both see the same background.
-    let rounds = cli
-        .rounds
-        .unwrap_or(cli.seconds.div_ceil(10))
-        .clamp(1, cli.seconds);
-    let mut total = RoundTotals::default();
-    let mut cyclic: Option<CyclictestHistogram> = None;
-    let mut cyclic_cmd = None;
-    let mut cyclic_rounds: Vec<(u64, CyclictestHistogram)> = Vec::new();
-    for round in 0..rounds {
-        let seconds =
-            cli.seconds / rounds + u64::from(round + 1 == rounds) * (cli.seconds % rounds);
-        tracing::info!("round {}/{rounds}: rt-core for {seconds} s", round + 1);
-        total.add(measure_rt_core(
-            cli,
-            &config,
-            round,
-            seconds,
-            &rt_core_bin,
-            &probe_bin,
-            driver_bin.as_deref(),
-        )?);
-        if !cli.no_cyclictest {
-            let args = cyclictest::command_line(
-                cli.priority,
-                cli.core,
-                cli.period_us,
-                seconds,
-                cli.hist_max_us,
-            );
-            tracing::info!("round {}/{rounds}: {}", round + 1, args.join(" "));
-            let text = cyclictest::run(&args)?;
-            std::fs::write(out(&format!("cyclictest-{round}.txt")), &text)?;
-            let h = CyclictestHistogram::parse(&text)?;
-            cyclic_rounds.push((seconds, h.clone()));
-            match &mut cyclic {
-                Some(all) => all.merge(&h),
-                None => cyclic = Some(h),
-            }
-            cyclic_cmd = Some(args.join(" "));
-        }
+/// Starts the background load on another core (`--load`): the process and its description.
+fn start_load(
+    cli: &Cli,
+    cores: &[core_affinity::CoreId],
+) -> anyhow::Result<(Option<Guarded>, Option<String>)> {
+    if !cli.load {
+        return Ok((None, None));
     }
-    drop(_load);
-    if !cyclic_rounds.is_empty() {
+    let other = cores
+        .iter()
+        .map(|c| c.id)
+        .find(|&c| c != cli.core)
+        .ok_or_else(|| anyhow!("--load needs a second core"))?;
+    let timeout = 3 * cli.seconds + 60;
+    let child = Command::new("stress-ng")
+        .args([
+            "--cpu",
+            "1",
+            "--taskset",
+            &other.to_string(),
+            "--timeout",
+            &format!("{timeout}s"),
+            "-q",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .context("starting stress-ng (install it: scripts/setup)")?;
+    let load_desc = Some(format!("stress-ng --cpu 1 --taskset {other}"));
+    std::thread::sleep(Duration::from_millis(500));
+    let load = Guarded {
+        name: "stress-ng",
+        child,
+    };
+    Ok((Some(load), load_desc))
+}
+
+/// What the cyclictest rounds gave: their merged histogram, the command line and each
+/// round's histogram with its length in seconds.
+#[derive(Default)]
+struct CyclictestRounds {
+    merged: Option<CyclictestHistogram>,
+    command: Option<String>,
+    rounds: Vec<(u64, CyclictestHistogram)>,
+}
+
+impl CyclictestRounds {
+    /// Runs cyclictest for one round of `seconds` and adds its histogram.
+    fn measure(&mut self, cli: &Cli, round: u64, rounds: u64, seconds: u64) -> anyhow::Result<()> {
+        let args = cyclictest::command_line(
+            cli.priority,
+            cli.core,
+            cli.period_us,
+            seconds,
+            cli.hist_max_us,
+        );
+        tracing::info!("round {}/{rounds}: {}", round + 1, args.join(" "));
+        let text = cyclictest::run(&args)?;
+        std::fs::write(cli.out_dir.join(format!("cyclictest-{round}.txt")), &text)?;
+        let h = CyclictestHistogram::parse(&text)?;
+        self.rounds.push((seconds, h.clone()));
+        match &mut self.merged {
+            Some(all) => all.merge(&h),
+            None => self.merged = Some(h),
+        }
+        self.command = Some(args.join(" "));
+        Ok(())
+    }
+
+    /// Writes the rounds' histograms to `path`, if cyclictest ran.
+    fn write_hlog(&self, path: &std::path::Path) -> anyhow::Result<()> {
+        if self.rounds.is_empty() {
+            return Ok(());
+        }
         // One interval per round (its start = the round's offset in cyclictest time).
-        let path = out("cyclictest.hlog");
         let mut log = HlogWriter::create(
-            &path,
+            path,
             "cyclictest (rt-tests), one interval per round, bucket middles",
             std::time::SystemTime::now(),
         )?;
         let mut start = Duration::ZERO;
-        for (seconds, h) in &cyclic_rounds {
+        for (seconds, h) in &self.rounds {
             let length = Duration::from_secs(*seconds);
             log.write(&h.to_latency_histogram(), "cyclictest", start, length)?;
             start += length;
         }
         log.flush()?;
+        Ok(())
     }
+}
+
+/// Assembles the results from the rounds' totals and cyclictest's histograms.
+fn results(
+    cli: &Cli,
+    total: RoundTotals,
+    cyclic: CyclictestRounds,
+    rounds: u64,
+    load_desc: Option<String>,
+) -> Results {
     let RoundTotals {
         wake,
         input,
@@ -425,12 +493,17 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         driver_forward,
         driver,
     } = total;
+    let CyclictestRounds {
+        merged: cyclic,
+        command: cyclic_cmd,
+        ..
+    } = cyclic;
 
     let wake_p = Percentiles::from_histogram(&wake);
     let cyclic_p = cyclic.as_ref().map(Percentiles::from_cyclictest);
     // cyclictest truncates to whole µs: compare against the middle of its bucket.
     let ratio = |ours: f64, theirs: f64| ours / (theirs + 0.5);
-    let results = Results {
+    Results {
         ticks,
         misses,
         overruns,
@@ -463,13 +536,7 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         cyclictest_command: cyclic_cmd,
         kernel: read_trim("/proc/sys/kernel/osrelease"),
         sched_rt_runtime_us: read_trim("/proc/sys/kernel/sched_rt_runtime_us"),
-    };
-    print_table(&results);
-    if let Some(path) = &cli.json {
-        std::fs::write(path, serde_json::to_string_pretty(&results)?)
-            .with_context(|| format!("writing {}", path.display()))?;
     }
-    Ok(())
 }
 
 /// What one or more rounds of the rt-core measurement gave.
@@ -514,6 +581,33 @@ impl RoundTotals {
     }
 }
 
+/// The files of one round in the out directory.
+struct RoundFiles {
+    /// rt-core's configuration.
+    config: PathBuf,
+    /// rt-core's interval log (absolute: rt-core gets it in its configuration).
+    core_hlog: PathBuf,
+    probe_hlog: PathBuf,
+    probe_summary: PathBuf,
+    driver_hlog: PathBuf,
+    driver_summary: PathBuf,
+}
+
+impl RoundFiles {
+    /// The file names of round `round` in `out_dir`.
+    fn new(out_dir: &std::path::Path, round: u64) -> anyhow::Result<Self> {
+        let out = |name: &str| out_dir.join(name);
+        Ok(Self {
+            config: out(&format!("rt-core-{round}.toml")),
+            core_hlog: std::path::absolute(out(&format!("rt-core-{round}.hlog")))?,
+            probe_hlog: out(&format!("rt-probe-{round}.hlog")),
+            probe_summary: out(&format!("probe-{round}.json")),
+            driver_hlog: out(&format!("driver-{round}.hlog")),
+            driver_summary: out(&format!("driver-{round}.json")),
+        })
+    }
+}
+
 /// One round: the probe, then the real rt-core process for `seconds`, with a reference
 /// publisher; returns the merged interval logs and the counters.
 fn measure_rt_core(
@@ -521,114 +615,22 @@ fn measure_rt_core(
     base: &RtCoreConfig,
     round: u64,
     seconds: u64,
-    rt_core_bin: &std::path::Path,
-    probe_bin: &std::path::Path,
-    driver_bin: Option<&std::path::Path>,
+    bins: &Binaries,
 ) -> anyhow::Result<RoundTotals> {
-    let out = |name: &str| cli.out_dir.join(name);
+    let files = RoundFiles::new(&cli.out_dir, round)?;
     let mut config = base.clone();
-    let core_hlog = std::path::absolute(out(&format!("rt-core-{round}.hlog")))?;
-    config.telemetry.hlog = Some(core_hlog.clone());
+    config.telemetry.hlog = Some(files.core_hlog.clone());
     config.ipc.prefix = format!("rtlatency{}r{round}", std::process::id());
-    let config_path = out(&format!("rt-core-{round}.toml"));
-    std::fs::write(&config_path, config.to_toml())?;
-    let probe_hlog = out(&format!("rt-probe-{round}.hlog"));
-    let probe_summary = out(&format!("probe-{round}.json"));
+    std::fs::write(&files.config, config.to_toml())?;
+    let prefix = config.ipc.prefix.clone();
 
-    let mut probe = Guarded {
-        name: "rt-probe",
-        child: Command::new(probe_bin)
-            .arg("--prefix")
-            .arg(&config.ipc.prefix)
-            .arg("--hlog")
-            .arg(&probe_hlog)
-            .arg("--summary")
-            .arg(&probe_summary)
-            .arg("--priority")
-            .arg((cli.priority - 1 - u8::from(driver_bin.is_some())).to_string())
-            .arg("--core")
-            .arg(cli.probe_core.unwrap_or(cli.core).to_string())
-            .stdout(Stdio::piped())
-            .spawn()
-            .context("starting rt-probe")?,
-    };
-    wait_for_ready(&mut probe)?;
-    // The driver sits where the deployment puts it: one priority below rt-core, on the
-    // probe's core; its virtual stimulator (hardware, in reality) on another core.
-    let driver_hlog = out(&format!("driver-{round}.hlog"));
-    let driver_summary = out(&format!("driver-{round}.json"));
-    let mut driver = match driver_bin {
-        Some(bin) => {
-            let core = cli.probe_core.unwrap_or(cli.core);
-            let mut cmd = Command::new(bin);
-            cmd.arg("--prefix")
-                .arg(&config.ipc.prefix)
-                .arg("--hlog")
-                .arg(&driver_hlog)
-                .arg("--summary")
-                .arg(&driver_summary)
-                .arg("--priority")
-                .arg((cli.priority - 1).to_string())
-                .arg("--core")
-                .arg(core.to_string())
-                .stdout(Stdio::piped());
-            if let Some(other) = core_affinity::get_core_ids()
-                .unwrap_or_default()
-                .iter()
-                .map(|c| c.id)
-                .find(|&c| c != core)
-            {
-                cmd.arg("--stim-core").arg(other.to_string());
-            }
-            let mut d = Guarded {
-                name: "driver-latency",
-                child: cmd.spawn().context("starting driver-latency")?,
-            };
-            wait_for_ready(&mut d)?;
-            Some(d)
-        }
+    let mut probe = start_probe(cli, &bins.probe, &prefix, &files, bins.driver.is_some())?;
+    let mut driver = match &bins.driver {
+        Some(bin) => Some(start_driver(cli, bin, &prefix, &files)?),
         None => None,
     };
-
-    let stop_references = AtomicBool::new(false);
-    let prefix = config.ipc.prefix.clone();
-    let measured = std::thread::scope(|s| -> anyhow::Result<()> {
-        let publisher = s.spawn(|| publish_references(&prefix, &stop_references));
-        let result = (|| -> anyhow::Result<()> {
-            // rt-core says READY=1 (sd_notify) once its loop ticks; the round's time runs
-            // from then, not from the spawn (start-up, mlockall included, can take seconds
-            // on a loaded machine).
-            let ready = ReadySocket::bind(&cli.out_dir, round)?;
-            let mut rt_core = Guarded {
-                name: "rt-core",
-                child: Command::new(rt_core_bin)
-                    .arg("--config")
-                    .arg(&config_path)
-                    .env("NOTIFY_SOCKET", &ready.path)
-                    .env_remove("WATCHDOG_USEC")
-                    .env_remove("WATCHDOG_PID")
-                    .spawn()
-                    .context("starting rt-core")?,
-            };
-            ready.wait(&mut rt_core, Duration::from_secs(30))?;
-            let end = Instant::now() + Duration::from_secs(seconds);
-            while Instant::now() < end {
-                if let Some(status) = rt_core.child.try_wait()? {
-                    bail!("rt-core exited early ({status}); see its log above");
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let status = rt_core.terminate(Duration::from_secs(10))?;
-            if !status.success() {
-                bail!("rt-core ended with {status}");
-            }
-            Ok(())
-        })();
-        stop_references.store(true, Ordering::Relaxed);
-        publisher
-            .join()
-            .map_err(|_| anyhow!("reference publisher panicked"))??;
-        result
+    let measured = with_references(&prefix, || {
+        run_rt_core(cli, round, seconds, &bins.rt_core, &files.config)
     });
     let probe_status = probe.wait(Duration::from_secs(10));
     let driver_status = driver
@@ -636,32 +638,167 @@ fn measure_rt_core(
         .map(|d| d.terminate(Duration::from_secs(10)));
     measured?;
     let driver_totals = match driver_status {
-        Some(status) => {
-            let status = status?;
-            if !status.success() {
-                bail!("driver-latency ended with {status}");
-            }
-            let totals: DriverTotals = serde_json::from_slice(
-                &std::fs::read(&driver_summary).context("reading the driver summary")?,
-            )
-            .context("parsing the driver summary")?;
-            Some(totals)
-        }
+        Some(status) => Some(driver_totals(status?, &files.driver_summary)?),
         None => None,
     };
-    let probe_status = probe_status?;
+    round_totals(probe_status?, &files, driver_totals)
+}
+
+/// Starts rt-probe on the round's prefix and waits for its `ready`; it runs one priority
+/// below rt-core, or two with the driver between them.
+fn start_probe(
+    cli: &Cli,
+    bin: &std::path::Path,
+    prefix: &str,
+    files: &RoundFiles,
+    with_driver: bool,
+) -> anyhow::Result<Guarded> {
+    let mut probe = Guarded {
+        name: "rt-probe",
+        child: Command::new(bin)
+            .arg("--prefix")
+            .arg(prefix)
+            .arg("--hlog")
+            .arg(&files.probe_hlog)
+            .arg("--summary")
+            .arg(&files.probe_summary)
+            .arg("--priority")
+            .arg((cli.priority - 1 - u8::from(with_driver)).to_string())
+            .arg("--core")
+            .arg(cli.probe_core.unwrap_or(cli.core).to_string())
+            .stdout(Stdio::piped())
+            .spawn()
+            .context("starting rt-probe")?,
+    };
+    wait_for_ready(&mut probe)?;
+    Ok(probe)
+}
+
+/// Starts driver-latency on the round's prefix and waits for its `ready`.
+fn start_driver(
+    cli: &Cli,
+    bin: &std::path::Path,
+    prefix: &str,
+    files: &RoundFiles,
+) -> anyhow::Result<Guarded> {
+    // The driver sits where the deployment puts it: one priority below rt-core, on the
+    // probe's core; its virtual stimulator (hardware, in reality) on another core.
+    let core = cli.probe_core.unwrap_or(cli.core);
+    let mut cmd = Command::new(bin);
+    cmd.arg("--prefix")
+        .arg(prefix)
+        .arg("--hlog")
+        .arg(&files.driver_hlog)
+        .arg("--summary")
+        .arg(&files.driver_summary)
+        .arg("--priority")
+        .arg((cli.priority - 1).to_string())
+        .arg("--core")
+        .arg(core.to_string())
+        .stdout(Stdio::piped());
+    if let Some(other) = core_affinity::get_core_ids()
+        .unwrap_or_default()
+        .iter()
+        .map(|c| c.id)
+        .find(|&c| c != core)
+    {
+        cmd.arg("--stim-core").arg(other.to_string());
+    }
+    let mut d = Guarded {
+        name: "driver-latency",
+        child: cmd.spawn().context("starting driver-latency")?,
+    };
+    wait_for_ready(&mut d)?;
+    Ok(d)
+}
+
+/// Runs `measure` while a reference publisher steps the reference on `prefix`.
+fn with_references(
+    prefix: &str,
+    measure: impl FnOnce() -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let stop_references = AtomicBool::new(false);
+    std::thread::scope(|s| -> anyhow::Result<()> {
+        let publisher = s.spawn(|| publish_references(prefix, &stop_references));
+        let result = measure();
+        stop_references.store(true, Ordering::Relaxed);
+        publisher
+            .join()
+            .map_err(|_| anyhow!("reference publisher panicked"))??;
+        result
+    })
+}
+
+/// Runs rt-core with `config` for `seconds` from its READY=1, then stops it.
+fn run_rt_core(
+    cli: &Cli,
+    round: u64,
+    seconds: u64,
+    bin: &std::path::Path,
+    config: &std::path::Path,
+) -> anyhow::Result<()> {
+    // rt-core says READY=1 (sd_notify) once its loop ticks; the round's time runs
+    // from then, not from the spawn (start-up, mlockall included, can take seconds
+    // on a loaded machine).
+    let ready = ReadySocket::bind(&cli.out_dir, round)?;
+    let mut rt_core = Guarded {
+        name: "rt-core",
+        child: Command::new(bin)
+            .arg("--config")
+            .arg(config)
+            .env("NOTIFY_SOCKET", &ready.path)
+            .env_remove("WATCHDOG_USEC")
+            .env_remove("WATCHDOG_PID")
+            .spawn()
+            .context("starting rt-core")?,
+    };
+    ready.wait(&mut rt_core, Duration::from_secs(30))?;
+    let end = Instant::now() + Duration::from_secs(seconds);
+    while Instant::now() < end {
+        if let Some(status) = rt_core.child.try_wait()? {
+            bail!("rt-core exited early ({status}); see its log above");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let status = rt_core.terminate(Duration::from_secs(10))?;
+    if !status.success() {
+        bail!("rt-core ended with {status}");
+    }
+    Ok(())
+}
+
+/// Checks driver-latency's exit status and reads its summary.
+fn driver_totals(
+    status: std::process::ExitStatus,
+    summary: &std::path::Path,
+) -> anyhow::Result<DriverTotals> {
+    if !status.success() {
+        bail!("driver-latency ended with {status}");
+    }
+    let totals: DriverTotals =
+        serde_json::from_slice(&std::fs::read(summary).context("reading the driver summary")?)
+            .context("parsing the driver summary")?;
+    Ok(totals)
+}
+
+/// Checks rt-probe's exit status and collects the round's interval logs and counters.
+fn round_totals(
+    probe_status: std::process::ExitStatus,
+    files: &RoundFiles,
+    driver_totals: Option<DriverTotals>,
+) -> anyhow::Result<RoundTotals> {
     if !probe_status.success() {
         bail!("rt-probe ended with {probe_status}");
     }
     let summary: ProbeSummary = serde_json::from_slice(
-        &std::fs::read(&probe_summary).context("reading the probe summary")?,
+        &std::fs::read(&files.probe_summary).context("reading the probe summary")?,
     )
     .context("parsing the probe summary")?;
     let timing = summary
         .rt_core
         .ok_or_else(|| anyhow!("the probe received no TimingReport from rt-core"))?;
-    let core_hists = merge_by_tag(&core_hlog)?;
-    let probe_hists = merge_by_tag(&probe_hlog)?;
+    let core_hists = merge_by_tag(&files.core_hlog)?;
+    let probe_hists = merge_by_tag(&files.probe_hlog)?;
     let tag = |m: &std::collections::BTreeMap<String, LatencyHistogram>, t: &str| {
         m.get(t)
             .cloned()
@@ -682,7 +819,7 @@ fn measure_rt_core(
         received: summary.received,
         lost: summary.lost,
         driver_forward: match &driver_totals {
-            Some(_) => merge_by_tag(&driver_hlog)?
+            Some(_) => merge_by_tag(&files.driver_hlog)?
                 .remove(TAG_TICK_TO_CAN)
                 .unwrap_or_default(),
             None => LatencyHistogram::new(),
