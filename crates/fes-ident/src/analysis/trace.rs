@@ -2,7 +2,7 @@
 //! (for the phi range of a data set, the force-frequency curve, phase planes, Figs.
 //! 5.26, 5.31, 5.32).
 //!
-//! It runs the model library's own network step ([`Network::step_inputs`]) with the delayed
+//! It runs the model library's own network step ([`Network::step_each`]) with the delayed
 //! input (and, for the undelayed scheduling class, the input now) exactly as [`fes_model::model::simulate::simulate`] does, so `y` equals that function's output.
 
 use fes_model::model::Network;
@@ -33,8 +33,7 @@ pub fn simulate_trace(net: &Network<f64>, u: &[f64]) -> Result<Trace, RunError> 
         t.phi.push(st.phi);
         t.x.push(st.ss_state());
         let v = if k >= d { u[k - d] } else { 0.0 };
-        let act = net.activation(&st);
-        t.y.push(net.step_inputs(&mut st, &act, v, u[k]));
+        t.y.push(net.step_each(&mut st, v, u[k]));
     }
     Ok(t)
 }

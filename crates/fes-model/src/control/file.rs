@@ -32,7 +32,7 @@ use super::design::{DesignOptions, EstimatorPoles, LocalGains};
 use super::lcn::AntiWindup;
 use super::lcn_design::{LcnDesignError, UnitDesign, UnitSpec, design_lcn};
 use super::pattern_generator::{
-    FeedbackMode, FeedbackState, PatternGenerator, PatternGeneratorError,
+    FeedbackMode, FeedbackState, PatternGenerator, PatternGeneratorError, loop_runs_on,
 };
 use super::planner::{PlanningConfig, PlanningConfigError, PlanningMode};
 use super::poles::Pole;
@@ -228,10 +228,7 @@ impl Controller {
                 "planning needs feedback_state advanced (the warm start runs the advanced loop)",
             ));
         }
-        if !network.can_run_ahead()
-            && (settings.mode, settings.feedback_state)
-                != (FeedbackMode::Model, FeedbackState::Delayed)
-        {
+        if !loop_runs_on(&network, settings.mode, settings.feedback_state) {
             return Err(invalid(
                 "feedback_state",
                 "the model's scheduling_input is undelayed (eq. 5.2): the state d samples ahead depends on pulses not yet decided, so only mode model with feedback_state delayed (the thesis's loop) runs on it",

@@ -221,6 +221,21 @@ impl Core {
             Self::Thesis(c) => c.network(),
         }
     }
+
+    /// The state the next step starts from (advanced: z\[k\]; thesis form: x\[k\]).
+    fn state(&self) -> &CoreState<f64> {
+        match self {
+            Self::Advanced(c) => c.state(),
+            Self::Thesis(c) => c.state(),
+        }
+    }
+}
+
+/// Whether the loop of `mode` and `state` runs on `net`: every loop does where the model can
+/// be run ahead; on the undelayed scheduling class (eq. 5.2) only the thesis's delayed loop
+/// in model mode (shared by the generator and the controller design).
+pub fn loop_runs_on(net: &Network<f64>, mode: FeedbackMode, state: FeedbackState) -> bool {
+    net.can_run_ahead() || (mode, state) == (FeedbackMode::Model, FeedbackState::Delayed)
 }
 
 /// The pattern generator (thesis Fig. 6.8 in the advanced form).
@@ -266,12 +281,12 @@ impl PatternGenerator {
         }
         let lcn = LocalControllerNetwork::new(gains, net.ts(), anti_windup)?;
         let shaper = PulseShaper::new(shaper)?;
+        if !loop_runs_on(&net, mode, feedback_state) {
+            return Err(NetworkError::CannotRunAhead { delay: net.delay() }.into());
+        }
         if !net.can_run_ahead() {
-            // The undelayed class (eq. 5.2): only the thesis's delayed loop, on the model in
-            // the thesis's form.
-            if (mode, feedback_state) != (FeedbackMode::Model, FeedbackState::Delayed) {
-                return Err(NetworkError::CannotRunAhead { delay: net.delay() }.into());
-            }
+            // The undelayed class (eq. 5.2): the thesis's delayed loop, on the model in the
+            // thesis's form.
             let core = Core::Thesis(ThesisForm::new(net)?);
             return Ok(Self {
                 initial_core: core.clone(),
@@ -473,10 +488,8 @@ impl PatternGenerator {
         let x_i = self.lcn.x_i();
         let out = match self.measured.as_mut() {
             None => {
-                let (act_core, core_now) = match &self.core {
-                    Core::Advanced(c) => (c.activation(), *c.state()),
-                    Core::Thesis(c) => (c.activation(), *c.state()),
-                };
+                let core_now = *self.core.state();
+                let act_core = self.core.network().activation(&core_now);
                 // The state fed back: the advanced core state, or the model state now.
                 let (act, state) = match self.delayed.as_mut() {
                     None => (act_core, core_now),

@@ -116,12 +116,6 @@ impl<S: Scalar> ThesisForm<S> {
         self.net.step_inputs(&mut self.state, act, v, u)
     }
 
-    /// The activation of the validity functions at the state's phi (phi\[k\]).
-    #[inline]
-    pub fn activation(&self) -> Activation<S> {
-        self.net.activation(&self.state)
-    }
-
     /// The core state before the next step (x\[k\], prefilter state, phi\[k\]).
     #[inline]
     pub fn state(&self) -> &CoreState<S> {

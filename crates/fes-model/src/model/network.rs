@@ -272,8 +272,14 @@ impl<S: Scalar> Network<S> {
     /// with d > 0 steps with [`Self::step_inputs`].
     #[inline]
     pub fn step(&self, st: &mut CoreState<S>, v: f64) -> S {
+        self.step_each(st, v, v)
+    }
+
+    /// One core step of either class ([`Self::step_inputs`]) with the activation at `st.phi`.
+    #[inline]
+    pub fn step_each(&self, st: &mut CoreState<S>, v: f64, u_now: f64) -> S {
         let act = self.activation(st);
-        self.step_with_activation(st, &act, v)
+        self.step_inputs(st, &act, v, u_now)
     }
 
     /// [`Self::step`] with the activation already evaluated for `st.phi` (e.g. by a

@@ -43,8 +43,7 @@ pub fn simulate<S: Scalar>(net: &Network<S>, u: &[f64], y: &mut [S]) -> Result<(
     let d = net.delay();
     for (k, yk) in y.iter_mut().enumerate() {
         let v = if k >= d { u[k - d] } else { 0.0 };
-        let act = net.activation(&st);
-        *yk = net.step_inputs(&mut st, &act, v, u[k]);
+        *yk = net.step_each(&mut st, v, u[k]);
     }
     Ok(())
 }
@@ -96,8 +95,7 @@ pub fn predict<S: Scalar>(
             st.phi = S::from_f64(meas(k_i - 1));
         }
         let v = if k >= d { u[k - d] } else { 0.0 };
-        let act = net.activation(&st);
-        *yk = net.step_inputs(&mut st, &act, v, u[k]);
+        *yk = net.step_each(&mut st, v, u[k]);
     }
     Ok(())
 }
