@@ -237,14 +237,15 @@ pub enum DriverEvent {
         /// Retries after a full transmit queue.
         retries: u32,
     },
-    /// What became of the pulse a StimTick asked for (one per such tick received): the
-    /// recording's record of what was delivered (issue 19, item 5).
+    /// What became of the pulse a StimTick asked for (one per such tick received), and
+    /// for a pulse sent, later, what the stimulator did with it: the recording's record
+    /// of what was sent and what was applied.
     Outcome {
         /// The StimTick's sequence number.
         tick_seq: u64,
         /// Its grid time, ns.
         tick_t_ns: u64,
-        /// Sent, refused, not armed or not written.
+        /// Sent, refused, not armed, not written or late; then applied or not applied.
         fate: PulseFate,
     },
     /// A tick was refused (its pulse, if any, not sent).
@@ -440,6 +441,10 @@ pub struct Counters {
     pub last_pulse_tick_seq: u64,
     /// Pulses the stimulator reports applied (STATUS, modulo 2^24).
     pub stimulator_pulses: u32,
+    /// Pulses sent that the stimulator accounted for as applied ([`crate::applied`]).
+    pub pulses_applied: u64,
+    /// Pulses sent that it rejected or never counted.
+    pub pulses_not_applied: u64,
     /// Wake-ups of the forward loop (its progress, for the systemd watchdog).
     pub wakeups: u64,
     /// `seq` of the last DriverCommand handled (below [`DriverCommand::MAX_SEQ`]); 0 = none.
@@ -474,6 +479,8 @@ pub struct SharedStatus {
     last_pulse_ns: AtomicU64,
     last_pulse_tick_seq: AtomicU64,
     stimulator_pulses: AtomicU64,
+    pulses_applied: AtomicU64,
+    pulses_not_applied: AtomicU64,
     wakeups: AtomicU64,
     /// `command_seq << 8 | command_result << 6 | command_reason`: the acknowledgement in one
     /// store, so a reader never sees the seq of one command with the result of another.
@@ -511,6 +518,8 @@ impl SharedStatus {
         self.last_pulse_tick_seq.store(c.last_pulse_tick_seq, r);
         self.stimulator_pulses
             .store(u64::from(c.stimulator_pulses), r);
+        self.pulses_applied.store(c.pulses_applied, r);
+        self.pulses_not_applied.store(c.pulses_not_applied, r);
         self.wakeups.store(c.wakeups, r);
         self.command_ack.store(
             (c.command_seq & (DriverCommand::MAX_SEQ - 1)) << 8
@@ -546,6 +555,8 @@ impl SharedStatus {
             last_pulse_ns: self.last_pulse_ns.load(r),
             last_pulse_tick_seq: self.last_pulse_tick_seq.load(r),
             stimulator_pulses: u32::try_from(self.stimulator_pulses.load(r)).unwrap_or(0),
+            pulses_applied: self.pulses_applied.load(r),
+            pulses_not_applied: self.pulses_not_applied.load(r),
             wakeups: self.wakeups.load(r),
             command_seq: ack >> 8,
             command_result: ((ack >> 6) & 0x3) as u8,
@@ -607,6 +618,8 @@ mod tests {
             last_pulse_ns: 13,
             last_pulse_tick_seq: 14,
             stimulator_pulses: 15,
+            pulses_applied: 21,
+            pulses_not_applied: 22,
             wakeups: 16,
             command_seq: (1 << 56) - 1,
             command_result: 2,

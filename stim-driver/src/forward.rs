@@ -38,6 +38,7 @@ use fes_rt::msg::{
     CommandRefusal, CommandResult, Contract, DriverCommand, DriverCommandKind, PulseFate, StimTick,
 };
 
+use crate::applied::{AppliedLedger, OpenPulse};
 use crate::event::{
     BringUp, BusErrorKind, BusEvent, Counters, DriverEvent, DriverState, EventSink, FrameKind,
     Liveness, stimulator_device_state,
@@ -98,6 +99,19 @@ fn outcome(tick: &StimTick, fate: PulseFate, ev: &mut impl EventSink) {
     ev.emit(DriverEvent::Outcome {
         tick_seq: tick.seq,
         tick_t_ns: tick.t_ns,
+        fate,
+    });
+}
+
+/// Reports what the stimulator did with a pulse sent earlier ([`crate::applied`]).
+fn account(counters: &mut Counters, pulse: &OpenPulse, fate: PulseFate, ev: &mut impl EventSink) {
+    match fate {
+        PulseFate::Applied => counters.pulses_applied += 1,
+        _ => counters.pulses_not_applied += 1,
+    }
+    ev.emit(DriverEvent::Outcome {
+        tick_seq: pulse.tick_seq,
+        tick_t_ns: pulse.tick_t_ns,
         fate,
     });
 }
@@ -177,6 +191,8 @@ pub struct ForwardPath<T: CanTx> {
     applied: Option<(u8, StimLimits)>,
     /// A pulse waiting for a busy transport (at most one: never a burst).
     deferred: Option<Deferred>,
+    /// The pulses sent that the stimulator has not accounted for yet.
+    ledger: AppliedLedger,
     /// The newest valid StimTick's `min_gap_ticks` (the generator's minimum interval).
     generator_gap_ticks: u16,
 }
@@ -232,6 +248,9 @@ impl<T: CanTx> ForwardPath<T> {
             readback: ConfigAssembler::new(),
             applied: None,
             deferred: None,
+            // Twice the in-flight window STATUS reconciliation allows a pulse to be
+            // uncounted: a pulse still open then will not be counted.
+            ledger: AppliedLedger::new(2 * settings.stimulator_timeout_ns),
             generator_gap_ticks: 0,
         }
     }
@@ -418,6 +437,16 @@ impl<T: CanTx> ForwardPath<T> {
                 self.counters.tx_retries += u64::from(sent.done.retries);
                 self.counters.last_pulse_ns = sent.done.written_ns.max(now_ns);
                 self.counters.last_pulse_tick_seq = command.tick_seq;
+                let counters = &mut self.counters;
+                self.ledger.on_sent(
+                    OpenPulse::new(
+                        command.tick_seq,
+                        command.t_ns,
+                        sent.pulse.seq,
+                        counters.last_pulse_ns,
+                    ),
+                    |p, fate| account(counters, p, fate, ev),
+                );
                 ev.emit(DriverEvent::PulseSent {
                     tick_seq: command.tick_seq,
                     pulse_seq: sent.pulse.seq,
@@ -795,6 +824,10 @@ impl<T: CanTx> ForwardPath<T> {
             BusEvent::Status(status) => self.on_status(status, now_ns, ev),
             BusEvent::Emcy(emcy) => {
                 ev.emit(DriverEvent::StimulatorEmcy(emcy));
+                // An EMCY naming a pulse (seq 0: none) rejected it: not applied.
+                if emcy.seq != 0 {
+                    self.ledger.on_rejected(emcy.seq);
+                }
                 if emcy.code == ErrorCode::ConfigInvalid
                     && matches!(self.config, ConfigState::Configuring { .. })
                 {
@@ -872,6 +905,7 @@ impl<T: CanTx> ForwardPath<T> {
                     // Answered busy: not delivered, and not to be counted as written in
                     // STATUS reconciliation.
                     self.counters.pulses_busy += 1;
+                    self.ledger.on_busy();
                 }
                 ev.emit(DriverEvent::Bus(event));
             }
@@ -881,6 +915,9 @@ impl<T: CanTx> ForwardPath<T> {
 
     /// The stimulator restarted or lost our configuration.
     fn stimulator_lost(&mut self, now_ns: u64, ev: &mut impl EventSink) {
+        let counters = &mut self.counters;
+        self.ledger
+            .on_stimulator_lost(|p, fate| account(counters, p, fate, ev));
         if self.is_armed() {
             self.trip(Fault::StimulatorReset, now_ns, ev);
         }
@@ -897,6 +934,10 @@ impl<T: CanTx> ForwardPath<T> {
         self.last_status = Some((status, now_ns));
         self.counters.stimulator_state = stimulator_device_state(status.state) as u8;
         self.counters.stimulator_pulses = status.pulses_delivered;
+        let counters = &mut self.counters;
+        self.ledger.on_status(status.pulses_delivered, |p, fate| {
+            account(counters, p, fate, ev)
+        });
         if changed {
             ev.emit(DriverEvent::StimulatorState {
                 state: status.state,
@@ -1076,10 +1117,14 @@ impl<T: CanTx> ForwardPath<T> {
     }
 
     /// Runs the timers due at `now_ns`: watchdogs, bring-up retries, a pending stop, a
-    /// pulse waiting for the transport, the heartbeat.
+    /// pulse waiting for the transport, the heartbeat, the account of pulses no STATUS
+    /// counted.
     pub fn poll(&mut self, now_ns: u64, ev: &mut impl EventSink) {
         let before = self.state();
         let s = self.settings;
+        let counters = &mut self.counters;
+        self.ledger
+            .expire(now_ns, |p, fate| account(counters, p, fate, ev));
         if let Mode::Armed {
             since_ns,
             confirmed,

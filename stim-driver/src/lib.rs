@@ -18,6 +18,7 @@
 //! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state, and frames
 //!   on the driver's own identifiers for [`intrusion`] detection).
 //! - [`reconcile`]: STATUS reconciliation (delivered pulses against pulses written).
+//! - [`applied`]: which pulses the stimulator applied (the per-pulse account of STATUS).
 //! - [`runner`] (the real-time forward thread), [`report`] (logs, DriverStatus,
 //!   TimingReport), [`telemetry`], [`liveness`], [`txstamp`]: the process. systemd
 //!   notification is rt-core's ([`fes_rt::rt::notify`]).
@@ -26,6 +27,7 @@
 #![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
+pub mod applied;
 pub mod bus;
 pub mod config;
 pub mod event;

@@ -696,8 +696,9 @@ fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
     let us = |ns: u64| ns as f64 / 1000.0;
     let c = shared.status.load();
     info!(
-        "final: {} StimTicks ({} missing, {} refused), {} pulses sent ({} applied by the \
-         stimulator since its reset, its last STATUS), {} refused by the interlocks, {} \
+        "final: {} StimTicks ({} missing, {} refused), {} pulses sent ({} of them accounted \
+         applied by the stimulator and {} not, the rest still open; its last STATUS: {} \
+         applied since its reset), {} refused by the interlocks, {} \
          while not armed, {} written late and {} dropped late (transport busy), {} busy \
          answers ({} pulses), {} CAN write errors, {} trips ({} \
          watchdog); StimTick->CAN write p50/p99/max {:.1}/{:.1}/{:.1} us; {} TX \
@@ -706,6 +707,8 @@ fn log_final(shared: &Shared, r: &ReportOutcome, outcome: &ForwardOutcome) {
         c.ticks_lost,
         c.ticks_refused,
         c.pulses_sent,
+        c.pulses_applied,
+        c.pulses_not_applied,
         c.stimulator_pulses,
         c.pulses_rejected,
         c.pulses_not_armed,

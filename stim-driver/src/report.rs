@@ -7,7 +7,9 @@
 //! * checks the StimTick publisher's liveness through iceoryx2 ([`LivenessMonitor`]) every
 //!   `liveness_check_ms` and hands it to the forward thread;
 //! * publishes a [`PulseOutcome`] for every StimTick that asked for a pulse (sent, refused,
-//!   not armed, not written), so that a recording says what was delivered;
+//!   not armed, not written, late), and a second one for every pulse sent once the
+//!   stimulator has accounted for it (applied, not applied: [`crate::applied`]), so that a
+//!   recording says what was decided, sent and applied;
 //! * publishes [`DriverStatus`] every `status_period_ms` and at once on a state change, and
 //!   a cumulative [`TimingReport`] (and an `.hlog` interval) every `report_period_ms`;
 //! * once the forward thread has ended: a last drain, the final DriverStatus and the final

@@ -479,12 +479,13 @@ impl SupervisorCore {
         self.driver_refusals = Some((s.t_ns, s.pulses_rejected));
     }
 
-    /// The driver dropped the pulse of the tick at `tick_t_ns` as late (its transport was
-    /// still busy with the previous command; PulseOutcome `late`): charged to its beat
-    /// like a refused one, so the outer loop does not learn from a beat that did not get
-    /// the train the inner loop planned. (Interlock refusals come counted in
-    /// DriverStatus instead.)
-    pub fn on_pulse_late(&mut self, tick_t_ns: u64) {
+    /// The pulse of the tick at `tick_t_ns` did not reach the muscle: the driver dropped
+    /// it as late (its transport was still busy with the previous command; PulseOutcome
+    /// `late`) or the stimulator did not apply it (`not_applied`). Charged to its beat like
+    /// a refused one, so the outer loop does not learn from a beat that did not get the
+    /// train the inner loop planned (an account that arrives after its beat has closed
+    /// charges nothing). Interlock refusals come counted in DriverStatus instead.
+    pub fn on_pulse_not_delivered(&mut self, tick_t_ns: u64) {
         self.contraction.add_refused(tick_t_ns, tick_t_ns, 1);
     }
 
@@ -824,7 +825,7 @@ mod tests {
                 let hit = (4800..5600).contains(&k);
                 c.on_force(t + 7 * MS, if hit { 0.4 } else { 0.8 } * r.force);
                 if k == 4950 {
-                    c.on_pulse_late(t);
+                    c.on_pulse_not_delivered(t);
                 }
             }
             c.take_beats()

@@ -376,14 +376,14 @@ impl<'a> Daemon<'a> {
     }
 
     /// The PulseOutcomes received (valid ones): recording, so that the data set says what
-    /// was delivered; a pulse dropped as late is charged to its beat.
+    /// was sent and applied; a pulse dropped as late or not applied is charged to its beat.
     fn read_outcomes(&mut self, now: u64) {
         while let Ok(Some(s)) = self.ports.outcomes.receive() {
             let o = *s.payload();
             drop(s);
             if o.validate().is_ok() {
-                if o.fate() == Ok(PulseFate::Late) {
-                    self.core.on_pulse_late(o.tick_t_ns);
+                if matches!(o.fate(), Ok(PulseFate::Late | PulseFate::NotApplied)) {
+                    self.core.on_pulse_not_delivered(o.tick_t_ns);
                 }
                 self.run.record(&mut self.core, Item::Outcome(o, now));
             }

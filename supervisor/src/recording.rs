@@ -7,20 +7,27 @@
 //!
 //! | file | content |
 //! |---|---|
-//! | `dataset.json`, `record_NNN.csv` | the data set: per 1 ms tick, `pulse` (what the driver delivered: the StimTick fired and its [`PulseOutcome`] says sent), `force` (the measured, normalised force nearest in time) and `decided` (the StimTick fired); one record per beat (cardiac) or per `max_record_ms`, and a new record after any gap |
+//! | `dataset.json`, `record_NNN.csv` | the data set: per 1 ms tick, `pulse` (what the muscle got: the StimTick fired, the driver's [`PulseOutcome`] says sent and the stimulator's account of it says applied), `force` (the measured, normalised force nearest in time) and `decided` (the StimTick fired); one record per beat (cardiac) or per `max_record_ms`, and a new record after any gap |
+//! | `pulses.csv` | every pulse decided: `tick_seq,t_ns,decided,sent,applied,fate` (1/0 each; `fate` the driver's decision: sent, refused, late, not_armed, not_written, or `unreported`) |
 //! | `ticks.csv` | every StimTick, all fields |
 //! | `force.csv` | every ForceSample |
 //! | `references.csv` | every published Reference |
 //! | `previews.csv` | every published ReferencePreview: `seq,t_ns,ref_seq,len`, then `t_ns_i,force_i,max_rate_per_s_i` for each of its 6 edge slots (empty where unused) |
 //! | `status.csv` | every DriverStatus |
-//! | `outcomes.csv` | every PulseOutcome: what the driver did with each pulse decision |
+//! | `outcomes.csv` | every PulseOutcome: what the driver did with each pulse decision, then what the stimulator did with each pulse sent (`applied`, `not_applied`) |
 //! | `timing.csv` | every TimingReport |
 //! | `beats.csv` | per beat: target, reference amplitude, measured plateau/peak/FTI, pulses, outer-loop correction, pulses the driver refused |
 //! | `events.jsonl` | commands, faults, warnings, with CLOCK_MONOTONIC and wall-clock times |
 //!
-//! A pulse the driver never reported on within [`OUTCOME_WAIT_NS`] (or before a report on a
-//! later tick) is recorded as not delivered: the data set never claims a pulse that nobody
-//! saw sent (issue 19, item 5).
+//! Decided, sent and applied are three facts from three places: rt-core decided the pulse
+//! (the StimTick), the driver wrote it (PulseOutcome `sent`), the stimulator applied it
+//! (PulseOutcome `applied`, from its STATUS count, an EMCY naming it, or a RehaStim 2's
+//! acknowledgement: stim-driver's `applied` module). A pulse the driver never reported on
+//! within [`OUTCOME_WAIT_NS`] (or before a report on a later tick) is recorded as not sent,
+//! one sent that the stimulator did not account for within [`APPLIED_WAIT_NS`] (or before
+//! an account of a later pulse) as not applied: the data set never claims a pulse that
+//! nobody saw applied. So a pulse cancelled in flight or dropped by the stimulator is
+//! `decided` and `sent` but not `pulse`.
 //!
 //! Durability: the stream files are flushed at least every `flush_period_ms` (default
 //! 1 s); each data-set record is at most `max_record_ms` (default 1 s) long, and when it
@@ -198,10 +205,12 @@ pub struct RecordingSummary {
     pub ticks: u64,
     /// ForceSamples recorded.
     pub force_samples: u64,
-    /// Pulses the pattern generator decided, over the data set's rows.
+    /// Pulses the pattern generator decided, over the ticks recorded.
     pub pulses_decided: u64,
     /// Of those, pulses the driver reported sent.
-    pub pulses_delivered: u64,
+    pub pulses_sent: u64,
+    /// Of those, pulses the stimulator accounted for as applied.
+    pub pulses_applied: u64,
 }
 
 /// Records one stimulation run.
@@ -214,13 +223,18 @@ pub struct Recorder {
     previews: Stream,
     status: Stream,
     outcomes: Stream,
+    pulses: Stream,
     timing: Stream,
     beats: Stream,
     events: Stream,
     record: Option<OpenRecord>,
+    /// The driver's decisions (sent, refused, ...), in tick order.
     pending_outcomes: VecDeque<(u64, PulseFate)>,
+    /// The stimulator's accounts of pulses sent (applied or not), in tick order.
+    pending_applied: VecDeque<(u64, bool)>,
     pulses_decided: u64,
-    pulses_delivered: u64,
+    pulses_sent: u64,
+    pulses_applied: u64,
     entries: Vec<Entry>,
     next_record: usize,
     pending_ticks: VecDeque<StimTick>,
@@ -243,6 +257,14 @@ pub const FORCE_MATCH_NS: u64 = 1_500_000;
 /// clock) for the driver's [`PulseOutcome`]; without one its pulse is recorded as not
 /// delivered, ns. Outcomes cross two processes and the recorder thread may be descheduled.
 pub const OUTCOME_WAIT_NS: u64 = 500_000_000;
+/// A pulse sent waits at most this long (after its grid time) for the stimulator's account
+/// of it ([`PulseFate::Applied`] or [`PulseFate::NotApplied`]); without one it is recorded as
+/// not applied, ns. The account normally arrives with the next STATUS (10 ms) or a RehaStim
+/// 2's acknowledgement; the driver closes a pulse no STATUS counted after twice its
+/// stimulator timeout (200 ms by default, 800 ms on a RehaStim 2). A driver configured with
+/// a stimulator timeout above 1 s may account later than this: such pulses are recorded as
+/// not applied (the data set under-claims, never over-claims).
+pub const APPLIED_WAIT_NS: u64 = 2_000_000_000;
 
 impl Recorder {
     /// Creates the run directory `root/name` (0750, parents too) and its files.
@@ -286,6 +308,11 @@ impl Recorder {
                 ),
             )?,
             outcomes: Stream::create(d, "outcomes.csv", Some("seq,t_ns,tick_seq,tick_t_ns,fate"))?,
+            pulses: Stream::create(
+                d,
+                "pulses.csv",
+                Some("tick_seq,t_ns,decided,sent,applied,fate"),
+            )?,
             timing: Stream::create(
                 d,
                 "timing.csv",
@@ -305,8 +332,10 @@ impl Recorder {
             settings,
             record: None,
             pending_outcomes: VecDeque::new(),
+            pending_applied: VecDeque::new(),
             pulses_decided: 0,
-            pulses_delivered: 0,
+            pulses_sent: 0,
+            pulses_applied: 0,
             entries: Vec::new(),
             next_record: 0,
             pending_ticks: VecDeque::new(),
@@ -442,9 +471,9 @@ impl Recorder {
         self.guard(r)
     }
 
-    /// Records the driver's outcome of one pulse decision (what the data set's `pulse`
-    /// column says was delivered). An outcome that does not decode is kept in
-    /// `outcomes.csv` and counts as not delivered.
+    /// Records the driver's outcome of one pulse decision, or the stimulator's account of a
+    /// pulse sent (what the data set's `pulse` column says was applied). An outcome that
+    /// does not decode is kept in `outcomes.csv` and counts as not sent.
     pub fn on_outcome(&mut self, o: &PulseOutcome, now_ns: u64) -> Result<(), RecordingError> {
         self.ok()?;
         let fate = o.fate();
@@ -458,12 +487,20 @@ impl Recorder {
         ));
         self.guard(r)?;
         let fate = fate.unwrap_or(PulseFate::Refused);
-        // Outcomes come in tick order, and may overtake their tick on the way here; one of
-        // a tick already written is too late and dropped.
+        // Outcomes come in tick order (decisions and accounts each), and may overtake their
+        // tick on the way here; one of a tick already written is too late and dropped.
         if o.tick_seq > self.last_tick_seq {
-            self.pending_outcomes.push_back((o.tick_seq, fate));
-            while self.pending_outcomes.len() > 4096 {
-                self.pending_outcomes.pop_front();
+            if fate.is_confirmation() {
+                self.pending_applied
+                    .push_back((o.tick_seq, fate == PulseFate::Applied));
+                while self.pending_applied.len() > 4096 {
+                    self.pending_applied.pop_front();
+                }
+            } else {
+                self.pending_outcomes.push_back((o.tick_seq, fate));
+                while self.pending_outcomes.len() > 4096 {
+                    self.pending_outcomes.pop_front();
+                }
             }
         }
         let r = self.drain(now_ns);
@@ -476,20 +513,48 @@ impl Recorder {
         self.pending_outcomes.back().is_some_and(|&(s, _)| s >= seq)
     }
 
-    /// Whether the pulse of tick `seq` was delivered: its outcome says sent. Forgets the
-    /// outcomes up to it.
-    fn take_delivered(&mut self, seq: u64) -> bool {
-        let mut delivered = false;
-        while let Some(&(s, fate)) = self.pending_outcomes.front() {
+    /// The driver's decision on the pulse of tick `seq`, if it reported one.
+    fn decision(&self, seq: u64) -> Option<PulseFate> {
+        self.pending_outcomes
+            .iter()
+            .find(|&&(s, _)| s == seq)
+            .map(|&(_, fate)| fate)
+    }
+
+    /// The driver's decision on the pulse of tick `seq`; forgets the decisions up to it.
+    fn take_decision(&mut self, seq: u64) -> Option<PulseFate> {
+        let mut fate = None;
+        while let Some(&(s, f)) = self.pending_outcomes.front() {
             if s > seq {
                 break;
             }
             self.pending_outcomes.pop_front();
             if s == seq {
-                delivered = fate == PulseFate::Sent;
+                fate = Some(f);
             }
         }
-        delivered
+        fate
+    }
+
+    /// The stimulator's account of the pulse of tick `seq` has arrived, or cannot arrive
+    /// any more (one of a later pulse is in: accounts arrive in tick order).
+    fn account_known(&self, seq: u64) -> bool {
+        self.pending_applied.back().is_some_and(|&(s, _)| s >= seq)
+    }
+
+    /// Whether the stimulator applied the pulse of tick `seq`; forgets the accounts up to it.
+    fn take_applied(&mut self, seq: u64) -> bool {
+        let mut applied = false;
+        while let Some(&(s, a)) = self.pending_applied.front() {
+            if s > seq {
+                break;
+            }
+            self.pending_applied.pop_front();
+            if s == seq {
+                applied = a;
+            }
+        }
+        applied
     }
 
     /// Records a TimingReport.
@@ -591,10 +656,23 @@ impl Recorder {
             if !(force_due && outcome_due) {
                 break;
             }
+            let sent = t.fires() && self.decision(t.seq) == Some(PulseFate::Sent);
+            let account_due =
+                !sent || self.account_known(t.seq) || now_ns >= t.t_ns + APPLIED_WAIT_NS;
+            if !account_due {
+                break;
+            }
             self.pending_ticks.pop_front();
             let force = self.force_at(t.t_ns);
-            let delivered = t.fires() && self.take_delivered(t.seq);
-            self.row(&t, force, delivered)?;
+            let applied = if t.fires() {
+                let fate = self.take_decision(t.seq);
+                let applied = sent && self.take_applied(t.seq);
+                self.pulse_line(&t, fate, applied)?;
+                applied
+            } else {
+                false
+            };
+            self.row(&t, force, applied)?;
         }
         // Forget force samples no pending tick can use.
         let oldest = self
@@ -608,11 +686,33 @@ impl Recorder {
         Ok(())
     }
 
+    /// One line of `pulses.csv` for the pulse decided at tick `t`: decided, sent (the
+    /// driver's `fate`), applied; counted in the summary.
+    fn pulse_line(
+        &mut self,
+        t: &StimTick,
+        fate: Option<PulseFate>,
+        applied: bool,
+    ) -> Result<(), RecordingError> {
+        let sent = fate == Some(PulseFate::Sent);
+        self.pulses_decided += 1;
+        self.pulses_sent += u64::from(sent);
+        self.pulses_applied += u64::from(applied);
+        self.pulses.line(format_args!(
+            "{},{},1,{},{},{}",
+            t.seq,
+            t.t_ns,
+            u8::from(sent),
+            u8::from(applied),
+            fate.map_or("unreported", PulseFate::name)
+        ))
+    }
+
     fn row(
         &mut self,
         t: &StimTick,
         force: Option<f64>,
-        delivered: bool,
+        applied: bool,
     ) -> Result<(), RecordingError> {
         while self.boundaries.front().is_some_and(|(b, _)| *b <= t.t_ns) {
             if let Some((_, kind)) = self.boundaries.pop_front() {
@@ -663,14 +763,12 @@ impl Recorder {
         r.stream.line(format_args!(
             "{},{},{},{}",
             r.samples,
-            u8::from(delivered),
+            u8::from(applied),
             force,
             u8::from(t.fires())
         ))?;
         r.samples += 1;
-        r.pulses += usize::from(delivered);
-        self.pulses_decided += u64::from(t.fires());
-        self.pulses_delivered += u64::from(delivered);
+        r.pulses += usize::from(applied);
         r.last_grid_ns = t.t_ns;
         Ok(())
     }
@@ -765,6 +863,7 @@ impl Recorder {
             &mut self.previews,
             &mut self.status,
             &mut self.outcomes,
+            &mut self.pulses,
             &mut self.timing,
             &mut self.beats,
             &mut self.events,
@@ -781,7 +880,7 @@ impl Recorder {
     /// flushed and fsynced, the directory fsynced.
     pub fn finish(mut self, now_ns: u64) -> Result<RecordingSummary, RecordingError> {
         self.ok()?;
-        let far = now_ns.saturating_add(FORCE_WAIT_NS.max(OUTCOME_WAIT_NS));
+        let far = now_ns.saturating_add(FORCE_WAIT_NS.max(OUTCOME_WAIT_NS).max(APPLIED_WAIT_NS));
         self.drain(far)?;
         self.end_record()?;
         for s in [
@@ -791,6 +890,7 @@ impl Recorder {
             &mut self.previews,
             &mut self.status,
             &mut self.outcomes,
+            &mut self.pulses,
             &mut self.timing,
             &mut self.beats,
             &mut self.events,
@@ -806,7 +906,8 @@ impl Recorder {
             ticks: self.tick_count,
             force_samples: self.force_count,
             pulses_decided: self.pulses_decided,
-            pulses_delivered: self.pulses_delivered,
+            pulses_sent: self.pulses_sent,
+            pulses_applied: self.pulses_applied,
         })
     }
 }

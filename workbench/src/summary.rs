@@ -162,8 +162,14 @@ pub struct Summary {
     /// interlocks, or dropped as late by a busy transport (the beats' `pulses_refused`).
     #[serde(default)]
     pub pulses_not_sent: u64,
-    /// Pulses the stimulator applied (DriverStatus `pulses_sent`, last), if known.
+    /// PULSE frames the driver wrote over the whole run (DriverStatus `pulses_sent`,
+    /// last), if known.
     pub pulses_sent: Option<u64>,
+    /// Every pulse decided over the whole run, how many the driver sent and how many the
+    /// stimulator applied (the recording's `pulses.csv`); none in-process or in a
+    /// recording made before it.
+    #[serde(default)]
+    pub pulse_ledger: Option<PulseLedger>,
     /// Skipped periods of rt-core (its final TimingReport).
     pub deadline_misses: u64,
     /// rt-core wake-up lateness p99, µs.
@@ -341,6 +347,75 @@ pub struct RunTiming {
     pub stim_driver: Option<Latency>,
     /// DriverStatus `pulses_sent`, last.
     pub pulses_sent: Option<u64>,
+    /// The recording's decided / sent / applied counts.
+    pub ledger: Option<PulseLedger>,
+}
+
+/// Decided, sent and applied, counted over a recording's `pulses.csv` (one line per pulse
+/// decided: `tick_seq,t_ns,decided,sent,applied,fate`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PulseLedger {
+    /// Pulses rt-core decided.
+    pub decided: u64,
+    /// Of those, pulses the driver wrote to the stimulator.
+    pub sent: u64,
+    /// Of those, pulses the stimulator accounted for as applied.
+    pub applied: u64,
+}
+
+impl PulseLedger {
+    /// Reads `pulses.csv`; `None` when the recording has none (made before it existed).
+    pub fn read(path: &Path) -> Result<Option<Self>, SummaryError> {
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => {
+                return Err(SummaryError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                });
+            }
+        };
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+        let at = |name: &str| {
+            header
+                .iter()
+                .position(|c| *c == name)
+                .ok_or_else(|| SummaryError::Format {
+                    path: path.to_path_buf(),
+                    line: 1,
+                    problem: format!("no column `{name}`"),
+                })
+        };
+        let cols = [at("decided")?, at("sent")?, at("applied")?];
+        let mut ledger = Self::default();
+        for (i, l) in lines.enumerate() {
+            let fields: Vec<&str> = l.split(',').collect();
+            if fields.len() != header.len() {
+                // A line cut by a crash: the rest of the file is not usable.
+                break;
+            }
+            let mut bits = [0u64; 3];
+            for (bit, &c) in bits.iter_mut().zip(&cols) {
+                *bit = match fields[c] {
+                    "0" => 0,
+                    "1" => 1,
+                    other => {
+                        return Err(SummaryError::Format {
+                            path: path.to_path_buf(),
+                            line: i + 2,
+                            problem: format!("`{other}` is not 0 or 1"),
+                        });
+                    }
+                };
+            }
+            ledger.decided += bits[0];
+            ledger.sent += bits[1];
+            ledger.applied += bits[2];
+        }
+        Ok(Some(ledger))
+    }
 }
 
 /// Summarises the recording in `dir`.
@@ -363,6 +438,7 @@ pub fn analyse(dir: &Path, input: &AnalysisInput) -> Result<Summary, SummaryErro
         rt_core: last.get(&1).map(latency).unwrap_or_default(),
         stim_driver: last.get(&2).map(latency),
         pulses_sent: status.col("pulses_sent").last().map(|&x| x as u64),
+        ledger: PulseLedger::read(&dir.join("pulses.csv"))?,
     };
     Ok(summarise(&s, input, timing, dir.display().to_string()))
 }
@@ -379,6 +455,7 @@ pub fn summarise(
         rt_core: rt,
         stim_driver: drv,
         pulses_sent,
+        ledger,
     } = timing;
     // Complete beats only.
     let (from, to) = match (s.beats.first(), s.beats.last()) {
@@ -457,6 +534,7 @@ pub fn summarise(
         beats_with_refused_pulses: s.beats.iter().filter(|b| b.pulses_refused > 0).count() as u64,
         pulses_not_sent: s.beats.iter().map(|b| b.pulses_refused).sum(),
         pulses_sent,
+        pulse_ledger: ledger,
         deadline_misses: rt.misses,
         rt_wake_p99_us: rt.wake_us[1],
         driver_forward_p99_us: drv.map_or(f64::NAN, |l| l.publish_us[1]),

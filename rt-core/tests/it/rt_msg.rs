@@ -90,11 +90,11 @@ fn type_names_are_explicit_and_versioned() {
     assert_eq!(type_name::<DriverStatus>(), "fes::DriverStatus::v3");
     assert_eq!(type_name::<TimingReport>(), "fes::TimingReport::v2");
     assert_eq!(type_name::<LatencySummary>(), "fes::LatencySummary::v1");
-    assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v2");
+    assert_eq!(type_name::<PulseOutcome>(), "fes::PulseOutcome::v3");
 }
 
 /// A PulseOutcome from another process is validated like every message: its fate is one of
-/// the four, its sequence numbers are set, its reserved bytes are zero.
+/// the seven, its sequence numbers are set, its reserved bytes are zero.
 #[test]
 fn pulse_outcome_validation() {
     let ok = PulseOutcome::new(1, 5, 7, 3, PulseFate::Refused);
@@ -106,14 +106,20 @@ fn pulse_outcome_validation() {
         PulseFate::NotArmed,
         PulseFate::NotWritten,
         PulseFate::Late,
+        PulseFate::Applied,
+        PulseFate::NotApplied,
     ] {
         assert_eq!(PulseFate::try_from(fate as u8), Ok(fate));
+        assert_eq!(
+            fate.is_confirmation(),
+            matches!(fate, PulseFate::Applied | PulseFate::NotApplied)
+        );
     }
     let bad = [
         PulseOutcome { seq: 0, ..ok },
         PulseOutcome { tick_seq: 0, ..ok },
         PulseOutcome { fate: 0, ..ok },
-        PulseOutcome { fate: 6, ..ok },
+        PulseOutcome { fate: 8, ..ok },
         PulseOutcome {
             reserved: [0, 0, 1, 0, 0, 0, 0],
             ..ok

@@ -1937,3 +1937,74 @@ fn an_arm_is_refused_while_the_generator_fires_closer_than_the_transport_deliver
     r.command(DriverCommandKind::Arm);
     assert_eq!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
 }
+
+/// What the stimulator did with each pulse sent reaches the recording as a second outcome
+/// per pulse, in the order written: applied as STATUS counts them, not applied when an
+/// EMCY names the pulse (the count skips it) or when no STATUS counts it within the
+/// confirmation window. Without the account every pulse would stay "sent".
+#[test]
+fn each_pulse_sent_is_accounted_applied_or_not_by_the_stimulator() {
+    let confirmations = |r: &Rig| -> Vec<(u64, PulseFate)> {
+        r.ev.iter()
+            .filter_map(|e| match e {
+                DriverEvent::Outcome { tick_seq, fate, .. } if fate.is_confirmation() => {
+                    Some((*tick_seq, *fate))
+                }
+                _ => None,
+            })
+            .collect()
+    };
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    let mut fired = Vec::new();
+    for _ in 0..3 {
+        r.advance(5 * MS);
+        r.tick(true);
+        fired.push(r.tick_seq);
+    }
+    let pulses = r.bus.pulses();
+    assert_eq!(pulses.len(), 3);
+    assert!(confirmations(&r).is_empty(), "nothing counted yet");
+    // The stimulator rejects the second pulse by name and applies the other two.
+    r.bus_event(BusEvent::Emcy(Emcy::new(
+        ErrorCode::MinIpiViolation,
+        StimState::Armed,
+        pulses[1].1.seq,
+        0,
+    )));
+    r.advance(MS);
+    r.bus_event(status_delivered(StimState::Armed, r.config_id, 2));
+    assert_eq!(
+        confirmations(&r),
+        vec![
+            (fired[0], PulseFate::Applied),
+            (fired[1], PulseFate::NotApplied),
+            (fired[2], PulseFate::Applied),
+        ]
+    );
+    assert_eq!(
+        (
+            r.fp.counters().pulses_applied,
+            r.fp.counters().pulses_not_applied
+        ),
+        (2, 1)
+    );
+
+    // A pulse no STATUS counts is closed as not applied once the window has passed.
+    let mut r = Rig::armed(settings());
+    r.bus.clear();
+    r.advance(5 * MS);
+    r.tick(true);
+    let first = r.tick_seq;
+    r.advance(5 * MS);
+    r.tick(true);
+    let second = r.tick_seq;
+    r.bus_event(status_delivered(StimState::Armed, r.config_id, 1));
+    assert_eq!(confirmations(&r), vec![(first, PulseFate::Applied)]);
+    r.advance(2 * settings().stimulator_timeout_ns + MS);
+    r.poll();
+    assert_eq!(
+        confirmations(&r),
+        vec![(first, PulseFate::Applied), (second, PulseFate::NotApplied)]
+    );
+}

@@ -613,6 +613,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
             rt_core: none,
             stim_driver: None,
             pulses_sent: None,
+            ledger: None,
         },
         "none (in-process simulation)".into(),
     );
@@ -812,6 +813,17 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
             "; stimulator driver sent {p} in all"
         ))
     );
+    if let Some(l) = &s.pulse_ledger {
+        let pct = |n: u64| fmt(100.0 * n as f64 / l.decided.max(1) as f64, 1);
+        println!(
+            "  pulse ledger (whole run)   {} decided, {} sent by the driver ({} %), {} applied by the stimulator ({} %)",
+            l.decided,
+            l.sent,
+            pct(l.sent),
+            l.applied,
+            pct(l.applied)
+        );
+    }
     if let Some(v) = &s.front {
         let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));
         let cheapest = v

@@ -30,6 +30,7 @@ fn a_runs_can_log_decodes_with_cantools_and_python_can() {
         Vec::new(),
     );
     std::thread::sleep(Duration::from_secs(2));
+    let root = dir.join("recording");
     let _ = stack.stop(Duration::from_secs(5));
     let frames = canlog.finish().expect("finish can.log");
     let text = std::fs::read_to_string(&log).unwrap();
@@ -45,6 +46,24 @@ fn a_runs_can_log_decodes_with_cantools_and_python_can() {
         .filter(|l| l.contains(&format!(" {HOSTBUS_CHANNEL} {pulse_id:03X}#")))
         .count();
     assert!(pulses > 10, "{pulses} PULSE frames");
+
+    // The recording's ledger: every pulse the driver sent is on the bus, and the virtual
+    // stimulator applied every one it accounted for (STATUS counts them in order); at most
+    // the last STATUS period's pulses may be unaccounted when the recording ended.
+    let run = workbench::bench::recordings_in(&root)
+        .pop()
+        .expect("the run's recording");
+    let ledger = workbench::summary::PulseLedger::read(&run.join("pulses.csv"))
+        .expect("read pulses.csv")
+        .expect("the recording has pulses.csv");
+    assert!(
+        ledger.sent <= pulses as u64,
+        "{ledger:?}, {pulses} on the bus"
+    );
+    assert!(
+        ledger.applied + 2 >= ledger.sent && ledger.applied > 10,
+        "{ledger:?}"
+    );
 
     // cantools: one decoded line per frame, every one a message of the DBC.
     let decoded = fes_tests::cantools::decode_log(&log);

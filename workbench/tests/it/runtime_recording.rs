@@ -78,6 +78,22 @@ fn refused(k: u64) -> bool {
     k % 100 == 53
 }
 
+/// The stimulator did not apply the pulse of tick k although it was sent (k = 103, 303, ...).
+fn not_applied(k: u64) -> bool {
+    k % 200 == 103
+}
+
+/// The stimulator's account of tick k's pulse (sent, not refused), 10 ms after its tick.
+fn account(k: u64, n: &mut u64) -> PulseOutcome {
+    *n += 1;
+    let fate = if not_applied(k) {
+        PulseFate::NotApplied
+    } else {
+        PulseFate::Applied
+    };
+    PulseOutcome::new(*n, T0 + (k + 10) * MS, k + 1, T0 + k * MS, fate)
+}
+
 /// The driver's outcome of tick k's pulse.
 fn outcome(k: u64, n: &mut u64) -> PulseOutcome {
     *n += 1;
@@ -94,17 +110,32 @@ fn tempdir(tag: &str) -> fes_testkit::Scratch {
 }
 
 /// Feeds `n` ms of a run: ticks first, the driver's outcome of each pulse with it (the
-/// outcome of the tick before: it may also overtake its tick), their force 2 ms later (as
-/// over CAN), a beat boundary every 800 ms, a reference every 10 ms.
+/// outcome of the tick before: it may also overtake its tick), the stimulator's account of
+/// each pulse sent 10 ms later (as the next STATUS), their force 2 ms later (as over CAN),
+/// a beat boundary every 800 ms, a reference every 10 ms.
 fn feed(r: &mut Recorder, n: u64) {
-    feed_with(r, n, |_| true);
+    feed_with(r, n, |_| true, |_| true);
 }
 
-/// [`feed`], with the driver's outcome of tick k's pulse sent only when `reported(k)`.
-fn feed_with(r: &mut Recorder, n: u64, reported: impl Fn(u64) -> bool) {
+/// [`feed`], with the driver's outcome of tick k's pulse sent only when `reported(k)`, and
+/// the stimulator's account of it only when `accounted(k)` too.
+fn feed_with(
+    r: &mut Recorder,
+    n: u64,
+    reported: impl Fn(u64) -> bool,
+    accounted: impl Fn(u64) -> bool,
+) {
     let mut outcomes = 0;
     for k in 0..n {
         let now = T0 + k * MS + 500_000;
+        if let Some(j) = k.checked_sub(10)
+            && tick(j).fires()
+            && !refused(j)
+            && reported(j)
+            && accounted(j)
+        {
+            r.on_outcome(&account(j, &mut outcomes), now).unwrap();
+        }
         if k % 800 == 0 {
             r.boundary(T0 + k * MS, format!("beat {}", k / 800));
         }
@@ -140,7 +171,11 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
     r.on_event(T0 + 3000 * MS, "stop").unwrap();
     let s = r.finish(T0 + 3001 * MS).unwrap();
     assert_eq!(s.ticks, 3000);
-    assert_eq!((s.pulses_decided, s.pulses_delivered), (120, 90));
+    // 120 decided, 30 refused by the driver, 15 of the 90 sent not applied.
+    assert_eq!(
+        (s.pulses_decided, s.pulses_sent, s.pulses_applied),
+        (120, 90, 75)
+    );
     let dir = root.join("run1");
     assert_eq!(
         std::fs::metadata(&dir).unwrap().permissions().mode() & 0o777,
@@ -152,6 +187,7 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         "force.csv",
         "events.jsonl",
         "outcomes.csv",
+        "pulses.csv",
         "record_00000.csv",
     ] {
         let m = std::fs::metadata(dir.join(f)).unwrap().permissions().mode() & 0o777;
@@ -176,7 +212,11 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         for (i, (&p, &f)) in rec.pulse.iter().zip(&rec.force).enumerate() {
             assert_eq!(rec.t_ms[i], i as f64);
             assert_eq!(decided[i], k % 25 == 3, "decided at {k}");
-            assert_eq!(p, k % 25 == 3 && !refused(k), "delivered at {k}");
+            assert_eq!(
+                p,
+                k % 25 == 3 && !refused(k) && !not_applied(k),
+                "applied at {k}"
+            );
             assert_eq!(f, force(k), "force at {k}");
             k += 1;
         }
@@ -193,11 +233,26 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         ds.header.offset_n
     );
     // The refused pulses are told apart, and identification refuses such data by default.
-    assert_eq!(ds.undelivered(), (30, 0));
+    assert_eq!(ds.undelivered(), (45, 0));
     let ticks = std::fs::read_to_string(dir.join("ticks.csv")).unwrap();
     assert_eq!(ticks.lines().count(), 3001);
     let outcomes = std::fs::read_to_string(dir.join("outcomes.csv")).unwrap();
-    assert_eq!(outcomes.lines().count(), 121);
+    // A decision per pulse, an account per pulse sent.
+    assert_eq!(outcomes.lines().count(), 1 + 120 + 90);
+    assert!(
+        outcomes.contains(",104,10103000000,not_applied"),
+        "{outcomes}"
+    );
+    let pulses = std::fs::read_to_string(dir.join("pulses.csv")).unwrap();
+    assert_eq!(pulses.lines().count(), 121);
+    for line in [
+        "tick_seq,t_ns,decided,sent,applied,fate",
+        "4,10003000000,1,1,1,sent",
+        "54,10053000000,1,0,0,refused",
+        "104,10103000000,1,1,0,sent",
+    ] {
+        assert!(pulses.lines().any(|l| l == line), "{line}: {pulses}");
+    }
     assert!(outcomes.contains(",54,10053000000,refused"), "{outcomes}");
     let refs = std::fs::read_to_string(dir.join("references.csv")).unwrap();
     assert_eq!(refs.lines().count(), 301);
@@ -206,13 +261,16 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
 
 /// A pulse decision the driver never reported on (its outcome lost, or the driver gone)
 /// is recorded as decided, not as delivered, once the outcome wait is over; the rows
-/// after it are not held up for longer than that.
+/// after it are not held up for longer than that. A pulse sent whose account never came
+/// is recorded as sent, not applied, once the account of a later pulse is in.
 #[test]
 fn a_pulse_the_driver_never_reported_is_not_recorded_as_delivered() {
     let root = tempdir("unreported");
     let mut r = Recorder::create(&root, "run", settings(), T0).unwrap();
-    // The outcomes of ticks 503 and 1603 are lost; from 2000 on the driver is silent.
-    feed_with(&mut r, 2400, |k| k != 503 && k != 1603 && k < 2000);
+    // The outcomes of ticks 503 and 1603 are lost; from 2000 on the driver is silent; the
+    // stimulator's account of 803 is lost.
+    let reported = |k: u64| k != 503 && k != 1603 && k < 2000;
+    feed_with(&mut r, 2400, reported, |k| k != 803);
     let end = T0 + 2400 * MS + supervisor::recording::OUTCOME_WAIT_NS;
     r.on_force(&sample(2398), end).unwrap();
     r.on_force(&sample(2399), end).unwrap();
@@ -227,17 +285,25 @@ fn a_pulse_the_driver_never_reported_is_not_recorded_as_delivered() {
         for (i, &p) in rec.pulse.iter().enumerate() {
             let fires = k % 25 == 3;
             assert_eq!(decided[i], fires, "decided at {k}");
-            let delivered = fires && !refused(k) && k != 503 && k != 1603 && k < 2000;
-            assert_eq!(p, delivered, "delivered at {k}");
+            let applied = fires && !refused(k) && reported(k) && !not_applied(k) && k != 803;
+            assert_eq!(p, applied, "applied at {k}");
             k += 1;
         }
     }
-    // 96 decided; 20 refused, 2 lost, 16 after the driver fell silent (2003..2378).
+    // 96 decided; 20 refused, 2 lost, 16 after the driver fell silent (2003..2378); of
+    // the 58 sent, 9 not applied (103, 303, ... but 503) and one unaccounted (803).
     assert_eq!(
-        (s.pulses_decided, s.pulses_delivered),
-        (96, 96 - 20 - 2 - 16)
+        (s.pulses_decided, s.pulses_sent, s.pulses_applied),
+        (96, 96 - 20 - 2 - 16, 58 - 9 - 1)
     );
-    assert_eq!(ds.undelivered(), (38, 0));
+    assert_eq!(ds.undelivered(), (48, 0));
+    let pulses = std::fs::read_to_string(root.join("run").join("pulses.csv")).unwrap();
+    for line in [
+        "504,10503000000,1,0,0,unreported",
+        "804,10803000000,1,1,0,sent",
+    ] {
+        assert!(pulses.lines().any(|l| l == line), "{line}");
+    }
 }
 
 /// A crash (the recorder dropped without `finish`) loses at most the record being

@@ -1,6 +1,6 @@
-//! [`PulseOutcome`]: what the driver did with one pulse decision (stim-driver -> supervisor),
-//! so that a recording says what was delivered, not only what was decided (issue 19,
-//! item 5).
+//! [`PulseOutcome`]: what the driver did with one pulse decision, and then what the
+//! stimulator did with it (stim-driver -> supervisor), so that a recording says what was
+//! decided, what was sent and what was applied, not only what was decided.
 
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -8,10 +8,12 @@ use super::service::{Contract, PubSubQos, TOPIC_PULSE_OUTCOME};
 use super::validate::{ValidationError, int_in_range, nonzero_seq, reserved_zero};
 
 /// The driver's outcome for one StimTick that fired a pulse: sent to the stimulator, or not
-/// and why. Published for every such tick the driver received, in tick order.
+/// and why. Published for every such tick the driver received, in tick order; for a pulse
+/// sent, a second outcome follows once the stimulator has accounted for it
+/// ([`PulseFate::Applied`] or [`PulseFate::NotApplied`]), these too in tick order.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
-#[type_name("fes::PulseOutcome::v2")]
+#[type_name("fes::PulseOutcome::v3")]
 pub struct PulseOutcome {
     /// Sequence number, 1, 2, ... per publisher.
     pub seq: u64,
@@ -44,6 +46,13 @@ pub enum PulseFate {
     /// command (ScienceMode 2 is stop-and-wait) beyond the driver's lateness bound, or a
     /// newer pulse decision took its place: not sent.
     Late = 5,
+    /// A pulse sent earlier: the stimulator counted it as applied (its STATUS pulse count,
+    /// in the order the pulses were written; a RehaStim 2's SinglePulse acknowledgement).
+    Applied = 6,
+    /// A pulse sent earlier that the stimulator did not apply: it rejected it (EMCY naming
+    /// the pulse, a busy answer), or no STATUS counted it within the driver's confirmation
+    /// window (a lost frame, a stimulator that stopped).
+    NotApplied = 7,
 }
 
 impl TryFrom<u8> for PulseFate {
@@ -56,11 +65,13 @@ impl TryFrom<u8> for PulseFate {
             3 => Ok(PulseFate::NotArmed),
             4 => Ok(PulseFate::NotWritten),
             5 => Ok(PulseFate::Late),
+            6 => Ok(PulseFate::Applied),
+            7 => Ok(PulseFate::NotApplied),
             _ => Err(ValidationError::IntOutOfRange {
                 field: "fate",
                 value: u64::from(v),
                 min: 1,
-                max: 5,
+                max: 7,
             }),
         }
     }
@@ -75,7 +86,15 @@ impl PulseFate {
             PulseFate::NotArmed => "not_armed",
             PulseFate::NotWritten => "not_written",
             PulseFate::Late => "late",
+            PulseFate::Applied => "applied",
+            PulseFate::NotApplied => "not_applied",
         }
+    }
+
+    /// Whether this is the stimulator's account of a pulse sent earlier (the second
+    /// outcome of that tick), not the driver's decision on it.
+    pub const fn is_confirmation(self) -> bool {
+        matches!(self, PulseFate::Applied | PulseFate::NotApplied)
     }
 }
 
@@ -104,9 +123,9 @@ impl Contract for PulseOutcome {
         // The driver alone says what it sent.
         max_publishers: 1,
         max_subscribers: 8,
-        // A second of pulses at the 500 Hz ceiling: the recorder's thread may be
-        // descheduled for hundreds of ms.
-        subscriber_buffer: 512,
+        // A second of pulses at the 500 Hz ceiling, two outcomes each (sent, then applied):
+        // the recorder's thread may be descheduled for hundreds of ms.
+        subscriber_buffer: 1024,
         history: 0,
         max_loaned_samples: 2,
     };
@@ -114,7 +133,7 @@ impl Contract for PulseOutcome {
     fn validate(&self) -> Result<(), ValidationError> {
         nonzero_seq(self.seq)?;
         nonzero_seq(self.tick_seq)?;
-        int_in_range("fate", u64::from(self.fate), 1, 5)?;
+        int_in_range("fate", u64::from(self.fate), 1, 7)?;
         reserved_zero("reserved", &self.reserved)
     }
 }
