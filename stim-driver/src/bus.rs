@@ -9,7 +9,9 @@
 //!
 //! Its socket accepts exactly FORCE, STATUS, EMCY and the stimulator heartbeat (standard
 //! data frames), the driver's own transmit identifiers (NMT, PULSE, CONFIG, host heartbeat:
-//! each such frame the driver did not write is an intrusion, [`crate::intrusion`]) plus
+//! each such frame the driver did not write is an intrusion, [`crate::intrusion`]; FORCE
+//! and STATUS out of the stimulator's own numbering are one too,
+//! [`crate::intrusion::StimulatorStreams`]) plus
 //! every error frame (`CAN_RAW_ERR_FILTER` = all), so bus-off,
 //! error-passive and controller problems arrive as frames. A read failing with `ENETDOWN`
 //! and the interface flags (`SIOCGIFFLAGS`: up and running), polled every
@@ -21,7 +23,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
-use fes_can::{Message, MessageKind, Nodes};
+use fes_can::{Message, MessageKind, NmtState, Nodes};
 use fes_hostbus::{self as hostbus, HostBus, Station};
 use fes_rt::msg::PortError;
 use fes_rt::msg::port;
@@ -35,7 +37,7 @@ use socketcan::{
 };
 
 use crate::event::{BusErrorKind, BusEvent, SharedStatus};
-use crate::intrusion::{OWN_KINDS, SentLog, SentMatcher, own_kind};
+use crate::intrusion::{OWN_KINDS, SentLog, SentMatcher, StimulatorStreams, own_kind};
 
 /// How often the interface flags are read, ns.
 pub const LINK_CHECK_NS: u64 = 10_000_000;
@@ -338,6 +340,7 @@ pub fn run_bus(
     let mut next_link_check = 0u64;
     let mut force_seq = 0u64;
     let mut last_frame_seq: Option<u16> = None;
+    let mut streams = StimulatorStreams::new();
     while !stop.load(Ordering::Relaxed) {
         let now = monotonic_ns();
         if now >= next_link_check {
@@ -370,6 +373,22 @@ pub fn run_bus(
                     continue;
                 }
                 match settings.nodes.decode(u32::from(id), &data[..len]) {
+                    Ok(Message::Force(f)) if !streams.force(f.seq) => {
+                        // A second sender of FORCE: not published (the closed loop must
+                        // not act on it), and the driver trips.
+                        BusCounters::bump(&counters.intrusions);
+                        push(BusEvent::Intrusion {
+                            cob_id: id,
+                            kind: MessageKind::Force,
+                        });
+                    }
+                    Ok(Message::Status(st)) if !streams.status(st.counter) => {
+                        BusCounters::bump(&counters.intrusions);
+                        push(BusEvent::Intrusion {
+                            cob_id: id,
+                            kind: MessageKind::Status,
+                        });
+                    }
                     Ok(Message::Force(f)) => {
                         if let Some(last) = last_frame_seq {
                             let gap = f.seq.wrapping_sub(last).wrapping_sub(1);
@@ -399,6 +418,11 @@ pub fn run_bus(
                         }
                     }
                     Ok(message) => {
+                        if let Message::StimHeartbeat(h) = &message
+                            && h.state == NmtState::BootUp
+                        {
+                            streams.boot_up();
+                        }
                         if let Some(event) = forward_event(&message) {
                             push(event);
                         }

@@ -190,9 +190,16 @@ impl core::fmt::Display for Fault {
                     "the stimulator refused the CONFIG (limit index {detail})"
                 )
             }
+            Fault::Intrusion { cob_id, kind } if crate::intrusion::OWN_KINDS.contains(&kind) => {
+                write!(
+                    f,
+                    "intrusion: a {} frame (COB-ID {cob_id:#05x}) the driver did not send",
+                    kind.name()
+                )
+            }
             Fault::Intrusion { cob_id, kind } => write!(
                 f,
-                "intrusion: a {} frame (COB-ID {cob_id:#05x}) the driver did not send",
+                "intrusion: a {} frame (COB-ID {cob_id:#05x}) out of the stimulator's numbering (repeated or stepping back): a second sender",
                 kind.name()
             ),
             Fault::DeliveryMismatch {

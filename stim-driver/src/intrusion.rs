@@ -198,6 +198,79 @@ impl<T: CanTx> CanTx for LoggingTx<'_, T> {
     }
 }
 
+/// STATUS frames over which [`StimulatorStreams`] counts anomalies.
+pub const STATUS_ANOMALY_WINDOW: u32 = 16;
+/// Anomalies among the last [`STATUS_ANOMALY_WINDOW`] STATUS frames that make a second
+/// sender.
+pub const STATUS_ANOMALIES: u32 = 3;
+
+/// A second sender of the stimulator's own sequenced streams (FORCE, STATUS): the
+/// stimulator numbers them (FORCE `seq` +1 per frame, 16 bits; STATUS `counter` +1 per
+/// frame, 4 bits), so frames from anyone else interleaved with its own repeat a number or
+/// step back, whatever numbers the forger chooses (a forger one ahead makes the
+/// stimulator's next frame a repeat; one far ahead makes it step back).
+///
+/// Frames the receive queue drops (a stalled reader) only ever skip numbers forward, so:
+///
+/// * FORCE: a repeat or a step back (a difference of 0 or at least 2^15, which dropped
+///   frames would need 33 s of loss to make) is a second sender, at once;
+/// * STATUS: 16 numbers wrap in 160 ms, so one drop of a backlog may land on any number;
+///   a repeat or a step back of 1-4 counts as an anomaly, and
+///   [`STATUS_ANOMALIES`] among the last [`STATUS_ANOMALY_WINDOW`] frames are a second
+///   sender (a forger in step with the stimulator makes one every frame; separate
+///   backlog drops within 160 ms cannot happen, each needs a stall of about half a second).
+///
+/// The stimulator's boot-up heartbeat restarts both numberings ([`Self::boot_up`]). Limits,
+/// stated: a single forged STATUS with a plausible counter passes (what it could claim, a
+/// state or a pulse count, trips the driver or is corrected by the next genuine STATUS); a
+/// forger that replaces the stimulator's frames entirely (the stimulator silent) is not a
+/// second sender: the stimulator-silence watchdog does not see it either. The private bus
+/// (docs/deployment.md) is the mitigation; this is detection.
+#[derive(Debug, Clone, Default)]
+pub struct StimulatorStreams {
+    force: Option<u16>,
+    status: Option<u8>,
+    /// One bit per STATUS frame of the window, most recent lowest: an anomaly.
+    status_anomalies: u32,
+}
+
+impl StimulatorStreams {
+    /// No frame seen yet.
+    pub const fn new() -> Self {
+        Self {
+            force: None,
+            status: None,
+            status_anomalies: 0,
+        }
+    }
+
+    /// The stimulator announced its boot-up: its numberings start again.
+    pub fn boot_up(&mut self) {
+        *self = Self::new();
+    }
+
+    /// A FORCE frame numbered `seq`: `false` when it repeats or steps back.
+    pub fn force(&mut self, seq: u16) -> bool {
+        let in_step = self
+            .force
+            .is_none_or(|last| !matches!(seq.wrapping_sub(last), 0 | 0x8000..));
+        self.force = Some(seq);
+        in_step
+    }
+
+    /// A STATUS frame with `counter` (4 bits): `false` when the anomalies in the window
+    /// reach [`STATUS_ANOMALIES`].
+    pub fn status(&mut self, counter: u8) -> bool {
+        let anomaly = self
+            .status
+            .is_some_and(|last| matches!(counter.wrapping_sub(last) & 0xF, 0 | 12..=15));
+        self.status = Some(counter & 0xF);
+        let window = (1u32 << STATUS_ANOMALY_WINDOW) - 1;
+        self.status_anomalies = ((self.status_anomalies << 1) | u32::from(anomaly)) & window;
+        self.status_anomalies.count_ones() < STATUS_ANOMALIES
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -328,5 +401,58 @@ mod tests {
         let mut tx = LoggingTx::new(failing, &log);
         assert!(tx.send(&f).is_err());
         assert_eq!(log.written(), 2);
+    }
+
+    #[test]
+    fn a_forced_repeat_or_step_back_is_a_second_force_sender_and_drops_are_not() {
+        let mut s = StimulatorStreams::new();
+        for seq in [7u16, 8, 9, 300, 301, 30_000, 60_000, 65_535, 0, 1] {
+            assert!(s.force(seq), "dropped frames skip forward: {seq}");
+        }
+        assert!(!s.force(1), "a repeat");
+        assert!(s.force(2));
+        assert!(!s.force(0), "a step back");
+        // A forger one ahead: the stimulator's own next frame repeats it.
+        let mut s = StimulatorStreams::new();
+        assert!(s.force(100));
+        assert!(s.force(101), "the forged frame, one ahead, passes");
+        assert!(!s.force(101), "the stimulator's own 101 is the repeat");
+        // A boot-up restarts the numbering.
+        s.boot_up();
+        assert!(s.force(0));
+    }
+
+    #[test]
+    fn status_anomalies_trip_at_three_in_sixteen_and_one_backlog_drop_does_not() {
+        let mut s = StimulatorStreams::new();
+        // Normal: +1 mod 16, and a drop that lands anywhere (here a repeat) once.
+        for k in 0..40u8 {
+            assert!(s.status(k % 16), "in step: {k}");
+        }
+        assert!(
+            s.status(39 % 16),
+            "one anomaly (a backlog drop) is not a sender"
+        );
+        for k in 40..80u8 {
+            assert!(s.status(k % 16), "in step: {k}");
+        }
+        // A forger in step: every stimulator frame repeats the forged number.
+        let mut s = StimulatorStreams::new();
+        assert!(s.status(4));
+        assert!(s.status(5)); // forged
+        assert!(s.status(5)); // the stimulator's: anomaly 1
+        assert!(s.status(6)); // forged
+        assert!(s.status(6)); // anomaly 2
+        assert!(s.status(7)); // forged
+        assert!(!s.status(7), "the third anomaly in 16 frames");
+        // Anomalies older than the window no longer count.
+        let mut s = StimulatorStreams::new();
+        assert!(s.status(0));
+        assert!(s.status(0));
+        assert!(s.status(15));
+        for k in 0..16u8 {
+            assert!(s.status(k), "in step: {k}");
+        }
+        assert!(s.status(15), "the earlier two left the window");
     }
 }

@@ -757,6 +757,34 @@ enum Foreign {
     /// sequence number and alive counter advanced by one and a correct CRC, sent 3 ms
     /// after it (past the stimulator's minimum interval): the stimulator accepts it.
     Pulse,
+    /// The stimulator's last FORCE frame sent again (a replay: the force the closed loop
+    /// would act on, from another sender).
+    Force,
+    /// The stimulator's last STATUS frame sent again three times (a second STATUS sender).
+    Status,
+}
+
+/// The last frame of `kind` the stimulator sent, from the tap (waits for one; the tap's
+/// backlog is drained first).
+fn last_stimulator_frame(tap: &HostBus, kind: fes_can::MessageKind) -> fes_can::Frame {
+    while let Ok(Some(_)) = tap.recv() {}
+    let id = Nodes::DEFAULT.id_of(kind);
+    let deadline = Instant::now() + Duration::from_secs(3);
+    loop {
+        assert!(
+            Instant::now() < deadline,
+            "no {kind:?} from the stimulator in 3 s"
+        );
+        match tap.recv() {
+            Ok(Some(r)) if r.frame.standard_id() == Some(id) => {
+                let m = fes_can::decode(u32::from(id), r.frame.payload())
+                    .unwrap_or_else(|e| panic!("the stimulator's {kind:?} does not decode: {e}"));
+                return m.encode().expect("re-encodes");
+            }
+            Ok(_) => std::thread::sleep(Duration::from_micros(100)),
+            Err(e) => panic!("tap: {e}"),
+        }
+    }
 }
 
 /// The next PULSE frame the driver would send, from the last one the tap sees (waits for
@@ -811,10 +839,15 @@ fn foreign_frame_attempt(kind: Foreign, attempt: u32) -> Result<f64, String> {
             std::thread::sleep(Duration::from_millis(3));
             f
         }
+        Foreign::Force => last_stimulator_frame(&tap, fes_can::MessageKind::Force),
+        Foreign::Status => last_stimulator_frame(&tap, fes_can::MessageKind::Status),
     };
     let from_ns = monotonic_ns();
-    tap.send(&RawFrame::data(frame.id, frame.payload()).unwrap())
-        .expect("inject");
+    let copies = if kind == Foreign::Status { 3 } else { 1 };
+    for _ in 0..copies {
+        tap.send(&RawFrame::data(frame.id, frame.payload()).unwrap())
+            .expect("inject");
+    }
     let status = bench.wait_fault(Duration::from_secs(3));
     std::thread::sleep(Duration::from_millis(300));
     drop(tap);
@@ -897,11 +930,19 @@ fn foreign_frame_attempt(kind: Foreign, attempt: u32) -> Result<f64, String> {
 /// stimulator leaves operation within [`INTRUSION_STOP_BOUND_MS`] of the injection and
 /// applies no pulse after. Without the detection the NMT start and the heartbeat change
 /// nothing (stimulation goes on) and the PULSE trips on the sequence error or the STATUS
-/// reconciliation instead, so this test fails.
+/// reconciliation instead, so this test fails. Likewise the stimulator's own FORCE and
+/// STATUS frames from a second sender (a replay: its numbering repeats): without the
+/// numbering check the FORCE feeds the loop and the STATUS changes nothing.
 #[test]
 fn valid_frames_from_a_foreign_sender_trip_the_driver_and_stop_the_stimulator() {
     let mut measured = Vec::new();
-    for kind in [Foreign::NmtStart, Foreign::Heartbeat, Foreign::Pulse] {
+    for kind in [
+        Foreign::NmtStart,
+        Foreign::Heartbeat,
+        Foreign::Pulse,
+        Foreign::Force,
+        Foreign::Status,
+    ] {
         let case = format!("foreign-{kind:?}");
         repeat_void(&case, |attempt| {
             measured.push((kind, foreign_frame_attempt(kind, attempt)?));
