@@ -120,6 +120,11 @@ pub struct ControlConfig {
     pub user: Option<String>,
     /// A group whose members (primary or supplementary) may connect. Default none.
     pub group: Option<String>,
+    /// A group whose members may only stop: admitted on the stop socket (which is then
+    /// owned by this group), refused on the control socket. Default none (the stop socket
+    /// has `group`'s policy and ownership). An operator who may also arm is a member of
+    /// both.
+    pub stop_group: Option<String>,
     /// Whether root may connect. Default true.
     pub allow_root: bool,
 }
@@ -131,6 +136,7 @@ impl Default for ControlConfig {
             mode: 0o660,
             user: None,
             group: None,
+            stop_group: None,
             allow_root: true,
         }
     }

@@ -21,7 +21,9 @@
 //! - **the stop socket** ([`stop_socket_path`], `supervisor-stop.sock` beside the control
 //!   socket, same mode and policy): connecting to it *is* the stop command. The server
 //!   reads nothing from it, checks the peer, hands `stop` to the main loop and answers;
-//!   `supervisor stop` uses it (issue 19, item 2).
+//!   `supervisor stop` uses it. With `stop_group` configured it also admits that group's
+//!   members, and is owned by it, where the control socket (arm, set, profile) does not:
+//!   who may stop need not be who may arm.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::fs::{DirBuilderExt, FileTypeExt, PermissionsExt};
@@ -93,6 +95,8 @@ pub struct PeerPolicy {
     pub uid: Option<u32>,
     /// An allowed group.
     pub gid: Option<u32>,
+    /// A group allowed on the stop socket only.
+    pub stop_gid: Option<u32>,
     /// Root allowed.
     pub allow_root: bool,
 }
@@ -128,26 +132,37 @@ impl PeerPolicy {
             ),
             None => None,
         };
-        let gid = match &cfg.group {
-            Some(name) => Some(
-                nix::unistd::Group::from_name(name)
-                    .ok()
-                    .flatten()
-                    .ok_or_else(|| ControlError::UnknownName {
-                        key: "group",
-                        name: name.clone(),
-                    })?
-                    .gid
-                    .as_raw(),
-            ),
-            None => None,
+        let group = |key: &'static str, name: &Option<String>| match name {
+            Some(name) => nix::unistd::Group::from_name(name)
+                .ok()
+                .flatten()
+                .map(|g| Some(g.gid.as_raw()))
+                .ok_or_else(|| ControlError::UnknownName {
+                    key,
+                    name: name.clone(),
+                }),
+            None => Ok(None),
         };
         Ok(Self {
             own_uid: nix::unistd::geteuid().as_raw(),
             uid,
-            gid,
+            gid: group("group", &cfg.group)?,
+            stop_gid: group("stop_group", &cfg.stop_group)?,
             allow_root: cfg.allow_root,
         })
+    }
+
+    /// Whether `peer` may use the stop socket: as [`Self::check`], or a member of the
+    /// stop-only group.
+    pub fn check_stop(&self, peer: &Peer) -> Result<(), PermissionDenied> {
+        let in_stop_group = self
+            .stop_gid
+            .is_some_and(|g| peer.gid == g || peer.groups.contains(&g));
+        if in_stop_group {
+            Ok(())
+        } else {
+            self.check(peer)
+        }
     }
 
     /// Whether `peer` may use the socket; the error says why not.
@@ -286,7 +301,7 @@ impl ControlServer {
         }
         let listener = bind(&path, cfg.mode, policy.gid)?;
         let stop_path = stop_socket_path(&path);
-        let stop_listener = bind(&stop_path, cfg.mode, policy.gid)?;
+        let stop_listener = bind(&stop_path, cfg.mode, policy.stop_gid.or(policy.gid))?;
         let stop = Arc::new(AtomicBool::new(false));
         let policy = Arc::new(policy);
         let spawn = |name: &str, f: Box<dyn FnOnce() + Send>| {
@@ -441,7 +456,7 @@ fn serve_stop(
         let Ok(peer) = peer_of(&stream) else {
             return;
         };
-        if let Err(e) = policy.check(&peer) {
+        if let Err(e) = policy.check_stop(&peer) {
             let _ = send(&mut stream, &Response::error(0, e.to_string()));
             return;
         }
@@ -755,6 +770,7 @@ mod tests {
             own_uid: 500,
             uid: Some(600),
             gid: Some(700),
+            stop_gid: None,
             allow_root: false,
         };
         let peer = |uid, gid, groups: Vec<u32>| Peer {
@@ -778,5 +794,39 @@ mod tests {
             ..p
         };
         assert!(p.check(&peer(0, 0, vec![])).is_ok());
+    }
+
+    /// A stop-only group: its members may stop (the stop socket) and nothing else (the
+    /// control socket refuses them); the control group's members may do both.
+    #[test]
+    fn a_stop_only_group_may_stop_and_not_arm() {
+        let p = PeerPolicy {
+            own_uid: 500,
+            uid: None,
+            gid: Some(700),
+            stop_gid: Some(800),
+            allow_root: false,
+        };
+        let peer = |gid, groups: Vec<u32>| Peer {
+            pid: 1,
+            uid: 1000,
+            gid,
+            groups,
+        };
+        for stopper in [peer(800, vec![]), peer(1000, vec![4, 800])] {
+            assert!(p.check_stop(&stopper).is_ok(), "{stopper:?}");
+            assert!(p.check(&stopper).is_err(), "{stopper:?} may not arm");
+        }
+        let operator = peer(1000, vec![700]);
+        assert!(p.check(&operator).is_ok() && p.check_stop(&operator).is_ok());
+        let other = peer(1000, vec![4]);
+        assert!(p.check(&other).is_err() && p.check_stop(&other).is_err());
+        // Without a stop group the stop socket admits exactly the control policy.
+        let p = PeerPolicy {
+            stop_gid: None,
+            ..p
+        };
+        assert!(p.check_stop(&peer(800, vec![])).is_err());
+        assert!(p.check_stop(&operator).is_ok());
     }
 }

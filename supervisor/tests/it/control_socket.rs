@@ -284,6 +284,7 @@ fn a_peer_the_policy_does_not_admit_is_refused() {
         own_uid: me.wrapping_add(12_345),
         uid: None,
         gid: Some(nix::unistd::getegid().as_raw().wrapping_add(777)),
+        stop_gid: None,
         allow_root: false,
     };
     let (tx, rx) = std::sync::mpsc::channel();
@@ -439,6 +440,7 @@ impl StopFixture {
             own_uid: me,
             uid: None,
             gid: None,
+            stop_gid: None,
             allow_root: me == 0,
         };
         let (tx, rx) = std::sync::mpsc::channel::<supervisor::control::Pending>();
@@ -628,4 +630,56 @@ fn no_daemon_is_exit_3_and_bad_usage_is_exit_2() {
     let o = cli(&socket, &["status", "--no-such-flag"]);
     assert_eq!(o.status.code(), Some(2));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A stop-only group over the real sockets: a peer admitted only as a member of
+/// `stop_group` (here the test's own primary group; its uid, the control group and root are
+/// not admitted) reaches the main loop with a stop through the stop socket, and is refused
+/// on the control socket before anything is read. The stop socket is owned by that group.
+#[test]
+fn a_stop_only_group_member_may_stop_and_is_refused_everything_else() {
+    use std::os::unix::fs::MetadataExt as _;
+    use supervisor::control::{request, request_stop};
+    use supervisor::protocol::Command as Cmd;
+
+    let dir = fes_testkit::Scratch::new("sv-stopgroup");
+    let cfg = ControlConfig {
+        socket: dir.path().join("s.sock"),
+        ..ControlConfig::default()
+    };
+    let me = nix::unistd::geteuid().as_raw();
+    let my_gid = nix::unistd::getegid().as_raw();
+    let policy = PeerPolicy {
+        own_uid: me.wrapping_add(12_345),
+        uid: None,
+        gid: Some(my_gid.wrapping_add(777)),
+        stop_gid: Some(my_gid),
+        allow_root: false,
+    };
+    let (tx, rx) = std::sync::mpsc::channel::<supervisor::control::Pending>();
+    let server = ControlServer::start_with_policy(&cfg, policy, tx).unwrap();
+    assert_eq!(
+        std::fs::metadata(server.stop_path()).unwrap().gid(),
+        my_gid,
+        "the stop socket belongs to the stop group"
+    );
+    let main_loop = std::thread::spawn(move || {
+        let p = rx.recv_timeout(Duration::from_secs(5)).expect("the stop");
+        let command = p.request.command.clone();
+        let _ = p.reply.send(Response::ok(p.request.id, "stopped", None));
+        (command, rx.recv_timeout(Duration::from_millis(300)).is_ok())
+    });
+    let r = request_stop(server.path(), Duration::from_secs(2)).unwrap();
+    assert!(r.ok, "{r:?}");
+    let r = request(server.path(), Cmd::Arm, Duration::from_secs(2)).unwrap();
+    assert!(
+        !r.ok
+            && r.error
+                .as_deref()
+                .is_some_and(|e| e.starts_with("permission denied")),
+        "{r:?}"
+    );
+    let (command, more) = main_loop.join().unwrap();
+    assert_eq!(command, Cmd::Stop);
+    assert!(!more, "the refused arm reached the main loop");
 }
