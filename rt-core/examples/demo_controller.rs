@@ -5,10 +5,8 @@
 //! `cargo run -p rt-core --example demo_controller -- PATH [UNITS]`
 #![allow(clippy::unwrap_used, clippy::expect_used)] // a tool: a failed step ends it with its message
 
-#[path = "../../crates/fes-model/tests/it/control_support.rs"]
-mod control_support;
-
 use fes_model::control::file::{Controller, ControllerSettings};
+use fes_testkit::control;
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -20,8 +18,8 @@ fn main() {
         u.parse().unwrap_or_else(|e| panic!("UNITS {u:?}: {e}"))
     });
     let controller = Controller::design(
-        control_support::fast_muscle(units),
-        &control_support::table_6_1_specs(units),
+        control::fast_muscle(units),
+        &control::table_6_1_specs(units),
         ControllerSettings::default(),
     )
     .unwrap_or_else(|e| panic!("design: {e}"));

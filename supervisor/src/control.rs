@@ -698,9 +698,7 @@ mod tests {
     /// only (setgroups); run as root as CI does.
     #[test]
     fn a_peers_groups_are_those_it_connected_with() {
-        let dir = std::env::temp_dir().join(format!("sv-groups-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fes_testkit::Scratch::new("sv-groups");
         let path = dir.join("s.sock");
         let listener = std::os::unix::net::UnixListener::bind(&path).unwrap();
         // Same process: the groups are this process's own.
@@ -761,7 +759,6 @@ mod tests {
         let mut seen = peer_of(&accepted).unwrap().groups;
         seen.sort_unstable();
         assert_eq!(seen, vec![4242, 4343], "the groups it connected with");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -8,12 +8,10 @@
 //! `runtime_outer_loop::*` of workbench.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // a tool: a failed step ends it with its message
 
-#[path = "../../crates/fes-model/tests/it/control_support.rs"]
-mod control_support;
-
 use std::path::{Path, PathBuf};
 
 use fes_model::control::file::{Controller, ControllerSettings};
+use fes_testkit::control;
 use sim_muscle::muscle::MuscleConfig;
 use sim_muscle::preset::Preset;
 use supervisor::contraction::ContractionSettings;
@@ -70,8 +68,8 @@ fn main() {
         .nth(1)
         .map_or_else(|| root.join("docs/img"), PathBuf::from);
     let fixture = Controller::design(
-        control_support::fast_muscle(6),
-        &control_support::table_6_1_specs(6),
+        control::fast_muscle(6),
+        &control::table_6_1_specs(6),
         ControllerSettings::default(),
     )
     .expect("fixture controller");

@@ -17,10 +17,7 @@ use fes_model::control::design::EstimatorPoles;
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_model::control::pattern_generator::{FeedbackMode, TickInput};
 use fes_model::control::poles::dominant_pair;
-
-#[path = "../tests/it/control_support.rs"]
-mod control_support;
-use control_support::{TS, fast_muscle, table_6_1_specs};
+use fes_testkit::control::{TS, fast_muscle, table_6_1_specs};
 
 fn controller(m: usize, mode: FeedbackMode) -> Controller {
     let [p1, p2] = dominant_pair(0.005, 1.2, TS).expect("valid estimator spec");

@@ -548,9 +548,7 @@ mod tests {
     #[test]
     fn a_prescription_others_could_change_is_refused() {
         use std::os::unix::fs::PermissionsExt as _;
-        let dir = std::env::temp_dir().join(format!("fes-prescription-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fes_testkit::Scratch::new("prescription");
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
         let file = dir.join("prescription.toml");
         std::fs::write(&file, DOSE).unwrap();
@@ -588,7 +586,6 @@ mod tests {
                 "{e}"
             );
         }
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     use super::*;

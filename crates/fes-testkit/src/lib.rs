@@ -1,6 +1,7 @@
 //! What the project's tests share: a dev-dependency of every crate, so it sits below all of
 //! them (it links only the leaf crates `fes-can` and `fes-hostbus`, for the bus tap; no
-//! dependency cycle through the system tests of `fes-tests`).
+//! dependency cycle through the system tests of `fes-tests`). With its feature `control` it
+//! links `fes-model` too, for the control tests' fixture.
 //!
 //! * [`Scratch`]: a scratch directory, removed when the test passes, kept (and named) when
 //!   it fails or `FES_TEST_KEEP` is set;
@@ -12,7 +13,9 @@
 //! * [`assert_refused`]: the bad-input sweeps' one check that a run refused its input
 //!   clearly (exit code, no panic, the offending name in a short message);
 //! * [`noise`]: the host's own wake-up noise, measured beside a timing check, so that the
-//!   check is judged against what the host allowed in the same run (docs/latency.md).
+//!   check is judged against what the host allowed in the same run (docs/latency.md);
+//! * `control` (feature `control`): the control tests' fixture, muscle-like Local Model
+//!   Networks built in code (the fast muscle, Table 6.1's rise times).
 //!
 //! Functional tests assert what a program does, whatever the host's timing; checks that
 //! depend on the host's timing live in `timing` modules of the test binaries and are
@@ -23,6 +26,8 @@
 
 pub mod bus;
 pub mod child;
+#[cfg(feature = "control")]
+pub mod control;
 pub mod noise;
 mod refused;
 mod scratch;

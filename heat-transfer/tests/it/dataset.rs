@@ -6,8 +6,7 @@ use sim_heat::HeatParams;
 
 #[test]
 fn the_experiments_are_written_as_the_study_reads_them() {
-    let dir = std::env::temp_dir().join(format!("heat-transfer-data-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fes_testkit::Scratch::new("heat-transfer-data");
     let p = HeatParams::default();
     heat_transfer::write_dataset(&p, 2, &dir).unwrap();
     let read = SignalSet::read(&dir).unwrap();
@@ -17,5 +16,4 @@ fn the_experiments_are_written_as_the_study_reads_them() {
     let e = heat_transfer::write_dataset(&p, 3, &dir).unwrap_err();
     assert!(matches!(e, heat_transfer::StudyError::Dataset(_)), "{e:?}");
     assert_eq!(SignalSet::read(&dir).unwrap(), read);
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -3,9 +3,8 @@
 
 #[test]
 fn every_figure_is_drawn() {
-    let dir = std::env::temp_dir().join(format!("heat-transfer-fig-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    heat_transfer::study_with_figures(1, Some(&dir)).unwrap();
+    let dir = fes_testkit::Scratch::new("heat-transfer-fig");
+    heat_transfer::study_with_figures(1, Some(dir.path())).unwrap();
     let mut names: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().into_string().unwrap())
@@ -19,16 +18,13 @@ fn every_figure_is_drawn() {
             assert!(bytes.starts_with(b"\x89PNG"), "{n}");
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(names.len(), 14, "{names:?}");
     assert!(names.contains(&"fig-e1.svg".to_string()), "{names:?}");
 }
 
 #[test]
 fn fig_e1_labels_every_part_of_the_rig() {
-    let dir = std::env::temp_dir().join(format!("heat-transfer-e1-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("heat-transfer-e1");
     heat_transfer::rig::fig_e1(&dir).unwrap();
     let png = std::fs::read(dir.join("fig-e1.png")).unwrap();
     assert!(png.starts_with(b"\x89PNG"));
@@ -39,7 +35,6 @@ fn fig_e1_labels_every_part_of_the_rig() {
         heat_transfer::rig::SIZE
     );
     let svg = std::fs::read_to_string(dir.join("fig-e1.svg")).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
     // Every text element's content.
     let texts: Vec<&str> = svg
         .split("<text")

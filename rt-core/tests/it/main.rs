@@ -10,8 +10,6 @@ use fes_rt::rt::alloc::CountingAllocator;
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
-#[path = "../../../crates/fes-model/tests/it/control_support.rs"]
-mod control_support;
 mod rt_common;
 
 mod rt_alloc_trace;

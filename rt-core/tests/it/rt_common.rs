@@ -174,7 +174,7 @@ pub fn read_ticks(dir: &Scratch) -> Vec<TickRecord> {
     .unwrap()
 }
 
-use crate::control_support;
+use fes_testkit::control;
 
 /// Designs a controller for the control tests' fast-muscle-like LMN with `units` units
 /// (thesis Table 6.1 rise times, xi = 1.2) through the control library, and writes it.
@@ -195,8 +195,7 @@ pub fn write_measured_controller(
     use fes_model::control::design::EstimatorPoles;
     use fes_model::control::file::ControllerSettings;
     use fes_model::control::pattern_generator::FeedbackMode;
-    let [p1, p2] =
-        fes_model::control::poles::dominant_pair(0.005, 1.2, control_support::TS).unwrap();
+    let [p1, p2] = fes_model::control::poles::dominant_pair(0.005, 1.2, control::TS).unwrap();
     write_controller_with(
         path,
         units,
@@ -215,8 +214,8 @@ fn write_controller_with(
 ) -> fes_model::control::file::Controller {
     use fes_model::control::file::Controller;
     let controller = Controller::design(
-        control_support::fast_muscle(units),
-        &control_support::table_6_1_specs(units),
+        control::fast_muscle(units),
+        &control::table_6_1_specs(units),
         settings,
     )
     .unwrap();

@@ -62,8 +62,7 @@ fn serialised_configurations_parse_back_identically() {
 
 #[test]
 fn a_relative_controller_path_is_relative_to_the_file() {
-    let dir = std::env::temp_dir().join(format!("rt-config-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("rt-config");
     let path = dir.join("rt-core.toml");
     std::fs::write(
         &path,
@@ -77,7 +76,6 @@ fn a_relative_controller_path_is_relative_to_the_file() {
             path: dir.join("ctrl/fast.json")
         }
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

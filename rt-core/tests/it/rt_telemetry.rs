@@ -71,7 +71,8 @@ fn a_full_queue_drops_and_counts_instead_of_blocking() {
 
 #[test]
 fn an_interval_log_reads_back_with_hdrhistograms_reader_and_the_counts_match() {
-    let path = std::env::temp_dir().join(format!("rt-telemetry-{}.hlog", std::process::id()));
+    let dir = fes_testkit::Scratch::new("rt-telemetry");
+    let path = dir.join("telemetry.hlog");
     let mut log = HlogWriter::create(&path, "test", SystemTime::now()).unwrap();
     let mut agg = TimingAggregator::new();
     let channel = TelemetryChannel::new(4096);
@@ -142,5 +143,4 @@ fn an_interval_log_reads_back_with_hdrhistograms_reader_and_the_counts_match() {
     );
     assert_eq!(report.wake.count, total);
     report.validate().unwrap();
-    std::fs::remove_file(&path).unwrap();
 }

@@ -67,12 +67,10 @@ fn mean_filter_is_the_three_sample_average() {
 /// The experiments written as a `fes-dataset/2` data set read back exactly.
 #[test]
 fn experiments_round_trip_through_the_data_set_format() {
-    let dir = std::env::temp_dir().join(format!("sim-heat-ds-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fes_testkit::Scratch::new("sim-heat-ds");
     let set = dataset(&HeatParams::default(), 1).unwrap();
     set.write(&dir, WriteMode::CreateNew).unwrap();
     let back = read_any(&dir).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
     let AnyDataSet::Signals(back) = back else {
         panic!("not read as signals")
     };

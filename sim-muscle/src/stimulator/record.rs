@@ -108,8 +108,7 @@ mod tests {
 
     #[test]
     fn writes_a_header_and_one_line_per_tick() {
-        let dir = std::env::temp_dir().join(format!("stim-record-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fes_testkit::Scratch::new("stim-record");
         let path = dir.join("r.csv");
         let mut r = Recorder::create(&path).unwrap();
         r.push(TickRecord {
@@ -135,6 +134,5 @@ mod tests {
             "tick,nominal_ns,late_ns,state,force_n,pulse_seq,amplitude_ma,width_us\n\
              0,10,1,armed,0.500000,,,\n1,20,2,stimulating,1.250000,7,20.0,200\n"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -476,8 +476,7 @@ mod tests {
 
     #[test]
     fn a_host_on_the_pty_connects_and_fires_a_pulse() {
-        let dir = std::env::temp_dir().join(format!("rehastim2-pty-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fes_testkit::Scratch::new("rehastim2-pty");
         let args = Rehastim2Args {
             pty_link: dir.join("tty"),
             pulse_log: Some(dir.join("pulses.csv")),
@@ -562,6 +561,5 @@ mod tests {
         assert_eq!(rows.len(), 1, "{log}");
         assert!(rows[0].ends_with(",pulse,1,300,30,single,1,"), "{log}");
         assert!(!args.pty_link.exists());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

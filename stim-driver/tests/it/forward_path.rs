@@ -1134,8 +1134,7 @@ fn malformed_configurations_are_refused_clearly_without_a_panic() {
     let example = Command::new(EXE).arg("example-config").output().unwrap();
     assert!(example.status.success());
     let good = String::from_utf8(example.stdout).unwrap();
-    let dir = std::env::temp_dir().join(format!("stim-driver-badcfg-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("stim-driver-badcfg");
     // The example's limits are the driver's defaults: a prescription that allows them.
     let prescription = dir.join("prescription.toml");
     std::fs::write(&prescription, DEFAULT_LIMITS_PRESCRIPTION).unwrap();
@@ -1252,7 +1251,6 @@ fn malformed_configurations_are_refused_clearly_without_a_panic() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The driver's outcome of every pulse decision (what the recording records as delivered,
@@ -1635,8 +1633,7 @@ max_charge_per_phase_nc = 4000
 min_ipi_us = 2000
 max_pulses_per_s = 100
 "#;
-    let dir = std::env::temp_dir().join(format!("stim-driver-presc-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("stim-driver-presc");
     std::fs::write(dir.join("dose.toml"), DOSE).unwrap();
     let example = Command::new(EXE).arg("example-config").output().unwrap();
     let example = String::from_utf8(example.stdout).unwrap();
@@ -1737,7 +1734,6 @@ max_pulses_per_s = 100
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// ScienceMode 2's stop-and-wait reaches the forward path as a busy transport

@@ -55,8 +55,7 @@ fn read_packets(
 
 #[test]
 fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
-    let dir = std::env::temp_dir().join(format!("stim-driver-serial-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("stim-driver-serial");
     let args = Rehastim2Args {
         pty_link: dir.join("ttyUSB0"),
         pulse_log: Some(dir.join("pulses.csv")),
@@ -175,5 +174,4 @@ fn driver_frames_reach_the_virtual_rehastim2_as_single_pulses() {
         );
     }
     assert!(!log.contains("watchdog"), "{log}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }

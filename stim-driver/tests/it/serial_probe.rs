@@ -2,17 +2,13 @@
 //! Init, times one command at a time, and suggests the transport's minimum interval from
 //! the answers; it provokes no -8 and delivers no charge.
 
-use std::path::PathBuf;
-
+use fes_testkit::Scratch;
 use stim_driver::probe::{ProbeSettings, probe};
 
 use crate::on_serial::{Device, DeviceOptions};
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stim-driver-probe-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("stim-driver-probe-{name}"))
 }
 
 /// A device processing each command for 5-15 ms (3 % for 100 ms, `--processing-ms 10`):
@@ -57,7 +53,6 @@ fn probe_times_the_answers_one_at_a_time_and_suggests_the_interval() {
         "probe, --processing-ms 10: median {p50:.1} ms, p99 {p99:.1} ms, longest {max:.1} ms: min_interval_ms {:?}",
         r.min_interval_ms()
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A device answering at once: the answers take the line and the device's tick, a few ms.
@@ -74,7 +69,6 @@ fn probe_of_a_prompt_device_suggests_a_few_ms() {
     let suggested = r.min_interval_ms().unwrap();
     assert!((1..=10).contains(&suggested), "{r:?}");
     device.stop();
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// No device answering: a clear error naming the wait, not a hang.

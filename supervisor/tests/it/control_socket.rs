@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use fes_testkit::Scratch;
 use supervisor::config::ControlConfig;
 use supervisor::control::{ControlServer, PeerPolicy};
 use supervisor::protocol::{Response, Status};
@@ -18,7 +19,8 @@ const EXE: &str = env!("CARGO_BIN_EXE_supervisor");
 
 struct Daemon {
     child: Child,
-    dir: PathBuf,
+    /// Removed (when the test passed) after the daemon is stopped.
+    _dir: Scratch,
     socket: PathBuf,
 }
 
@@ -26,7 +28,6 @@ impl Drop for Daemon {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
-        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
 
@@ -37,9 +38,7 @@ fn daemon(tag: &str) -> Daemon {
 /// The daemon, watching stim-driver's acknowledgements when `watch_driver` (no driver
 /// runs in these tests: nothing acknowledges).
 fn daemon_with(tag: &str, watch_driver: bool) -> Daemon {
-    let dir = std::env::temp_dir().join(format!("sv-ctl-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new(&format!("sv-ctl-{tag}"));
     let cfg = dir.join("supervisor.toml");
     // Recording is on: the daemon needs the prescription whose checksum it records.
     std::fs::write(
@@ -87,7 +86,11 @@ prescription = "prescription.toml"
         );
         std::thread::sleep(Duration::from_millis(50));
     }
-    Daemon { child, dir, socket }
+    Daemon {
+        child,
+        _dir: dir,
+        socket,
+    }
 }
 
 fn cli(socket: &Path, args: &[&str]) -> Output {
@@ -273,8 +276,9 @@ fn a_stop_the_driver_never_acknowledges_is_an_alarm_not_a_success() {
 
 #[test]
 fn a_peer_the_policy_does_not_admit_is_refused() {
-    let dir = std::env::temp_dir().join(format!("sv-peer-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    // The socket's directory is left for the server to create.
+    let scratch = Scratch::new("sv-peer");
+    let dir = scratch.join("run");
     let cfg = ControlConfig {
         socket: dir.join("s.sock"),
         ..ControlConfig::default()
@@ -302,7 +306,6 @@ fn a_peer_the_policy_does_not_admit_is_refused() {
     );
     drop(server);
     assert!(!dir.join("s.sock").exists(), "socket removed on shutdown");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Bad-input sweep of the daemon's configuration file (issue 10, item 3): each malformed
@@ -311,9 +314,7 @@ fn a_peer_the_policy_does_not_admit_is_refused() {
 /// directory it names.
 #[test]
 fn malformed_configurations_are_refused_by_name_and_create_nothing() {
-    let dir = std::env::temp_dir().join(format!("sv-badcfg-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("sv-badcfg");
     let example = Command::new(EXE)
         .args(["run", "--print-example-config"])
         .output()
@@ -413,7 +414,6 @@ fn malformed_configurations_are_refused_by_name_and_create_nothing() {
     }
     // Nothing was created next to the files: no socket directory, no recordings.
     assert!(!dir.join("run").exists() && !dir.join("recordings").exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// A control server with a main loop that answers every request and records its commands.
@@ -421,14 +421,13 @@ struct StopFixture {
     server: Option<ControlServer>,
     seen: std::sync::Arc<std::sync::Mutex<Vec<supervisor::protocol::Command>>>,
     main_loop: Option<std::thread::JoinHandle<()>>,
-    dir: PathBuf,
+    /// Removed (when the test passed) after the server and its main loop are gone.
+    _dir: Scratch,
 }
 
 impl StopFixture {
     fn new(tag: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("sv-stop-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = Scratch::new(&format!("sv-stop-{tag}"));
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
         let cfg = ControlConfig {
             socket: dir.join("s.sock"),
@@ -459,7 +458,7 @@ impl StopFixture {
             server: Some(server),
             seen,
             main_loop: Some(main_loop),
-            dir,
+            _dir: dir,
         }
     }
 
@@ -501,7 +500,6 @@ impl Drop for StopFixture {
         if let Some(t) = self.main_loop.take() {
             let _ = t.join();
         }
-        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
 
@@ -613,8 +611,7 @@ fn the_stop_socket_works_when_every_control_connection_is_taken() {
 /// "refused" (1) or as done (0); a command line clap does not understand is 2.
 #[test]
 fn no_daemon_is_exit_3_and_bad_usage_is_exit_2() {
-    let dir = std::env::temp_dir().join(format!("fes-sup-nodaemon-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("sup-nodaemon");
     let socket = dir.join("none.sock");
     for args in [
         &["status"][..],
@@ -629,7 +626,6 @@ fn no_daemon_is_exit_3_and_bad_usage_is_exit_2() {
     }
     let o = cli(&socket, &["status", "--no-such-flag"]);
     assert_eq!(o.status.code(), Some(2));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// A stop-only group over the real sockets: a peer admitted only as a member of

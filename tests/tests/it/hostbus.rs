@@ -7,11 +7,14 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use fes_hostbus::*;
+use fes_testkit::Scratch;
 
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("hostbus-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+/// A bus directory not made yet (the first station makes it, private), in a scratch
+/// directory that goes with the test.
+fn dir(name: &str) -> (Scratch, PathBuf) {
+    let scratch = Scratch::new(&format!("hostbus-{name}"));
+    let d = scratch.join("bus");
+    (scratch, d)
 }
 
 #[test]
@@ -39,7 +42,7 @@ fn frames_round_trip_as_struct_can_frame() {
 
 #[test]
 fn a_frame_reaches_every_other_station_with_a_timestamp() {
-    let d = dir("bcast");
+    let (_scratch, d) = dir("bcast");
     let driver = HostBus::open(&d, Station::Driver, None).unwrap();
     let stim = HostBus::open(&d, Station::Stimulator, None).unwrap();
     let tap = HostBus::open(&d, Station::Tap, Some(Duration::from_millis(50))).unwrap();
@@ -67,12 +70,11 @@ fn a_frame_reaches_every_other_station_with_a_timestamp() {
     assert_eq!(driver.recv().unwrap().unwrap().frame, e);
     assert_eq!(stim.recv().unwrap().unwrap().frame, e);
     assert_eq!(driver.missed(), 0);
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 #[test]
 fn absent_or_full_stations_miss_frames_and_the_sender_carries_on() {
-    let d = dir("missing");
+    let (_scratch, d) = dir("missing");
     let driver = HostBus::open(&d, Station::Driver, None).unwrap();
     let f = RawFrame::data(0x110, &[1]).unwrap();
     driver.send(&f).unwrap();
@@ -102,12 +104,11 @@ fn absent_or_full_stations_miss_frames_and_the_sender_carries_on() {
     if stim.queue_limit() >= Some(MIN_DGRAM_QLEN) {
         assert!(got >= 200, "{got}");
     }
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 #[test]
 fn a_stale_socket_is_replaced_a_live_one_refused_and_bad_datagrams_rejected() {
-    let d = dir("stale");
+    let (_scratch, d) = dir("stale");
     let first = HostBus::open(&d, Station::Stimulator, None).unwrap();
     let e = HostBus::open(&d, Station::Stimulator, None).unwrap_err();
     assert_eq!(e.kind(), io::ErrorKind::AddrInUse, "{e}");
@@ -129,7 +130,6 @@ fn a_stale_socket_is_replaced_a_live_one_refused_and_bad_datagrams_rejected() {
     assert_eq!(stim.recv().unwrap().unwrap().frame.payload(), &[2, 1]);
     drop(stim);
     assert!(!d.join("stimulator.sock").exists());
-    let _ = std::fs::remove_dir_all(&d);
 }
 
 /// As on SocketCAN (`CAN_RAW_RECV_OWN_MSGS` off), a station never hears its own frames,
@@ -139,7 +139,7 @@ fn a_stale_socket_is_replaced_a_live_one_refused_and_bad_datagrams_rejected() {
 /// someone else's (the intrusion detection, stim-driver/src/intrusion.rs).
 #[test]
 fn a_station_never_hears_itself_and_hears_every_other_sender() {
-    let d = dir("own");
+    let (_scratch, d) = dir("own");
     let driver = HostBus::open(&d, Station::Driver, None).unwrap();
     let stim = HostBus::open(&d, Station::Stimulator, None).unwrap();
     let tap = HostBus::open(&d, Station::Tap, None).unwrap();
@@ -161,5 +161,4 @@ fn a_station_never_hears_itself_and_hears_every_other_sender() {
         assert_eq!(driver.recv().unwrap().unwrap().frame, nmt_start);
     }
     assert_eq!(driver.recv().unwrap(), None);
-    let _ = std::fs::remove_dir_all(&d);
 }

@@ -72,8 +72,7 @@ fn interop(can: &CanEnv) {
     let phase = |what: &str| println!("[{:6.2} s] {what}", t0.elapsed().as_secs_f64());
     require_in_path("candump", "install can-utils (scripts/setup)");
     require_in_path("cansend", "install can-utils (scripts/setup)");
-    let dir = std::env::temp_dir().join(format!("fes-interop-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("interop");
     let log = dir.join("candump.log");
 
     // candump records the whole run; a first host frame proves it is listening.
@@ -234,5 +233,4 @@ fn interop(can: &CanEnv) {
         "cantools decoded all {} frames; last STATUS: {last}",
         lines.len()
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

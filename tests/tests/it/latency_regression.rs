@@ -26,9 +26,10 @@ const BIN: &str = env!("CARGO_BIN_EXE_latency-regression");
 
 /// Runs the suite: its exit code and its report (stdout, then the lines of stderr that
 /// are not log records). The processes' log records (thousands of lines on a long run)
-/// go to a file named in the text, so that a failed assertion shows its reason and the
-/// report, not a screenful of logs.
-fn run(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
+/// go to a file in `log_dir` (the test's scratch directory, kept when the test fails)
+/// named in the text, so that a failed assertion shows its reason and the report, not a
+/// screenful of logs.
+fn run(log_dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
     static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let mut cmd = Command::new(BIN);
     cmd.args(args).env_remove("FES_TEST_TICK_BUSY_US");
@@ -53,10 +54,7 @@ fn run(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
         text.push('\n');
     }
     let n = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let log_path = std::env::temp_dir().join(format!(
-        "latency-regression-test-{}-{n}.log",
-        std::process::id()
-    ));
+    let log_path = log_dir.join(format!("latency-regression-{n}.log"));
     std::fs::write(&log_path, logs.join("\n")).expect("write the run's log");
     text.push_str(&format!(
         "({} log records in {})\n",
@@ -150,8 +148,9 @@ fn write_summary(dir: &Path, name: &str, no_load: Figures, load: Option<Figures>
     path
 }
 
-fn compare(summary: &Path, baseline: &Path) -> (Option<i32>, String) {
+fn compare(dir: &Path, summary: &Path, baseline: &Path) -> (Option<i32>, String) {
     run(
+        dir,
         &[
             "--compare",
             &summary.display().to_string(),
@@ -186,7 +185,7 @@ fn the_gate_applies_the_stated_tolerance() {
         ..at_limits
     };
     let s = write_summary(dir, "at-limits", at_limits, Some(load_at_limits));
-    let (code, out) = compare(&s, &baseline);
+    let (code, out) = compare(dir, &s, &baseline);
     assert_eq!(code, Some(0), "every value at its limit passes:\n{out}");
     assert!(out.contains("PASS"), "{out}");
     assert_eq!(out.matches(" ok").count(), 12, "6 checks x 2 conditions");
@@ -237,7 +236,7 @@ fn the_gate_applies_the_stated_tolerance() {
     ];
     for (i, (name, figures)) in over.into_iter().enumerate() {
         let s = write_summary(dir, &format!("over-{i}"), figures, Some(GOOD));
-        let (code, out) = compare(&s, &baseline);
+        let (code, out) = compare(dir, &s, &baseline);
         assert_eq!(code, Some(1), "{name} just over its limit fails:\n{out}");
         assert!(
             !out.contains("error:"),
@@ -258,14 +257,14 @@ fn the_gate_applies_the_stated_tolerance() {
             ..GOOD
         }),
     );
-    let (code, out) = compare(&s, &baseline);
+    let (code, out) = compare(dir, &s, &baseline);
     assert_eq!(code, Some(1), "{out}");
     assert!(out.contains("FAIL: regressed: load.ratio_p99\n"), "{out}");
 
     // With too few samples beyond p99.9 (1 < 2) the p99.9 ratio is not judged.
     let strict_tail = write_baseline(dir, 1.5, true, 2);
     let s = write_summary(dir, "tail", over[1].1, Some(GOOD));
-    let (code, out) = compare(&s, &strict_tail);
+    let (code, out) = compare(dir, &s, &strict_tail);
     assert_eq!(code, Some(0), "{out}");
     assert_eq!(
         out.matches("not judged (too few tail samples)").count(),
@@ -292,20 +291,20 @@ fn the_gate_applies_the_stated_tolerance() {
     );
     let s = dir.join("rounds.json");
     std::fs::write(&s, text).expect("rewrite");
-    let (code, out) = compare(&s, &baseline);
+    let (code, out) = compare(dir, &s, &baseline);
     assert_eq!(code, Some(0), "{out}");
     assert!(out.contains("no_load  ratio_p99_rounds"), "{out}");
 
     // A baseline without the loaded condition cannot judge a loaded run.
     let no_load_only = write_baseline(dir, 1.5, false, 1);
     let s = write_summary(dir, "both", GOOD, Some(GOOD));
-    let (code, out) = compare(&s, &no_load_only);
+    let (code, out) = compare(dir, &s, &no_load_only);
     assert_eq!(code, Some(1), "{out}");
     assert!(out.contains("latency-regression: error:"), "{out}");
     assert!(out.contains("no 'load' condition"), "{out}");
     // A factor below 1 would fail the baseline's own run: refused, naming the key.
     let bad = write_baseline(dir, 0.9, true, 1);
-    let (code, out) = compare(&s, &bad);
+    let (code, out) = compare(dir, &s, &bad);
     assert_eq!(code, Some(1), "{out}");
     assert!(out.contains("latency-regression: error:"), "{out}");
     assert!(out.contains("tolerance.ratio_p99_factor = 0.9"), "{out}");
@@ -316,7 +315,7 @@ fn the_gate_applies_the_stated_tolerance() {
         1,
     );
     std::fs::write(&s, text).expect("rewrite");
-    let (code, out) = compare(&s, &baseline);
+    let (code, out) = compare(dir, &s, &baseline);
     assert_eq!(code, Some(1), "{out}");
     assert!(out.contains("latency-regression: error:"), "{out}");
     assert!(out.contains("no cyclictest comparison"), "{out}");
@@ -379,7 +378,7 @@ mod timing {
         args.extend(["--seconds", "5", "--json"].map(str::to_owned));
         args.push(json.display().to_string());
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (code, out) = run(&args, &[]);
+        let (code, out) = run(scratch.path(), &args, &[]);
         assert_eq!(
             code,
             Some(0),
@@ -467,7 +466,7 @@ mod timing {
         let mut args = common(&slow_dir);
         args.extend(["--seconds", "2", "--no-load", "--probe-core", "0"].map(str::to_owned));
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (code, out) = run(&args, &[("FES_TEST_TICK_BUSY_US", "1100")]);
+        let (code, out) = run(scratch.path(), &args, &[("FES_TEST_TICK_BUSY_US", "1100")]);
         assert_eq!(code, Some(1), "a slowed loop is a regression:\n{out}");
         let failed = out
             .lines()

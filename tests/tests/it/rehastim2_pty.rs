@@ -73,10 +73,10 @@ struct Run {
 /// after the client ends, lets the device run `after` more, stops it and reads its log.
 fn run(name: &str, mode: &str, after: Duration) -> Run {
     let python = peer_python();
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("rehastim2-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new_in(
+        Path::new(env!("CARGO_TARGET_TMPDIR")),
+        &format!("rehastim2-{name}"),
+    );
     let args = Rehastim2Args {
         pty_link: dir.join("ttyRehaStim2"),
         pulse_log: Some(dir.join("pulses.csv")),
@@ -139,7 +139,6 @@ fn run(name: &str, mode: &str, after: Duration) -> Run {
         summary.pulses,
         rows.iter().filter(|r| r.event == "pulse").count() as u64
     );
-    std::fs::remove_dir_all(&dir).unwrap();
     Run {
         client,
         stdout,

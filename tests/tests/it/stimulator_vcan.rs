@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 
 use common::*;
 use fes_can::{ErrorCode, NmtCommand, StimLimits, StimState};
+use fes_testkit::Scratch;
 use fes_testkit::bus::{HeartbeatSender, HostPort, Tap};
 use fes_testkit::vcan::{Backend, CanEnv, with_vcan};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
@@ -44,7 +45,8 @@ fn session(can: &CanEnv) {
     };
     let tap = Tap::open(&can.iface).expect("open the tap");
     let mut host = HostPort::open(&can.iface).expect("open the host port");
-    let record = std::env::temp_dir().join(format!("stim-session-{}.csv", std::process::id()));
+    let dir = Scratch::new("stim-session");
+    let record = dir.join("stim-session.csv");
     let watchdog = watchdog_ms.to_string();
     let stim = StimProcess::spawn(
         &can.iface,
@@ -399,7 +401,6 @@ fn session(can: &CanEnv) {
         "FORCE: {} frames, no sequence gap; stimulator loop max wake-up lateness {max_late_us} us",
         all.len()
     );
-    let _ = std::fs::remove_file(&record);
 }
 
 /// The stimulator drives the physiological model (Ding fast preset) as well: no force at
@@ -410,7 +411,8 @@ fn ding_muscle_over_can() {
     with_vcan(|can| {
         let tap = Tap::open(&can.iface).expect("open the tap");
         let mut host = HostPort::open(&can.iface).expect("open the host port");
-        let record = std::env::temp_dir().join(format!("stim-ding-{}.csv", std::process::id()));
+        let dir = Scratch::new("stim-ding");
+        let record = dir.join("stim-ding.csv");
         let record_arg = record.to_str().expect("utf-8 temp dir").to_owned();
         let stim = StimProcess::spawn(
             &can.iface,
@@ -468,7 +470,6 @@ fn ding_muscle_over_can() {
         // pulses at the ticks the stimulator recorded, gives the force it published at
         // every tick (missed ticks included: the plant is advanced through them).
         let text = std::fs::read_to_string(&record).expect("the stimulator's record");
-        let _ = std::fs::remove_file(&record);
         let rows: Vec<Vec<&str>> = text
             .lines()
             .skip(1)

@@ -6,6 +6,7 @@ use crate::analysis_support;
 
 use analysis_support::*;
 use fes_model::model::simulate::{mse, simulate};
+use fes_testkit::control;
 
 /// `--format svg`: the analysis's figures are written as SVG (vector, for papers) under
 /// the same names, and no PNG is.

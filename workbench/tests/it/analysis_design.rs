@@ -3,9 +3,9 @@
 
 use crate::analysis_support;
 
-use analysis_support::control::fast_muscle;
 use analysis_support::*;
 use fes_model::model::lmn::LocalModelSet;
+use fes_testkit::control::fast_muscle;
 
 /// Thesis Table 6.1 (fast muscle): t_r (ms), p1, p2.
 const TABLE_6_1: [(f64, f64, f64); 6] = [

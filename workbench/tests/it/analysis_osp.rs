@@ -5,6 +5,7 @@
 use crate::analysis_support;
 
 use analysis_support::*;
+use fes_testkit::control;
 
 fn cell(h: &[String], rows: &[Vec<String>], subject: &str, pulses: usize, ipi: f64) -> f64 {
     let (s, p, i, f) = (

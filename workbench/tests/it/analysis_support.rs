@@ -1,7 +1,6 @@
 //! Helpers of the analysis CLI tests: temporary directories, running the binary, model and
 //! data-set fixtures (fes-ident's test fixtures, shared by path).
 
-pub(crate) use crate::control_support as control;
 #[path = "../../../crates/fes-ident/tests/it/analysis_support.rs"]
 pub mod fixtures;
 

@@ -23,6 +23,7 @@ use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
 use fes_dataset::DataSet;
 use fes_hostbus::{HostBus, RawFrame, Station};
 use fes_rt::rt::clock::monotonic_ns;
+use fes_testkit::Scratch;
 use fes_tests::stack::{StimRow, stack_binaries, stimulator_rows};
 use nix::sys::signal::Signal;
 use rand::{RngExt, SeedableRng};
@@ -42,7 +43,7 @@ const TIMING: ChainTiming = ChainTiming::Tolerant;
 
 struct Bench {
     stack: Stack,
-    dir: PathBuf,
+    dir: Scratch,
     _serial: std::sync::MutexGuard<'static, ()>,
 }
 
@@ -64,9 +65,7 @@ impl Bench {
         env: Vec<(&'static str, String, String)>,
     ) -> Self {
         let serial = stack_support::one_stack_at_a_time();
-        let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("stack directory");
+        let dir = Scratch::new(&format!("fi-{tag}"));
         prepare(&dir);
         let stack = stack_support::start_armed(
             tag,
@@ -128,7 +127,7 @@ impl Bench {
     /// and the exit codes.
     fn finish(self) -> Finished {
         let recordings = self.stack.recordings();
-        let dir = self.dir.clone();
+        let dir = self.dir;
         let exits = self.stack.stop(Duration::from_secs(5));
         let rows = stimulator_rows(&dir.join("stimulator.csv"));
         let run = recordings.last().expect("a recording run");
@@ -151,7 +150,8 @@ impl Bench {
         let logs = process_logs(&dir);
         let driver_trips = stack_support::driver_trips(&dir);
         let rt_core_log = std::fs::read_to_string(dir.join("rt-core.log")).unwrap_or_default();
-        let _ = std::fs::remove_dir_all(&dir);
+        // Everything the checks need is read: the directory goes now.
+        drop(dir);
         Finished {
             rows,
             samples,
@@ -1053,6 +1053,8 @@ fn full_disk_attempt(attempt: u32) -> Result<(), String> {
     let fault = status.fault.clone().unwrap_or_default();
     std::thread::sleep(Duration::from_millis(300));
     let done = bench.finish();
+    // The stack's scratch directory, which `finish` could not remove with the tmpfs
+    // mounted in it.
     let dir = mounted.0.parent().map(Path::to_path_buf);
     let cleanup = move || {
         drop(mounted);
@@ -1258,12 +1260,10 @@ fn start_unarmed(
     tag: &str,
     pulse_amplitude_ua: Option<u32>,
     env: Vec<(&'static str, String, String)>,
-) -> (Result<Stack, workbench::bench::BenchError>, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("fes-fi-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("stack directory");
+) -> (Result<Stack, workbench::bench::BenchError>, Scratch) {
+    let dir = Scratch::new(&format!("fi-{tag}"));
     let stack = Stack::start(workbench::bench::StackOptions {
-        dir: dir.clone(),
+        dir: dir.to_path_buf(),
         bin_dir: stack_binaries(),
         controller: fes_tests::stack::workspace_root().join("models/fast.lcn.json"),
         iface: format!("hostbus:{}", dir.join("bus").display()),
@@ -1321,7 +1321,6 @@ fn a_5x_amplitude_slip_in_rt_core_is_refused_before_any_pulse() {
             .all(|r| r.pulse.is_none() && !OPERATING.contains(&r.state.as_str())),
         "the stimulator was operated or applied a pulse\n{logs}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Issue 19, item 4: a stimulator that applies a looser limit than the CONFIG asked for (the
@@ -1362,5 +1361,4 @@ fn a_stimulator_that_applies_a_looser_limit_is_refused_at_arm() {
             .all(|r| r.pulse.is_none() && !OPERATING.contains(&r.state.as_str())),
         "the stimulator was operated or applied a pulse\n{logs}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

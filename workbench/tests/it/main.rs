@@ -5,8 +5,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;
-#[path = "../../../crates/fes-model/tests/it/control_support.rs"]
-mod control_support;
 mod stack_support;
 
 mod analysis_analyse;

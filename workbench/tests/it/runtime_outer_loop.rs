@@ -1,16 +1,15 @@
 //! The outer loop against a simulated plant: the Ding fast muscle with fatigue, driven by
 //! the pattern generator, all in process ([`workbench::simulation`]).
 //!
-//! The controller is rt-core's control fixture (a fast-muscle-like LMN, thesis Table 6.1
+//! The controller is the control tests' fixture (a fast-muscle-like LMN, thesis Table 6.1
 //! rise times), which is *not* fitted to the Ding muscle: the model mismatch is part of
 //! the test, as on a rig.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::control_support;
-
 use std::path::Path;
 
 use fes_model::control::file::{Controller, ControllerSettings};
+use fes_testkit::control;
 use sim_muscle::muscle::MuscleConfig;
 use sim_muscle::preset::Preset;
 use supervisor::contraction::ContractionSettings;
@@ -23,8 +22,8 @@ const TARGET: f64 = 0.3;
 
 fn controller() -> Controller {
     Controller::design(
-        control_support::fast_muscle(6),
-        &control_support::table_6_1_specs(6),
+        control::fast_muscle(6),
+        &control::table_6_1_specs(6),
         ControllerSettings::default(),
     )
     .expect("fixture controller")

@@ -438,8 +438,7 @@ fn kill_one(
     use supervisor::protocol::Command as Cmd;
     use workbench::bench::process_logs;
 
-    let dir = std::env::temp_dir().join(format!("fes-kill-{victim}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = tempdir(&format!("kill-{victim}"));
     let iface = iface.map_or_else(
         || format!("hostbus:{}", dir.join("bus").display()),
         str::to_owned,
@@ -464,7 +463,6 @@ fn kill_one(
     {
         let _ = stack.stop(Duration::from_secs(5));
         let trips = stack_support::driver_trips(&dir);
-        let _ = std::fs::remove_dir_all(&dir);
         return Err(format!("{trip}; driver: {trips}"));
     }
     assert_eq!(before.state, "armed", "{victim}: {before:?}");
@@ -574,7 +572,6 @@ fn kill_one(
         "kill {victim}: the data set holds {samples} samples in {} records",
         ds.records.len()
     );
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
 

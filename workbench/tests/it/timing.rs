@@ -11,11 +11,12 @@ use fes_tests::stack::{stack_binaries, workspace_root};
 /// three times.
 fn bench(tag: &str, args: &[&str]) -> serde_json::Value {
     let mut failures = Vec::new();
+    // A failed attempt's directory is kept with the test's failure.
+    let mut failed_dirs = Vec::new();
     for attempt in 1..=3 {
-        let dir =
-            std::env::temp_dir().join(format!("fes-bench-{tag}-{}-{attempt}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let json = dir.with_extension("json");
+        let scratch = fes_testkit::Scratch::new(&format!("bench-{tag}-{attempt}"));
+        let dir = scratch.join("out");
+        let json = scratch.join("out.json");
         let out = Command::new(env!("CARGO_BIN_EXE_fes"))
             .current_dir(workspace_root())
             .args(["bench", "--seconds", "30", "--out"])
@@ -27,17 +28,14 @@ fn bench(tag: &str, args: &[&str]) -> serde_json::Value {
             .output()
             .expect("run fes bench");
         if out.status.success() {
-            let v: serde_json::Value =
-                serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-            let _ = std::fs::remove_dir_all(&dir);
-            let _ = std::fs::remove_file(&json);
-            return v;
+            return serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         }
         failures.push(format!(
             "attempt {attempt}: {}\n{}",
             out.status,
             String::from_utf8_lossy(&out.stderr)
         ));
+        failed_dirs.push(scratch);
     }
     panic!(
         "fes bench {args:?} failed three times:\n{}",

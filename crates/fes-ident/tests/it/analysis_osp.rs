@@ -4,7 +4,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use super::analysis_support;
-use super::control_support;
 
 use analysis_support::*;
 use fes_ident::analysis::osp::iterative::iterative_method;
@@ -14,6 +13,7 @@ use fes_ident::analysis::osp::trains::{constant_ipi_train, train_surface};
 use fes_ident::analysis::osp::{Evaluator, ModelResponse, OspError, average_frequency};
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_model::model::lmn::LocalModelSet;
+use fes_testkit::control;
 
 /// The twitch FTI of a linear model is G Ts (the sum of the pulse response is the
 /// steady-state gain G = -c'A^-1 b, eq. A.18), to 1e-9 relative with the tail e^{-40 x 2}
@@ -151,10 +151,10 @@ fn methods_equal_direct_evaluation() {
 /// step there is no pulse.
 #[test]
 fn lcn_run_follows_a_step() {
-    let lmn = control_support::fast_muscle(6);
+    let lmn = control::fast_muscle(6);
     let c = Controller::design(
         lmn,
-        &control_support::table_6_1_specs(6),
+        &control::table_6_1_specs(6),
         ControllerSettings::default(),
     )
     .unwrap();

@@ -3,15 +3,13 @@
 //! and settling, gap and energy properties with the shaper on a muscle-like LMN.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use super::control_support;
-
-use control_support::{DELAY, TS, fast_muscle, fast_muscle_with_offsets, table_6_1_specs};
 use fes_model::control::design::augmented;
 use fes_model::control::design::plant_matrices;
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_model::control::lcn::AntiWindup;
 use fes_model::control::lcn_design::UnitSpec;
 use fes_model::control::pattern_generator::TickInput;
+use fes_testkit::control::{DELAY, TS, fast_muscle, fast_muscle_with_offsets, table_6_1_specs};
 use nalgebra::{Matrix3, RowVector3, Vector2, Vector3};
 
 fn controller(lmn: fes_model::model::Lmn, specs: &[UnitSpec]) -> Controller {

@@ -6,8 +6,9 @@ use super::dataset_support;
 
 use std::fs;
 
-use dataset_support::{Scratch, small_dataset};
+use dataset_support::small_dataset;
 use fes_dataset::{DataSet, FormatError, META_FILE, ReadError, WriteError, WriteMode};
+use fes_testkit::Scratch;
 
 /// Writes the small data set and returns the scratch dir holding it.
 fn written() -> Scratch {

@@ -6,8 +6,9 @@ use super::dataset_support;
 
 use std::path::Path;
 
-use dataset_support::{Scratch, small_dataset};
+use dataset_support::small_dataset;
 use fes_dataset::{DataSet, FORCE_SLACK, WriteMode, parse_record_csv};
+use fes_testkit::Scratch;
 use proptest::prelude::*;
 
 /// Checks the invariants of an accepted record.

@@ -326,12 +326,10 @@ fn every_bad_value_is_named_by_line_and_column() {
 fn an_import_writes_a_data_set_the_reader_accepts() {
     let text = table(&[2, 9], &[5]);
     let ds = run(&text, &opts()).unwrap();
-    let dir = std::env::temp_dir().join(format!("fes-import-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fes_testkit::Scratch::new("import");
     ds.write(&dir, fes_dataset::WriteMode::CreateNew).unwrap();
     let back = DataSet::read(&dir).unwrap();
     assert_eq!(back, ds);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A time in the wrong unit (ms read as s) makes a record of hours: refused by name

@@ -2,11 +2,12 @@
 //! continuous-valued inputs and outputs at any period, written and read back exactly;
 //! version 1 keeps its reader and opens through `read_any` as signals.
 
-use super::dataset_support::{Scratch, small_dataset};
+use super::dataset_support::small_dataset;
 use fes_dataset::signals::{
     AnyDataSet, Channel, SCHEMA_V2, SignalHeader, SignalRecord, SignalSet, read_any,
 };
 use fes_dataset::{DataSet, FormatError, ReadError, Split, WriteMode};
+use fes_testkit::Scratch;
 
 /// Two inputs (valve angle, heater voltage), one output, Ts = 50 ms: the heat-transfer
 /// process's shape (App. E.2).

@@ -1,40 +1,7 @@
-//! Helpers shared by the data-set tests: scratch directories and a small valid data set.
-
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+//! Helpers shared by the data-set tests: a small valid data set (their scratch directories
+//! are `fes_testkit::Scratch`).
 
 use fes_dataset::{DataSet, Header, Record, Split};
-
-/// A fresh, empty scratch directory, removed on drop.
-pub struct Scratch(pub PathBuf);
-
-impl Scratch {
-    /// A new directory under the system temp dir, unique per process and call.
-    pub fn new(tag: &str) -> Scratch {
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let n = N.fetch_add(1, Ordering::Relaxed);
-        let dir = std::env::temp_dir().join(format!("rt-core-{tag}-{}-{n}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("create scratch dir");
-        Scratch(dir)
-    }
-
-    /// Path of `name` inside it.
-    pub fn join(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-
-    /// The directory.
-    pub fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// Three records of five samples at 1 ms: two train, one test.
 pub fn small_dataset() -> DataSet {

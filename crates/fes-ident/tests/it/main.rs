@@ -5,8 +5,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod analysis_support;
-#[path = "../../../fes-model/tests/it/control_support.rs"]
-mod control_support;
 mod dataset_support;
 
 mod analysis_force_frequency;

@@ -39,10 +39,10 @@ fn load(doc: &Value) -> Result<Controller, ControllerFileError> {
 #[test]
 fn round_trip_through_a_file_keeps_everything() {
     let c = designed();
-    let path = std::env::temp_dir().join(format!("fes-lcn-roundtrip-{}.json", std::process::id()));
+    let dir = fes_testkit::Scratch::new("lcn-roundtrip");
+    let path = dir.join("lcn-roundtrip.json");
     c.save(&path).unwrap();
     let back = Controller::load(&path).unwrap();
-    std::fs::remove_file(&path).unwrap();
     // rt-core enables serde_json's `float_roundtrip`: every number reads back exactly.
     assert_eq!(back.units, c.units);
     assert_eq!(back.settings, c.settings);
@@ -235,6 +235,7 @@ fn mutated_files_are_rejected_or_load_a_valid_controller() {
     use proptest::{prop_assert, prop_assert_eq};
     use std::cell::RefCell;
 
+    let dir = fes_testkit::Scratch::new("controller-fuzz");
     let doc = document();
     let same = apply(
         &doc,
@@ -259,7 +260,7 @@ fn mutated_files_are_rejected_or_load_a_valid_controller() {
             Ok(text) => Controller::from_json_str(text),
             Err(_) => {
                 t.non_utf8 += 1;
-                let path = scratch_file("controller", &bytes);
+                let path = scratch_file(&dir, "controller", &bytes);
                 let r = Controller::load(&path);
                 if let Err(e) = &r {
                     let msg = e.to_string();
@@ -293,10 +294,6 @@ fn mutated_files_are_rejected_or_load_a_valid_controller() {
         t.rejected,
         t.non_utf8
     );
-    std::fs::remove_file(
-        std::env::temp_dir().join(format!("fuzz-controller-{}.json", std::process::id())),
-    )
-    .ok();
     result.unwrap();
     assert!(
         t.rejected > t.cases / 2,

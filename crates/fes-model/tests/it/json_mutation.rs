@@ -238,9 +238,9 @@ pub struct Tally {
     pub example: String,
 }
 
-/// Writes `bytes` to a scratch file unique to this process and target.
-pub fn scratch_file(target: &str, bytes: &[u8]) -> std::path::PathBuf {
-    let path = std::env::temp_dir().join(format!("fuzz-{target}-{}.json", std::process::id()));
+/// Writes `bytes` to the target's scratch file in `dir` (a `fes_testkit::Scratch`).
+pub fn scratch_file(dir: &std::path::Path, target: &str, bytes: &[u8]) -> std::path::PathBuf {
+    let path = dir.join(format!("fuzz-{target}.json"));
     std::fs::write(&path, bytes).expect("scratch file");
     path
 }

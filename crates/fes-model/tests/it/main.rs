@@ -6,6 +6,10 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 mod alloc_count;
+// The control tests' fixture, `fes_testkit::control`, compiled in here rather than linked:
+// these tests are part of this crate's own test build, and through fes-testkit they would
+// see a second fes-model, whose types are not this crate's.
+#[path = "../../../fes-testkit/src/control.rs"]
 mod control_support;
 mod json_mutation;
 

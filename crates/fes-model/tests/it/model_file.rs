@@ -201,8 +201,7 @@ fn try_sim(lmn: &Lmn) -> Result<Vec<f64>, String> {
 /// save -> load -> identical parameters and bit-identical simulation, for every structure.
 #[test]
 fn round_trip_gives_identical_simulation() {
-    let dir = std::env::temp_dir().join(format!("model_file_rt_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("model-file-rt");
     for (i, lmn) in all_structures().into_iter().enumerate() {
         lmn.validate(Stability::Require)
             .unwrap_or_else(|e| panic!("case {i}: {e}"));
@@ -213,7 +212,6 @@ fn round_trip_gives_identical_simulation() {
         assert_eq!(back, lmn, "case {i}");
         assert_eq!(sim(&back), sim(&lmn), "case {i}");
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// Applies `edit` to the JSON of a valid model and returns the loader's error message.
@@ -278,11 +276,11 @@ fn rejects_an_unstable_local_model() {
 /// The lenient loader opens the unstable model and reports it as data.
 #[test]
 fn lenient_loader_reports_instability() {
-    let path = std::env::temp_dir().join(format!("model_unstable_{}.lmn.json", std::process::id()));
+    let dir = fes_testkit::Scratch::new("model-unstable");
+    let path = dir.join("model_unstable.lmn.json");
     file::save(&table_5_3(true), &path).unwrap();
     assert!(file::load(&path).is_err());
     let (lmn, report) = file::load_allow_unstable(&path).unwrap();
-    std::fs::remove_file(&path).ok();
     assert_eq!(report.len(), 4);
     let unstable: Vec<_> = report
         .iter()
@@ -551,6 +549,7 @@ fn mutated_files_are_rejected_or_load_a_valid_model() {
     use proptest::test_runner::{Config, TestCaseError, TestRunner};
     use std::cell::RefCell;
 
+    let dir = fes_testkit::Scratch::new("model-fuzz");
     let docs: Vec<Value> = all_structures()
         .iter()
         .map(|l| serde_json::from_str(&file::to_json_string(l).unwrap()).unwrap())
@@ -582,7 +581,7 @@ fn mutated_files_are_rejected_or_load_a_valid_model() {
             Ok(text) => file::from_json_str(text, Stability::Require),
             Err(_) => {
                 t.non_utf8 += 1;
-                let path = scratch_file("model", &bytes);
+                let path = scratch_file(&dir, "model", &bytes);
                 let r = file::load(&path);
                 if let Err(e) = &r {
                     let msg = e.to_string();
@@ -623,10 +622,6 @@ fn mutated_files_are_rejected_or_load_a_valid_model() {
         t.non_finite,
         t.example
     );
-    std::fs::remove_file(
-        std::env::temp_dir().join(format!("fuzz-model-{}.json", std::process::id())),
-    )
-    .ok();
     result.unwrap();
     assert_eq!(
         t.non_finite, 0,

@@ -511,33 +511,21 @@ mod tests {
 
     /// A fake manager: a datagram socket the notifier sends to.
     struct FakeManager {
-        _dir: PathGuard,
+        _dir: fes_testkit::Scratch,
         socket: UnixDatagram,
         path: std::path::PathBuf,
     }
 
-    struct PathGuard(std::path::PathBuf);
-    impl Drop for PathGuard {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-
     impl FakeManager {
         fn new(tag: &str) -> Self {
-            let dir = std::env::temp_dir().join(format!(
-                "rt-notify-test-{}-{tag}-{}",
-                std::process::id(),
-                crate::rt::clock::monotonic_ns()
-            ));
-            std::fs::create_dir_all(&dir).unwrap();
+            let dir = fes_testkit::Scratch::new(&format!("rt-notify-{tag}"));
             let path = dir.join("notify");
             let socket = UnixDatagram::bind(&path).unwrap();
             socket
                 .set_read_timeout(Some(Duration::from_millis(50)))
                 .unwrap();
             Self {
-                _dir: PathGuard(dir),
+                _dir: dir,
                 socket,
                 path,
             }

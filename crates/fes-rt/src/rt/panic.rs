@@ -101,10 +101,8 @@ mod tests {
         if let Ok(marker) = std::env::var(CHILD) {
             child(&marker);
         }
-        let dir = std::env::temp_dir().join(format!("fes-rt-panic-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fes_testkit::Scratch::new("rt-panic");
         let marker = dir.join("safe-move");
-        let _ = std::fs::remove_file(&marker);
         let mut c = Command::new(std::env::current_exe().unwrap())
             .args([
                 "rt::panic::tests::a_blocked_stderr_delays_neither_the_safe_move_nor_the_abort",
@@ -131,7 +129,6 @@ mod tests {
             std::thread::sleep(Duration::from_millis(10));
         };
         let safe_move = std::fs::read_to_string(&marker).is_ok();
-        let _ = std::fs::remove_dir_all(&dir);
         let status = status.expect("the panicking child hung (its log write blocked)");
         assert_eq!(status.signal(), Some(libc::SIGABRT), "{status:?}");
         assert!(safe_move, "the safe move did not run");

@@ -702,8 +702,7 @@ pub fn driver_on_the_bus(can: &CanEnv) {
     let uml = can.backend == Backend::Uml;
     let pid = std::process::id();
     let prefix = format!("sdt{pid}");
-    let dir = std::env::temp_dir().join(format!("stim-driver-test-{pid}"));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fes_testkit::Scratch::new("stim-driver-test");
     let config = write_config(&dir, &can.iface, &prefix, &t);
     let log = dir.join("driver.log");
     let nodes = Nodes::DEFAULT;
@@ -1092,5 +1091,4 @@ pub fn driver_on_the_bus(can: &CanEnv) {
         summary.pulses_delivered, summary.missed_ticks
     );
     println!("{}", tail(&log));
-    let _ = std::fs::remove_dir_all(&dir);
 }

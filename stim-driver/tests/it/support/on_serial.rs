@@ -182,7 +182,8 @@ prefix = "{prefix}"
 
 /// The driver process, the device and an operator, the driver up and disarmed.
 pub struct Rig {
-    pub dir: PathBuf,
+    /// Removed (when the test passed) after the driver and the device are stopped.
+    _dir: fes_testkit::Scratch,
     pub prefix: String,
     pub device: Device,
     pub driver: Child,
@@ -236,9 +237,7 @@ impl Rig {
     fn start_device(name: &str, options: DeviceOptions) -> Self {
         let pid = std::process::id();
         let prefix = format!("sds{pid}{name}");
-        let dir = std::env::temp_dir().join(format!("stim-driver-serial-{name}-{pid}"));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fes_testkit::Scratch::new(&format!("stim-driver-serial-{name}"));
         let device = Device::start(&dir, options);
         let config = write_config(&dir, &device.link, &prefix, options.processing_ms > 0);
         let log = dir.join("driver.log");
@@ -260,7 +259,7 @@ impl Rig {
         })
         .unwrap_or_else(|| panic!("the driver did not come up disarmed\n{}", tail(&log)));
         Self {
-            dir,
+            _dir: dir,
             prefix,
             device,
             driver,
@@ -336,9 +335,6 @@ impl Drop for Rig {
         let _ = self.driver.kill();
         let _ = self.driver.wait();
         self.device.stop();
-        if !std::thread::panicking() {
-            let _ = std::fs::remove_dir_all(&self.dir);
-        }
     }
 }
 

@@ -25,14 +25,16 @@ struct FakeManager {
     socket: UnixDatagram,
     path: PathBuf,
     start: Instant,
+    /// Holds the socket; removed (when the test passed) after it is closed.
+    _dir: Scratch,
 }
 
 impl FakeManager {
     fn new(tag: &str) -> Self {
-        // sun_path holds at most 107 bytes: keep the socket in the (short) temp dir.
-        let path =
-            std::env::temp_dir().join(format!("fes-notify-{tag}-{}.sock", std::process::id()));
-        let _ = std::fs::remove_file(&path);
+        // sun_path holds at most 107 bytes: keep the socket in a scratch directory in the
+        // (short) temp dir, not in the target directory's.
+        let dir = Scratch::new(&format!("notify-{tag}"));
+        let path = dir.join("notify.sock");
         let socket = UnixDatagram::bind(&path).expect("bind the fake notify socket");
         socket
             .set_read_timeout(Some(Duration::from_millis(20)))
@@ -41,6 +43,7 @@ impl FakeManager {
             socket,
             path,
             start: Instant::now(),
+            _dir: dir,
         }
     }
 
@@ -72,12 +75,6 @@ impl FakeManager {
             }
         }
         out
-    }
-}
-
-impl Drop for FakeManager {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
     }
 }
 

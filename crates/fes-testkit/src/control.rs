@@ -1,5 +1,10 @@
-//! Shared fixtures of the control tests: muscle-like Local Model Networks built in code.
-#![allow(dead_code)] // shared by path: every includer (tests, benches, examples) uses a part
+//! The control tests' fixture (feature `control`): muscle-like Local Model Networks built
+//! in code, for the tests, benches and examples of fes-model, fes-ident, rt-core and the
+//! workbench.
+//!
+//! fes-model's own tests, which compile into its library's test binary, include this file
+//! by path instead (`crates/fes-model/tests/it/main.rs`): linked, it would give them a
+//! second fes-model whose types are not theirs. So it names fes-model only as `fes_model`.
 
 use fes_model::control::lcn_design::UnitSpec;
 use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance};
