@@ -58,6 +58,8 @@
 //! liveness_check_ms = 20         # how often the publishers' nodes are checked
 //! liveness_unknown_grace_ms = 200 # a publisher's liveness unknown for longer counts as dead
 //! supervisor_watch = true        # the supervisor's node dead or gone while armed -> NMT stop
+//! # supervisor_unit = "fes-supervisor.service" # the DriverCommand publisher must run in it
+//! # generator_unit = "fes-rt-core.service"     # the StimTick publisher must run in it
 //!
 //! [force]
 //! max_n = 40.0                   # required: the muscle's maximal force, normalises ForceSample
@@ -375,7 +377,7 @@ impl Default for InterlockConfig {
 
 /// `[watchdog]`. Defaults: 1 ms period, 3 ticks, 3 ticks, 100 ms, 100 ms, 100 ms, 20 ms,
 /// supervisor watched.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WatchdogConfig {
     /// rt-core's tick period, µs (100..=1000000).
@@ -402,6 +404,15 @@ pub struct WatchdogConfig {
     /// or gone trips the safe state, and an Arm is refused while it is seen dead. On by
     /// default: without the supervisor nobody watches health, records, or can stop.
     pub supervisor_watch: bool,
+    /// The systemd unit the DriverCommand publisher's process must run in (its cgroup):
+    /// a publisher elsewhere, a process of the same user that took the service after the
+    /// supervisor died, is foreign and counts as no supervisor. Absent: not checked (a
+    /// bench without systemd).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supervisor_unit: Option<String>,
+    /// The same for the StimTick publisher (rt-core).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator_unit: Option<String>,
 }
 
 impl Default for WatchdogConfig {
@@ -416,6 +427,8 @@ impl Default for WatchdogConfig {
             liveness_check_ms: 20,
             liveness_unknown_grace_ms: 200,
             supervisor_watch: true,
+            supervisor_unit: None,
+            generator_unit: None,
         }
     }
 }
@@ -804,6 +817,22 @@ impl DriverConfig {
             w.liveness_unknown_grace_ms,
             "1..=10000",
         )?;
+        for (key, unit) in [
+            ("watchdog.supervisor_unit", &w.supervisor_unit),
+            ("watchdog.generator_unit", &w.generator_unit),
+        ] {
+            if let Some(unit) = unit {
+                config_file::range(
+                    !unit.is_empty()
+                        && !unit.contains('/')
+                        && unit.contains('.')
+                        && unit.chars().all(|c| c.is_ascii_graphic()),
+                    key,
+                    unit,
+                    "a systemd unit name such as fes-supervisor.service",
+                )?;
+            }
+        }
         config_file::range(
             self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
             "force.max_n",
@@ -1051,6 +1080,9 @@ mod tests {
         expected.interlocks.max_charge_nc = 4000;
         // Stated, at the CAN default.
         expected.watchdog.stimulator_timeout_ms = Some(DEFAULT_STIMULATOR_TIMEOUT_MS);
+        // On the rig the publishers' processes must run in the stack's units.
+        expected.watchdog.supervisor_unit = Some("fes-supervisor.service".into());
+        expected.watchdog.generator_unit = Some("fes-rt-core.service".into());
         assert_eq!(rig, expected);
         let dose = fes_prescription::Prescription::parse(include_str!(
             "../../deploy/etc/fes/prescription.toml"

@@ -88,6 +88,9 @@ pub enum Liveness {
     Dead = 2,
     /// The service has no publisher.
     NoPublisher = 3,
+    /// Its publisher's process runs outside the systemd unit the configuration names
+    /// (`watchdog.supervisor_unit` / `generator_unit`): a squatter, never the real one.
+    Foreign = 4,
 }
 
 impl Liveness {
@@ -97,6 +100,7 @@ impl Liveness {
             1 => Liveness::Alive,
             2 => Liveness::Dead,
             3 => Liveness::NoPublisher,
+            4 => Liveness::Foreign,
             _ => Liveness::Unknown,
         }
     }

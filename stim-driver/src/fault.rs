@@ -96,6 +96,12 @@ pub enum Fault {
         /// The first limit that differs.
         field: &'static str,
     },
+    /// A publisher the driver follows runs outside the systemd unit its configuration
+    /// names ([`crate::liveness`]): a process of the same user that took the service.
+    ForeignPublisher {
+        /// The DriverCommand publisher (else the StimTick publisher).
+        supervisor: bool,
+    },
 }
 
 impl Fault {
@@ -122,6 +128,7 @@ impl Fault {
             Fault::Intrusion { .. } => DriverStatus::FAULT_INTRUSION,
             Fault::DeliveryMismatch { .. } => DriverStatus::FAULT_DELIVERY_MISMATCH,
             Fault::LimitsChanged { .. } => DriverStatus::FAULT_LIMITS_CHANGED,
+            Fault::ForeignPublisher { .. } => DriverStatus::FAULT_FOREIGN_PUBLISHER,
         }
     }
 
@@ -213,6 +220,20 @@ impl core::fmt::Display for Fault {
             Fault::LimitsChanged { field } => write!(
                 f,
                 "the stimulator now applies another {field} than the limits checked at the Arm (CONFIG_APPLIED)"
+            ),
+            Fault::ForeignPublisher { supervisor } => write!(
+                f,
+                "a foreign {} publisher: its process runs outside watchdog.{}_unit",
+                if supervisor {
+                    "DriverCommand"
+                } else {
+                    "StimTick"
+                },
+                if supervisor {
+                    "supervisor"
+                } else {
+                    "generator"
+                }
             ),
         }
     }
@@ -365,6 +386,7 @@ mod tests {
             Fault::LimitsChanged {
                 field: "max_amplitude",
             },
+            Fault::ForeignPublisher { supervisor: true },
         ];
         let mut codes: Vec<u16> = faults.iter().map(Fault::code).collect();
         assert!(codes.iter().all(|c| (0xFF21..=0xFF3F).contains(c)));

@@ -761,7 +761,7 @@ impl<T: CanTx> ForwardPath<T> {
         // The command itself proves a publisher existed when it was sent; a node seen
         // dead means it came from a sample its dead sender left behind.
         if s.supervisor_watch
-            && (self.supervisor == Liveness::Dead
+            && (matches!(self.supervisor, Liveness::Dead | Liveness::Foreign)
                 || unknown_too_long(self.supervisor_unknown_since, s, now_ns))
         {
             return Some(ArmRefusal::SupervisorDead);
@@ -1073,6 +1073,9 @@ impl<T: CanTx> ForwardPath<T> {
             match liveness {
                 Liveness::Dead => self.trip(Fault::PublisherDead, now_ns, ev),
                 Liveness::NoPublisher => self.trip(Fault::PublisherGone, now_ns, ev),
+                Liveness::Foreign => {
+                    self.trip(Fault::ForeignPublisher { supervisor: false }, now_ns, ev)
+                }
                 Liveness::Alive | Liveness::Unknown => {}
             }
         }
@@ -1104,6 +1107,9 @@ impl<T: CanTx> ForwardPath<T> {
             match liveness {
                 Liveness::Dead => self.trip(Fault::SupervisorDead, now_ns, ev),
                 Liveness::NoPublisher => self.trip(Fault::SupervisorGone, now_ns, ev),
+                Liveness::Foreign => {
+                    self.trip(Fault::ForeignPublisher { supervisor: true }, now_ns, ev)
+                }
                 Liveness::Alive | Liveness::Unknown => {}
             }
         }

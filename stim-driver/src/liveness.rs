@@ -10,8 +10,17 @@
 //! `try_remove_stale_resources`), which frees the service's single publisher slot for a
 //! restarted rt-core (or supervisor).
 //!
-//! With several publishers (only DriverCommand can have more than one), the service is
-//! alive when any publisher's node is alive, dead when none is alive and one is dead.
+//! With several publishers, the service is alive when any publisher's node is alive, dead
+//! when none is alive and one is dead.
+//!
+//! **Whose publisher.** Every service here admits one publisher, but once the real one is
+//! gone (its process killed) a process of the same user can take the slot and publish:
+//! alive, it would keep the driver armed after the supervisor's death. With a unit
+//! configured ([`LivenessMonitor::in_unit`]), a publisher counts only when its node's
+//! process (the pid iceoryx2's node id carries) runs in that systemd unit
+//! ([`fes_rt::rt::unit`]); any publisher outside it makes the service
+//! [`Liveness::Foreign`], which the forward path treats as no publisher: it trips and
+//! refuses an Arm (fail closed), whatever else is alive.
 //!
 //! This does file-system work, so it runs on the normal-priority report thread; the
 //! forward thread reads the outcome from an atomic.
@@ -32,6 +41,8 @@ const MAX_PUBLISHERS_CHECKED: usize = 8;
 pub struct LivenessMonitor<T: Contract> {
     service: PortFactory<ipc::Service, T, ()>,
     config: iceoryx2::config::Config,
+    /// The systemd unit every publisher's process must run in, if checked.
+    unit: Option<String>,
 }
 
 /// What one check found.
@@ -49,7 +60,15 @@ impl<T: Contract> LivenessMonitor<T> {
         Ok(Self {
             service: open_pubsub::<T>(node, prefix)?,
             config: node.config().clone(),
+            unit: None,
         })
+    }
+
+    /// Requires every publisher's process to run in systemd unit `unit` (`None`: not
+    /// checked).
+    pub fn in_unit(mut self, unit: Option<String>) -> Self {
+        self.unit = unit;
+        self
     }
 
     /// Looks at the publishers now (see the module documentation).
@@ -70,6 +89,12 @@ impl<T: Contract> LivenessMonitor<T> {
             cleaned_up: false,
         };
         for node_id in nodes.iter().flatten() {
+            if self.is_foreign(node_id) {
+                return LivenessCheck {
+                    liveness: Liveness::Foreign,
+                    cleaned_up: result.cleaned_up,
+                };
+            }
             let one = self.check_node(*node_id);
             result.cleaned_up |= one.cleaned_up;
             result.liveness = match (result.liveness, one.liveness) {
@@ -79,6 +104,22 @@ impl<T: Contract> LivenessMonitor<T> {
             };
         }
         result
+    }
+
+    /// A publisher whose live process runs outside the configured unit. A node whose
+    /// process is gone is not judged here: it is dead ([`Self::check_node`]).
+    fn is_foreign(&self, node_id: &iceoryx2::identifiers::UniqueNodeId) -> bool {
+        let Some(unit) = &self.unit else {
+            return false;
+        };
+        let Ok(pid) = node_id.pid::<ipc::Service>() else {
+            return true;
+        };
+        let Ok(pid) = u32::try_from(pid.value()) else {
+            return true;
+        };
+        let alive = std::path::Path::new("/proc").join(pid.to_string()).exists();
+        alive && !fes_rt::rt::unit::runs_in_unit(pid, unit)
     }
 
     fn check_node(&self, node_id: iceoryx2::identifiers::UniqueNodeId) -> LivenessCheck {

@@ -141,12 +141,18 @@ pub fn log_event(event: &DriverEvent) {
             Liveness::Unknown => warn!("supervisor liveness unknown"),
             Liveness::Dead => warn!("the supervisor's node is DEAD"),
             Liveness::NoPublisher => warn!("no supervisor (no DriverCommand publisher)"),
+            Liveness::Foreign => error!(
+                "the DriverCommand publisher runs outside watchdog.supervisor_unit: a FOREIGN publisher, not the supervisor"
+            ),
         },
         DriverEvent::Liveness(l) => match l {
             Liveness::Alive => info!("StimTick publisher alive"),
             Liveness::Unknown => warn!("StimTick publisher liveness unknown"),
             Liveness::Dead => warn!("StimTick publisher's node is DEAD"),
             Liveness::NoPublisher => warn!("no StimTick publisher"),
+            Liveness::Foreign => error!(
+                "the StimTick publisher runs outside watchdog.generator_unit: a FOREIGN publisher, not rt-core"
+            ),
         },
         DriverEvent::PulseLate {
             tick_seq,
@@ -203,8 +209,10 @@ pub fn run_report(
         status: port::publisher::<DriverStatus>(&node, prefix)?,
         timing: port::publisher::<TimingReport>(&node, prefix)?,
         outcome: port::publisher::<PulseOutcome>(&node, prefix)?,
-        generator: LivenessMonitor::<StimTick>::new(&node, prefix)?,
-        supervisor: LivenessMonitor::<DriverCommand>::new(&node, prefix)?,
+        generator: LivenessMonitor::<StimTick>::new(&node, prefix)?
+            .in_unit(config.watchdog.generator_unit.clone()),
+        supervisor: LivenessMonitor::<DriverCommand>::new(&node, prefix)?
+            .in_unit(config.watchdog.supervisor_unit.clone()),
     };
     let nodes: Nodes = config
         .nodes()

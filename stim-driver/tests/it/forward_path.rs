@@ -2004,3 +2004,27 @@ fn each_pulse_sent_is_accounted_applied_or_not_by_the_stimulator() {
         vec![(first, PulseFate::Applied), (second, PulseFate::NotApplied)]
     );
 }
+
+/// A foreign publisher (its process outside the configured unit) is no supervisor and no
+/// generator: armed, the driver trips with 0xFF33 naming which, and stops the stimulator;
+/// an Arm is refused while the supervisor's publisher is foreign.
+#[test]
+fn a_foreign_publisher_trips_and_blocks_the_arm() {
+    for supervisor in [true, false] {
+        let mut r = Rig::armed(settings());
+        r.bus.clear();
+        r.advance(MS);
+        if supervisor {
+            r.fp.on_supervisor_liveness(Liveness::Foreign, r.now, &mut r.ev);
+        } else {
+            r.fp.on_liveness(Liveness::Foreign, r.now, &mut r.ev);
+        }
+        let f = Fault::ForeignPublisher { supervisor };
+        assert_eq!(r.fault(), Some(f), "{:?}", r.ev);
+        assert_eq!(r.fp.counters().fault_code, 0xFF33);
+        assert_eq!(r.bus.nmt(), vec![(r.now, NmtCommand::Stop)]);
+        // Still foreign: an Arm is refused.
+        r.command(DriverCommandKind::Arm);
+        assert_ne!(r.fp.state(), DriverState::Armed, "{:?}", r.ev);
+    }
+}

@@ -252,11 +252,14 @@ impl DriverStatus {
     /// Driver fault: while armed, the stimulator read back (CONFIG_APPLIED) limits other
     /// than the ones checked at the Arm: what it enforces changed under the driver.
     pub const FAULT_LIMITS_CHANGED: u16 = 0xFF32;
+    /// Driver fault: the StimTick or DriverCommand publisher's process runs outside the
+    /// systemd unit the driver's configuration names (a squatter of the same user).
+    pub const FAULT_FOREIGN_PUBLISHER: u16 = 0xFF33;
 
     /// The driver's own fault codes (manufacturer-specific EMCY range 0xFF21..=0xFF3F),
     /// with their names: the contract between stim-driver, which reports them, and the
     /// supervisor, which names them (docs/stim-driver.md).
-    pub const DRIVER_FAULTS: [(u16, &'static str); 18] = [
+    pub const DRIVER_FAULTS: [(u16, &'static str); 19] = [
         (Self::FAULT_TICK_TIMEOUT, "tick_timeout"),
         (Self::FAULT_GENERATOR_DEAD, "generator_dead"),
         (Self::FAULT_GENERATOR_GONE, "generator_gone"),
@@ -278,6 +281,7 @@ impl DriverStatus {
         (Self::FAULT_INTRUSION, "intrusion"),
         (Self::FAULT_DELIVERY_MISMATCH, "delivery_mismatch"),
         (Self::FAULT_LIMITS_CHANGED, "limits_changed"),
+        (Self::FAULT_FOREIGN_PUBLISHER, "foreign_publisher"),
     ];
 
     /// The name of a driver fault code, if it is one.

@@ -19,6 +19,7 @@ pub mod probe;
 pub mod realtime;
 pub mod signals;
 pub mod telemetry;
+pub mod unit;
 
 pub use clock::{PeriodicClock, PeriodicSchedule, Wakeup, monotonic_ns};
 pub use config::{MissingRightsPolicy, RtConfig};

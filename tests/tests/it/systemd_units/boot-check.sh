@@ -85,6 +85,19 @@ done
 say supervisor-restarts "$(prop fes-supervisor NRestarts)"
 state up
 
+# Whose publishers: the rig's driver configuration names the units rt-core and the
+# supervisor must run in (watchdog.generator_unit, supervisor_unit); under systemd the
+# driver finds each publisher's process in its unit's cgroup and logs it alive, never
+# FOREIGN. journald writes late in the guest: wait up to 60 s for both lines.
+driver_log() { journalctl -b --no-pager -u fes-stim-driver.service; }
+end=$(($(now) + 60))
+until { driver_log | grep -q 'supervisor (DriverCommand publisher) alive' &&
+        driver_log | grep -q 'StimTick publisher alive'; } || [ "$(now)" -ge "$end" ]; do sleep 1; done
+say supervisor-cgroup "$(sed -n 's/^0:://p' "/proc/$(prop fes-supervisor MainPID)/cgroup")"
+say driver-sees-supervisor "$(driver_log | grep -c 'supervisor (DriverCommand publisher) alive')"
+say driver-sees-generator "$(driver_log | grep -c 'StimTick publisher alive')"
+say driver-foreign "$(driver_log | grep -c 'FOREIGN')"
+
 # The private bus: the CAN interface exists only in /run/netns/fes, which the driver and
 # the virtual stimulator joined (rt-core did not); the host's namespace has no such link.
 iface=$(sed -n 's/^FES_CAN_IFACE=//p' /etc/fes/can.env)

@@ -334,6 +334,28 @@ fn booted_units_start_in_order_and_stop_safely() {
     assert_eq!(rt, host, "rt-core stays in the host's namespace: {ns:?}");
     assert_eq!(r.value("start"), "0");
 
+    // Whose publishers (docs/stim-driver.md): the driver, told the units rt-core and the
+    // supervisor run in, finds both publishers' processes in them under systemd.
+    assert!(
+        r.value("supervisor-cgroup")
+            .ends_with("/fes-supervisor.service"),
+        "{r:#?}"
+    );
+    for key in ["driver-sees-supervisor", "driver-sees-generator"] {
+        assert!(
+            r.value(key).trim().parse::<u32>().unwrap_or(0) >= 1,
+            "{key}: {}\n{}",
+            r.value(key),
+            r.journal.join("\n")
+        );
+    }
+    assert_eq!(
+        r.value("driver-foreign").trim(),
+        "0",
+        "{}",
+        r.journal.join("\n")
+    );
+
     // Order: CAN -> stimulator, driver -> rt-core (after the driver's READY) -> supervisor.
     let t = |unit: &str, p: &str| r.mono("up", unit, p);
     let enter = "ActiveEnterTimestampMonotonic";
