@@ -23,7 +23,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossbeam::queue::ArrayQueue;
-use fes_can::{Message, MessageKind, NmtState, Nodes};
+use fes_can::{Force, Message, MessageKind, Nodes};
 use fes_hostbus::{self as hostbus, HostBus, Station};
 use fes_rt::msg::PortError;
 use fes_rt::msg::port;
@@ -31,6 +31,8 @@ use fes_rt::msg::service::ServiceError;
 use fes_rt::msg::{Contract, ForceSample};
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::node::create_node;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::ipc;
 use socketcan::errors::{CanError, ControllerProblems};
 use socketcan::{
     CanErrorFrame, CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions,
@@ -313,6 +315,47 @@ impl RxSocket {
     }
 }
 
+/// Republishes the stimulator's FORCE frames as [`ForceSample`]s, counting the frames the
+/// stimulator numbered but this socket never saw.
+struct ForceRepublisher {
+    publisher: Publisher<ipc::Service, ForceSample, ()>,
+    /// The last ForceSample's `seq`.
+    seq: u64,
+    /// The last FORCE frame's `seq`.
+    last_frame_seq: Option<u16>,
+}
+
+impl ForceRepublisher {
+    fn publish(&mut self, f: &Force, max_force_n: f64, stim_seq: u64, counters: &BusCounters) {
+        if let Some(last) = self.last_frame_seq {
+            let gap = f.seq.wrapping_sub(last).wrapping_sub(1);
+            if gap > 0 && gap < 0x8000 {
+                counters
+                    .forces_lost
+                    .fetch_add(u64::from(gap), Ordering::Relaxed);
+            }
+        }
+        self.last_frame_seq = Some(f.seq);
+        let force_n = f.force_n();
+        let sample = ForceSample {
+            seq: self.seq + 1,
+            t_ns: monotonic_ns(),
+            stim_seq,
+            force_n,
+            force: force_n / max_force_n,
+        };
+        if sample.validate().is_err() {
+            BusCounters::bump(&counters.forces_invalid);
+        } else if self.publisher.send_copy(sample).is_ok() {
+            self.seq += 1;
+            BusCounters::bump(&counters.forces_published);
+        } else {
+            self.seq += 1;
+            BusCounters::bump(&counters.publish_errors);
+        }
+    }
+}
+
 /// Runs the receive thread until `stop` is set. `on_ready` is called once the socket and
 /// the ForceSample publisher exist. `sent` is the log of the frames the forward thread
 /// writes ([`crate::intrusion`]).
@@ -338,8 +381,11 @@ pub fn run_bus(
     };
     let mut link_up = true;
     let mut next_link_check = 0u64;
-    let mut force_seq = 0u64;
-    let mut last_frame_seq: Option<u16> = None;
+    let mut forces = ForceRepublisher {
+        publisher,
+        seq: 0,
+        last_frame_seq: None,
+    };
     let mut streams = StimulatorStreams::new();
     while !stop.load(Ordering::Relaxed) {
         let now = monotonic_ns();
@@ -373,57 +419,16 @@ pub fn run_bus(
                     continue;
                 }
                 match settings.nodes.decode(u32::from(id), &data[..len]) {
-                    Ok(Message::Force(f)) if !streams.force(f.seq) => {
-                        // A second sender of FORCE: not published (the closed loop must
-                        // not act on it), and the driver trips.
-                        BusCounters::bump(&counters.intrusions);
-                        push(BusEvent::Intrusion {
-                            cob_id: id,
-                            kind: MessageKind::Force,
-                        });
-                    }
-                    Ok(Message::Status(st)) if !streams.status(st.counter) => {
-                        BusCounters::bump(&counters.intrusions);
-                        push(BusEvent::Intrusion {
-                            cob_id: id,
-                            kind: MessageKind::Status,
-                        });
-                    }
-                    Ok(Message::Force(f)) => {
-                        if let Some(last) = last_frame_seq {
-                            let gap = f.seq.wrapping_sub(last).wrapping_sub(1);
-                            if gap > 0 && gap < 0x8000 {
-                                counters
-                                    .forces_lost
-                                    .fetch_add(u64::from(gap), Ordering::Relaxed);
-                            }
-                        }
-                        last_frame_seq = Some(f.seq);
-                        let force_n = f.force_n();
-                        force_seq += 1;
-                        let sample = ForceSample {
-                            seq: force_seq,
-                            t_ns: monotonic_ns(),
-                            stim_seq: status.load().last_pulse_tick_seq,
-                            force_n,
-                            force: force_n / settings.max_force_n,
-                        };
-                        if sample.validate().is_err() {
-                            force_seq -= 1;
-                            BusCounters::bump(&counters.forces_invalid);
-                        } else if publisher.send_copy(sample).is_ok() {
-                            BusCounters::bump(&counters.forces_published);
-                        } else {
-                            BusCounters::bump(&counters.publish_errors);
-                        }
-                    }
                     Ok(message) => {
-                        if let Message::StimHeartbeat(h) = &message
-                            && h.state == NmtState::BootUp
-                        {
-                            streams.boot_up();
-                        }
-                        if let Some(event) = forward_event(&message) {
+                        if let Some(kind) = streams.judge(&message) {
+                            // A second sender of FORCE or STATUS: not published (the
+                            // closed loop must not act on it), and the driver trips.
+                            BusCounters::bump(&counters.intrusions);
+                            push(BusEvent::Intrusion { cob_id: id, kind });
+                        } else if let Message::Force(f) = message {
+                            let stim_seq = status.load().last_pulse_tick_seq;
+                            forces.publish(&f, settings.max_force_n, stim_seq, counters);
+                        } else if let Some(event) = forward_event(&message) {
                             push(event);
                         }
                     }

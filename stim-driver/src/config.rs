@@ -805,34 +805,7 @@ impl DriverConfig {
             w.command_max_age_ms,
             "1..=10000",
         )?;
-        config_file::range(
-            (1..=1000).contains(&w.liveness_check_ms),
-            "watchdog.liveness_check_ms",
-            w.liveness_check_ms,
-            "1..=1000",
-        )?;
-        config_file::range(
-            (1..=10_000).contains(&w.liveness_unknown_grace_ms),
-            "watchdog.liveness_unknown_grace_ms",
-            w.liveness_unknown_grace_ms,
-            "1..=10000",
-        )?;
-        for (key, unit) in [
-            ("watchdog.supervisor_unit", &w.supervisor_unit),
-            ("watchdog.generator_unit", &w.generator_unit),
-        ] {
-            if let Some(unit) = unit {
-                config_file::range(
-                    !unit.is_empty()
-                        && !unit.contains('/')
-                        && unit.contains('.')
-                        && unit.chars().all(|c| c.is_ascii_graphic()),
-                    key,
-                    unit,
-                    "a systemd unit name such as fes-supervisor.service",
-                )?;
-            }
-        }
+        validate_liveness(w)?;
         config_file::range(
             self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
             "force.max_n",
@@ -1041,6 +1014,40 @@ impl DriverConfig {
         // tables, arrays); serialisation of this type cannot fail.
         toml::to_string_pretty(self).expect("DriverConfig serialises to TOML")
     }
+}
+
+/// `[watchdog]`'s liveness keys: the check period, the grace of an unknown liveness, and
+/// the systemd units the publishers must run in.
+fn validate_liveness(w: &WatchdogConfig) -> Result<(), ConfigError> {
+    config_file::range(
+        (1..=1000).contains(&w.liveness_check_ms),
+        "watchdog.liveness_check_ms",
+        w.liveness_check_ms,
+        "1..=1000",
+    )?;
+    config_file::range(
+        (1..=10_000).contains(&w.liveness_unknown_grace_ms),
+        "watchdog.liveness_unknown_grace_ms",
+        w.liveness_unknown_grace_ms,
+        "1..=10000",
+    )?;
+    for (key, unit) in [
+        ("watchdog.supervisor_unit", &w.supervisor_unit),
+        ("watchdog.generator_unit", &w.generator_unit),
+    ] {
+        if let Some(unit) = unit {
+            config_file::range(
+                !unit.is_empty()
+                    && !unit.contains('/')
+                    && unit.contains('.')
+                    && unit.chars().all(|c| c.is_ascii_graphic()),
+                key,
+                unit,
+                "a systemd unit name such as fes-supervisor.service",
+            )?;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -249,6 +249,21 @@ impl StimulatorStreams {
         *self = Self::new();
     }
 
+    /// Judges one decoded frame of the stimulator: the kind of a FORCE or STATUS out of
+    /// its numbering (a second sender), else `None`; a boot-up heartbeat restarts both
+    /// numberings.
+    pub fn judge(&mut self, m: &fes_can::Message) -> Option<MessageKind> {
+        match m {
+            fes_can::Message::Force(f) if !self.force(f.seq) => Some(MessageKind::Force),
+            fes_can::Message::Status(s) if !self.status(s.counter) => Some(MessageKind::Status),
+            fes_can::Message::StimHeartbeat(h) if h.state == fes_can::NmtState::BootUp => {
+                self.boot_up();
+                None
+            }
+            _ => None,
+        }
+    }
+
     /// A FORCE frame numbered `seq`: `false` when it repeats or steps back.
     pub fn force(&mut self, seq: u16) -> bool {
         let in_step = self

@@ -71,6 +71,20 @@ pub fn driver_status(seq: u64, t_ns: u64, c: &Counters) -> DriverStatus {
     }
 }
 
+/// Logs a publisher's liveness: `who` is the publisher, `unit_key` the `[watchdog]` key
+/// naming the unit it must run in.
+fn log_liveness(who: &str, unit_key: &str, l: Liveness) {
+    match l {
+        Liveness::Alive => info!("{who} alive"),
+        Liveness::Unknown => warn!("{who}: liveness unknown"),
+        Liveness::Dead => warn!("{who}: its node is DEAD"),
+        Liveness::NoPublisher => warn!("no {who}"),
+        Liveness::Foreign => {
+            error!("{who}: runs outside watchdog.{unit_key}: a FOREIGN publisher, not the stack's")
+        }
+    }
+}
+
 /// Logs one event at its level (the per-tick timing events are not logged).
 pub fn log_event(event: &DriverEvent) {
     match *event {
@@ -136,24 +150,10 @@ pub fn log_event(event: &DriverEvent) {
             emcy.seq
         ),
         DriverEvent::Bus(bus) => warn!("bus: {bus:?}"),
-        DriverEvent::SupervisorLiveness(l) => match l {
-            Liveness::Alive => info!("supervisor (DriverCommand publisher) alive"),
-            Liveness::Unknown => warn!("supervisor liveness unknown"),
-            Liveness::Dead => warn!("the supervisor's node is DEAD"),
-            Liveness::NoPublisher => warn!("no supervisor (no DriverCommand publisher)"),
-            Liveness::Foreign => error!(
-                "the DriverCommand publisher runs outside watchdog.supervisor_unit: a FOREIGN publisher, not the supervisor"
-            ),
-        },
-        DriverEvent::Liveness(l) => match l {
-            Liveness::Alive => info!("StimTick publisher alive"),
-            Liveness::Unknown => warn!("StimTick publisher liveness unknown"),
-            Liveness::Dead => warn!("StimTick publisher's node is DEAD"),
-            Liveness::NoPublisher => warn!("no StimTick publisher"),
-            Liveness::Foreign => error!(
-                "the StimTick publisher runs outside watchdog.generator_unit: a FOREIGN publisher, not rt-core"
-            ),
-        },
+        DriverEvent::SupervisorLiveness(l) => {
+            log_liveness("supervisor (DriverCommand publisher)", "supervisor_unit", l);
+        }
+        DriverEvent::Liveness(l) => log_liveness("StimTick publisher", "generator_unit", l),
         DriverEvent::PulseLate {
             tick_seq,
             waited_ns,

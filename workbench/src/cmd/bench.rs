@@ -773,6 +773,35 @@ fn fmt(v: f64, digits: usize) -> String {
     }
 }
 
+/// The summary's pulse lines: decided, not sent, and the recording's decided / sent /
+/// applied ledger.
+fn print_pulses(s: &Summary) {
+    println!(
+        "  pulses decided             {} ({} per contraction), {} not sent by the driver (refused or late, {} %){}",
+        s.pulses,
+        fmt(s.pulses_per_contraction, 2),
+        s.pulses_not_sent,
+        fmt(
+            100.0 * s.pulses_not_sent as f64 / (s.pulses.max(1)) as f64,
+            1
+        ),
+        s.pulses_sent.map_or(String::new(), |p| format!(
+            "; stimulator driver sent {p} in all"
+        ))
+    );
+    if let Some(l) = &s.pulse_ledger {
+        let pct = |n: u64| fmt(100.0 * n as f64 / l.decided.max(1) as f64, 1);
+        println!(
+            "  pulse ledger (whole run)   {} decided, {} sent by the driver ({} %), {} applied by the stimulator ({} %)",
+            l.decided,
+            l.sent,
+            pct(l.sent),
+            l.applied,
+            pct(l.applied)
+        );
+    }
+}
+
 fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
     println!();
     println!(
@@ -800,30 +829,7 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
             fmt(s.worst_deviation_after_10_delivered * 100.0, 1)
         );
     }
-    println!(
-        "  pulses decided             {} ({} per contraction), {} not sent by the driver (refused or late, {} %){}",
-        s.pulses,
-        fmt(s.pulses_per_contraction, 2),
-        s.pulses_not_sent,
-        fmt(
-            100.0 * s.pulses_not_sent as f64 / (s.pulses.max(1)) as f64,
-            1
-        ),
-        s.pulses_sent.map_or(String::new(), |p| format!(
-            "; stimulator driver sent {p} in all"
-        ))
-    );
-    if let Some(l) = &s.pulse_ledger {
-        let pct = |n: u64| fmt(100.0 * n as f64 / l.decided.max(1) as f64, 1);
-        println!(
-            "  pulse ledger (whole run)   {} decided, {} sent by the driver ({} %), {} applied by the stimulator ({} %)",
-            l.decided,
-            l.sent,
-            pct(l.sent),
-            l.applied,
-            pct(l.applied)
-        );
-    }
+    print_pulses(s);
     if let Some(v) = &s.front {
         let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));
         let cheapest = v
