@@ -833,3 +833,36 @@ fn a_5x_amplitude_slip_is_refused_before_any_tick() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// rt-core refuses to start on an iceoryx2 root that others may write: in a private mount
+/// namespace `/tmp/iceoryx2` is a tmpfs of mode 0777, and rt-core exits non-zero naming
+/// the root and the mode, before it creates any service. Without the check it runs (and
+/// iceoryx2 would keep its bookkeeping there). Root only (a mount namespace); CI runs as
+/// root.
+#[test]
+fn rt_core_refuses_an_iceoryx2_root_others_may_write() {
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("SKIPPED: needs root (a private mount namespace)");
+        return;
+    }
+    let dir = Scratch::new("ipcroot");
+    let path = write_config(&dir, &config(&prefix("ipcroot"), 4));
+    let _ = std::fs::create_dir_all("/tmp/iceoryx2");
+    let out = Command::new("unshare")
+        .args(["--mount", "--propagation", "private", "sh", "-c"])
+        .arg(
+            "mount -t tmpfs -o mode=0777 fes-ipcroot-test /tmp/iceoryx2 && \
+             exec timeout 10 \"$0\" --config \"$1\"",
+        )
+        .arg(RT_CORE)
+        .arg(&path)
+        .output()
+        .expect("run unshare");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "rt-core ran: {stderr}");
+    assert!(
+        stderr.contains("iceoryx2's root /tmp/iceoryx2") && stderr.contains("mode 777"),
+        "{}: {stderr}",
+        out.status
+    );
+}

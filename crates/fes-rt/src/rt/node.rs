@@ -101,7 +101,11 @@ pub fn check_ipc_root(root: &std::path::Path, uid: u32) -> Result<(), RunError> 
             .create(root)
             .map_err(|e| refuse(root, format!("cannot be made: {e}")))?;
     }
-    for path in [root.to_path_buf(), root.join("nodes"), root.join("services")] {
+    for path in [
+        root.to_path_buf(),
+        root.join("nodes"),
+        root.join("services"),
+    ] {
         let meta = match std::fs::symlink_metadata(&path) {
             Ok(m) => m,
             Err(_) if path != root => continue,
@@ -150,7 +154,10 @@ mod tests {
         check_ipc_root(&root, uid).unwrap();
         std::fs::set_permissions(root.join("nodes"), std::fs::Permissions::from_mode(0o777))
             .unwrap();
-        let e = is_refused(check_ipc_root(&root, uid), "a world-writable nodes directory");
+        let e = is_refused(
+            check_ipc_root(&root, uid),
+            "a world-writable nodes directory",
+        );
         assert!(e.contains("nodes") && e.contains("mode 777"), "{e}");
         std::fs::set_permissions(root.join("nodes"), std::fs::Permissions::from_mode(0o750))
             .unwrap();
