@@ -523,17 +523,7 @@ impl Recorder {
 
     /// The driver's decision on the pulse of tick `seq`; forgets the decisions up to it.
     fn take_decision(&mut self, seq: u64) -> Option<PulseFate> {
-        let mut fate = None;
-        while let Some(&(s, f)) = self.pending_outcomes.front() {
-            if s > seq {
-                break;
-            }
-            self.pending_outcomes.pop_front();
-            if s == seq {
-                fate = Some(f);
-            }
-        }
-        fate
+        take_through(&mut self.pending_outcomes, seq)
     }
 
     /// The stimulator's account of the pulse of tick `seq` has arrived, or cannot arrive
@@ -544,17 +534,7 @@ impl Recorder {
 
     /// Whether the stimulator applied the pulse of tick `seq`; forgets the accounts up to it.
     fn take_applied(&mut self, seq: u64) -> bool {
-        let mut applied = false;
-        while let Some(&(s, a)) = self.pending_applied.front() {
-            if s > seq {
-                break;
-            }
-            self.pending_applied.pop_front();
-            if s == seq {
-                applied = a;
-            }
-        }
-        applied
+        take_through(&mut self.pending_applied, seq).unwrap_or(false)
     }
 
     /// Records a TimingReport.
@@ -910,6 +890,22 @@ impl Recorder {
             pulses_applied: self.pulses_applied,
         })
     }
+}
+
+/// The value queued for tick `seq` in a queue kept in tick order, forgetting every entry up
+/// to it (the driver's decisions, the stimulator's accounts).
+fn take_through<T: Copy>(queue: &mut VecDeque<(u64, T)>, seq: u64) -> Option<T> {
+    let mut found = None;
+    while let Some(&(s, v)) = queue.front() {
+        if s > seq {
+            break;
+        }
+        queue.pop_front();
+        if s == seq {
+            found = Some(v);
+        }
+    }
+    found
 }
 
 /// `YYYYMMDDTHHMMSSZ` of the current UTC time (run directory names).

@@ -3,8 +3,7 @@
 //! supervisor: it trips while armed and refuses an Arm. Without a unit (a bench) the same
 //! publisher is simply alive.
 
-use fes_rt::msg::port;
-use fes_rt::msg::{DriverCommand, StimTick};
+use fes_rt::msg::{Contract, DriverCommand, StimTick, port};
 use fes_rt::rt::node::create_node;
 use stim_driver::event::Liveness;
 use stim_driver::liveness::LivenessMonitor;
@@ -20,20 +19,8 @@ fn a_publisher_outside_the_configured_unit_is_foreign() {
     let _commands = port::publisher::<DriverCommand>(&node, &prefix).expect("publisher");
     let _ticks = port::publisher::<StimTick>(&node, &prefix).expect("publisher");
     let watcher = create_node("sdt-ident-watch").expect("node");
-    let supervisor = |unit: Option<&str>| {
-        LivenessMonitor::<DriverCommand>::new(&watcher, &prefix)
-            .expect("monitor")
-            .in_unit(unit.map(str::to_owned))
-            .check()
-            .liveness
-    };
-    let generator = |unit: Option<&str>| {
-        LivenessMonitor::<StimTick>::new(&watcher, &prefix)
-            .expect("monitor")
-            .in_unit(unit.map(str::to_owned))
-            .check()
-            .liveness
-    };
+    let supervisor = |unit| liveness::<DriverCommand>(&watcher, &prefix, unit);
+    let generator = |unit| liveness::<StimTick>(&watcher, &prefix, unit);
     assert_eq!(supervisor(None), Liveness::Alive, "no unit configured");
     assert_eq!(generator(None), Liveness::Alive, "no unit configured");
     assert_eq!(
@@ -50,4 +37,17 @@ fn a_publisher_outside_the_configured_unit_is_foreign() {
             "this process's cgroup {own:?} names no unit: the positive case is the boot test's"
         );
     }
+}
+
+/// The liveness of `T`'s publishers as a monitor requiring `unit` sees it.
+fn liveness<T: Contract>(
+    watcher: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+    prefix: &str,
+    unit: Option<&str>,
+) -> Liveness {
+    LivenessMonitor::<T>::new(watcher, prefix)
+        .expect("monitor")
+        .in_unit(unit.map(str::to_owned))
+        .check()
+        .liveness
 }
