@@ -28,7 +28,6 @@
 //! let decoded: Vec<_> = decoder.feed(&buf[..n]).collect();
 //! assert_eq!(decoded, [Ok(pulse)]);
 //! ```
-#![deny(missing_docs)]
 
 pub mod error;
 pub mod frame;

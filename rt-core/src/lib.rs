@@ -13,7 +13,6 @@
 //! real-time plumbing `fes-rt`'s (`fes_rt::{msg, rt}`), and every crate names the crate
 //! that defines what it uses. Identification, analysis and the data-set format live in
 //! `fes-ident`; nothing here links them.
-#![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
 pub mod rt;

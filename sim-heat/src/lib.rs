@@ -11,7 +11,6 @@
 //! - [`experiment`]: the four identification experiments of E.2 (fast and slow
 //!   pseudo-random, test-angle, test-voltage), the 2nd-order mean filter and the [0, 1]
 //!   normalisation.
-#![deny(missing_docs)]
 
 pub mod experiment;
 pub mod plant;

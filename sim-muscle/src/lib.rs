@@ -15,7 +15,6 @@
 //! - [`protocol`], [`recorder`]: the thesis recording protocol (5.1) producing data sets in
 //!   the `fes_dataset` format.
 //! - [`plot`]: records drawn like thesis Fig. 5.2.
-#![deny(missing_docs)]
 
 pub mod ding;
 pub mod lmn_plant;

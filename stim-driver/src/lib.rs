@@ -24,7 +24,6 @@
 //!   notification is rt-core's ([`fes_rt::rt::notify`]).
 //! - [`safe_stop`]: the `safe-stop` subcommand; [`probe`]: the `probe` subcommand (a
 //!   RehaStim 2's answer times).
-#![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
 pub mod applied;

@@ -13,7 +13,6 @@
 //! control protocol, the health rules, the supervisor state machine) take time as an
 //! argument and do no I/O, so they are tested without processes. The I/O parts are
 //! [`control`] (Unix socket), [`recording`] (files) and [`daemon`] (iceoryx2).
-#![deny(missing_docs)]
 
 pub mod cli;
 pub mod command_link;

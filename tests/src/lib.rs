@@ -6,7 +6,6 @@
 //! * [`cyclictest`]: running cyclictest and reading its histogram (the latency tools).
 //! * [`stack`]: building the four binaries and reading the virtual stimulator's record,
 //!   for tests that run the whole stack (`workbench::bench::Stack`).
-#![deny(missing_docs)]
 // A testkit: its helpers panic on a failed setup step by design (a failed test).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -3,7 +3,6 @@
 //! ([`summary`], [`baseline`], [`cft`]) and their figures ([`plots`]). It builds on the
 //! supervisor's pure parts (profiles, outer loop, protocol) and links the muscle simulator
 //! and plotting, which the safety daemon does not.
-#![deny(missing_docs)]
 
 pub mod baseline;
 pub mod bench;

@@ -10,7 +10,6 @@
 //! The equations are `fes_model`'s and the data-set format `fes_dataset`'s, named by those
 //! crates (nothing is re-exported). Nothing here runs in real time or talks to another
 //! process.
-#![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
 pub mod analysis;

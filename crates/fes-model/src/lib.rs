@@ -20,7 +20,6 @@
 //! `num::math`, nalgebra's through its `libm` feature), so results may differ from a `std`
 //! build in the last bits; a `std` build uses std's methods only.
 #![cfg_attr(not(feature = "std"), no_std)]
-#![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
 extern crate alloc;

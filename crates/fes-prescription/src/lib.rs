@@ -25,7 +25,6 @@
 //! `I * sqrt(2 * w * f) / A` (two phases per pulse, `f` = `max_pulses_per_s`), must not exceed
 //! IEC 60601-2-10's 2 mA/cm² attention level unless `current_density_acknowledged` says the
 //! prescriber has considered it.
-#![deny(missing_docs)]
 
 mod sha256;
 

@@ -1,7 +1,6 @@
 //! The real-time side shared by the processes of the stimulation chain: the iceoryx2
 //! message contracts ([`msg`]) and the real-time plumbing ([`rt`]). It links neither the
 //! numerics nor plotting, so the stimulator driver that depends on it does not either.
-#![deny(missing_docs)]
 #![deny(clippy::missing_safety_doc)]
 
 pub mod msg;
