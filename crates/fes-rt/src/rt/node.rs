@@ -66,6 +66,23 @@ pub enum RunError {
         /// This process's effective uid.
         uid: u32,
     },
+    /// iceoryx2's root directory could not be made or examined.
+    #[error(
+        "iceoryx2's root {}: {what}: {source}; refusing to use it (it must be a directory of \
+         this user, uid {uid}, that nobody else may write: systemd-tmpfiles makes it on a rig)",
+        path.display()
+    )]
+    IpcRootIo {
+        /// The directory.
+        path: std::path::PathBuf,
+        /// What was being done.
+        what: &'static str,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+        /// This process's effective uid.
+        uid: u32,
+    },
     /// The interval log could not be written.
     #[error(transparent)]
     Hlog(#[from] HlogError),
@@ -115,7 +132,12 @@ pub fn check_ipc_root(root: &std::path::Path, uid: u32) -> Result<(), RunError> 
             .recursive(true)
             .mode(0o700)
             .create(root)
-            .map_err(|e| refuse(root, format!("cannot be made: {e}")))?;
+            .map_err(|source| RunError::IpcRootIo {
+                path: root.to_path_buf(),
+                what: "cannot be made",
+                source,
+                uid,
+            })?;
     }
     for path in [
         root.to_path_buf(),
@@ -125,7 +147,14 @@ pub fn check_ipc_root(root: &std::path::Path, uid: u32) -> Result<(), RunError> 
         let meta = match std::fs::symlink_metadata(&path) {
             Ok(m) => m,
             Err(_) if path != root => continue,
-            Err(e) => return Err(refuse(&path, e.to_string())),
+            Err(source) => {
+                return Err(RunError::IpcRootIo {
+                    path,
+                    what: "cannot be examined",
+                    source,
+                    uid,
+                });
+            }
         };
         if !meta.file_type().is_dir() {
             return Err(refuse(&path, "not a directory (a link, or a file)".into()));
