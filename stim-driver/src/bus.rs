@@ -180,9 +180,9 @@ pub enum BusError {
     /// The ForceSample publisher could not be made.
     #[error(transparent)]
     Port(#[from] PortError),
-    /// iceoryx2 node or port.
+    /// The receive thread's iceoryx2 node could not be made.
     #[error("receive thread: {0}")]
-    Ipc(String),
+    Ipc(#[from] fes_rt::rt::node::RunError),
 }
 
 /// The message kinds the receive socket accepts: the stimulator's, and the driver's own
@@ -370,7 +370,7 @@ pub fn run_bus(
 ) -> Result<(), BusError> {
     let socket = open_socket(settings)?;
     let mut echoes = SentMatcher::new();
-    let node = create_node("stim-driver-bus").map_err(|e| BusError::Ipc(e.to_string()))?;
+    let node = create_node("stim-driver-bus")?;
     let publisher = port::publisher::<ForceSample>(&node, &settings.prefix)?;
     on_ready();
 

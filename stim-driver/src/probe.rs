@@ -157,7 +157,7 @@ impl Line {
         let mut buf = [0u8; MAX_PACKET_LEN];
         let n = packet
             .encode(&mut buf)
-            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
+            .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
         let mut written = 0;
         let deadline = Instant::now() + Duration::from_millis(100);
         while written < n {

@@ -214,9 +214,7 @@ pub fn run_report(
         supervisor: LivenessMonitor::<DriverCommand>::new(&node, prefix)?
             .in_unit(config.watchdog.supervisor_unit.clone()),
     };
-    let nodes: Nodes = config
-        .nodes()
-        .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
+    let nodes: Nodes = config.nodes().map_err(|e| RunError::Config(Box::new(e)))?;
     on_ready();
     let mut reporter = Reporter::new(config, shared, ports, nodes, hlog, tx_stamps);
     let panic_at = test_panic_after().map(|after| Instant::now() + after);
@@ -444,7 +442,7 @@ impl<'a> Reporter<'a> {
                     self.interval_start,
                     now.saturating_sub(self.interval_start),
                 )
-                .map_err(|e| RunError::Node(format!("telemetry.hlog: {e}")))?;
+                .map_err(RunError::Hlog)?;
         }
         self.interval_start = now;
         self.report_seq += 1;

@@ -146,7 +146,7 @@ pub fn run_forward<T: CanTx>(
     let rt = enter_realtime(&config.rt)?;
     let settings = config
         .forward_settings()
-        .map_err(|e| RunError::Node(format!("configuration: {e}")))?;
+        .map_err(|e| RunError::Config(Box::new(e)))?;
     let prefix = config.ipc.prefix.as_str();
     let node = create_node(NODE_NAME)?;
     let ticks = port::subscriber::<StimTick>(&node, prefix)?;

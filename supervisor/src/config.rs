@@ -198,12 +198,13 @@ pub enum ConfigError {
         source: std::io::Error,
     },
     /// Not valid TOML or not the expected shape.
-    #[error("{path}: {message}")]
+    #[error("{path}: {source}")]
     Parse {
         /// File.
         path: PathBuf,
-        /// toml's message (names the key and line).
-        message: String,
+        /// toml's error (its message names the key and line).
+        #[source]
+        source: toml::de::Error,
     },
     /// A value out of range.
     #[error("{path}: {key}: {problem}")]
@@ -255,12 +256,12 @@ impl SupervisorConfig {
 
     /// Parses and validates TOML text (`path` only names the file in errors).
     pub fn from_toml(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        let parse = |message: String| ConfigError::Parse {
+        let parse = |source| ConfigError::Parse {
             path: path.to_path_buf(),
-            message,
+            source,
         };
         // Schema first, so a wrong file says so rather than complaining about a key.
-        let value: toml::Table = toml::from_str(text).map_err(|e| parse(e.to_string()))?;
+        let value: toml::Table = toml::from_str(text).map_err(parse)?;
         match value.get("schema").and_then(|v| v.as_str()) {
             Some(SCHEMA) => {}
             Some(other) => {
@@ -278,7 +279,7 @@ impl SupervisorConfig {
                 });
             }
         }
-        let cfg: Self = toml::from_str(text).map_err(|e| parse(e.to_string()))?;
+        let cfg: Self = toml::from_str(text).map_err(parse)?;
         cfg.validate()
             .map_err(|(key, problem)| ConfigError::Invalid {
                 path: path.to_path_buf(),

@@ -645,7 +645,7 @@ pub fn request(
         command,
     };
     let mut w = stream.try_clone()?;
-    let line = serde_json::to_string(&req).map_err(|e| ProtocolError::Malformed(e.to_string()))?;
+    let line = serde_json::to_string(&req).map_err(ProtocolError::Malformed)?;
     let sent = w
         .write_all(line.as_bytes())
         .and_then(|()| w.write_all(b"\n"))

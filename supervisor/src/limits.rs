@@ -64,9 +64,54 @@ pub enum Rejection {
         /// Limit.
         max_per_s: f64,
     },
-    /// Any other parameter outside its range.
-    #[error("{0}")]
-    Invalid(String),
+    /// A parameter outside its allowed interval.
+    #[error("{what} {value}{unit} is outside {allowed}{why}")]
+    Outside {
+        /// Which parameter.
+        what: String,
+        /// Its value.
+        value: f64,
+        /// Its unit with a leading space, or "".
+        unit: &'static str,
+        /// The allowed interval, e.g. `[60, 200]`.
+        allowed: String,
+        /// Why that interval, with a leading space, or "".
+        why: &'static str,
+    },
+    /// A time that does not increase from the previous point's.
+    #[error("{what} {value} does not increase (previous {previous})")]
+    NotIncreasing {
+        /// Which time.
+        what: String,
+        /// Its value, s.
+        value: f64,
+        /// The previous point's, s.
+        previous: f64,
+    },
+    /// A repeating ramp profile that does not end where it starts.
+    #[error("a repeating ramp profile must end where it starts (first force {first}, last {last})")]
+    RepeatGap {
+        /// The first point's force.
+        first: f64,
+        /// The last point's force.
+        last: f64,
+    },
+    /// A cardiac edge that takes longer than the shorter phase of the beat.
+    #[error(
+        "an edge of amplitude {amplitude} at {rate_per_s} /s takes {edge_ms:.1} ms, longer than the {phase} phase ({phase_ms:.1} ms): raise the edge rate or change the duty"
+    )]
+    EdgeTooLong {
+        /// The amplitude.
+        amplitude: f64,
+        /// The edge rate.
+        rate_per_s: f64,
+        /// The edge's duration, ms.
+        edge_ms: f64,
+        /// The shorter phase: "contraction" or "rest".
+        phase: &'static str,
+        /// Its duration, ms.
+        phase_ms: f64,
+    },
 }
 
 /// The configuration's limits are inconsistent.
@@ -138,9 +183,13 @@ impl ReferenceLimits {
             });
         }
         if rate <= 0.0 {
-            return Err(Rejection::Invalid(format!(
-                "{what} {rate} /s must be > 0 (the supervisor never steps the reference)"
-            )));
+            return Err(Rejection::Outside {
+                what: what.into(),
+                value: rate,
+                unit: " /s",
+                allowed: format!("(0, {}]", self.max_rate_per_s),
+                why: " (the supervisor never steps the reference)",
+            });
         }
         if rate > self.max_rate_per_s {
             return Err(Rejection::TooFast {
@@ -161,9 +210,13 @@ impl ReferenceLimits {
             });
         }
         if !(seconds > 0.0 && seconds <= 86_400.0) {
-            return Err(Rejection::Invalid(format!(
-                "{what} {seconds} s must be in (0, 86400]"
-            )));
+            return Err(Rejection::Outside {
+                what: what.into(),
+                value: seconds,
+                unit: " s",
+                allowed: "(0, 86400]".into(),
+                why: "",
+            });
         }
         Ok(())
     }

@@ -176,20 +176,22 @@ impl ProfileSpec {
                     }
                 }
                 if points[0].t_s != 0.0 {
-                    return Err(Rejection::Invalid(format!(
-                        "points[0].t_s is {}: the first point must be at t = 0",
-                        points[0].t_s
-                    )));
+                    return Err(Rejection::Outside {
+                        what: "points[0].t_s".into(),
+                        value: points[0].t_s,
+                        unit: " s",
+                        allowed: "[0, 0]".into(),
+                        why: " (the first point must be at t = 0)",
+                    });
                 }
                 for (i, w) in points.windows(2).enumerate() {
                     let dt = w[1].t_s - w[0].t_s;
                     if dt <= 0.0 {
-                        return Err(Rejection::Invalid(format!(
-                            "points[{}].t_s {} does not increase (previous {})",
-                            i + 1,
-                            w[1].t_s,
-                            w[0].t_s
-                        )));
+                        return Err(Rejection::NotIncreasing {
+                            what: format!("points[{}].t_s", i + 1),
+                            value: w[1].t_s,
+                            previous: w[0].t_s,
+                        });
                     }
                     ReferenceLimits::check_duration(&format!("points[{}].t_s", i + 1), w[1].t_s)?;
                     let slope = (w[1].force - w[0].force).abs() / dt;
@@ -203,10 +205,10 @@ impl ProfileSpec {
                 }
                 let (first, last) = (points[0], points[points.len() - 1]);
                 if *repeat && first.force != last.force {
-                    return Err(Rejection::Invalid(format!(
-                        "a repeating ramp profile must end where it starts (first force {}, last {})",
-                        first.force, last.force
-                    )));
+                    return Err(Rejection::RepeatGap {
+                        first: first.force,
+                        last: last.force,
+                    });
                 }
             }
             ProfileSpec::Cardiac(c) => c.validate(limits)?,
@@ -238,9 +240,13 @@ impl ProfileSpec {
 
 fn count(what: &str, n: usize, min: usize) -> Result<(), Rejection> {
     if n < min || n > MAX_POINTS {
-        return Err(Rejection::Invalid(format!(
-            "{what}: {n} given, {min}..={MAX_POINTS} allowed"
-        )));
+        return Err(Rejection::Outside {
+            what: format!("number of {what}"),
+            value: n as f64,
+            unit: "",
+            allowed: format!("{min}..={MAX_POINTS}"),
+            why: "",
+        });
     }
     Ok(())
 }
@@ -256,17 +262,23 @@ impl CardiacSpec {
     pub fn validate(&self, limits: &ReferenceLimits) -> Result<(), Rejection> {
         let (lo, hi) = HEART_RATE_BPM;
         if !self.bpm.is_finite() || !(lo..=hi).contains(&self.bpm) {
-            return Err(Rejection::Invalid(format!(
-                "heart rate {} beats/min is outside [{lo}, {hi}] (thesis 1.1: 1-3.3 Hz)",
-                self.bpm
-            )));
+            return Err(Rejection::Outside {
+                what: "heart rate".into(),
+                value: self.bpm,
+                unit: " beats/min",
+                allowed: format!("[{lo}, {hi}]"),
+                why: " (thesis 1.1: 1-3.3 Hz)",
+            });
         }
         let (lo, hi) = DUTY;
         if !self.duty.is_finite() || !(lo..=hi).contains(&self.duty) {
-            return Err(Rejection::Invalid(format!(
-                "duty {} is outside [{lo}, {hi}]",
-                self.duty
-            )));
+            return Err(Rejection::Outside {
+                what: "duty".into(),
+                value: self.duty,
+                unit: "",
+                allowed: format!("[{lo}, {hi}]"),
+                why: "",
+            });
         }
         limits.check_force("amplitude", self.amplitude)?;
         let rate = self.edge_rate(limits);
@@ -275,13 +287,13 @@ impl CardiacSpec {
         let on_s = self.on_ns() as f64 * 1e-9;
         let off_s = (self.period_ns() - self.on_ns()) as f64 * 1e-9;
         if edge_s > on_s.min(off_s) {
-            return Err(Rejection::Invalid(format!(
-                "an edge of amplitude {} at {rate} /s takes {:.1} ms, longer than the {} phase ({:.1} ms): raise the edge rate or change the duty",
-                self.amplitude,
-                edge_s * 1e3,
-                if on_s <= off_s { "contraction" } else { "rest" },
-                on_s.min(off_s) * 1e3
-            )));
+            return Err(Rejection::EdgeTooLong {
+                amplitude: self.amplitude,
+                rate_per_s: rate,
+                edge_ms: edge_s * 1e3,
+                phase: if on_s <= off_s { "contraction" } else { "rest" },
+                phase_ms: on_s.min(off_s) * 1e3,
+            });
         }
         Ok(())
     }
@@ -800,7 +812,10 @@ mod tests {
         let e = ProfileSpec::Cardiac(cardiac(250.0, 0.4, 0.3))
             .validate(&l)
             .unwrap_err();
-        assert!(e.to_string().contains("heart rate 250"), "{e}");
+        assert!(
+            matches!(&e, Rejection::Outside { what, value, .. } if what == "heart rate" && *value == 250.0),
+            "{e}"
+        );
         let e = ProfileSpec::Cardiac(cardiac(75.0, 0.4, f64::NAN))
             .validate(&l)
             .unwrap_err();
@@ -810,7 +825,10 @@ mod tests {
             ..cardiac(75.0, 0.4, 0.5)
         };
         let e = ProfileSpec::Cardiac(slow_edges).validate(&l).unwrap_err();
-        assert!(e.to_string().contains("takes 500.0 ms"), "{e}");
+        assert!(
+            matches!(e, Rejection::EdgeTooLong { edge_ms, .. } if (edge_ms - 500.0).abs() < 1e-9),
+            "{e}"
+        );
         let steep = ProfileSpec::Ramps {
             points: vec![
                 RampPoint {
@@ -834,6 +852,9 @@ mod tests {
         }
         .validate(&l)
         .unwrap_err();
-        assert!(e.to_string().contains("steps: 0 given"), "{e}");
+        assert!(
+            matches!(&e, Rejection::Outside { what, value, .. } if what == "number of steps" && *value == 0.0),
+            "{e}"
+        );
     }
 }

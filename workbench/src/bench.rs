@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command as Proc, Stdio};
 use std::time::{Duration, Instant};
 
-use fes_model::control::file::Controller;
+use fes_model::control::file::{Controller, ControllerFileError};
 
 use supervisor::control;
 use supervisor::profile::ProfileSpec;
@@ -33,16 +33,56 @@ pub enum BenchError {
     #[error("{0} not found: build the workspace first (cargo build --release --workspace)")]
     MissingBinary(PathBuf),
     /// The default controller could not be loaded.
-    #[error("controller {path}: {message}")]
+    #[error("controller {path}: {source}")]
     Controller {
         /// File.
         path: PathBuf,
         /// Why.
-        message: String,
+        #[source]
+        source: ControllerFileError,
     },
-    /// A process exited or never became ready.
-    #[error("{0}")]
-    Process(String),
+    /// The supervisor's control socket did not answer in time.
+    #[error("the supervisor's control socket {} did not answer; its log:\n{log}", socket.display())]
+    NoAnswer {
+        /// The socket.
+        socket: PathBuf,
+        /// The end of the supervisor's log.
+        log: String,
+    },
+    /// A process exited while the stack ran.
+    #[error("{name} exited unexpectedly; its log ({}):\n{tail}", log.display())]
+    Exited {
+        /// The process.
+        name: &'static str,
+        /// Its log file.
+        log: PathBuf,
+        /// The end of its log.
+        tail: String,
+    },
+    /// The supervisor's status answer carried no state.
+    #[error("status without state: {reason}")]
+    NoState {
+        /// The supervisor's error text, or "no reason given".
+        reason: String,
+    },
+    /// Some processes never became healthy in time.
+    #[error("the supervisor has not heard from every process: {}", waiting.join("; "))]
+    NotHealthy {
+        /// Each waiting process: name, state and detail.
+        waiting: Vec<String>,
+    },
+    /// No process of that name in the stack.
+    #[error("no process {0}")]
+    NoProcess(String),
+    /// A signal could not be sent.
+    #[error("kill {name}: {source}")]
+    Signal {
+        /// The process.
+        name: String,
+        /// The OS error.
+        #[source]
+        source: nix::errno::Errno,
+    },
     /// The supervisor refused a command.
     #[error("supervisor refused `{command}`: {reason}")]
     Refused {
@@ -282,9 +322,9 @@ impl Stack {
         std::fs::create_dir_all(d).map_err(io(format!("create {}", d.display())))?;
         check_binaries(&opts.bin_dir)?;
         let controller =
-            Controller::load(&opts.controller).map_err(|e| BenchError::Controller {
+            Controller::load(&opts.controller).map_err(|source| BenchError::Controller {
                 path: opts.controller.clone(),
-                message: e.to_string(),
+                source,
             })?;
         let scale_n = controller.lmn.force_scale_n;
         let delay = controller.lmn.delay;
@@ -349,11 +389,10 @@ impl Stack {
                 return Ok(());
             }
             if Instant::now() > deadline {
-                return Err(BenchError::Process(format!(
-                    "the supervisor's control socket {} did not answer; its log:\n{}",
-                    self.socket.display(),
-                    log_tail(&self.procs[3].log, 2000)
-                )));
+                return Err(BenchError::NoAnswer {
+                    socket: self.socket.clone(),
+                    log: log_tail(&self.procs[3].log, 2000),
+                });
             }
             std::thread::sleep(Duration::from_millis(100));
         }
@@ -392,12 +431,11 @@ impl Stack {
                         .is_some_and(|r| r.trim_start().starts_with('Z'))
                 })
             {
-                return Err(BenchError::Process(format!(
-                    "{} exited unexpectedly; its log ({}):\n{}",
-                    p.name,
-                    p.log.display(),
-                    log_tail(&p.log, 3000)
-                )));
+                return Err(BenchError::Exited {
+                    name: p.name,
+                    log: p.log.clone(),
+                    tail: log_tail(&p.log, 3000),
+                });
             }
         }
         Ok(())
@@ -464,11 +502,8 @@ impl Stack {
     /// The supervisor's status.
     pub fn status(&self) -> Result<Status, BenchError> {
         let r = self.command(Command::Status)?;
-        r.status.ok_or_else(|| {
-            BenchError::Process(format!(
-                "status without state: {}",
-                r.error.as_deref().unwrap_or("no reason given")
-            ))
+        r.status.ok_or_else(|| BenchError::NoState {
+            reason: r.error.as_deref().unwrap_or("no reason given").to_owned(),
         })
     }
 
@@ -488,10 +523,7 @@ impl Stack {
                     .filter(|p| p.state != ProcessState::Ok)
                     .map(|p| format!("{} {} {}", p.name, p.state, p.detail))
                     .collect();
-                return Err(BenchError::Process(format!(
-                    "the supervisor has not heard from every process: {}",
-                    waiting.join("; ")
-                )));
+                return Err(BenchError::NotHealthy { waiting });
             }
             std::thread::sleep(Duration::from_millis(200));
         }
@@ -501,9 +533,13 @@ impl Stack {
     pub fn signal(&self, name: &str, signal: nix::sys::signal::Signal) -> Result<(), BenchError> {
         let pid = self
             .pid(name)
-            .ok_or_else(|| BenchError::Process(format!("no process {name}")))?;
-        nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), signal)
-            .map_err(|e| BenchError::Process(format!("kill {name}: {e}")))
+            .ok_or_else(|| BenchError::NoProcess(name.to_owned()))?;
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), signal).map_err(|source| {
+            BenchError::Signal {
+                name: name.to_owned(),
+                source,
+            }
+        })
     }
 
     /// Stops every process: the supervisor first (it closes the recording), then rt-core,

@@ -95,13 +95,23 @@ pub enum PrescriptionError {
         /// Why.
         source: std::io::Error,
     },
+    /// Not UTF-8 text.
+    #[error("prescription{at}: {source}")]
+    Utf8 {
+        /// `" <path>"` or `""`.
+        at: String,
+        /// The decoding error.
+        #[source]
+        source: std::str::Utf8Error,
+    },
     /// Not TOML of this format.
-    #[error("prescription{at}: {message}")]
+    #[error("prescription{at}: {source}")]
     Parse {
         /// `" <path>"` or `""`.
         at: String,
-        /// The parser's message.
-        message: String,
+        /// The parser's error.
+        #[source]
+        source: toml::de::Error,
     },
     /// Another `format`.
     #[error("prescription{at}: format = {found:?}, this version reads {FORMAT:?}")]
@@ -285,13 +295,13 @@ impl Prescription {
 
     fn parse_bytes(bytes: &[u8], at: &str) -> Result<Self, PrescriptionError> {
         let sha256 = sha256_hex(bytes);
-        let text = std::str::from_utf8(bytes).map_err(|e| PrescriptionError::Parse {
+        let text = std::str::from_utf8(bytes).map_err(|source| PrescriptionError::Utf8 {
             at: at.to_owned(),
-            message: e.to_string(),
+            source,
         })?;
-        let f: File = toml::from_str(text).map_err(|e| PrescriptionError::Parse {
+        let f: File = toml::from_str(text).map_err(|source| PrescriptionError::Parse {
             at: at.to_owned(),
-            message: e.to_string(),
+            source,
         })?;
         if f.format != FORMAT {
             return Err(PrescriptionError::Format {

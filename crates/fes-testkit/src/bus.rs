@@ -214,7 +214,7 @@ fn write(socket: &CanSocket, f: &Frame) -> io::Result<()> {
 
 fn encode(m: &Message, nodes: &Nodes) -> io::Result<Frame> {
     m.encode_for(nodes)
-        .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))
+        .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))
 }
 
 /// The host's side of the protocol, for scripted tests.

@@ -117,20 +117,20 @@ impl LoopPorts {
     fn connect(&self) -> Result<(), RunError> {
         self.publisher
             .update_connections()
-            .map_err(|e| connect_err("StimTick publisher")(&e))?;
+            .map_err(connect_err("StimTick publisher"))?;
         self.references
             .update_connections()
-            .map_err(|e| connect_err("Reference subscriber")(&e))?;
+            .map_err(connect_err("Reference subscriber"))?;
         self.previews
             .update_connections()
-            .map_err(|e| connect_err("ReferencePreview subscriber")(&e))?;
+            .map_err(connect_err("ReferencePreview subscriber"))?;
         if let Some(n) = &self.notifier {
             n.update_connections()
-                .map_err(|e| connect_err("stim-tick notifier")(&e))?;
+                .map_err(connect_err("stim-tick notifier"))?;
         }
         if let Some(f) = &self.forces {
             f.update_connections()
-                .map_err(|e| connect_err("ForceSample subscriber")(&e))?;
+                .map_err(connect_err("ForceSample subscriber"))?;
         }
         Ok(())
     }

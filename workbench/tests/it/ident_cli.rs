@@ -504,7 +504,7 @@ fn bad_inputs_are_refused_with_clear_errors() {
                 "--out",
                 outp,
             ],
-            "order 5",
+            "ARX order = 5",
         ),
         (
             vec![

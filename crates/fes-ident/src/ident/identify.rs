@@ -21,7 +21,6 @@
 //!
 //! Time is passed in ([`Hooks::clock`]); rt-core never reads a clock itself.
 
-use super::IdentError;
 use super::gauge::fix_gauge;
 use super::knots::KnotMap;
 use super::lm::{LmOptions, LmReport, StopReason, levenberg_marquardt};
@@ -35,6 +34,7 @@ use super::regression::{Learning, fit_prediction};
 use super::resample::PulseShift;
 use super::start;
 use super::validation::{Validation, validate};
+use super::{IdentError, PREDICTION_NEEDS_ARX};
 use fes_model::model::lmn::{Lmn, LocalModelSet, Provenance, Structure};
 use fes_model::model::network::MAX_DELAY;
 use fes_model::model::params::ParamLayout;
@@ -156,52 +156,62 @@ impl Default for IdentOptions {
 impl IdentOptions {
     /// Checks every option; the error names it.
     pub fn validate(&self) -> Result<(), IdentError> {
-        let bad = |s: String| Err(IdentError::Option(s));
+        let bad = |option, value: &dyn std::fmt::Display, allowed: String| {
+            Err(IdentError::Option {
+                option,
+                value: value.to_string(),
+                allowed,
+            })
+        };
+        let conflict = |option, value: &str, with: String, rule| {
+            Err(IdentError::Conflict {
+                option,
+                value: value.into(),
+                with,
+                rule,
+            })
+        };
         if self.units == 0 || self.units > MAX_UNITS {
-            return bad(format!(
-                "units = {}: the number of units must be in 1..={MAX_UNITS} (1 = a single linear model)",
-                self.units
-            ));
+            let allowed = format!("in 1..={MAX_UNITS} (1 = a single linear model)");
+            return bad("units", &self.units, allowed);
         }
         if !(1..=3).contains(&self.arx_order) {
-            return bad(format!("ARX order {} is outside 1..=3", self.arx_order));
+            return bad("ARX order", &self.arx_order, "in 1..=3".into());
         }
         if self.ts_factor == 0 {
-            return bad("the model period must be a positive multiple of the data's period".into());
+            let allowed = "a positive multiple of the data's period".into();
+            return bad("the model period factor", &self.ts_factor, allowed);
         }
         if let Some(d) = self.delay
             && d > MAX_DELAY
         {
-            return bad(format!("delay {d} samples exceeds the maximum {MAX_DELAY}"));
+            return bad("delay", &d, format!("at most {MAX_DELAY} samples"));
         }
         if self.starts == 0 {
-            return bad("starts must be at least 1".into());
+            return bad("starts", &self.starts, "at least 1".into());
         }
         if self.mode == Mode::Prediction {
             if self.structure.is_state_space() {
-                return bad(format!(
-                    "prediction mode needs an ARX structure (arx-shift or arx-delta); {} has an unmeasured state (B.5): use simulation mode",
-                    self.structure
-                ));
+                let with = format!("structure {}", self.structure);
+                return conflict("mode", "prediction", with, PREDICTION_NEEDS_ARX);
             }
             if self.optimise_knots {
-                return bad("knot optimisation runs in simulation mode".into());
+                let rule = "knot optimisation runs in simulation mode";
+                return conflict("optimise_knots", "true", "mode prediction".into(), rule);
             }
         }
         if self.optimise_knots && self.knots == KnotLayout::Uniform {
-            return bad(
-                "knot optimisation moves the interior knots between clamped end knots: use the clamped layout"
-                    .into(),
-            );
+            let rule = "knot optimisation moves the interior knots between clamped end knots: \
+                        use the clamped layout";
+            return conflict("optimise_knots", "true", "knots uniform".into(), rule);
         }
         if !(self.prior.is_finite() && self.prior >= 0.0) {
-            return bad(format!("prior {} must be finite and >= 0", self.prior));
+            return bad("prior", &self.prior, "finite and >= 0".into());
         }
         let (lo, hi) = self.range;
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return bad(format!(
-                "scheduling range [{lo}, {hi}] must be finite with lo < hi"
-            ));
+            let range = format!("[{lo}, {hi}]");
+            return bad("scheduling range", &range, "finite with lo < hi".into());
         }
         Ok(())
     }

@@ -82,15 +82,8 @@ pub fn validity_weights(
     data: &ModelData,
 ) -> Result<Vec<Vec<Vec<f64>>>, ProblemError> {
     let m = template.units();
-    let scheduler = Scheduler::new(&template.scheduling, template.ts).map_err(|e| {
-        ProblemError::Param(
-            fes_model::model::lmn::LmnError::Invalid {
-                field: "scheduling".into(),
-                problem: e.to_string(),
-            }
-            .into(),
-        )
-    })?;
+    let scheduler = Scheduler::new(&template.scheduling, template.ts)
+        .map_err(|e| ProblemError::Param(fes_model::model::lmn::LmnError::Scheduling(e).into()))?;
     let units: Vec<ArxUnit<Dual<MAX_UNITS>>> = (0..m)
         .map(|i| {
             let mut u = ArxUnit::zero();

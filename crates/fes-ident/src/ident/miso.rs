@@ -56,8 +56,10 @@ pub fn records(
     let idx: Vec<usize> = inputs
         .iter()
         .map(|n| {
-            set.input_index(n)
-                .ok_or_else(|| IdentError::Option(format!("the data set has no input `{n}`")))
+            set.input_index(n).ok_or_else(|| IdentError::NoChannel {
+                kind: "input",
+                name: (*n).to_owned(),
+            })
         })
         .collect::<Result<_, _>>()?;
     let out = set
@@ -65,7 +67,10 @@ pub fn records(
         .outputs
         .iter()
         .position(|c| c.name == output)
-        .ok_or_else(|| IdentError::Option(format!("the data set has no output `{output}`")))?;
+        .ok_or_else(|| IdentError::NoChannel {
+            kind: "output",
+            name: output.to_owned(),
+        })?;
     let take = |list: &[usize]| {
         list.iter()
             .filter_map(|&i| set.records.get(i))
@@ -104,8 +109,7 @@ pub fn run(model: &MisoArx, r: &MisoRecord, horizon: Horizon) -> Result<Vec<f64>
     match horizon {
         Horizon::Simulation => model.simulate(&u, r.y[0], &mut yh),
         Horizon::Prediction => model.predict(&u, &r.y, &mut yh),
-    }
-    .map_err(|e| IdentError::Option(e.to_string()))?;
+    }?;
     Ok(yh)
 }
 
@@ -129,7 +133,10 @@ pub fn fit_prediction(
     for rec in recs {
         let u = rec.inputs();
         st.check_record(&u, rec.y.len())
-            .map_err(|e| IdentError::Option(format!("{}: {e}", rec.name)))?;
+            .map_err(|source| IdentError::MisoRecord {
+                record: rec.name.clone(),
+                source,
+            })?;
         for k in 0..rec.y.len() {
             for (i, p) in psis.iter_mut().enumerate() {
                 st.regressor(&u, &rec.y, k, i, &mut psi);
@@ -313,8 +320,7 @@ impl<'a> SimulationProblem<'a, MisoArx> {
         if let Some(d) = st.unit_delays.get(i) {
             st1.unit_delays = vec![d.clone()];
         }
-        let model = MisoArx::new(template.ts, st1, one, template.unit(i).to_vec())
-            .map_err(|e| IdentError::Option(e.to_string()))?;
+        let model = MisoArx::new(template.ts, st1, one, template.unit(i).to_vec())?;
         Ok(Self {
             model,
             recs,

@@ -47,6 +47,11 @@ pub use metrics::Metrics;
 pub use records::{IdentRecord, RecordSet, RecordsError, Undelivered};
 pub use regression::Learning;
 
+/// Why prediction mode refuses a state-space structure ([`IdentError::Conflict`]).
+pub(crate) const PREDICTION_NEEDS_ARX: &str = "prediction mode needs an ARX structure \
+     (arx-shift or arx-delta): a state-space network's state is not measured (B.5); use \
+     simulation mode";
+
 /// Why an identification failed. Every message names the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum IdentError {
@@ -56,9 +61,48 @@ pub enum IdentError {
     /// Down-sampling failed.
     #[error(transparent)]
     Resample(#[from] resample::ResampleError),
-    /// An option is invalid or the options do not fit together.
-    #[error("{0}")]
-    Option(String),
+    /// An option's value is outside what it allows.
+    #[error("{option} = {value}: must be {allowed}")]
+    Option {
+        /// The option.
+        option: &'static str,
+        /// Its value, as given.
+        value: String,
+        /// The values it allows.
+        allowed: String,
+    },
+    /// An option's value does not fit with another option.
+    #[error("{option} = {value} with {with}: {rule}")]
+    Conflict {
+        /// The option.
+        option: &'static str,
+        /// Its value, as given.
+        value: String,
+        /// The other option and its value.
+        with: String,
+        /// Why they do not fit together.
+        rule: &'static str,
+    },
+    /// The data set has no channel of that name.
+    #[error("the data set has no {kind} `{name}`")]
+    NoChannel {
+        /// `input` or `output`.
+        kind: &'static str,
+        /// The name asked for.
+        name: String,
+    },
+    /// A multi-input model could not be built or run.
+    #[error(transparent)]
+    Miso(#[from] fes_model::model::miso::MisoError),
+    /// A record does not fit the multi-input model's structure.
+    #[error("{record}: {source}")]
+    MisoRecord {
+        /// The record's name.
+        record: String,
+        /// Why.
+        #[source]
+        source: fes_model::model::miso::MisoError,
+    },
     /// A parameter vector does not define a model.
     #[error(transparent)]
     Param(#[from] fes_model::model::params::ParamError),

@@ -16,10 +16,10 @@
 //! information; with local learning it is given the unweighted (linear) fit instead and
 //! reported.
 
-use super::IdentError;
 use super::lsq::{self, DEFAULT_RCOND};
 use super::metrics::validity_weights;
 use super::problem::{Horizon, ModelData, Problem, ThetaMap};
+use super::{IdentError, PREDICTION_NEEDS_ARX};
 use fes_model::model::lmn::{Lmn, LocalModelSet};
 use fes_model::model::params::ParamLayout;
 use fes_model::model::validity::ValidityFunctions;
@@ -58,9 +58,12 @@ pub fn fit_prediction(
     learning: Learning,
 ) -> Result<(Vec<f64>, Vec<usize>), IdentError> {
     if template.structure().is_state_space() {
-        return Err(IdentError::Option(
-            "prediction mode needs an ARX structure (arx-shift or arx-delta): a state-space network's state is not measured (B.5)".into(),
-        ));
+        return Err(IdentError::Conflict {
+            option: "mode",
+            value: "prediction".into(),
+            with: format!("structure {}", template.structure()),
+            rule: PREDICTION_NEEDS_ARX,
+        });
     }
     let layout = ParamLayout::new(template);
     let theta_ref = layout.theta(template)?;

@@ -92,11 +92,11 @@ pub fn sweep(
     on_fit: &mut dyn FnMut(usize, &Identified),
 ) -> Result<Sweep, IdentError> {
     if units.is_empty() {
-        return Err(IdentError::Option(format!(
-            "the unit range {}..={} is empty",
-            units.start(),
-            units.end()
-        )));
+        return Err(IdentError::Option {
+            option: "unit range",
+            value: format!("{}..={}", units.start(), units.end()),
+            allowed: "non-empty".into(),
+        });
     }
     let mut rows = Vec::new();
     let mut models = Vec::new();

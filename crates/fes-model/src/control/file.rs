@@ -149,10 +149,13 @@ pub enum ControllerFileError {
     },
     /// The embedded model is invalid.
     #[error("model.{0}")]
-    Model(ModelFileError),
+    Model(#[source] ModelFileError),
     /// The embedded model cannot run.
     #[error("model: {0}")]
-    Network(LmnError),
+    Network(#[source] LmnError),
+    /// The pattern generator of the file's mode cannot be built.
+    #[error("mode: {0}")]
+    Mode(#[source] PatternGeneratorError),
     /// A field has an invalid value.
     #[error("{field}: {problem}")]
     Invalid {
@@ -400,8 +403,7 @@ impl Controller {
         }
         // Valid means runnable: the pattern generator of the file's mode must build (e.g.
         // the measured-force mode needs an input delay of at least one sample).
-        c.pattern_generator()
-            .map_err(|e| invalid("mode", e.to_string()))?;
+        c.pattern_generator().map_err(ControllerFileError::Mode)?;
         Ok(c)
     }
 }

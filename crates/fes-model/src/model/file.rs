@@ -21,9 +21,7 @@
 use super::arx::{ArxUnit, MAX_ARX_ORDER};
 #[cfg(feature = "std")]
 use super::lmn::UnitStability;
-use super::lmn::{
-    Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure, UnknownStructure,
-};
+use super::lmn::{Lmn, LmnError, LocalModelSet, Provenance, Stability, Structure};
 use super::local_model::{EigCommonUnit, EigLocalUnit, SsLocalModel};
 use super::scheduling::{SchedulingInput, SchedulingSpec};
 use super::validity::ValidityFunctions;
@@ -72,6 +70,23 @@ pub enum FileError {
     /// A field is missing or invalid (the message names it).
     #[error(transparent)]
     Invalid(#[from] LmnError),
+    /// A field is missing or of the wrong type, or the model cannot be encoded (`field`
+    /// is `(file)` for the top level, `(model)` when writing).
+    #[error("{field}: {source}")]
+    Json {
+        /// The field, e.g. `units[2].b`.
+        field: String,
+        /// serde_json's error.
+        #[source]
+        source: serde_json::Error,
+    },
+}
+
+fn json(field: &str) -> impl FnOnce(serde_json::Error) -> FileError + '_ {
+    move |source| FileError::Json {
+        field: field.into(),
+        source,
+    }
 }
 
 fn bad(field: impl Into<String>, problem: impl Into<String>) -> FileError {
@@ -132,7 +147,7 @@ pub fn to_json_string(lmn: &Lmn) -> Result<String, FileError> {
             doc(lmn, units.iter().map(|u| ArxDoc::new(u, *order, zo)), None)
         }
     }?;
-    serde_json::to_string_pretty(&value).map_err(|e| bad("(model)", e.to_string()))
+    serde_json::to_string_pretty(&value).map_err(json("(model)"))
 }
 
 /// The document of `lmn` with its units already converted, as a JSON value: written from
@@ -143,8 +158,7 @@ fn doc<U: Serialize>(
     units: impl Iterator<Item = U>,
     reference_unit: Option<usize>,
 ) -> Result<Value, FileError> {
-    serde_json::to_value(ModelDoc::new(lmn, units, reference_unit))
-        .map_err(|e| bad("(model)", e.to_string()))
+    serde_json::to_value(ModelDoc::new(lmn, units, reference_unit)).map_err(json("(model)"))
 }
 
 /// Parses and validates a model file's text.
@@ -160,10 +174,7 @@ pub fn from_json_str(text: &str, stability: Stability) -> Result<Lmn, FileError>
             ),
         ));
     }
-    let structure: Structure = head
-        .structure
-        .parse()
-        .map_err(|e: UnknownStructure| bad("structure", e.to_string()))?;
+    let structure: Structure = head.structure.parse().map_err(LmnError::Structure)?;
     let lmn = match structure {
         Structure::SsDirect => typed::<ModelDoc<SsDirectDoc>>(&root)?.into_lmn(),
         Structure::SsEigLocal => typed::<ModelDoc<EigLocalDoc>>(&root)?.into_lmn(),
@@ -205,7 +216,7 @@ fn typed<'a, T: Deserialize<'a>>(root: &'a Value) -> Result<T, FileError> {
         } else {
             e.path().to_string()
         };
-        bad(field, e.into_inner().to_string())
+        json(&field)(e.into_inner())
     })
 }
 
@@ -315,7 +326,7 @@ fn validity(
         ));
     }
     let knots: Vec<f64> = knots.iter().map(|k| k.0).collect();
-    ValidityFunctions::from_knots(&knots, order).map_err(|e| bad("knots", e.to_string()))
+    ValidityFunctions::from_knots(&knots, order).map_err(|e| LmnError::Knots(e).into())
 }
 
 /// `scheduling`: `kind` selects the form, whose numbers are the other fields. A struct with

@@ -197,6 +197,18 @@ pub enum LmnError {
         /// The poles, formatted.
         poles: String,
     },
+    /// The scheduling specification makes no scheduler at this Ts.
+    #[error("scheduling: {0}")]
+    Scheduling(#[source] crate::model::scheduling::SchedulingError),
+    /// The local models do not make a network, or it has no rest state.
+    #[error("units: {0}")]
+    Network(#[source] NetworkError),
+    /// The structure name is not one of [`Structure::ALL`]'s.
+    #[error("structure: {0}")]
+    Structure(#[source] UnknownStructure),
+    /// The knots make no validity functions.
+    #[error("knots: {0}")]
+    Knots(#[source] crate::model::validity::ValidityError),
 }
 
 /// Largest magnitude accepted for any local-model parameter: far above any identified value
@@ -346,7 +358,7 @@ impl Lmn {
     fn check_scheduling(&self) -> Result<(), LmnError> {
         Scheduler::new(&self.scheduling, self.ts)
             .map(|_| ())
-            .map_err(|e| invalid("scheduling", e.to_string()))
+            .map_err(LmnError::Scheduling)
     }
 
     /// The force scale is finite and > 0.
@@ -546,7 +558,7 @@ impl Lmn {
         self.network()?
             .rest_state()
             .map(|_| ())
-            .map_err(|e| invalid("units", e.to_string()))
+            .map_err(LmnError::Network)
     }
 
     /// Every local model is stable *and* so is their interpolation at every frozen
@@ -638,8 +650,7 @@ impl Lmn {
     /// The run-time network (validates without the stability requirement first).
     pub fn network(&self) -> Result<Network<f64>, LmnError> {
         self.validate(Stability::Report)?;
-        let scheduler = Scheduler::new(&self.scheduling, self.ts)
-            .map_err(|e| invalid("scheduling", e.to_string()))?;
+        let scheduler = Scheduler::new(&self.scheduling, self.ts).map_err(LmnError::Scheduling)?;
         let net = if let Some(units) = self.ss_units() {
             Network::state_space(self.ts, self.delay, self.validity, scheduler, &units)
         } else if let Some((n, units)) = self.arx_shift_units() {
@@ -647,6 +658,6 @@ impl Lmn {
         } else {
             return Err(invalid("units", "eigenvectors are parallel"));
         };
-        net.map_err(|e: NetworkError| invalid("units", e.to_string()))
+        net.map_err(LmnError::Network)
     }
 }

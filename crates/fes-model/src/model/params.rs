@@ -28,11 +28,7 @@ use super::network::Network;
 use super::scheduling::Scheduler;
 use super::validity::ValidityFunctions;
 use crate::num::Scalar;
-use alloc::{
-    format,
-    string::{String, ToString},
-    vec::Vec,
-};
+use alloc::{format, string::String, vec::Vec};
 
 /// Why theta could not be mapped.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -284,10 +280,7 @@ impl ParamLayout {
             Some(k) => ValidityFunctions::from_knots(k, lmn.validity.order())?,
             None => lmn.validity.cast(|_, k| S::from_f64(k)),
         };
-        let scheduler = Scheduler::new(&lmn.scheduling, lmn.ts).map_err(|e| LmnError::Invalid {
-            field: "scheduling".into(),
-            problem: e.to_string(),
-        })?;
+        let scheduler = Scheduler::new(&lmn.scheduling, lmn.ts).map_err(LmnError::Scheduling)?;
         let net = match self.structure {
             Structure::SsDirect => Network::state_space(
                 lmn.ts,

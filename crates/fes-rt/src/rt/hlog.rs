@@ -14,11 +14,10 @@ use std::time::{Duration, SystemTime};
 
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD as BASE64;
-use hdrhistogram::serialization::Deserializer;
-use hdrhistogram::serialization::V2Serializer;
 use hdrhistogram::serialization::interval_log::{
-    IntervalLogIterator, IntervalLogWriterBuilder, LogEntry, Tag,
+    IntervalLogIterator, IntervalLogWriterBuilder, IntervalLogWriterError, LogEntry, Tag,
 };
+use hdrhistogram::serialization::{DeserializeError, Deserializer, V2SerializeError, V2Serializer};
 
 use super::histogram::LatencyHistogram;
 
@@ -34,12 +33,13 @@ pub enum HlogError {
         source: io::Error,
     },
     /// A histogram could not be encoded.
-    #[error("{path}: cannot encode histogram: {detail}")]
+    #[error("{path}: cannot encode histogram: {source}")]
     Encode {
         /// The file.
         path: PathBuf,
         /// The cause.
-        detail: String,
+        #[source]
+        source: IntervalLogWriterError<V2SerializeError>,
     },
     /// A tag is not a valid interval-log tag (no `,`, space or newline allowed).
     #[error("invalid hlog tag {0:?}")]
@@ -51,8 +51,32 @@ pub enum HlogError {
         path: PathBuf,
         /// 1-based entry number.
         line: usize,
-        /// What is wrong.
+        /// What is wrong: the Debug text of hdrhistogram's `LogIteratorError`, which
+        /// implements neither `Display` nor `std::error::Error` and so cannot be kept as a
+        /// source.
         detail: String,
+    },
+    /// An interval's histogram is not valid base64.
+    #[error("{path}: line {line}: histogram is not valid base64: {source}")]
+    Base64 {
+        /// The file.
+        path: PathBuf,
+        /// 1-based entry number.
+        line: usize,
+        /// The cause.
+        #[source]
+        source: base64::DecodeError,
+    },
+    /// An interval's histogram cannot be decoded.
+    #[error("{path}: line {line}: cannot decode histogram: {source}")]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// 1-based entry number.
+        line: usize,
+        /// The cause.
+        #[source]
+        source: DeserializeError,
     },
 }
 
@@ -108,9 +132,9 @@ impl HlogWriter {
             })?;
         writer
             .write_histogram(hist.raw(), start, duration, Some(tag_value))
-            .map_err(|e| HlogError::Encode {
+            .map_err(|source| HlogError::Encode {
                 path: self.path.clone(),
-                detail: format!("{e:?}"),
+                source,
             })
     }
 
@@ -145,20 +169,26 @@ pub fn read_intervals(path: &Path) -> Result<Vec<HlogInterval>, HlogError> {
     let mut deserializer = Deserializer::new();
     let mut out = Vec::new();
     for (i, entry) in IntervalLogIterator::new(&bytes).enumerate() {
-        let parse = |detail: String| HlogError::Parse {
-            path: path.to_path_buf(),
-            line: i + 1,
-            detail,
-        };
-        match entry.map_err(|e| parse(format!("{e:?}")))? {
+        let (path, line) = (path.to_path_buf(), i + 1);
+        let entry = entry.map_err(|e| HlogError::Parse {
+            path: path.clone(),
+            line,
+            detail: format!("{e:?}"),
+        })?;
+        match entry {
             LogEntry::Interval(ilh) => {
                 let encoded = ilh.encoded_histogram();
-                let decoded = BASE64
-                    .decode(encoded.trim())
-                    .map_err(|e| parse(format!("histogram is not valid base64: {e}")))?;
+                let decoded =
+                    BASE64
+                        .decode(encoded.trim())
+                        .map_err(|source| HlogError::Base64 {
+                            path: path.clone(),
+                            line,
+                            source,
+                        })?;
                 let histogram: hdrhistogram::Histogram<u64> = deserializer
                     .deserialize(&mut &decoded[..])
-                    .map_err(|e| parse(format!("cannot decode histogram: {e:?}")))?;
+                    .map_err(|source| HlogError::Decode { path, line, source })?;
                 out.push(HlogInterval {
                     tag: ilh.tag().map(|t| t.as_str().to_owned()).unwrap_or_default(),
                     start: ilh.start_timestamp(),

@@ -1,6 +1,8 @@
 //! The iceoryx2 node of a real-time process and the failures of its real-time thread,
 //! shared by rt-core's loop and stim-driver's forward path.
 
+use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::port::update_connections::ConnectionFailure;
 use iceoryx2::prelude::*;
 
 use super::clock::PeriodError;
@@ -22,19 +24,33 @@ pub enum RunError {
     #[error(transparent)]
     Port(#[from] PortError),
     /// A port could not connect to its peers.
-    #[error("cannot connect the {port}: {detail}")]
+    #[error("cannot connect the {port}: {source}")]
     Connect {
         /// Which port.
         port: &'static str,
         /// iceoryx2's reason.
-        detail: String,
+        #[source]
+        source: ConnectionFailure,
     },
     /// The period is invalid.
     #[error(transparent)]
     Period(#[from] PeriodError),
+    /// The name is not a valid iceoryx2 node name.
+    #[error("cannot create the iceoryx2 node: invalid node name {name:?}: {source}")]
+    NodeName {
+        /// The name asked for.
+        name: String,
+        /// iceoryx2's reason.
+        #[source]
+        source: SemanticStringError,
+    },
     /// The iceoryx2 node could not be created.
     #[error("cannot create the iceoryx2 node: {0}")]
-    Node(String),
+    Node(#[source] NodeCreationFailure),
+    /// The process's configuration is not usable by the real-time thread (the
+    /// process's own configuration error, kept as the source).
+    #[error("configuration: {0}")]
+    Config(#[source] Box<dyn std::error::Error + Send + Sync>),
     /// iceoryx2's root directory is not this user's alone to write: another user could
     /// replace its services' bookkeeping.
     #[error(
@@ -50,23 +66,40 @@ pub enum RunError {
         /// This process's effective uid.
         uid: u32,
     },
+    /// iceoryx2's root directory could not be made or examined.
+    #[error(
+        "iceoryx2's root {}: {what}: {source}; refusing to use it (it must be a directory of \
+         this user, uid {uid}, that nobody else may write: systemd-tmpfiles makes it on a rig)",
+        path.display()
+    )]
+    IpcRootIo {
+        /// The directory.
+        path: std::path::PathBuf,
+        /// What was being done.
+        what: &'static str,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+        /// This process's effective uid.
+        uid: u32,
+    },
     /// The interval log could not be written.
     #[error(transparent)]
     Hlog(#[from] HlogError),
 }
 
 /// A map from an iceoryx2 connection error to [`RunError::Connect`] naming the port.
-pub fn connect_err(port: &'static str) -> impl Fn(&dyn std::fmt::Debug) -> RunError {
-    move |e| RunError::Connect {
-        port,
-        detail: format!("{e:?}"),
-    }
+pub fn connect_err(port: &'static str) -> impl Fn(ConnectionFailure) -> RunError {
+    move |source| RunError::Connect { port, source }
 }
 
 /// Creates an iceoryx2 node named `name` with iceoryx2's own signal handling disabled (the
 /// process installs [`super::signals::install_stop_handler`]).
 pub fn create_node(name: &str) -> Result<Node<ipc::Service>, RunError> {
-    let node_name = NodeName::new(name).map_err(|e| RunError::Node(format!("{e:?}")))?;
+    let node_name = NodeName::new(name).map_err(|source| RunError::NodeName {
+        name: name.to_owned(),
+        source,
+    })?;
     // An explicit default configuration: iceoryx2's defaults, without its warning that no
     // global configuration file was found.
     let config = iceoryx2::config::Config::default();
@@ -77,7 +110,7 @@ pub fn create_node(name: &str) -> Result<Node<ipc::Service>, RunError> {
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| RunError::Node(format!("{e:?}")))
+        .map_err(RunError::Node)
 }
 
 /// Checks iceoryx2's root directory (its node and service bookkeeping, `/tmp/iceoryx2` by
@@ -99,7 +132,12 @@ pub fn check_ipc_root(root: &std::path::Path, uid: u32) -> Result<(), RunError> 
             .recursive(true)
             .mode(0o700)
             .create(root)
-            .map_err(|e| refuse(root, format!("cannot be made: {e}")))?;
+            .map_err(|source| RunError::IpcRootIo {
+                path: root.to_path_buf(),
+                what: "cannot be made",
+                source,
+                uid,
+            })?;
     }
     for path in [
         root.to_path_buf(),
@@ -109,7 +147,14 @@ pub fn check_ipc_root(root: &std::path::Path, uid: u32) -> Result<(), RunError> 
         let meta = match std::fs::symlink_metadata(&path) {
             Ok(m) => m,
             Err(_) if path != root => continue,
-            Err(e) => return Err(refuse(&path, e.to_string())),
+            Err(source) => {
+                return Err(RunError::IpcRootIo {
+                    path,
+                    what: "cannot be examined",
+                    source,
+                    uid,
+                });
+            }
         };
         if !meta.file_type().is_dir() {
             return Err(refuse(&path, "not a directory (a link, or a file)".into()));

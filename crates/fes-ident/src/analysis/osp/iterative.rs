@@ -69,9 +69,13 @@ pub fn iterative_method<R: ForceResponse + ?Sized>(
     progress: &(dyn Fn() + Sync),
 ) -> Result<Iterative, OspError> {
     if max_pulses == 0 {
-        return Err(OspError::Settings(
-            "the iterative method needs at least 1 pulse".into(),
-        ));
+        return Err(OspError::Settings {
+            method: "the iterative method",
+            setting: "max_pulses",
+            value: max_pulses,
+            min: 1,
+            max: None,
+        });
     }
     let ipis = ipi_range(ipi_min, ipi_max)?;
     let mut pattern = vec![0usize];

@@ -212,6 +212,30 @@ impl StepSettings {
     pub fn second_half(&self) -> usize {
         self.samples / 2
     }
+
+    /// At least 4 samples, and the onset in the first half.
+    fn check(&self) -> Result<(), OspError> {
+        let method = "the step run";
+        if self.samples < 4 {
+            return Err(OspError::Settings {
+                method,
+                setting: "samples",
+                value: self.samples,
+                min: 4,
+                max: None,
+            });
+        }
+        if self.onset >= self.second_half() {
+            return Err(OspError::Settings {
+                method,
+                setting: "onset (sample)",
+                value: self.onset,
+                min: 0,
+                max: Some(self.second_half() - 1),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// One subject (muscle or model) driven by the pattern outside the loop (Fig. 6.6(b)).
@@ -271,12 +295,7 @@ pub fn evaluate_step(
     settings: &StepSettings,
     subjects: &[(&dyn ForceResponse, f64)],
 ) -> Result<(LcnRun, StepScore), OspError> {
-    if settings.samples < 4 || settings.onset >= settings.samples / 2 {
-        return Err(OspError::Settings(format!(
-            "step run of {} samples with the onset at {}: need the onset in the first half",
-            settings.samples, settings.onset
-        )));
-    }
+    settings.check()?;
     let run = run_pattern_generator(pg, &step_reference(level, settings.onset, settings.samples));
     let pulses = run.pulse_times();
     let half = settings.second_half();

@@ -26,6 +26,7 @@ pub mod lcn;
 pub mod random;
 pub mod trains;
 
+use fes_model::model::lmn::LmnError;
 use fes_model::model::simulate::{RunError, simulate};
 use fes_model::model::{Lmn, Network};
 
@@ -63,17 +64,34 @@ pub enum OspError {
         /// First bad sample.
         sample: usize,
     },
-    /// A method's settings are invalid.
-    #[error("{0}")]
-    Settings(String),
+    /// A method's setting is outside its allowed range `min..=max` (`max` `None`:
+    /// unbounded).
+    #[error("{method}: {setting} = {value} is outside {}", allowed(*.min, *.max))]
+    Settings {
+        /// The method (or step) whose setting it is.
+        method: &'static str,
+        /// The setting.
+        setting: &'static str,
+        /// Its value.
+        value: usize,
+        /// The least allowed value.
+        min: usize,
+        /// The greatest allowed value, if any.
+        max: Option<usize>,
+    },
     /// The model could not be run.
     #[error("model: {0}")]
-    Model(String),
+    Model(#[from] RunError),
+    /// The model's run-time network could not be built.
+    #[error("model: {0}")]
+    Network(#[from] LmnError),
 }
 
-impl From<RunError> for OspError {
-    fn from(e: RunError) -> Self {
-        OspError::Model(e.to_string())
+/// The allowed range of [`OspError::Settings`] as text.
+fn allowed(min: usize, max: Option<usize>) -> String {
+    match max {
+        Some(max) => format!("{min}..={max}"),
+        None => format!("{min}.."),
     }
 }
 
@@ -133,7 +151,7 @@ impl ModelResponse {
     /// The response of a model (unstable local models allowed: a diverging response is
     /// reported as [`OspError::NonFinite`] by the evaluation).
     pub fn new(lmn: &Lmn) -> Result<Self, OspError> {
-        let net = lmn.network().map_err(|e| OspError::Model(e.to_string()))?;
+        let net = lmn.network()?;
         Self::from_network(net)
     }
 
@@ -291,9 +309,13 @@ fn run<R: ForceResponse + ?Sized>(
 /// Inter-pulse intervals `ipi_min..=ipi_max` in samples, validated (`1 <= min <= max`).
 pub(crate) fn ipi_range(ipi_min: usize, ipi_max: usize) -> Result<Vec<usize>, OspError> {
     if ipi_min == 0 || ipi_min > ipi_max {
-        return Err(OspError::Settings(format!(
-            "the IPI range {ipi_min}..={ipi_max} samples must satisfy 1 <= min <= max"
-        )));
+        return Err(OspError::Settings {
+            method: "the IPI range (samples)",
+            setting: "ipi_min",
+            value: ipi_min,
+            min: 1,
+            max: Some(ipi_max),
+        });
     }
     Ok((ipi_min..=ipi_max).collect())
 }

@@ -26,9 +26,13 @@ pub fn random_method<R: ForceResponse + ?Sized>(
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<RandomPattern>, OspError> {
     if patterns.is_empty() {
-        return Err(OspError::Settings(
-            "the random pattern method needs at least one pattern".into(),
-        ));
+        return Err(OspError::Settings {
+            method: "the random pattern method",
+            setting: "patterns",
+            value: patterns.len(),
+            min: 1,
+            max: None,
+        });
     }
     let ts = ev.ts();
     patterns

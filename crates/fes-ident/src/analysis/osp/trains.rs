@@ -56,9 +56,13 @@ pub fn train_surface<R: ForceResponse + ?Sized>(
     progress: &(dyn Fn() + Sync),
 ) -> Result<TrainSurface, OspError> {
     if max_pulses == 0 {
-        return Err(OspError::Settings(
-            "the train surface needs at least 1 pulse per train".into(),
-        ));
+        return Err(OspError::Settings {
+            method: "the train surface",
+            setting: "max_pulses (per train)",
+            value: max_pulses,
+            min: 1,
+            max: None,
+        });
     }
     let ipis = ipi_range(ipi_min, ipi_max)?;
     let pulses: Vec<usize> = (1..=max_pulses).collect();
