@@ -5,11 +5,12 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use fes_model::control::design::EstimatorPoles;
 use fes_model::control::file::Controller;
 use fes_model::control::lcn_design::{THESIS_DAMPING, UnitSpec};
-use fes_model::control::pattern_generator::FeedbackState;
+use fes_model::control::pattern_generator::{FeedbackMode, FeedbackState};
 use fes_model::control::planner::PlanningConfig;
-use fes_model::control::poles::{Pole, third_pole};
+use fes_model::control::poles::{Pole, dominant_pair, third_pole};
 use fes_model::model::file;
 
 use super::inputs::{md_table, parse_list};
@@ -70,9 +71,28 @@ pub struct Args {
     /// Wall-clock planning budget per tick in rt-core, us.
     #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.budget_us)]
     pub plan_budget_us: f64,
+    /// Which signal closes the loop: `model` (Fig. 6.6(b): the model alone, no sensor) or
+    /// `measured-force` (Fig. 6.6(a): a force sensor corrects the model state through a
+    /// local estimator, eq. C.18, and drives the integral action; plans start from the
+    /// corrected state).
+    #[arg(long, value_enum, default_value_t = FeedbackArg::Model)]
+    pub feedback: FeedbackArg,
+    /// Rise time of the estimator's pole pair (damping 1.2), ms; with --feedback
+    /// measured-force. Faster corrects the model sooner and passes more sensor noise (C.2.2).
+    #[arg(long, default_value_t = 5.0, value_name = "MS")]
+    pub estimator_rise_ms: f64,
     /// The controller file to write.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// `--feedback`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FeedbackArg {
+    /// The model closes the loop (thesis Fig. 6.6(b)).
+    Model,
+    /// The measured force corrects the model through the estimator (thesis Fig. 6.6(a)).
+    MeasuredForce,
 }
 
 /// `--planning`.
@@ -192,6 +212,16 @@ pub fn run(args: Args) -> Result<()> {
     let mut settings = args.variant.settings();
     settings.shaper.min_gap = min_gap(args.min_interval_ms, lmn.ts)?;
     settings.design.allow_negative_gain = args.allow_negative_gain;
+    if args.feedback == FeedbackArg::MeasuredForce {
+        let tr = args.estimator_rise_ms;
+        if !(tr.is_finite() && tr > 0.0) {
+            bail!("--estimator-rise-ms {tr}: must be a finite number > 0");
+        }
+        let [p1, p2] = dominant_pair(tr * 1e-3, THESIS_DAMPING, lmn.ts)
+            .with_context(|| format!("estimator poles for a {tr} ms rise time"))?;
+        settings.mode = FeedbackMode::MeasuredForce;
+        settings.estimator_poles = Some(EstimatorPoles { p1, p2 });
+    }
     let planning = args.planning.unwrap_or(match settings.feedback_state {
         FeedbackState::Advanced => PlanningArg::RecedingHorizon,
         FeedbackState::Delayed => PlanningArg::Off,

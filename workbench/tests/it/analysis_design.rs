@@ -275,6 +275,39 @@ fn the_minimum_interval_becomes_the_shapers_gap() {
     );
 }
 
+/// `--feedback measured-force` writes Fig. 6.6(a)'s loop: the file's mode and the
+/// estimator's pole pair from `--estimator-rise-ms` (damping 1.2, the thesis's rise-time
+/// rule); the default is the model loop with no estimator; a rise time that is not a
+/// positive number is refused naming the option.
+#[test]
+fn measured_force_feedback_writes_the_estimators_poles() {
+    use fes_model::control::file::Controller;
+    use fes_model::control::pattern_generator::FeedbackMode;
+    let dir = tmp("design-measured");
+    let lmn = fast_muscle(6);
+    let ts = lmn.ts;
+    let model = save_model(&dir, "m.json", &lmn);
+    let m = model.to_str().unwrap();
+    let out = dir.join("c.json");
+    let o = out.to_str().unwrap();
+    let base = ["design", "--model", m, "--rise-ms", "auto", "--out", o];
+    ok(&base);
+    let c = Controller::load(&out).unwrap();
+    assert_eq!(c.settings.mode, FeedbackMode::Model);
+    assert_eq!(c.settings.estimator_poles, None);
+    let mut args = base.to_vec();
+    args.extend_from_slice(&["--feedback", "measured-force", "--estimator-rise-ms", "8"]);
+    ok(&args);
+    let c = Controller::load(&out).unwrap();
+    assert_eq!(c.settings.mode, FeedbackMode::MeasuredForce);
+    let [p1, p2] = fes_model::control::poles::dominant_pair(0.008, 1.2, ts).unwrap();
+    let poles = c.settings.estimator_poles.unwrap();
+    assert_eq!((poles.p1, poles.p2), (p1, p2));
+    let mut args = base.to_vec();
+    args.extend_from_slice(&["--feedback", "measured-force", "--estimator-rise-ms", "0"]);
+    fails(&args, &["--estimator-rise-ms 0"]);
+}
+
 /// A model of eq. 5.2's undelayed scheduling class cannot be run ahead: `fes design` refuses
 /// the advanced loop naming `feedback_state` and designs the thesis's delayed loop (with no
 /// planning by default, whose warm start is the advanced loop); `fes lcn-variants` runs only
