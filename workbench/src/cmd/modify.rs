@@ -150,47 +150,106 @@ fn long_train(
     let t0 = simulate_trace(&original.network()?, &u).context("original model")?;
     let t1 = simulate_trace(&fixed.network()?, &u).context("modified model")?;
     let ts_ms = ts * 1e3;
-    let pts = |y: &[f64]| -> Vec<(f64, f64)> {
-        y.iter()
-            .enumerate()
-            .map(|(k, &v)| (k as f64 * ts_ms, v))
-            .collect()
+    let fig = Figure {
+        title: format!(
+            "{} Hz constant train: original (unstable) and modified model (Fig. 5.32(a))",
+            args.long_train_hz
+        ),
+        columns: vec![
+            vec![
+                (3, output_panel(&t0, &t1, ts_ms)),
+                (1, activation_panel(fixed, result, &t1, ts_ms)?),
+            ],
+            vec![(1, phase_plane(&t0, &t1, ts_ms))],
+        ],
     };
-    let amax = |y: &[f64]| {
-        y.iter().fold(0.0f64, |a, v| {
-            if v.is_finite() {
-                a.max(v.abs())
-            } else {
-                f64::INFINITY
-            }
-        })
-    };
-    let hi =
-        t1.y.iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max);
-    let lo =
-        t1.y.iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::min);
+    plots::save(&fig, png, (1300, 600))?;
+    Ok((
+        max_abs(&t0.y),
+        max_abs(&t1.y),
+        t1.y.last().copied().unwrap_or(0.0),
+    ))
+}
+
+/// The largest |y| of a trace, infinite when any sample is not finite.
+fn max_abs(y: &[f64]) -> f64 {
+    y.iter().fold(0.0f64, |a, v| {
+        if v.is_finite() {
+            a.max(v.abs())
+        } else {
+            f64::INFINITY
+        }
+    })
+}
+
+/// A trace as (ms, value) points.
+fn trace_points(y: &[f64], ts_ms: f64) -> Vec<(f64, f64)> {
+    y.iter()
+        .enumerate()
+        .map(|(k, &v)| (k as f64 * ts_ms, v))
+        .collect()
+}
+
+/// Both models' outputs (Fig. 5.32(a)), axes from the modified model's, with a note where
+/// the original leaves them.
+fn output_panel(t0: &Trace, t1: &Trace, ts_ms: f64) -> Panel {
+    let finite = || t1.y.iter().copied().filter(|v| v.is_finite());
+    let hi = finite().fold(0.0, f64::max);
+    let lo = finite().fold(0.0, f64::min);
     let span = (hi - lo).max(0.1);
     let (ylo, yhi) = (lo - 0.5 * span, hi + 0.5 * span);
     let leaves =
         t0.y.iter()
             .position(|v| !(v.is_finite() && (ylo..=yhi).contains(v)))
             .map(|k| k as f64 * ts_ms);
-    let units: Vec<usize> = result
-        .offsets
-        .iter()
-        .map(|o| o.unit)
-        .chain(result.changes.iter().map(|c| c.unit))
-        .collect();
+    let peak = max_abs(&t0.y);
+    let peak = if peak < 1e4 {
+        format!("{peak:.2}")
+    } else if peak.is_finite() {
+        format!("{peak:.3e}")
+    } else {
+        "infinite".into()
+    };
+    Panel {
+        x_label: "time (ms)".into(),
+        y_label: "model output (normalised force)".into(),
+        y: Some((ylo, yhi)),
+        lines: vec![
+            Line::new(
+                Some("original".to_string()),
+                trace_points(&t0.y, ts_ms),
+                color(3),
+            )
+            .dashed(),
+            Line::new(
+                Some("modified".to_string()),
+                trace_points(&t1.y, ts_ms),
+                color(0),
+            ),
+        ],
+        hline: Some(0.0),
+        texts: leaves
+            .map(|t| {
+                vec![(
+                    t + 20.0,
+                    hi + 0.35 * span,
+                    format!("original leaves the plot at {t:.0} ms (max |y| {peak})"),
+                )]
+            })
+            .unwrap_or_default(),
+        legend: true,
+        ..Panel::default()
+    }
+}
+
+/// The activations of the units the modification changed, along the modified model's run.
+fn activation_panel(fixed: &Lmn, result: &Stabilised, t1: &Trace, ts_ms: f64) -> Result<Panel> {
     let net = fixed.network()?;
-    let mut act_lines = Vec::new();
+    let mut lines = Vec::new();
     let mut seen = Vec::new();
-    for &i in &units {
+    let units =
+        (result.offsets.iter().map(|o| o.unit)).chain(result.changes.iter().map(|c| c.unit));
+    for i in units {
         if seen.contains(&i) {
             continue;
         }
@@ -201,72 +260,20 @@ fn long_train(
             .enumerate()
             .map(|(k, &phi)| (k as f64 * ts_ms, net.validity().eval(phi).get(i)))
             .collect();
-        act_lines.push(Line::new(
+        lines.push(Line::new(
             Some(format!("rho_{i} (modified unit)")),
             rho,
             color(2 + seen.len()),
         ));
     }
-    let fig = Figure {
-        title: format!(
-            "{} Hz constant train: original (unstable) and modified model (Fig. 5.32(a))",
-            args.long_train_hz
-        ),
-        columns: vec![vec![
-            (
-                3,
-                Panel {
-                    x_label: "time (ms)".into(),
-                    y_label: "model output (normalised force)".into(),
-                    y: Some((lo - 0.5 * span, hi + 0.5 * span)),
-                    lines: vec![
-                        Line::new(Some("original".to_string()), pts(&t0.y), color(3)).dashed(),
-                        Line::new(Some("modified".to_string()), pts(&t1.y), color(0)),
-                    ],
-                    hline: Some(0.0),
-                    texts: leaves
-                        .map(|t| {
-                            vec![(
-                                t + 20.0,
-                                hi + 0.35 * span,
-                                format!(
-                                    "original leaves the plot at {t:.0} ms (max |y| {})",
-                                    if amax(&t0.y) < 1e4 {
-                                        format!("{:.2}", amax(&t0.y))
-                                    } else if amax(&t0.y).is_finite() {
-                                        format!("{:.3e}", amax(&t0.y))
-                                    } else {
-                                        "infinite".into()
-                                    }
-                                ),
-                            )]
-                        })
-                        .unwrap_or_default(),
-                    legend: true,
-                    ..Panel::default()
-                },
-            ),
-            (
-                1,
-                Panel {
-                    x_label: "time (ms)".into(),
-                    y_label: "activation".into(),
-                    y: Some((0.0, 1.05)),
-                    lines: act_lines,
-                    legend: true,
-                    ..Panel::default()
-                },
-            ),
-        ]],
-    };
-    let mut fig = fig;
-    fig.columns.push(vec![(1, phase_plane(&t0, &t1, ts_ms))]);
-    plots::save(&fig, png, (1300, 600))?;
-    Ok((
-        amax(&t0.y),
-        amax(&t1.y),
-        t1.y.last().copied().unwrap_or(0.0),
-    ))
+    Ok(Panel {
+        x_label: "time (ms)".into(),
+        y_label: "activation".into(),
+        y: Some((0.0, 1.05)),
+        lines,
+        legend: true,
+        ..Panel::default()
+    })
 }
 
 /// State trajectories of both models over the first 300 ms (Fig. 5.32(b)), axes from the
