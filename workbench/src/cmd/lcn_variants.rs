@@ -339,47 +339,8 @@ fn write_outputs(
             if err.abs() <= 0.05 {
                 within += 1;
             }
-            let means: Vec<String> = std::iter::once(format!("{:.3}", sc.loop_mean))
-                .chain(sc.subjects.iter().map(|x| format!("{:.3}", x.mean)))
-                .collect();
-            rows.push(vec![
-                format!("{}", sc.level),
-                sc.pulses.len().to_string(),
-                sc.first_ipi()
-                    .map_or("-".into(), |i| format!("{}", i as f64 * ms)),
-                shape_words(sc),
-                means.join(" / "),
-                format!("{:+.1} %", 100.0 * err),
-                format!("{:.3}", sc.subjects[last].rms),
-                format!("{:.2}", sc.min_energy),
-            ]);
-            let sh = sc.shape.as_ref();
-            csv.push(vec![
-                s.variant.name.to_string(),
-                format!("{}", sc.level),
-                sc.pulses.len().to_string(),
-                sc.pulses_from(half).to_string(),
-                sc.first_ipi()
-                    .map_or(String::new(), |i| format!("{}", i as f64 * ms)),
-                sh.map_or(String::new(), |x| x.burst_pulses.to_string()),
-                sh.and_then(|x| x.pause)
-                    .map_or(String::new(), |p| format!("{}", p as f64 * ms)),
-                sh.and_then(|x| x.steady_median)
-                    .map_or(String::new(), |m| format!("{}", m * ms)),
-                sh.and_then(|x| x.steady_cv)
-                    .map_or(String::new(), |c| format!("{c}")),
-                sh.is_some_and(|x| x.is_doublet_pause_even()).to_string(),
-                sc.short_ipis_after_opening(10).to_string(),
-                format!("{}", sc.loop_mean),
-                sc.subjects
-                    .first()
-                    .filter(|_| last > 0)
-                    .map_or(String::new(), |x| format!("{}", x.mean)),
-                format!("{}", target),
-                format!("{}", sc.loop_rms),
-                format!("{}", sc.subjects[last].rms),
-                format!("{}", sc.min_energy),
-            ]);
+            rows.push(table_row(sc, err, ms, last));
+            csv.push(csv_row(s.variant.name, sc, half, ms, last));
         }
         let mut header = vec!["r", "pulses", "first IPI (ms)", "shape"];
         let mean_head = format!("mean 2nd half: loop / {}", subjects.join(" / "));
@@ -414,29 +375,83 @@ fn write_outputs(
     };
     let path = args.out.join("variants.md");
     std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
-    write_csv(
-        &args.out.join("variants.csv"),
-        &[
-            "variant",
-            "reference",
-            "pulses",
-            "pulses_second_half",
-            "first_ipi_ms",
-            "burst_pulses",
-            "pause_ms",
-            "later_ipi_median_ms",
-            "later_ipi_cv",
-            "doublet_pause_even",
-            "short_ipis_after_opening",
-            "loop_mean",
-            "plant_model_mean",
-            "muscle_mean",
-            "loop_rms",
-            "muscle_rms",
-            "min_energy",
-        ],
-        &csv,
-    )?;
+    write_csv(&args.out.join("variants.csv"), &CSV_HEADER, &csv)?;
     println!("variant table written to {}", path.display());
     Ok(())
+}
+
+/// The columns of `variants.csv`, one row per variant and level ([`csv_row`]).
+const CSV_HEADER: [&str; 17] = [
+    "variant",
+    "reference",
+    "pulses",
+    "pulses_second_half",
+    "first_ipi_ms",
+    "burst_pulses",
+    "pause_ms",
+    "later_ipi_median_ms",
+    "later_ipi_cv",
+    "doublet_pause_even",
+    "short_ipis_after_opening",
+    "loop_mean",
+    "plant_model_mean",
+    "muscle_mean",
+    "loop_rms",
+    "muscle_rms",
+    "min_energy",
+];
+
+/// One level's row of a variant's Markdown table; `err` is the last subject's relative
+/// error against the level.
+fn table_row(sc: &StepScore, err: f64, ms: f64, last: usize) -> Vec<String> {
+    let means: Vec<String> = std::iter::once(format!("{:.3}", sc.loop_mean))
+        .chain(sc.subjects.iter().map(|x| format!("{:.3}", x.mean)))
+        .collect();
+    vec![
+        format!("{}", sc.level),
+        sc.pulses.len().to_string(),
+        sc.first_ipi()
+            .map_or("-".into(), |i| format!("{}", i as f64 * ms)),
+        shape_words(sc),
+        means.join(" / "),
+        format!("{:+.1} %", 100.0 * err),
+        format!("{:.3}", sc.subjects[last].rms),
+        format!("{:.2}", sc.min_energy),
+    ]
+}
+
+/// One level's row of `variants.csv` ([`CSV_HEADER`]).
+fn csv_row(variant: &str, sc: &StepScore, half: usize, ms: f64, last: usize) -> Vec<String> {
+    let sh = sc.shape.as_ref();
+    let or_empty = |v: Option<String>| v.unwrap_or_default();
+    vec![
+        variant.to_string(),
+        format!("{}", sc.level),
+        sc.pulses.len().to_string(),
+        sc.pulses_from(half).to_string(),
+        or_empty(sc.first_ipi().map(|i| format!("{}", i as f64 * ms))),
+        or_empty(sh.map(|x| x.burst_pulses.to_string())),
+        or_empty(
+            sh.and_then(|x| x.pause)
+                .map(|p| format!("{}", p as f64 * ms)),
+        ),
+        or_empty(
+            sh.and_then(|x| x.steady_median)
+                .map(|m| format!("{}", m * ms)),
+        ),
+        or_empty(sh.and_then(|x| x.steady_cv).map(|c| format!("{c}"))),
+        sh.is_some_and(|x| x.is_doublet_pause_even()).to_string(),
+        sc.short_ipis_after_opening(10).to_string(),
+        format!("{}", sc.loop_mean),
+        or_empty(
+            sc.subjects
+                .first()
+                .filter(|_| last > 0)
+                .map(|x| format!("{}", x.mean)),
+        ),
+        format!("{}", sc.subjects[last].mean),
+        format!("{}", sc.loop_rms),
+        format!("{}", sc.subjects[last].rms),
+        format!("{}", sc.min_energy),
+    ]
 }
