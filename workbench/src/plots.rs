@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 /// A drawing failure.
@@ -405,87 +406,8 @@ pub fn plot_front_compare(
             .y_desc("RMS tracking error (normalised force)")
             .draw()
             .map_err(|x| e(&x))?;
-        let reference = verdict.reference_fti_per_contraction;
-        let equal = |p: &crate::cft::FrontPoint| {
-            (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
-        };
-        // The lower envelope: the best train for each pulse count.
-        let mut best: std::collections::BTreeMap<u64, f64> = std::collections::BTreeMap::new();
-        for p in &verdict.cft_front {
-            let k = p.pulses_per_contraction.round() as u64;
-            let b = best.entry(k).or_insert(f64::INFINITY);
-            *b = b.min(p.rms_error);
-        }
-        let line: Vec<(f64, f64)> = best.iter().map(|(&k, &r)| (k as f64, r)).collect();
-        chart
-            .draw_series(LineSeries::new(line, BLUE.stroke_width(2)))
-            .map_err(|x| e(&x))?
-            .label("CFT(f, n), 5-100 Hz: the best train for each pulse count")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1)));
-        chart
-            .draw_series(verdict.cft_front.iter().map(|p| {
-                if equal(p) {
-                    Circle::new((p.pulses_per_contraction, p.rms_error), 5, GREEN.filled())
-                } else {
-                    Circle::new(
-                        (p.pulses_per_contraction, p.rms_error),
-                        3,
-                        BLUE.stroke_width(1),
-                    )
-                }
-            }))
-            .map_err(|x| e(&x))?;
-        chart
-            .draw_series(
-                verdict
-                    .cft_front
-                    .iter()
-                    .filter(|p| {
-                        p.hz.is_some_and(|h| h % 10 == 0)
-                            && !verdict.cft_front.iter().any(|q| q.hz == p.hz && q.n > p.n)
-                    })
-                    .map(|p| {
-                        Text::new(
-                            format!("{} Hz", p.hz.unwrap_or(0)),
-                            (p.pulses_per_contraction, p.rms_error),
-                            ("sans-serif", 13),
-                        )
-                    }),
-            )
-            .map_err(|x| e(&x))?;
-        let l = &verdict.lcn;
-        chart
-            .draw_series(std::iter::once(Circle::new(
-                (l.pulses_per_contraction, l.rms_error),
-                7,
-                RED.filled(),
-            )))
-            .map_err(|x| e(&x))?
-            .label(format!(
-                "pattern generator: {:.2} pulses, RMS {:.4}{}",
-                l.pulses_per_contraction,
-                l.rms_error,
-                if verdict.lcn_dominated {
-                    " (dominated)"
-                } else {
-                    ""
-                }
-            ))
-            .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
-        for (label, p) in others {
-            chart
-                .draw_series(std::iter::once(Circle::new(
-                    (p.pulses_per_contraction, p.rms_error),
-                    7,
-                    RGBColor(230, 120, 0).filled(),
-                )))
-                .map_err(|x| e(&x))?
-                .label(format!(
-                    "{label}: {:.2} pulses, RMS {:.4}",
-                    p.pulses_per_contraction, p.rms_error
-                ))
-                .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(230, 120, 0).filled()));
-        }
+        draw_trains(&mut chart, verdict, &e)?;
+        draw_runs(&mut chart, verdict, others, &e)?;
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.9))
@@ -496,4 +418,109 @@ pub fn plot_front_compare(
         root.present().map_err(|x| e(&x))?;
         Ok(())
     })
+}
+
+/// The chart of a front: pulses per contraction against RMS error.
+type FrontChart<'a, 'b, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The trains of a front: the best for each pulse count as a line, every train as a
+/// circle (filled green where its FTI equals the reference's), every 10 Hz train's last
+/// point named.
+fn draw_trains<DB: DrawingBackend>(
+    chart: &mut FrontChart<'_, '_, DB>,
+    verdict: &crate::cft::FrontVerdict,
+    e: &dyn Fn(&dyn std::fmt::Display) -> PlotError,
+) -> Result<(), PlotError> {
+    let reference = verdict.reference_fti_per_contraction;
+    let equal = |p: &crate::cft::FrontPoint| {
+        (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
+    };
+    // The lower envelope: the best train for each pulse count.
+    let mut best: std::collections::BTreeMap<u64, f64> = std::collections::BTreeMap::new();
+    for p in &verdict.cft_front {
+        let k = p.pulses_per_contraction.round() as u64;
+        let b = best.entry(k).or_insert(f64::INFINITY);
+        *b = b.min(p.rms_error);
+    }
+    let line: Vec<(f64, f64)> = best.iter().map(|(&k, &r)| (k as f64, r)).collect();
+    chart
+        .draw_series(LineSeries::new(line, BLUE.stroke_width(2)))
+        .map_err(|x| e(&x))?
+        .label("CFT(f, n), 5-100 Hz: the best train for each pulse count")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(1)));
+    chart
+        .draw_series(verdict.cft_front.iter().map(|p| {
+            if equal(p) {
+                Circle::new((p.pulses_per_contraction, p.rms_error), 5, GREEN.filled())
+            } else {
+                Circle::new(
+                    (p.pulses_per_contraction, p.rms_error),
+                    3,
+                    BLUE.stroke_width(1),
+                )
+            }
+        }))
+        .map_err(|x| e(&x))?;
+    chart
+        .draw_series(
+            verdict
+                .cft_front
+                .iter()
+                .filter(|p| {
+                    p.hz.is_some_and(|h| h % 10 == 0)
+                        && !verdict.cft_front.iter().any(|q| q.hz == p.hz && q.n > p.n)
+                })
+                .map(|p| {
+                    Text::new(
+                        format!("{} Hz", p.hz.unwrap_or(0)),
+                        (p.pulses_per_contraction, p.rms_error),
+                        ("sans-serif", 13),
+                    )
+                }),
+        )
+        .map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// The pattern generator's point (red) and the other runs' (orange), each in the legend.
+fn draw_runs<DB: DrawingBackend>(
+    chart: &mut FrontChart<'_, '_, DB>,
+    verdict: &crate::cft::FrontVerdict,
+    others: &[(&str, &crate::cft::FrontPoint)],
+    e: &dyn Fn(&dyn std::fmt::Display) -> PlotError,
+) -> Result<(), PlotError> {
+    let l = &verdict.lcn;
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (l.pulses_per_contraction, l.rms_error),
+            7,
+            RED.filled(),
+        )))
+        .map_err(|x| e(&x))?
+        .label(format!(
+            "pattern generator: {:.2} pulses, RMS {:.4}{}",
+            l.pulses_per_contraction,
+            l.rms_error,
+            if verdict.lcn_dominated {
+                " (dominated)"
+            } else {
+                ""
+            }
+        ))
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, RED.filled()));
+    for (label, p) in others {
+        chart
+            .draw_series(std::iter::once(Circle::new(
+                (p.pulses_per_contraction, p.rms_error),
+                7,
+                RGBColor(230, 120, 0).filled(),
+            )))
+            .map_err(|x| e(&x))?
+            .label(format!(
+                "{label}: {:.2} pulses, RMS {:.4}",
+                p.pulses_per_contraction, p.rms_error
+            ))
+            .legend(|(x, y)| Circle::new((x + 10, y), 5, RGBColor(230, 120, 0).filled()));
+    }
+    Ok(())
 }
