@@ -831,50 +831,7 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
     }
     print_pulses(s);
     if let Some(v) = &s.front {
-        let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));
-        let cheapest = v
-            .cft_front
-            .iter()
-            .filter(|p| p.rms_error <= v.lcn.rms_error)
-            .min_by(|a, b| {
-                a.pulses_per_contraction
-                    .total_cmp(&b.pulses_per_contraction)
-            });
-        let (low_hz, top_hz) = v.hz_range;
-        println!(
-            "  CFT front (every {low_hz}-{top_hz} Hz train from each onset, whole or stopped after n pulses; same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
-            fmt(v.lcn.pulses_per_contraction, 2),
-            fmt(v.lcn.rms_error, 4),
-            fmt(v.lcn.ftipp, 3),
-            fmt(v.lcn.fti_per_contraction, 4),
-            fmt(v.reference_fti_per_contraction, 4)
-        );
-        println!(
-            "    dominated by a CFT of equal FTI: {}; pulses vs the cheapest CFT as good {}{}; FTIpP vs the best CFT of equal FTI {}",
-            if v.lcn_dominated { "YES" } else { "no" },
-            opt(v.pulses_vs_equal_rms_cft, 3),
-            cheapest.map_or(String::new(), |p| format!(
-                " ({} Hz x {}: RMS {})",
-                p.hz.unwrap_or(0),
-                p.n.unwrap_or(0),
-                fmt(p.rms_error, 4)
-            )),
-            opt(v.ftipp_vs_best_cft, 3)
-        );
-        // The user's question: does any train with no more pulses track as well?
-        println!(
-            "    a train with no more pulses that tracks as well: {}",
-            match (&v.best_cft_no_more_pulses, v.beats_every_cft) {
-                (_, true) => "none (the run beats every one)".to_string(),
-                (Some(p), false) => format!(
-                    "{} Hz x {} pulses, RMS {}",
-                    p.hz.unwrap_or(0),
-                    p.n.unwrap_or(0),
-                    fmt(p.rms_error, 4)
-                ),
-                (None, false) => "none has so few pulses".to_string(),
-            }
-        );
+        print_front(v);
     }
     println!(
         "  40 Hz baseline, same FTI   {} pulses per contraction, RMS error {} (FTI per contraction {} s)",
@@ -906,6 +863,55 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
     if !unclean.is_empty() {
         println!("  note: not stopped cleanly: {}", unclean.join(", "));
     }
+}
+
+/// The CFT front's verdict on the run: the user's question first answered by the pulses
+/// and RMS of the best train with no more pulses.
+fn print_front(v: &workbench::cft::FrontVerdict) {
+    let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));
+    let cheapest = v
+        .cft_front
+        .iter()
+        .filter(|p| p.rms_error <= v.lcn.rms_error)
+        .min_by(|a, b| {
+            a.pulses_per_contraction
+                .total_cmp(&b.pulses_per_contraction)
+        });
+    let (low_hz, top_hz) = v.hz_range;
+    println!(
+        "  CFT front (every {low_hz}-{top_hz} Hz train from each onset, whole or stopped after n pulses; same muscle and sensor): LCN {} pulses, RMS {}, FTIpP {} (FTI {} s; reference {} s)",
+        fmt(v.lcn.pulses_per_contraction, 2),
+        fmt(v.lcn.rms_error, 4),
+        fmt(v.lcn.ftipp, 3),
+        fmt(v.lcn.fti_per_contraction, 4),
+        fmt(v.reference_fti_per_contraction, 4)
+    );
+    println!(
+        "    dominated by a CFT of equal FTI: {}; pulses vs the cheapest CFT as good {}{}; FTIpP vs the best CFT of equal FTI {}",
+        if v.lcn_dominated { "YES" } else { "no" },
+        opt(v.pulses_vs_equal_rms_cft, 3),
+        cheapest.map_or(String::new(), |p| format!(
+            " ({} Hz x {}: RMS {})",
+            p.hz.unwrap_or(0),
+            p.n.unwrap_or(0),
+            fmt(p.rms_error, 4)
+        )),
+        opt(v.ftipp_vs_best_cft, 3)
+    );
+    // The user's question: does any train with no more pulses track as well?
+    println!(
+        "    a train with no more pulses that tracks as well: {}",
+        match (&v.best_cft_no_more_pulses, v.beats_every_cft) {
+            (_, true) => "none (the run beats every one)".to_string(),
+            (Some(p), false) => format!(
+                "{} Hz x {} pulses, RMS {}",
+                p.hz.unwrap_or(0),
+                p.n.unwrap_or(0),
+                fmt(p.rms_error, 4)
+            ),
+            (None, false) => "none has so few pulses".to_string(),
+        }
+    );
 }
 
 fn print_latency(s: &Summary) {
