@@ -541,18 +541,9 @@ impl DriverConfig {
     /// Reads, parses and validates a file; a relative prescription path is resolved
     /// against the file's directory.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = config_file::read(path)?;
-        let mut config = Self::parse(&text).map_err(|e| match e {
-            ConfigError::File(f) => ConfigError::File(f.in_file(path)),
-            other => other,
-        })?;
-        if config.prescription.is_relative() {
-            let joined = path
-                .parent()
-                .unwrap_or(Path::new(""))
-                .join(&config.prescription);
-            config.prescription = std::path::absolute(&joined).unwrap_or(joined);
-        }
+        let mut config: Self = config_file::load(path)?;
+        config.validate()?;
+        config_file::resolve(path, &mut config.prescription);
         Ok(config)
     }
 

@@ -265,25 +265,15 @@ impl RtCoreConfig {
     /// Reads, parses and validates a file; a relative controller path is resolved against
     /// the file's directory.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = config_file::read(path)?;
-        let mut config = Self::parse(&text).map_err(|e| match e {
-            ConfigError::File(f) => ConfigError::File(f.in_file(path)),
-            other => other,
-        })?;
-        if let SourceConfig::Controller { path: controller } = &mut config.source
-            && controller.is_relative()
-        {
-            let dir = path.parent().unwrap_or(Path::new(""));
-            let joined = dir.join(&*controller);
-            // Absolute, so that the configuration can be written elsewhere and still point
-            // at the same file.
-            *controller = std::path::absolute(&joined).unwrap_or(joined);
+        let mut config: Self = config_file::load(path)?;
+        config.validate()?;
+        // Absolute, so that the configuration can be written elsewhere and still point at
+        // the same files.
+        if let SourceConfig::Controller { path: controller } = &mut config.source {
+            config_file::resolve(path, controller);
         }
-        if let Some(p) = &mut config.prescription
-            && p.is_relative()
-        {
-            let joined = path.parent().unwrap_or(Path::new("")).join(&*p);
-            *p = std::path::absolute(&joined).unwrap_or(joined);
+        if let Some(p) = &mut config.prescription {
+            config_file::resolve(path, p);
         }
         Ok(config)
     }
