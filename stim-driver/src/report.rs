@@ -302,7 +302,7 @@ impl<'a> Reporter<'a> {
             outcome_seq: 0,
             last_ack: (0, 0),
             start,
-            status_period: Duration::from_millis(config.telemetry.status_period_ms),
+            status_period: Duration::from_millis(config.telemetry.own.status_period_ms),
             report_period,
             liveness_period: Duration::from_millis(u64::from(config.watchdog.liveness_check_ms)),
             next_status: start,

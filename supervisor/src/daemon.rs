@@ -261,7 +261,7 @@ impl<'a> Daemon<'a> {
         } else {
             None
         };
-        let node = fes_rt::rt::node::create_node(&cfg.ipc.node_name)?;
+        let node = fes_rt::rt::node::create_node(&cfg.ipc.own.node_name)?;
         let ports = Ports::open(&node, cfg.ipc.prefix.as_str())?;
         let (tx, requests) = mpsc::channel::<Pending>();
         let server = ControlServer::start(&cfg.control, tx)?;

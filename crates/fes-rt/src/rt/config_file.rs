@@ -5,6 +5,7 @@
 //! the resolution of the paths a file names ([`resolve`]); each process wraps
 //! [`FileError`] in its own error type, next to its own checks.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
@@ -44,7 +45,7 @@ pub enum FileError {
         /// The value.
         value: String,
         /// What is allowed.
-        allowed: &'static str,
+        allowed: Cow<'static, str>,
     },
 }
 
@@ -118,7 +119,7 @@ pub fn range<T: ToString>(
         Err(FileError::Range {
             field,
             value: value.to_string(),
-            allowed,
+            allowed: Cow::Borrowed(allowed),
         })
     }
 }
