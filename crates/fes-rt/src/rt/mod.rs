@@ -12,6 +12,7 @@ pub mod error_text;
 pub mod exit;
 pub mod histogram;
 pub mod hlog;
+pub mod liveness;
 pub mod logging;
 pub mod node;
 pub mod notify;
