@@ -13,8 +13,9 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use fes_can::{MessageKind, StimState};
 use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::rt::liveness::Liveness;
 use stim_driver::config::DriverConfig;
-use stim_driver::event::{DriverState, Liveness, NullSink};
+use stim_driver::event::{DriverState, NullSink};
 use stim_driver::forward::ForwardPath;
 use stim_driver::tx::CountingSink;
 

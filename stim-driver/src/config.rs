@@ -85,10 +85,11 @@ use std::path::{Path, PathBuf};
 
 use fes_can::{Nodes, StimLimits};
 use fes_prescription::{Ceilings, Exceeded, Prescription, pulses_per_s};
-use fes_rt::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
+use fes_rt::msg::service::ServiceError;
 use fes_rt::rt::RtConfig;
-use fes_rt::rt::config::RtConfigError;
+use fes_rt::rt::config::{IpcConfig, OwnKeys, RtConfigError, TelemetryConfig};
 use fes_rt::rt::config_file::{self, FileError};
+use serde::de::{MapAccess, SeqAccess};
 use serde::{Deserialize, Serialize};
 
 use crate::forward::ForwardSettings;
@@ -137,7 +138,7 @@ pub struct DriverConfig {
     pub bus_rt: Option<RtConfig>,
     /// Telemetry and status.
     #[serde(default)]
-    pub telemetry: TelemetryConfig,
+    pub telemetry: TelemetryConfig<TelemetryKeys>,
     /// iceoryx2.
     #[serde(default)]
     pub ipc: IpcConfig,
@@ -441,52 +442,45 @@ pub struct ForceConfig {
     pub max_n: f64,
 }
 
-/// `[telemetry]`. Defaults: no hlog, a TimingReport every 1000 ms, a DriverStatus every
-/// 100 ms (and on every state change), 8192 queued events.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TelemetryConfig {
-    /// HdrHistogram interval log; relative paths are relative to the working directory.
-    pub hlog: Option<PathBuf>,
-    /// Period of TimingReports and hlog intervals, ms (10..=60000).
-    pub report_period_ms: u64,
+/// stim-driver's own key of `[telemetry]` ([`TelemetryConfig`]). Default: a DriverStatus
+/// every 100 ms (and on every state change).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct TelemetryKeys {
     /// Period of DriverStatus, ms (10..=10000).
     pub status_period_ms: u64,
-    /// Events the queue from the forward thread holds (256..=1048576).
-    pub queue_capacity: usize,
-    /// Keep the backtrace of the forward loop's first heap allocation, if one happens, and
-    /// log it at exit (`fes_rt::rt::alloc::trace_first_heap_allocation`; costs nothing
-    /// until then). Default true.
-    pub trace_allocations: bool,
 }
 
-impl Default for TelemetryConfig {
+impl Default for TelemetryKeys {
     fn default() -> Self {
         Self {
-            hlog: None,
-            report_period_ms: 1000,
             status_period_ms: 100,
-            queue_capacity: 8192,
-            trace_allocations: true,
         }
     }
 }
 
-/// `[ipc]`. Default prefix "fes".
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IpcConfig {
-    /// Service-name prefix.
-    pub prefix: String,
-}
+impl OwnKeys for TelemetryKeys {
+    const KEYS: &'static [&'static str] = &["status_period_ms"];
 
-impl Default for IpcConfig {
-    fn default() -> Self {
-        Self {
-            prefix: DEFAULT_PREFIX.to_owned(),
-        }
+    fn read_value<'de, A: MapAccess<'de>>(
+        &mut self,
+        _key: &'static str,
+        map: &mut A,
+    ) -> Result<(), A::Error> {
+        self.status_period_ms = map.next_value()?;
+        Ok(())
+    }
+
+    fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
+        Ok(seq
+            .next_element()?
+            .map(|v| self.status_period_ms = v)
+            .is_some())
     }
 }
+
+/// The least `[telemetry] queue_capacity` stim-driver accepts, in events of the forward
+/// thread.
+pub const MIN_QUEUE_CAPACITY: usize = 256;
 
 /// Invalid configuration.
 #[derive(Debug, thiserror::Error)]
@@ -541,18 +535,9 @@ impl DriverConfig {
     /// Reads, parses and validates a file; a relative prescription path is resolved
     /// against the file's directory.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = config_file::read(path)?;
-        let mut config = Self::parse(&text).map_err(|e| match e {
-            ConfigError::File(f) => ConfigError::File(f.in_file(path)),
-            other => other,
-        })?;
-        if config.prescription.is_relative() {
-            let joined = path
-                .parent()
-                .unwrap_or(Path::new(""))
-                .join(&config.prescription);
-            config.prescription = std::path::absolute(&joined).unwrap_or(joined);
-        }
+        let mut config: Self = config_file::load(path)?;
+        config.validate()?;
+        config_file::resolve(path, &mut config.prescription);
         Ok(config)
     }
 
@@ -633,7 +618,7 @@ impl DriverConfig {
                 FileError::Range {
                     field: "stimulator.max_amplitude_ua",
                     value: s.max_amplitude_ua.to_string(),
-                    allowed: "0..=150000",
+                    allowed: "0..=150000".into(),
                 }
             })?;
         config_file::range(
@@ -646,7 +631,7 @@ impl DriverConfig {
             u16::try_from(s.max_charge_nc / 10).map_err(|_| FileError::Range {
                 field: "stimulator.max_charge_nc",
                 value: s.max_charge_nc.to_string(),
-                allowed: "0..=150000",
+                allowed: "0..=150000".into(),
             })?;
         let limits = StimLimits {
             max_amplitude_100ua,
@@ -816,26 +801,15 @@ impl DriverConfig {
         if let Some(b) = &self.bus_rt {
             b.validate()?;
         }
-        let t = &self.telemetry;
+        self.telemetry.validate(MIN_QUEUE_CAPACITY)?;
+        let status_period_ms = self.telemetry.own.status_period_ms;
         config_file::range(
-            (10..=60_000).contains(&t.report_period_ms),
-            "telemetry.report_period_ms",
-            t.report_period_ms,
-            "10..=60000",
-        )?;
-        config_file::range(
-            (10..=10_000).contains(&t.status_period_ms),
+            (10..=10_000).contains(&status_period_ms),
             "telemetry.status_period_ms",
-            t.status_period_ms,
+            status_period_ms,
             "10..=10000",
         )?;
-        config_file::range(
-            (256..=1 << 20).contains(&t.queue_capacity),
-            "telemetry.queue_capacity",
-            t.queue_capacity,
-            "256..=1048576",
-        )?;
-        validate_prefix(&self.ipc.prefix)?;
+        self.ipc.validate()?;
         Ok(())
     }
 

@@ -12,6 +12,7 @@ use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 use crossbeam::queue::ArrayQueue;
 use fes_can::{Emcy, MessageKind, NmtState, Status, StimState};
 use fes_rt::msg::{DeviceState, DriverCommand, PulseFate, ValidationError};
+use fes_rt::rt::liveness::Liveness;
 
 use crate::fault::{ArmRefusal, Fault};
 use crate::interlock::Violation;
@@ -73,37 +74,6 @@ pub enum BusEvent {
         /// The command was a SinglePulse: that pulse was not delivered.
         pulse: bool,
     },
-}
-
-/// Liveness of a service's publisher — the StimTick publisher (rt-core) or the
-/// DriverCommand publisher (the supervisor) — checked by the report thread through iceoryx2.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Liveness {
-    /// Not checked yet.
-    Unknown = 0,
-    /// A publisher exists and its node's process is alive.
-    Alive = 1,
-    /// The publisher's node is dead (its process died without cleaning up).
-    Dead = 2,
-    /// The service has no publisher.
-    NoPublisher = 3,
-    /// Its publisher's process runs outside the systemd unit the configuration names
-    /// (`watchdog.supervisor_unit` / `generator_unit`): a squatter, never the real one.
-    Foreign = 4,
-}
-
-impl Liveness {
-    /// Decodes the value stored in [`SharedStatus::liveness`].
-    pub const fn from_u8(v: u8) -> Self {
-        match v {
-            1 => Liveness::Alive,
-            2 => Liveness::Dead,
-            3 => Liveness::NoPublisher,
-            4 => Liveness::Foreign,
-            _ => Liveness::Unknown,
-        }
-    }
 }
 
 /// The driver's state as a whole.

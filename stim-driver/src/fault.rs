@@ -97,7 +97,7 @@ pub enum Fault {
         field: &'static str,
     },
     /// A publisher the driver follows runs outside the systemd unit its configuration
-    /// names ([`crate::liveness`]): a process of the same user that took the service.
+    /// names ([`fes_rt::rt::liveness`]): a process of the same user that took the service.
     ForeignPublisher {
         /// The DriverCommand publisher (else the StimTick publisher).
         supervisor: bool,

@@ -37,11 +37,12 @@ use fes_can::{ConfigAssembler, ErrorCode, NmtState, Nodes, Status, StimLimits, S
 use fes_rt::msg::{
     CommandRefusal, CommandResult, Contract, DriverCommand, DriverCommandKind, PulseFate, StimTick,
 };
+use fes_rt::rt::liveness::Liveness;
 
 use crate::applied::{AppliedLedger, OpenPulse};
 use crate::event::{
     BringUp, BusErrorKind, BusEvent, Counters, DriverEvent, DriverState, EventSink, FrameKind,
-    Liveness, stimulator_device_state,
+    stimulator_device_state,
 };
 use crate::fault::{ArmRefusal, Fault};
 use crate::interlock::{InterlockLimits, Interlocks, PulseCommand, Verdict, Violation};

@@ -20,8 +20,9 @@
 //! - [`reconcile`]: STATUS reconciliation (delivered pulses against pulses written).
 //! - [`applied`]: which pulses the stimulator applied (the per-pulse account of STATUS).
 //! - [`runner`] (the real-time forward thread), [`report`] (logs, DriverStatus,
-//!   TimingReport), [`telemetry`], [`liveness`], [`txstamp`]: the process. systemd
-//!   notification is rt-core's ([`fes_rt::rt::notify`]).
+//!   TimingReport, the publishers' liveness through [`fes_rt::rt::liveness`]),
+//!   [`telemetry`], [`txstamp`]: the process. systemd notification is rt-core's
+//!   ([`fes_rt::rt::notify`]).
 //! - [`safe_stop`]: the `safe-stop` subcommand; [`probe`]: the `probe` subcommand (a
 //!   RehaStim 2's answer times).
 #![deny(clippy::missing_safety_doc)]
@@ -34,7 +35,6 @@ pub mod fault;
 pub mod forward;
 pub mod interlock;
 pub mod intrusion;
-pub mod liveness;
 pub mod output;
 pub mod probe;
 pub mod reconcile;

@@ -23,14 +23,14 @@ use fes_rt::msg::port;
 use fes_rt::msg::{DeviceState, DriverCommand, DriverStatus, PulseOutcome, StimTick, TimingReport};
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::hlog::HlogWriter;
+use fes_rt::rt::liveness::{Liveness, LivenessMonitor};
 use fes_rt::rt::node::{RunError, create_node};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::ipc;
 use tracing::{debug, error, info, warn};
 
 use crate::config::DriverConfig;
-use crate::event::{Counters, DriverEvent, DriverState, Liveness};
-use crate::liveness::LivenessMonitor;
+use crate::event::{Counters, DriverEvent, DriverState};
 use crate::runner::Shared;
 use crate::telemetry::DriverTelemetry;
 use crate::txstamp::{PulseTimes, TxStampReader};
@@ -302,7 +302,7 @@ impl<'a> Reporter<'a> {
             outcome_seq: 0,
             last_ack: (0, 0),
             start,
-            status_period: Duration::from_millis(config.telemetry.status_period_ms),
+            status_period: Duration::from_millis(config.telemetry.own.status_period_ms),
             report_period,
             liveness_period: Duration::from_millis(u64::from(config.watchdog.liveness_check_ms)),
             next_status: start,

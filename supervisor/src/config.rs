@@ -5,6 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
+use fes_rt::rt::config::{IpcConfig, OwnKeys};
+use serde::de::{MapAccess, SeqAccess};
 use serde::{Deserialize, Serialize};
 
 use crate::contraction::ContractionSettings;
@@ -26,9 +28,9 @@ pub const EXAMPLE: &str = include_str!("../../deploy/etc/fes/supervisor.toml");
 pub struct SupervisorConfig {
     /// Must be [`SCHEMA`].
     pub schema: String,
-    /// iceoryx2.
+    /// iceoryx2: the service-name prefix (as rt-core's and stim-driver's) and the node name.
     #[serde(default)]
-    pub ipc: IpcConfig,
+    pub ipc: IpcConfig<IpcKeys>,
     /// Reference publication and limits.
     #[serde(default)]
     pub reference: ReferenceConfig,
@@ -49,22 +51,35 @@ pub struct SupervisorConfig {
     pub recording: RecordingConfig,
 }
 
-/// iceoryx2 settings.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IpcConfig {
-    /// Service-name prefix (as rt-core's and stim-driver's). Default "fes".
-    pub prefix: String,
-    /// iceoryx2 node name of the supervisor. Default "supervisor".
+/// The supervisor's own key of `[ipc]` ([`IpcConfig`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct IpcKeys {
+    /// iceoryx2 node name of the supervisor (1..=64 characters). Default "supervisor".
     pub node_name: String,
 }
 
-impl Default for IpcConfig {
+impl Default for IpcKeys {
     fn default() -> Self {
         Self {
-            prefix: fes_rt::msg::service::DEFAULT_PREFIX.into(),
             node_name: "supervisor".into(),
         }
+    }
+}
+
+impl OwnKeys for IpcKeys {
+    const KEYS: &'static [&'static str] = &["node_name"];
+
+    fn read_value<'de, A: MapAccess<'de>>(
+        &mut self,
+        _key: &'static str,
+        map: &mut A,
+    ) -> Result<(), A::Error> {
+        self.node_name = map.next_value()?;
+        Ok(())
+    }
+
+    fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
+        Ok(seq.next_element()?.map(|v| self.node_name = v).is_some())
     }
 }
 
@@ -292,9 +307,11 @@ impl SupervisorConfig {
     /// Checks every value; the error is (key, problem).
     pub fn validate(&self) -> Result<(), (String, String)> {
         let key = |section: &str, e: RangeError| (format!("{section}.{}", e.key), e.problem());
-        fes_rt::msg::service::validate_prefix(&self.ipc.prefix)
+        self.ipc
+            .validate()
             .map_err(|e| ("ipc.prefix".to_string(), e.to_string()))?;
-        if self.ipc.node_name.is_empty() || self.ipc.node_name.len() > 64 {
+        let node_name = &self.ipc.own.node_name;
+        if node_name.is_empty() || node_name.len() > 64 {
             return Err(("ipc.node_name".into(), "must be 1..=64 characters".into()));
         }
         if !(1..=50).contains(&self.reference.period_ms) {

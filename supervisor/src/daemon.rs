@@ -13,14 +13,14 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 
-use fes_rt::msg::service::{ServiceError, open_pubsub};
+use fes_rt::msg::service::ServiceError;
 use fes_rt::msg::{
     Contract, DriverCommand, DriverStatus, ForceSample, PreviewEdge, PulseFate, PulseOutcome,
     Reference, ReferencePreview, StimTick, TimingReport,
 };
 use fes_rt::msg::{PortError, port};
 use fes_rt::rt::clock::{monotonic_ns, sleep_until};
-use iceoryx2::node::NodeView;
+use fes_rt::rt::liveness::{LivenessMonitor, list_nodes};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -29,7 +29,7 @@ use crate::command_link::{self, CommandLink, LinkEvent, LinkSettings, OrderRecor
 use crate::config::{RecordingConfig, SupervisorConfig};
 use crate::control::{ControlServer, Pending};
 use crate::core::{ArmState, DriverOrder, Fault, FaultCause, SupervisorCore};
-use crate::health::{HealthMonitor, NodeObservation, ServiceOwners, Severity, proc_state};
+use crate::health::{HealthMonitor, ServiceOwners, Severity, proc_state};
 use crate::pass;
 use crate::protocol::{Command, DriverOrderStatus, Response, Status};
 use crate::recording::{RecorderSettings, utc_stamp};
@@ -68,44 +68,6 @@ pub struct Outcome {
     pub fault: Option<Fault>,
 }
 
-fn node_id(id: &iceoryx2::identifiers::UniqueNodeId) -> u128 {
-    u128::from_str_radix(&id.to_string(), 16).unwrap_or(0)
-}
-
-/// Lists the iceoryx2 nodes of this machine (name, pid, id, dead).
-pub fn list_nodes() -> Vec<NodeObservation> {
-    let config = iceoryx2::config::Config::default();
-    let mut out = Vec::new();
-    let _ = Node::<ipc::Service>::list(&config, |state| {
-        let (view_dead, details, id) = match &state {
-            NodeState::Alive(v) => (false, v.details().clone(), node_id(v.id())),
-            NodeState::Dead(v) => (true, v.details().clone(), node_id(v.id())),
-            _ => return CallbackProgression::Continue,
-        };
-        if let Some(d) = details {
-            out.push(NodeObservation {
-                name: d.name().as_str().to_string(),
-                pid: d.process_id().value() as u32,
-                id,
-                dead: view_dead,
-            });
-        }
-        CallbackProgression::Continue
-    });
-    out
-}
-
-/// The node ids of a service's publishers.
-fn publisher_nodes<T: Contract>(service: &PubSubService<T>) -> Vec<u128> {
-    use iceoryx2::service::port_factory::PortFactory as _;
-    let mut ids = Vec::new();
-    service.dynamic_config().list_publishers(|p| {
-        ids.push(node_id(&p.node_id));
-        CallbackProgression::Continue
-    });
-    ids
-}
-
 /// The iceoryx2 ports of the daemon, opened under the configured prefix.
 struct Ports {
     /// Reference to rt-core.
@@ -117,18 +79,14 @@ struct Ports {
     ticks: Subscriber<ipc::Service, StimTick, ()>,
     forces: Subscriber<ipc::Service, ForceSample, ()>,
     statuses: Subscriber<ipc::Service, DriverStatus, ()>,
-    /// The StimTick service, whose publishers are this stack's rt-core.
-    tick_service: PubSubService<StimTick>,
-    /// The DriverStatus service, whose publishers are this stack's stim-driver.
-    status_service: PubSubService<DriverStatus>,
+    /// The StimTick service's publishers: this stack's rt-core.
+    tick_publishers: LivenessMonitor<StimTick>,
+    /// The DriverStatus service's publishers: this stack's stim-driver.
+    status_publishers: LivenessMonitor<DriverStatus>,
     timings: Subscriber<ipc::Service, TimingReport, ()>,
     /// What the driver did with each pulse decision (for the recording).
     outcomes: Subscriber<ipc::Service, PulseOutcome, ()>,
 }
-
-/// A publish-subscribe service of the stack.
-type PubSubService<T> =
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
 
 impl Ports {
     /// Opens every port on `node` under `prefix`.
@@ -140,8 +98,8 @@ impl Ports {
             ticks: port::subscriber::<StimTick>(node, prefix)?,
             forces: port::subscriber::<ForceSample>(node, prefix)?,
             statuses: port::subscriber::<DriverStatus>(node, prefix)?,
-            tick_service: open_pubsub::<StimTick>(node, prefix)?,
-            status_service: open_pubsub::<DriverStatus>(node, prefix)?,
+            tick_publishers: LivenessMonitor::new(node, prefix)?,
+            status_publishers: LivenessMonitor::new(node, prefix)?,
             timings: port::subscriber::<TimingReport>(node, prefix)?,
             outcomes: port::subscriber::<PulseOutcome>(node, prefix)?,
         })
@@ -261,7 +219,7 @@ impl<'a> Daemon<'a> {
         } else {
             None
         };
-        let node = fes_rt::rt::node::create_node(&cfg.ipc.node_name)?;
+        let node = fes_rt::rt::node::create_node(&cfg.ipc.own.node_name)?;
         let ports = Ports::open(&node, cfg.ipc.prefix.as_str())?;
         let (tx, requests) = mpsc::channel::<Pending>();
         let server = ControlServer::start(&cfg.control, tx)?;
@@ -474,8 +432,8 @@ impl<'a> Daemon<'a> {
         if now >= self.next_scan {
             self.next_scan = now + self.scan_ns;
             let owners = ServiceOwners {
-                stim_tick: publisher_nodes(&self.ports.tick_service),
-                driver_status: publisher_nodes(&self.ports.status_service),
+                stim_tick: self.ports.tick_publishers.publisher_ids(),
+                driver_status: self.ports.status_publishers.publisher_ids(),
             };
             let listed = list_nodes();
             self.health.on_nodes(&listed, &owners);

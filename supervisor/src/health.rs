@@ -19,6 +19,7 @@ use std::collections::BTreeMap;
 use fes_rt::msg::{
     Contract, DeviceState, DriverStatus, ForceSample, StimTick, TimingReport, TimingSource,
 };
+use fes_rt::rt::liveness::NodeObservation;
 use serde::{Deserialize, Serialize};
 
 use crate::protocol::{ProcessState, ProcessStatus};
@@ -82,19 +83,6 @@ pub fn proc_state(pid: u32) -> ProcState {
         Some(_) => ProcState::Running,
         None => ProcState::Gone,
     }
-}
-
-/// An iceoryx2 node seen in a node listing.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct NodeObservation {
-    /// Node name (`rt-core`, `stim-driver`, ...).
-    pub name: String,
-    /// Owner process id.
-    pub pid: u32,
-    /// iceoryx2's unique node id.
-    pub id: u128,
-    /// iceoryx2 reports the node dead (its process is gone without cleaning up).
-    pub dead: bool,
 }
 
 /// Health settings. Defaults suit a native bench; the UML bench relaxes them.

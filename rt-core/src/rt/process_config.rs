@@ -45,14 +45,15 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use serde::de::{MapAccess, SeqAccess};
 use serde::{Deserialize, Serialize};
 
 use super::generator::PulseSettings;
 use super::reference::ReferencePolicy;
 use fes_rt::msg::StimTick;
-use fes_rt::msg::service::{DEFAULT_PREFIX, ServiceError, validate_prefix};
+use fes_rt::msg::service::ServiceError;
 use fes_rt::rt::clock::{MAX_PERIOD, MIN_PERIOD};
-use fes_rt::rt::config::{RtConfig, RtConfigError};
+use fes_rt::rt::config::{IpcConfig, OwnKeys, RtConfig, RtConfigError, TelemetryConfig};
 use fes_rt::rt::config_file::{self, FileError};
 
 /// The schema tag this version reads.
@@ -91,7 +92,7 @@ pub struct RtCoreConfig {
     pub telemetry: TelemetryConfig,
     /// iceoryx2.
     #[serde(default)]
-    pub ipc: IpcConfig,
+    pub ipc: IpcConfig<IpcKeys>,
 }
 
 fn default_period_us() -> u64 {
@@ -176,54 +177,39 @@ impl Default for PulseConfig {
     }
 }
 
-/// Telemetry. Defaults: no hlog, a report every 1000 ms, 8192 queued records, allocations
-/// traced.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TelemetryConfig {
-    /// HdrHistogram interval log to write; relative paths are relative to the working
-    /// directory.
-    pub hlog: Option<PathBuf>,
-    /// Period of TimingReports and hlog intervals, ms (10..=60000).
-    pub report_period_ms: u64,
-    /// Tick records the queue to the telemetry thread holds (16..=1048576).
-    pub queue_capacity: usize,
-    /// Keep the backtrace of the loop's first heap allocation, if one happens, and log it
-    /// at exit (`fes_rt::rt::alloc::trace_first_heap_allocation`; costs nothing until
-    /// then). Default true.
-    pub trace_allocations: bool,
-}
-
-impl Default for TelemetryConfig {
-    fn default() -> Self {
-        Self {
-            hlog: None,
-            report_period_ms: 1000,
-            queue_capacity: 8192,
-            trace_allocations: true,
-        }
-    }
-}
-
-/// iceoryx2. Defaults: prefix "fes", notify on.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct IpcConfig {
-    /// Service-name prefix.
-    pub prefix: String,
+/// rt-core's own key of `[ipc]` ([`IpcConfig`]). Default: notify on.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct IpcKeys {
     /// Notify the stim-tick event service after each StimTick, so receivers can sleep on a
     /// listener instead of polling.
     pub notify: bool,
 }
 
-impl Default for IpcConfig {
+impl Default for IpcKeys {
     fn default() -> Self {
-        Self {
-            prefix: DEFAULT_PREFIX.to_owned(),
-            notify: true,
-        }
+        Self { notify: true }
     }
 }
+
+impl OwnKeys for IpcKeys {
+    const KEYS: &'static [&'static str] = &["notify"];
+
+    fn read_value<'de, A: MapAccess<'de>>(
+        &mut self,
+        _key: &'static str,
+        map: &mut A,
+    ) -> Result<(), A::Error> {
+        self.notify = map.next_value()?;
+        Ok(())
+    }
+
+    fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
+        Ok(seq.next_element()?.map(|v| self.notify = v).is_some())
+    }
+}
+
+/// The least `[telemetry] queue_capacity` rt-core accepts, in tick records.
+pub const MIN_QUEUE_CAPACITY: usize = 16;
 
 /// Invalid configuration file.
 #[derive(Debug, thiserror::Error)]
@@ -265,25 +251,15 @@ impl RtCoreConfig {
     /// Reads, parses and validates a file; a relative controller path is resolved against
     /// the file's directory.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = config_file::read(path)?;
-        let mut config = Self::parse(&text).map_err(|e| match e {
-            ConfigError::File(f) => ConfigError::File(f.in_file(path)),
-            other => other,
-        })?;
-        if let SourceConfig::Controller { path: controller } = &mut config.source
-            && controller.is_relative()
-        {
-            let dir = path.parent().unwrap_or(Path::new(""));
-            let joined = dir.join(&*controller);
-            // Absolute, so that the configuration can be written elsewhere and still point
-            // at the same file.
-            *controller = std::path::absolute(&joined).unwrap_or(joined);
+        let mut config: Self = config_file::load(path)?;
+        config.validate()?;
+        // Absolute, so that the configuration can be written elsewhere and still point at
+        // the same files.
+        if let SourceConfig::Controller { path: controller } = &mut config.source {
+            config_file::resolve(path, controller);
         }
-        if let Some(p) = &mut config.prescription
-            && p.is_relative()
-        {
-            let joined = path.parent().unwrap_or(Path::new("")).join(&*p);
-            *p = std::path::absolute(&joined).unwrap_or(joined);
+        if let Some(p) = &mut config.prescription {
+            config_file::resolve(path, p);
         }
         Ok(config)
     }
@@ -361,20 +337,8 @@ impl RtCoreConfig {
             "1..=250000",
         )?;
         config_file::range(p.width_us >= 1, "pulse.width_us", p.width_us, ">= 1")?;
-        let t = &self.telemetry;
-        config_file::range(
-            (10..=60_000).contains(&t.report_period_ms),
-            "telemetry.report_period_ms",
-            t.report_period_ms,
-            "10..=60000",
-        )?;
-        config_file::range(
-            (16..=1 << 20).contains(&t.queue_capacity),
-            "telemetry.queue_capacity",
-            t.queue_capacity,
-            "16..=1048576",
-        )?;
-        validate_prefix(&self.ipc.prefix)?;
+        self.telemetry.validate(MIN_QUEUE_CAPACITY)?;
+        self.ipc.validate()?;
         Ok(())
     }
 

@@ -103,7 +103,7 @@ impl LoopPorts {
             } else {
                 None
             },
-            notifier: if config.ipc.notify {
+            notifier: if config.ipc.own.notify {
                 Some(port::stim_tick_notifier(node, prefix)?)
             } else {
                 None

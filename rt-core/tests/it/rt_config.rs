@@ -41,7 +41,7 @@ fn a_minimal_file_gets_the_documented_defaults() {
         (c.telemetry.report_period_ms, c.telemetry.queue_capacity),
         (1000, 8192)
     );
-    assert_eq!((c.ipc.prefix.as_str(), c.ipc.notify), ("fes", true));
+    assert_eq!((c.ipc.prefix.as_str(), c.ipc.own.notify), ("fes", true));
     assert_eq!(c.reference_policy().stale_after_ns, 100_000_000);
     assert_eq!(c.feedback_max_age_ns(), None);
 }

@@ -11,8 +11,9 @@ use fes_rt::msg::{
     CommandAck, CommandRefusal, CommandResult, Contract, DriverCommand, DriverCommandKind,
     PulseFate, StimTick,
 };
+use fes_rt::rt::liveness::Liveness;
 use stim_driver::config::DriverConfig;
-use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
+use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState};
 use stim_driver::fault::{ArmRefusal, Fault};
 use stim_driver::forward::{ForwardPath, ForwardSettings};
 use stim_driver::tx::TxError;

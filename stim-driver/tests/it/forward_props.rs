@@ -32,9 +32,10 @@
 
 use fes_can::{Emcy, ErrorCode, Message, MessageKind, NmtCommand, NmtState, Nodes, StimState};
 use fes_rt::msg::{DriverCommand, DriverCommandKind, StimTick};
+use fes_rt::rt::liveness::Liveness;
 use proptest::prelude::*;
 use stim_driver::config::DriverConfig;
-use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState, Liveness};
+use stim_driver::event::{BusErrorKind, BusEvent, DriverEvent, DriverState};
 use stim_driver::fault::Fault;
 use stim_driver::forward::{ForwardPath, ForwardSettings};
 

@@ -14,7 +14,6 @@ mod recording_bus;
 mod forward_path;
 mod forward_props;
 mod interlock_props;
-mod publisher_identity;
 mod serial_device;
 mod serial_driver;
 mod serial_probe;

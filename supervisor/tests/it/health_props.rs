@@ -17,12 +17,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use fes_rt::msg::{DeviceState, DriverStatus, ForceSample, Reference, StimTick};
+use fes_rt::rt::liveness::NodeObservation;
 use proptest::prelude::*;
 use supervisor::contraction::ContractionSettings;
 use supervisor::core::{ArmState, DriverOrder, SupervisorCore};
-use supervisor::health::{
-    HealthMonitor, HealthSettings, NodeObservation, ProcState, ServiceOwners, Severity,
-};
+use supervisor::health::{HealthMonitor, HealthSettings, ProcState, ServiceOwners, Severity};
 use supervisor::limits::ReferenceLimits;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::pass::{check_health, serve_command};

@@ -1,9 +1,11 @@
 //! Versioned TOML configuration files of the real-time processes (rt-core's
 //! `fes-rt-core/1`, stim-driver's `fes-stim-driver/1`): read once at start-up, parsed into a
 //! serde type that denies unknown keys, checked for its `schema` tag and every value's
-//! range. One implementation of the reading, the errors and the range check; each process
-//! wraps [`FileError`] in its own error type, next to its own checks.
+//! range. One implementation of the reading ([`load`]), the errors, the range check and
+//! the resolution of the paths a file names ([`resolve`]); each process wraps
+//! [`FileError`] in its own error type, next to its own checks.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
@@ -43,7 +45,7 @@ pub enum FileError {
         /// The value.
         value: String,
         /// What is allowed.
-        allowed: &'static str,
+        allowed: Cow<'static, str>,
     },
 }
 
@@ -66,6 +68,21 @@ pub fn read(path: &Path) -> Result<String, FileError> {
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// Reads the file `path` and parses it into `T` (no validation beyond the shape); a parse
+/// error names the file. The processes check the values after, with [`range`].
+pub fn load<T: DeserializeOwned>(path: &Path) -> Result<T, FileError> {
+    parse(&read(path)?).map_err(|e| e.in_file(path))
+}
+
+/// Makes `p`, a path written in the file `file`, absolute: a relative one is relative to
+/// the file's directory (so the configuration means the same from any working directory).
+pub fn resolve(file: &Path, p: &mut PathBuf) {
+    if p.is_relative() {
+        let joined = file.parent().unwrap_or(Path::new("")).join(&*p);
+        *p = std::path::absolute(&joined).unwrap_or(joined);
+    }
 }
 
 /// Parses TOML `text` into `T` (no validation beyond the shape).
@@ -102,7 +119,7 @@ pub fn range<T: ToString>(
         Err(FileError::Range {
             field,
             value: value.to_string(),
-            allowed,
+            allowed: Cow::Borrowed(allowed),
         })
     }
 }
@@ -150,5 +167,34 @@ mod tests {
             .unwrap_err()
             .in_file(Path::new("/x"));
         assert!(matches!(r, FileError::Range { field: "n", .. }));
+    }
+
+    #[test]
+    fn a_loaded_file_names_itself_in_parse_errors_and_its_relative_paths_resolve_against_it() {
+        let dir = fes_testkit::Scratch::new("config-file");
+        let path = dir.join("x.toml");
+        std::fs::write(&path, "schema = \"a/1\"\nn = 3\n").unwrap();
+        let ok: Small = load(&path).unwrap();
+        assert_eq!((ok.schema.as_str(), ok.n), ("a/1", 3));
+        std::fs::write(&path, "schema = \"a/1\"\nn = 3\nm = 2\n").unwrap();
+        let e = load::<Small>(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("{}: ", path.display())) && e.contains("unknown field `m`"),
+            "{e}"
+        );
+        let e = load::<Small>(&dir.join("absent.toml")).unwrap_err();
+        assert!(matches!(e, FileError::Read { .. }), "{e}");
+
+        let mut p = PathBuf::from("sub/p.toml");
+        resolve(&path, &mut p);
+        assert_eq!(p, dir.join("sub/p.toml"));
+        let mut abs = PathBuf::from("/etc/fes/p.toml");
+        resolve(&path, &mut abs);
+        assert_eq!(abs, PathBuf::from("/etc/fes/p.toml"));
+        // A file named without a directory: its paths are relative to the working
+        // directory, made absolute.
+        let mut bare = PathBuf::from("p.toml");
+        resolve(Path::new("x.toml"), &mut bare);
+        assert_eq!(bare, std::env::current_dir().unwrap().join("p.toml"));
     }
 }

@@ -1,7 +1,8 @@
 //! Real-time thread plumbing shared by the real-time processes: absolute-time periodic
 //! clock, SCHED_FIFO / affinity / memory locking, the counting allocator, telemetry into
 //! HdrHistograms and interval logs, systemd notification, journald logging, stop signals,
-//! configuration-file reading and the iceoryx2 node (docs/realtime.md).
+//! configuration-file reading and the sections the daemons' files share, and the iceoryx2
+//! node (docs/realtime.md).
 
 pub mod alloc;
 pub mod clock;
@@ -11,6 +12,7 @@ pub mod error_text;
 pub mod exit;
 pub mod histogram;
 pub mod hlog;
+pub mod liveness;
 pub mod logging;
 pub mod node;
 pub mod notify;

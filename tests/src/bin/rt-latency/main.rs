@@ -372,7 +372,7 @@ fn rt_core_config(cli: &Cli) -> anyhow::Result<RtCoreConfig> {
     config.rt.on_missing_rights = MissingRightsPolicy::Refuse;
     config.rt.lock_memory = true;
     config.telemetry.report_period_ms = 1000;
-    config.ipc.notify = true;
+    config.ipc.own.notify = true;
     config.validate().context("rt-core configuration")?;
     Ok(config)
 }
