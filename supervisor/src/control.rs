@@ -220,6 +220,9 @@ fn peer_groups(stream: &UnixStream) -> std::io::Result<Vec<u32>> {
     }
 }
 
+/// How the server learns a connection's credentials ([`peer_of`] outside tests).
+pub type PeerReader = fn(&UnixStream) -> std::io::Result<Peer>;
+
 /// The credentials of the process at the other end of `stream`.
 pub fn peer_of(stream: &UnixStream) -> std::io::Result<Peer> {
     let c = nix::sys::socket::getsockopt(stream, nix::sys::socket::sockopt::PeerCredentials)
@@ -284,6 +287,19 @@ impl ControlServer {
         policy: PeerPolicy,
         requests: mpsc::Sender<Pending>,
     ) -> Result<Self, ControlError> {
+        Self::start_with_peer_reader(cfg, policy, peer_of, requests)
+    }
+
+    /// [`ControlServer::start_with_policy`] reading each peer's credentials with `peers`
+    /// instead of [`peer_of`]. For tests only: an unprivileged test cannot connect as
+    /// another user, so it marks some of its own connections as a foreign uid to prove
+    /// the refusal path (checked before anything is read) without root.
+    pub fn start_with_peer_reader(
+        cfg: &ControlConfig,
+        policy: PeerPolicy,
+        peers: PeerReader,
+        requests: mpsc::Sender<Pending>,
+    ) -> Result<Self, ControlError> {
         let path = cfg.socket.clone();
         let io = |op: &'static str, p: &Path| {
             let path = p.to_path_buf();
@@ -315,14 +331,14 @@ impl ControlServer {
                 (Arc::clone(&policy), requests.clone(), Arc::clone(&stop));
             spawn(
                 "control",
-                Box::new(move || serve(listener, policy, requests, stop)),
+                Box::new(move || serve(listener, policy, peers, requests, stop)),
             )?
         };
         let stopper = {
             let stop = Arc::clone(&stop);
             spawn(
                 "control-stop",
-                Box::new(move || serve_stop(stop_listener, policy, requests, stop)),
+                Box::new(move || serve_stop(stop_listener, policy, peers, requests, stop)),
             )?
         };
         Ok(Self {
@@ -416,6 +432,7 @@ fn send(stream: &mut UnixStream, r: &Response) -> std::io::Result<()> {
 fn serve(
     listener: UnixListener,
     policy: Arc<PeerPolicy>,
+    peers: PeerReader,
     requests: mpsc::Sender<Pending>,
     stop: Arc<AtomicBool>,
 ) {
@@ -434,7 +451,7 @@ fn serve(
         let spawned = std::thread::Builder::new()
             .name("control-client".into())
             .spawn(move || {
-                let _ = handle(stream, &policy, &requests);
+                let _ = handle(stream, &policy, peers, &requests);
                 done.fetch_sub(1, Ordering::AcqRel);
             });
         if spawned.is_err() {
@@ -447,13 +464,14 @@ fn serve(
 fn serve_stop(
     listener: UnixListener,
     policy: Arc<PeerPolicy>,
+    peers: PeerReader,
     requests: mpsc::Sender<Pending>,
     stop: Arc<AtomicBool>,
 ) {
     accept_loop(&listener, &stop, |mut stream| {
         let _ = stream.set_nonblocking(false);
         let _ = stream.set_write_timeout(Some(CLIENT_DEADLINE));
-        let Ok(peer) = peer_of(&stream) else {
+        let Ok(peer) = peers(&stream) else {
             return;
         };
         if let Err(e) = policy.check_stop(&peer) {
@@ -532,12 +550,13 @@ fn read_line(stream: &mut UnixStream, deadline: Instant) -> std::io::Result<Opti
 fn handle(
     mut stream: UnixStream,
     policy: &PeerPolicy,
+    peers: PeerReader,
     requests: &mpsc::Sender<Pending>,
 ) -> std::io::Result<()> {
     let deadline = Instant::now() + CLIENT_DEADLINE;
     stream.set_nonblocking(false)?;
     stream.set_write_timeout(Some(CLIENT_DEADLINE))?;
-    let peer = peer_of(&stream)?;
+    let peer = peers(&stream)?;
     // The policy first: a peer it does not admit is answered and disconnected unread (the
     // client reads the answer even when its own write fails, `request`).
     if let Err(e) = policy.check(&peer) {

@@ -510,6 +510,30 @@ fn malformed_configurations_are_refused_by_name_and_create_nothing() {
 }
 
 /// A control server with a main loop that answers every request and records its commands.
+/// The pids of this test process's children that play peers of another user
+/// ([`foreign_marked_peer_of`]).
+static FOREIGN_PIDS: std::sync::Mutex<Vec<i32>> = std::sync::Mutex::new(Vec::new());
+
+/// The uid the foreign peers have: set by the kernel when the test runs as root (the
+/// children run as it), by [`foreign_marked_peer_of`] otherwise.
+const FOREIGN_UID: u32 = 65534;
+
+/// The server's credentials as the kernel reports them, except that a child registered in
+/// [`FOREIGN_PIDS`] is reported as [`FOREIGN_UID`]: an unprivileged test cannot connect as
+/// another user, and what it proves is the policy's refusal before anything is read, which
+/// runs on the credentials either way.
+fn foreign_marked_peer_of(
+    stream: &std::os::unix::net::UnixStream,
+) -> std::io::Result<supervisor::control::Peer> {
+    let mut peer = supervisor::control::peer_of(stream)?;
+    if FOREIGN_PIDS.lock().unwrap().contains(&peer.pid) {
+        peer.uid = FOREIGN_UID;
+        peer.gid = FOREIGN_UID;
+        peer.groups = vec![FOREIGN_UID];
+    }
+    Ok(peer)
+}
+
 struct StopFixture {
     server: Option<ControlServer>,
     seen: std::sync::Arc<std::sync::Mutex<Vec<supervisor::protocol::Command>>>,
@@ -536,7 +560,9 @@ impl StopFixture {
             allow_root: me == 0,
         };
         let (tx, rx) = std::sync::mpsc::channel::<supervisor::control::Pending>();
-        let server = ControlServer::start_with_policy(&cfg, policy, tx).unwrap();
+        let server =
+            ControlServer::start_with_peer_reader(&cfg, policy, foreign_marked_peer_of, tx)
+                .unwrap();
         let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let seen2 = std::sync::Arc::clone(&seen);
         let main_loop = std::thread::spawn(move || {
@@ -598,7 +624,8 @@ impl Drop for StopFixture {
 
 /// The operator's stop cannot be held up (issue 19, item 2). 16 clients trickle a byte every
 /// 100 ms and never finish their request, and 16 peers the policy does not admit (run as
-/// uid 65534 when the test runs as root) connect and hold; meanwhile a `status` on the control
+/// uid 65534: run as it when the test runs as root, marked as it by the test's credential
+/// reader otherwise, [`foreign_marked_peer_of`]) connect and hold; meanwhile a `status` on the control
 /// socket and a stop on the stop socket are each answered within 100 ms, the stop reaches the
 /// main loop as `stop`, every trickling client is cut off at the total deadline
 /// ([`CLIENT_DEADLINE`]) and every foreign peer is refused unread. (Served one connection at
@@ -611,29 +638,28 @@ fn the_stop_is_answered_while_trickling_and_refused_peers_hold_connections() {
     let f = StopFixture::new("trickle");
     let socket = f.socket();
     let tricklers = f.tricklers(16);
-    let me = nix::unistd::geteuid().as_raw();
+    let root = nix::unistd::geteuid().is_root();
     let mut foreign = Vec::new();
-    if me == 0 {
-        use std::os::unix::process::CommandExt;
+    {
+        // Held while spawning: a child is registered before the server can read its
+        // credentials (the reader waits for this lock).
+        let mut pids = FOREIGN_PIDS.lock().unwrap();
         for _ in 0..16 {
-            foreign.push(
-                Command::new("python3")
-                    .args([
-                        "-c",
-                        "import socket,sys,time\ns=socket.socket(socket.AF_UNIX)\ns.connect(sys.argv[1])\nprint(s.recv(4096).decode().strip(), flush=True)\ntime.sleep(3)",
-                    ])
-                    .arg(&socket)
-                    .uid(65534)
-                    .gid(65534)
-                    .stdout(Stdio::piped())
-                    .spawn()
-                    .unwrap(),
-            );
+            use std::os::unix::process::CommandExt;
+            let mut cmd = Command::new("python3");
+            cmd.args([
+                "-c",
+                "import socket,sys,time\ns=socket.socket(socket.AF_UNIX)\ns.connect(sys.argv[1])\nprint(s.recv(4096).decode().strip(), flush=True)\ntime.sleep(3)",
+            ])
+            .arg(&socket)
+            .stdout(Stdio::piped());
+            if root {
+                cmd.uid(FOREIGN_UID).gid(FOREIGN_UID);
+            }
+            let child = cmd.spawn().unwrap();
+            pids.push(child.id() as i32);
+            foreign.push(child);
         }
-    } else {
-        eprintln!(
-            "not root: the 16 foreign peers of this test need uid 65534; only the tricklers run"
-        );
     }
     std::thread::sleep(Duration::from_millis(300));
     let t = Instant::now();
