@@ -704,6 +704,41 @@ impl DriverConfig {
         config_file::check_schema(&self.schema, SCHEMA)?;
         let c = &self.can;
         self.validate_transport()?;
+        self.validate_can()?;
+        let limits = self.stim_limits()?;
+        config_file::range(
+            u32::from(limits.watchdog_ms) >= 2 * u32::from(c.heartbeat_ms),
+            "stimulator.watchdog_ms",
+            limits.watchdog_ms,
+            ">= 2 x can.heartbeat_ms",
+        )?;
+        self.interlock_limits()?;
+        self.validate_watchdog()?;
+        config_file::range(
+            self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
+            "force.max_n",
+            self.force.max_n,
+            "> 0 and <= 10000 N",
+        )?;
+        self.rt.validate()?;
+        if let Some(b) = &self.bus_rt {
+            b.validate()?;
+        }
+        self.telemetry.validate(MIN_QUEUE_CAPACITY)?;
+        let status_period_ms = self.telemetry.own.status_period_ms;
+        config_file::range(
+            (10..=10_000).contains(&status_period_ms),
+            "telemetry.status_period_ms",
+            status_period_ms,
+            "10..=10000",
+        )?;
+        self.ipc.validate()?;
+        Ok(())
+    }
+
+    /// `[can]`: the interface, the nodes and the bus timings.
+    fn validate_can(&self) -> Result<(), ConfigError> {
+        let c = &self.can;
         match fes_hostbus::bus_dir(&c.iface) {
             _ if self.transport.kind == TransportKind::Sciencemode => {}
             Some(dir) => config_file::range(
@@ -745,14 +780,12 @@ impl DriverConfig {
             c.bringup_retry_ms,
             "50..=60000",
         )?;
-        let limits = self.stim_limits()?;
-        config_file::range(
-            u32::from(limits.watchdog_ms) >= 2 * u32::from(c.heartbeat_ms),
-            "stimulator.watchdog_ms",
-            limits.watchdog_ms,
-            ">= 2 x can.heartbeat_ms",
-        )?;
-        self.interlock_limits()?;
+        Ok(())
+    }
+
+    /// `[watchdog]`: the tick, stimulator, arming and command timeouts, and the
+    /// publishers' liveness.
+    fn validate_watchdog(&self) -> Result<(), ConfigError> {
         let w = &self.watchdog;
         config_file::range(
             (100..=1_000_000).contains(&w.tick_period_us),
@@ -790,138 +823,127 @@ impl DriverConfig {
             w.command_max_age_ms,
             "1..=10000",
         )?;
-        validate_liveness(w)?;
-        config_file::range(
-            self.force.max_n.is_finite() && self.force.max_n > 0.0 && self.force.max_n <= 10_000.0,
-            "force.max_n",
-            self.force.max_n,
-            "> 0 and <= 10000 N",
-        )?;
-        self.rt.validate()?;
-        if let Some(b) = &self.bus_rt {
-            b.validate()?;
-        }
-        self.telemetry.validate(MIN_QUEUE_CAPACITY)?;
-        let status_period_ms = self.telemetry.own.status_period_ms;
-        config_file::range(
-            (10..=10_000).contains(&status_period_ms),
-            "telemetry.status_period_ms",
-            status_period_ms,
-            "10..=10000",
-        )?;
-        self.ipc.validate()?;
-        Ok(())
+        validate_liveness(w)
     }
 
     /// `[transport]`: the keys of the other transport are refused, not ignored; with
     /// ScienceMode the limits must lie within the RehaStim 2's fixed ones and the
     /// stimulator timeout must cover the device's latency (`docs/sciencemode.md`).
     fn validate_transport(&self) -> Result<(), ConfigError> {
+        match self.transport.kind {
+            TransportKind::Can => self.validate_can_transport(),
+            TransportKind::Sciencemode => self.validate_sciencemode_transport(),
+        }
+    }
+
+    /// `[transport]` with kind = "can": no serial keys, an interface named.
+    fn validate_can_transport(&self) -> Result<(), ConfigError> {
         let t = &self.transport;
-        match t.kind {
-            TransportKind::Can => {
-                config_file::range(
-                    t.device.is_none(),
-                    "transport.device",
-                    t.device
-                        .as_deref()
-                        .map_or(String::new(), |d| d.display().to_string()),
-                    "absent with kind = \"can\" (a serial device is for kind = \"sciencemode\")",
-                )?;
-                config_file::range(
-                    t.poll_ms.is_none(),
-                    "transport.poll_ms",
-                    t.poll_ms.unwrap_or(0),
-                    "absent with kind = \"can\" (the stimulator sends STATUS by itself)",
-                )?;
-                config_file::range(
-                    t.max_lateness_ms.is_none(),
-                    "transport.max_lateness_ms",
-                    t.max_lateness_ms.unwrap_or(0),
-                    "absent with kind = \"can\" (a CAN write never waits for an answer)",
-                )?;
-                config_file::range(
-                    t.min_interval_ms.is_none(),
-                    "transport.min_interval_ms",
-                    t.min_interval_ms.unwrap_or(0),
-                    "absent with kind = \"can\" (the stimulator takes a PULSE any tick)",
-                )?;
-                config_file::range(
-                    !self.can.iface.is_empty(),
-                    "can.iface",
-                    "",
-                    "required with transport kind \"can\" (the default)",
-                )?;
-            }
-            TransportKind::Sciencemode => {
-                let device = t.device.as_deref().unwrap_or(Path::new(""));
-                config_file::range(
-                    device.is_absolute(),
-                    "transport.device",
-                    device.display(),
-                    "required with kind = \"sciencemode\": the serial device's absolute path (/dev/ttyUSB0)",
-                )?;
-                config_file::range(
-                    self.can.iface.is_empty(),
-                    "can.iface",
-                    &self.can.iface,
-                    "absent with transport kind \"sciencemode\" (no CAN interface is used)",
-                )?;
-                let poll_ms = t.poll_ms();
-                config_file::range(
-                    (5..=1000).contains(&poll_ms),
-                    "transport.poll_ms",
-                    poll_ms,
-                    "5..=1000",
-                )?;
-                let min_interval = t.min_interval_ms();
-                config_file::range(
-                    (1..=200).contains(&min_interval),
-                    "transport.min_interval_ms",
-                    min_interval,
-                    "1..=200",
-                )?;
-                let lateness = t.max_lateness_ms();
-                config_file::range(
-                    lateness <= 20,
-                    "transport.max_lateness_ms",
-                    lateness,
-                    "0..=20",
-                )?;
-                config_file::range(
-                    self.stimulator_timeout_ms() >= crate::serial_rx::MAX_RESPONSE_MS + 2 * poll_ms,
-                    "watchdog.stimulator_timeout_ms",
-                    self.stimulator_timeout_ms(),
-                    ">= 100 ms (the RehaStim 2's longest answer, §2.3) + 2 x transport.poll_ms with kind = \"sciencemode\"",
-                )?;
-                let limits = self.stim_limits()?;
-                if let Err(field) = crate::serial_rx::limits_within_device(&limits) {
-                    let (name, value) = match field {
-                        "max_amplitude_ua" => (
-                            "stimulator.max_amplitude_ua",
-                            self.stimulator.max_amplitude_ua,
-                        ),
-                        _ => (
-                            "stimulator.max_width_us",
-                            u32::from(self.stimulator.max_width_us),
-                        ),
-                    };
-                    config_file::range(
-                        false,
-                        name,
-                        value,
-                        "within the RehaStim 2's fixed limits (126000 uA, 500 us) with kind = \"sciencemode\"",
-                    )?;
-                }
-                for &ch in &self.interlocks.channels {
-                    config_file::range(
-                        ch < fes_sciencemode::limits::CHANNELS,
-                        "interlocks.channels",
-                        ch,
-                        "0..=7 (the RehaStim 2's 8 channels) with kind = \"sciencemode\"",
-                    )?;
-                }
-            }
+        config_file::range(
+            t.device.is_none(),
+            "transport.device",
+            t.device
+                .as_deref()
+                .map_or(String::new(), |d| d.display().to_string()),
+            "absent with kind = \"can\" (a serial device is for kind = \"sciencemode\")",
+        )?;
+        config_file::range(
+            t.poll_ms.is_none(),
+            "transport.poll_ms",
+            t.poll_ms.unwrap_or(0),
+            "absent with kind = \"can\" (the stimulator sends STATUS by itself)",
+        )?;
+        config_file::range(
+            t.max_lateness_ms.is_none(),
+            "transport.max_lateness_ms",
+            t.max_lateness_ms.unwrap_or(0),
+            "absent with kind = \"can\" (a CAN write never waits for an answer)",
+        )?;
+        config_file::range(
+            t.min_interval_ms.is_none(),
+            "transport.min_interval_ms",
+            t.min_interval_ms.unwrap_or(0),
+            "absent with kind = \"can\" (the stimulator takes a PULSE any tick)",
+        )?;
+        config_file::range(
+            !self.can.iface.is_empty(),
+            "can.iface",
+            "",
+            "required with transport kind \"can\" (the default)",
+        )?;
+        Ok(())
+    }
+
+    /// `[transport]` with kind = "sciencemode": the device, its polling and pulse timing,
+    /// and the limits and channels the RehaStim 2 has.
+    fn validate_sciencemode_transport(&self) -> Result<(), ConfigError> {
+        let t = &self.transport;
+        let device = t.device.as_deref().unwrap_or(Path::new(""));
+        config_file::range(
+            device.is_absolute(),
+            "transport.device",
+            device.display(),
+            "required with kind = \"sciencemode\": the serial device's absolute path (/dev/ttyUSB0)",
+        )?;
+        config_file::range(
+            self.can.iface.is_empty(),
+            "can.iface",
+            &self.can.iface,
+            "absent with transport kind \"sciencemode\" (no CAN interface is used)",
+        )?;
+        let poll_ms = t.poll_ms();
+        config_file::range(
+            (5..=1000).contains(&poll_ms),
+            "transport.poll_ms",
+            poll_ms,
+            "5..=1000",
+        )?;
+        let min_interval = t.min_interval_ms();
+        config_file::range(
+            (1..=200).contains(&min_interval),
+            "transport.min_interval_ms",
+            min_interval,
+            "1..=200",
+        )?;
+        let lateness = t.max_lateness_ms();
+        config_file::range(
+            lateness <= 20,
+            "transport.max_lateness_ms",
+            lateness,
+            "0..=20",
+        )?;
+        config_file::range(
+            self.stimulator_timeout_ms() >= crate::serial_rx::MAX_RESPONSE_MS + 2 * poll_ms,
+            "watchdog.stimulator_timeout_ms",
+            self.stimulator_timeout_ms(),
+            ">= 100 ms (the RehaStim 2's longest answer, §2.3) + 2 x transport.poll_ms with kind = \"sciencemode\"",
+        )?;
+        let limits = self.stim_limits()?;
+        if let Err(field) = crate::serial_rx::limits_within_device(&limits) {
+            let (name, value) = match field {
+                "max_amplitude_ua" => (
+                    "stimulator.max_amplitude_ua",
+                    self.stimulator.max_amplitude_ua,
+                ),
+                _ => (
+                    "stimulator.max_width_us",
+                    u32::from(self.stimulator.max_width_us),
+                ),
+            };
+            config_file::range(
+                false,
+                name,
+                value,
+                "within the RehaStim 2's fixed limits (126000 uA, 500 us) with kind = \"sciencemode\"",
+            )?;
+        }
+        for &ch in &self.interlocks.channels {
+            config_file::range(
+                ch < fes_sciencemode::limits::CHANNELS,
+                "interlocks.channels",
+                ch,
+                "0..=7 (the RehaStim 2's 8 channels) with kind = \"sciencemode\"",
+            )?;
         }
         Ok(())
     }
