@@ -25,7 +25,9 @@ use fes_rt::rt::alloc;
 use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::node::{RunError, create_node};
 use fes_rt::rt::realtime::{RtStatus, enter_realtime};
-use iceoryx2::prelude::FileDescriptorBased;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{FileDescriptorBased, ipc};
 
 use crate::bus::BusCounters;
 use crate::config::DriverConfig;
@@ -133,6 +135,75 @@ fn wait_for_tick(fd: i32, timeout: Duration) -> Result<bool, ()> {
     }
 }
 
+/// Waits for rt-core's tick notification or the forward path's `deadline` (from `now`):
+/// the wake-up time and whether a notification woke it. A failed wait sleeps to the
+/// deadline instead of spinning.
+fn wait_for_tick_or_deadline(
+    listener: &Listener<ipc::Service>,
+    listener_fd: i32,
+    now: u64,
+    deadline: u64,
+) -> (u64, bool) {
+    let mut notified = false;
+    let waited = wait_for_tick(
+        listener_fd,
+        Duration::from_nanos(deadline.saturating_sub(now).max(1_000)),
+    )
+    .and_then(|ready| {
+        if ready {
+            listener
+                .try_wait(|_| notified = true)
+                .map_err(|_| ())
+                .map(|_| ())
+        } else {
+            Ok(())
+        }
+    });
+    let wake_ns = monotonic_ns();
+    if waited.is_err() {
+        fes_rt::rt::clock::sleep_until(deadline);
+    }
+    (wake_ns, notified)
+}
+
+/// Hands the forward path what the supervisor ordered and what rt-core decided since the
+/// last wake-up, each at most its subscriber buffer's worth (a flood cannot hold the loop).
+fn receive_orders<T: CanTx>(
+    commands: &Subscriber<ipc::Service, DriverCommand, ()>,
+    ticks: &Subscriber<ipc::Service, StimTick, ()>,
+    path: &mut ForwardPath<T>,
+    sink: &mut QueueSink<'_>,
+) {
+    let max_ticks = StimTick::QOS.subscriber_buffer;
+    let max_commands = DriverCommand::QOS.subscriber_buffer;
+    for _ in 0..max_commands {
+        match commands.receive() {
+            Ok(Some(sample)) => {
+                let command = *sample.payload();
+                drop(sample);
+                path.on_command(&command, monotonic_ns(), sink);
+            }
+            Ok(None) | Err(_) => break,
+        }
+    }
+    for _ in 0..max_ticks {
+        match ticks.receive() {
+            Ok(Some(sample)) => {
+                let tick = *sample.payload();
+                drop(sample);
+                let received = monotonic_ns();
+                path.on_tick(&tick, received, sink);
+                sink.emit(DriverEvent::Tick {
+                    seq: tick.seq,
+                    ipc_ns: received.saturating_sub(tick.t_publish_ns),
+                    decide_ns: monotonic_ns().saturating_sub(received),
+                });
+            }
+            Ok(None) | Err(_) => break,
+        }
+    }
+}
+
 /// Runs the forward thread on the calling thread until `stop` is set or another thread
 /// fails (see the module documentation). `on_ready` is called once real time is entered
 /// and the ports exist, before the first frame is sent.
@@ -169,31 +240,10 @@ pub fn run_forward<T: CanTx>(
     path.start(monotonic_ns(), &mut sink);
     shared.status.store(path.counters());
     let mut bus_events_lost = 0u64;
-    let max_ticks = StimTick::QOS.subscriber_buffer;
-    let max_commands = DriverCommand::QOS.subscriber_buffer;
     while !shared.stopping(stop) {
         let now = monotonic_ns();
         let deadline = path.next_deadline(now);
-        let mut notified = false;
-        let waited = wait_for_tick(
-            listener_fd,
-            Duration::from_nanos(deadline.saturating_sub(now).max(1_000)),
-        )
-        .and_then(|ready| {
-            if ready {
-                listener
-                    .try_wait(|_| notified = true)
-                    .map_err(|_| ())
-                    .map(|_| ())
-            } else {
-                Ok(())
-            }
-        });
-        let wake_ns = monotonic_ns();
-        if waited.is_err() {
-            // A failed wait must not spin: fall back to sleeping to the deadline.
-            fes_rt::rt::clock::sleep_until(deadline);
-        }
+        let (wake_ns, notified) = wait_for_tick_or_deadline(&listener, listener_fd, now, deadline);
         if shared.stopping(stop) {
             break;
         }
@@ -207,32 +257,7 @@ pub fn run_forward<T: CanTx>(
             bus_events_lost = lost;
             path.on_bus(BusEvent::EventsLost, monotonic_ns(), &mut sink);
         }
-        for _ in 0..max_commands {
-            match commands.receive() {
-                Ok(Some(sample)) => {
-                    let command = *sample.payload();
-                    drop(sample);
-                    path.on_command(&command, monotonic_ns(), &mut sink);
-                }
-                Ok(None) | Err(_) => break,
-            }
-        }
-        for _ in 0..max_ticks {
-            match ticks.receive() {
-                Ok(Some(sample)) => {
-                    let tick = *sample.payload();
-                    drop(sample);
-                    let received = monotonic_ns();
-                    path.on_tick(&tick, received, &mut sink);
-                    sink.emit(DriverEvent::Tick {
-                        seq: tick.seq,
-                        ipc_ns: received.saturating_sub(tick.t_publish_ns),
-                        decide_ns: monotonic_ns().saturating_sub(received),
-                    });
-                }
-                Ok(None) | Err(_) => break,
-            }
-        }
+        receive_orders(&commands, &ticks, &mut path, &mut sink);
         let polled = monotonic_ns();
         path.poll(polled, &mut sink);
         path.count_wakeup();
