@@ -358,15 +358,7 @@ impl<T: CanTx> ForwardPath<T> {
             && violation.is_stream_fault()
         {
             self.counters.ticks_refused += 1;
-            self.counters.pulses_rejected += u64::from(pulse);
-            ev.emit(DriverEvent::Rejected {
-                tick_seq: tick.seq,
-                violation,
-                pulse,
-            });
-            if pulse {
-                outcome(tick, PulseFate::Refused, ev);
-            }
+            self.reject(tick, violation, pulse, ev);
             self.finish(before, ev);
             return;
         }
@@ -381,39 +373,58 @@ impl<T: CanTx> ForwardPath<T> {
         }
         match assessment.verdict {
             Verdict::NoPulse => {}
-            Verdict::Rejected { violation, pulse } => {
-                self.counters.pulses_rejected += u64::from(pulse);
-                ev.emit(DriverEvent::Rejected {
-                    tick_seq: tick.seq,
-                    violation,
-                    pulse,
-                });
-                if pulse {
-                    outcome(tick, PulseFate::Refused, ev);
-                }
-            }
-            Verdict::Pulse(command) => {
-                // A newer decision takes the place of a pulse still waiting for the
-                // transport: the two never go out as a burst.
-                self.drop_deferred(PulseFate::Late, now_ns, ev);
-                let written = if self.write_keeps_interval(now_ns) {
-                    self.forward(&command, now_ns, ev)
-                } else {
-                    None
-                };
-                match written {
-                    Some(fate) => outcome(tick, fate, ev),
-                    None => {
-                        self.deferred = Some(Deferred {
-                            command,
-                            tick: *tick,
-                            since_ns: now_ns,
-                        });
-                    }
-                }
-            }
+            Verdict::Rejected { violation, pulse } => self.reject(tick, violation, pulse, ev),
+            Verdict::Pulse(command) => self.pulse(tick, command, now_ns, ev),
         }
         self.finish(before, ev);
+    }
+
+    /// Counts and reports a tick the interlocks refused, and its pulse as refused.
+    fn reject(
+        &mut self,
+        tick: &StimTick,
+        violation: Violation,
+        pulse: bool,
+        ev: &mut impl EventSink,
+    ) {
+        self.counters.pulses_rejected += u64::from(pulse);
+        ev.emit(DriverEvent::Rejected {
+            tick_seq: tick.seq,
+            violation,
+            pulse,
+        });
+        if pulse {
+            outcome(tick, PulseFate::Refused, ev);
+        }
+    }
+
+    /// Writes the pulse the interlocks accepted, or keeps it for the transport's next
+    /// free moment.
+    fn pulse(
+        &mut self,
+        tick: &StimTick,
+        command: PulseCommand,
+        now_ns: u64,
+        ev: &mut impl EventSink,
+    ) {
+        // A newer decision takes the place of a pulse still waiting for the transport:
+        // the two never go out as a burst.
+        self.drop_deferred(PulseFate::Late, now_ns, ev);
+        let written = if self.write_keeps_interval(now_ns) {
+            self.forward(&command, now_ns, ev)
+        } else {
+            None
+        };
+        match written {
+            Some(fate) => outcome(tick, fate, ev),
+            None => {
+                self.deferred = Some(Deferred {
+                    command,
+                    tick: *tick,
+                    since_ns: now_ns,
+                });
+            }
+        }
     }
 
     /// Sends an accepted pulse if armed; what became of it, `None` when the transport is
