@@ -132,6 +132,50 @@ pub struct LmReport {
     pub lambda: f64,
 }
 
+/// The inner loop of [`levenberg_marquardt`]: solves the damped normal equations
+/// (H + lambda diag(H)) delta = -g, raising lambda tenfold until a step within the bounds
+/// decreases the cost; the trial point and its cost, or `None` once lambda passes
+/// `lambda_max`. Counts the cost evaluations.
+#[allow(clippy::too_many_arguments)]
+fn damped_step<P: LeastSquares>(
+    problem: &P,
+    p: &[f64],
+    free: &[usize],
+    bounds: &[(f64, f64)],
+    normal: &Normal,
+    lambda: &mut f64,
+    lambda_max: f64,
+    evaluations: &mut usize,
+) -> Option<(Vec<f64>, f64)> {
+    let n = free.len();
+    let dmax = normal.h.diagonal().iter().fold(0.0f64, |a, &v| a.max(v));
+    let floor = 1e-12 * dmax.max(f64::MIN_POSITIVE);
+    loop {
+        if *lambda > lambda_max {
+            return None;
+        }
+        let mut a: DMatrix<f64> = normal.h.clone();
+        for k in 0..n {
+            a[(k, k)] += *lambda * normal.h[(k, k)].max(floor);
+        }
+        let Some(chol) = Cholesky::new(a) else {
+            *lambda *= 10.0;
+            continue;
+        };
+        let delta: DVector<f64> = chol.solve(&(-&normal.g));
+        let mut trial = p.to_vec();
+        for (k, &i) in free.iter().enumerate() {
+            let (lo, hi) = bounds[i];
+            trial[i] = (trial[i] + delta[k]).clamp(lo, hi);
+        }
+        *evaluations += 1;
+        match problem.cost(&trial) {
+            Ok(c) if c.is_finite() && c < normal.cost => return Some((trial, c)),
+            _ => *lambda *= 10.0,
+        }
+    }
+}
+
 /// Minimises the problem's sum of squared residuals over the parameters `free` (the others
 /// stay at their value in `p0`), starting from `p0` (projected into the bounds). `on_step(iteration, cost)` is called
 /// after every accepted step. Fails only if the starting point cannot be evaluated.
@@ -165,33 +209,16 @@ pub fn levenberg_marquardt<P: LeastSquares>(
         if iterations >= opts.max_iter {
             break StopReason::MaxIterations;
         }
-        let dmax = normal.h.diagonal().iter().fold(0.0f64, |a, &v| a.max(v));
-        let floor = 1e-12 * dmax.max(f64::MIN_POSITIVE);
-        // Inner loop: raise lambda until a step decreases the cost.
-        let accepted = loop {
-            if lambda > opts.lambda_max {
-                break None;
-            }
-            let mut a: DMatrix<f64> = normal.h.clone();
-            for k in 0..n {
-                a[(k, k)] += lambda * normal.h[(k, k)].max(floor);
-            }
-            let Some(chol) = Cholesky::new(a) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let delta: DVector<f64> = chol.solve(&(-&normal.g));
-            let mut trial = p.clone();
-            for (k, &i) in free.iter().enumerate() {
-                let (lo, hi) = bounds[i];
-                trial[i] = (trial[i] + delta[k]).clamp(lo, hi);
-            }
-            evaluations += 1;
-            match problem.cost(&trial) {
-                Ok(c) if c.is_finite() && c < normal.cost => break Some((trial, c)),
-                _ => lambda *= 10.0,
-            }
-        };
+        let accepted = damped_step(
+            problem,
+            &p,
+            free,
+            &bounds,
+            &normal,
+            &mut lambda,
+            opts.lambda_max,
+            &mut evaluations,
+        );
         let Some((trial, c)) = accepted else {
             break StopReason::Stalled;
         };
