@@ -156,108 +156,88 @@ pub fn setups(quick: bool, seed: u64) -> Vec<Setup> {
         learning: Learning::Local,
         ..IdentOptions::default()
     };
-    let o = |structure, mode, scheduling, zero_offsets| IdentOptions {
+    ROWS.iter()
+        .map(|r| Setup {
+            scheduling: r.scheduling,
+            domain: r.domain,
+            mode: r.mode,
+            options: IdentOptions {
+                structure: r.structure,
+                mode: r.mode,
+                scheduling: r.kind,
+                zero_offsets: r.zero_offsets,
+                ..base.clone()
+            },
+            units: match (r.scheduling, r.mode) {
+                ("(linear)", _) => 1..=1,
+                (_, Mode::Prediction) => 1..=pred_max,
+                (_, Mode::Simulation) => 1..=sim_max,
+            },
+            ts_factors: match (r.scheduling, r.structure) {
+                ("(linear)", Structure::ArxShift) => vec![1, 5, 10],
+                (_, Structure::ArxShift) => Vec::new(),
+                _ => vec![1],
+            },
+        })
+        .collect()
+}
+
+/// One row of Tables 5.1 / 5.2 as [`setups`] builds it: linear rows fit one unit and try
+/// the periods 1, 5 and 10 (shift) or 1 (delta); network shift rows take the linear rows'
+/// best period; delta and state-space rows run at the data's period.
+struct Row {
+    scheduling: &'static str,
+    domain: &'static str,
+    structure: Structure,
+    mode: Mode,
+    kind: SchedulingKind,
+    zero_offsets: bool,
+}
+
+const fn row(
+    scheduling: &'static str,
+    domain: &'static str,
+    structure: Structure,
+    mode: Mode,
+    kind: SchedulingKind,
+    zero_offsets: bool,
+) -> Row {
+    Row {
+        scheduling,
+        domain,
         structure,
         mode,
-        scheduling,
+        kind,
         zero_offsets,
-        ..base.clone()
-    };
+    }
+}
+
+/// The rows, in the order of the tables.
+const ROWS: [Row; 11] = {
     use Mode::{Prediction as P, Simulation as S};
     use SchedulingKind::{Input as I, Output as O};
     use Structure::*;
-    let linear_ts = vec![1, 5, 10];
-    vec![
-        Setup {
-            scheduling: "(linear)",
-            domain: "shift",
-            mode: P,
-            options: o(ArxShift, P, I, false),
-            units: 1..=1,
-            ts_factors: linear_ts.clone(),
-        },
-        Setup {
-            scheduling: "(linear)",
-            domain: "shift",
-            mode: S,
-            options: o(ArxShift, S, I, false),
-            units: 1..=1,
-            ts_factors: linear_ts,
-        },
-        Setup {
-            scheduling: "(linear)",
-            domain: "delta",
-            mode: S,
-            options: o(ArxDelta, S, I, false),
-            units: 1..=1,
-            ts_factors: vec![1],
-        },
-        Setup {
-            scheduling: "output",
-            domain: "shift",
-            mode: P,
-            options: o(ArxShift, P, O, false),
-            units: 1..=pred_max,
-            ts_factors: Vec::new(),
-        },
-        Setup {
-            scheduling: "output",
-            domain: "delta",
-            mode: S,
-            options: o(ArxDelta, S, O, false),
-            units: 1..=sim_max,
-            ts_factors: vec![1],
-        },
-        Setup {
-            scheduling: "input",
-            domain: "shift",
-            mode: P,
-            options: o(ArxShift, P, I, false),
-            units: 1..=pred_max,
-            ts_factors: Vec::new(),
-        },
-        Setup {
-            scheduling: "input",
-            domain: "shift",
-            mode: S,
-            options: o(ArxShift, S, I, false),
-            units: 1..=sim_max,
-            ts_factors: Vec::new(),
-        },
-        Setup {
-            scheduling: "input",
-            domain: "delta",
-            mode: S,
-            options: o(ArxDelta, S, I, false),
-            units: 1..=sim_max,
-            ts_factors: vec![1],
-        },
-        Setup {
-            scheduling: "input",
-            domain: "ss, local eigenvectors",
-            mode: S,
-            options: o(SsEigLocal, S, I, false),
-            units: 1..=sim_max,
-            ts_factors: vec![1],
-        },
-        Setup {
-            scheduling: "input",
-            domain: "ss, common eigenvectors",
-            mode: S,
-            options: o(SsEigCommon, S, I, false),
-            units: 1..=sim_max,
-            ts_factors: vec![1],
-        },
-        Setup {
-            scheduling: "input",
-            domain: "ss, common eigenvectors, zero offsets",
-            mode: S,
-            options: o(SsEigCommon, S, I, true),
-            units: 1..=sim_max,
-            ts_factors: vec![1],
-        },
+    [
+        row("(linear)", "shift", ArxShift, P, I, false),
+        row("(linear)", "shift", ArxShift, S, I, false),
+        row("(linear)", "delta", ArxDelta, S, I, false),
+        row("output", "shift", ArxShift, P, O, false),
+        row("output", "delta", ArxDelta, S, O, false),
+        row("input", "shift", ArxShift, P, I, false),
+        row("input", "shift", ArxShift, S, I, false),
+        row("input", "delta", ArxDelta, S, I, false),
+        row("input", "ss, local eigenvectors", SsEigLocal, S, I, false),
+        row("input", "ss, common eigenvectors", SsEigCommon, S, I, false),
+        row(
+            "input",
+            "ss, common eigenvectors, zero offsets",
+            SsEigCommon,
+            S,
+            I,
+            true,
+        ),
     ]
-}
+};
 
 /// One row of the comparison table: the best size (and period) of a setup.
 #[derive(Debug, Clone, PartialEq, Serialize)]
