@@ -628,21 +628,14 @@ impl Message {
     pub fn decode(command: u8, data: &[u8]) -> Result<Message, DecodeError> {
         let command =
             Command::from_id(command).ok_or(DecodeError::UnknownCommand { number: 0, command })?;
-        let expect = |n: u8| -> Result<(), DecodeError> {
-            if data.len() == usize::from(n) {
-                Ok(())
-            } else {
-                Err(DecodeError::WrongDataLength {
-                    command,
-                    expected: n,
-                    actual: u8::try_from(data.len()).unwrap_or(u8::MAX),
-                })
-            }
-        };
-        let byte = |i: usize| data.get(i).copied().unwrap_or(0);
-        let signed = |i: usize| i8::from_be_bytes([byte(i)]);
-        let word = |i: usize| u16::from_be_bytes([byte(i), byte(i + 1)]);
-        let result = |i: usize| AckResult::from_code(signed(i));
+        let f = Fields { command, data };
+        let (expect, byte, signed, word, result) = (
+            |n| f.expect(n),
+            |i| f.byte(i),
+            |i| f.signed(i),
+            |i| f.word(i),
+            |i| f.result(i),
+        );
         let message = match command {
             Command::Init => {
                 expect(1)?;
@@ -664,26 +657,7 @@ impl Message {
                 expect(0)?;
                 Message::GetStimulationMode
             }
-            Command::GetStimulationModeAck => {
-                // §4.2: "if Result != 0, then byte 8 = stop byte": an error acknowledgement
-                // carries the result only.
-                if data.len() == 1 && !result(0).is_ok() {
-                    return Ok(Message::GetStimulationModeAck {
-                        result: result(0),
-                        mode: None,
-                    });
-                }
-                expect(2)?;
-                let mode = StimulationMode::from_byte(byte(1)).ok_or(DecodeError::BadField {
-                    command,
-                    field: "mode",
-                    value: byte(1),
-                })?;
-                Message::GetStimulationModeAck {
-                    result: result(0),
-                    mode: Some(mode),
-                }
-            }
+            Command::GetStimulationModeAck => f.mode_ack()?,
             Command::InitChannelListMode => {
                 expect(7)?;
                 Message::InitChannelListMode(ChannelListInit {
@@ -699,33 +673,7 @@ impl Message {
                 expect(1)?;
                 Message::InitChannelListModeAck { result: result(0) }
             }
-            Command::StartChannelListMode => {
-                if data.is_empty() || !data.len().is_multiple_of(4) || data.len() > MAX_COMMAND_DATA
-                {
-                    return Err(DecodeError::WrongDataLength {
-                        command,
-                        expected: 4 * (data.len() / 4).clamp(1, 8) as u8,
-                        actual: u8::try_from(data.len()).unwrap_or(u8::MAX),
-                    });
-                }
-                let mut entries = [ChannelPulse::default(); 8];
-                for (slot, chunk) in entries.iter_mut().zip(data.chunks_exact(4)) {
-                    let mode = PulseMode::from_byte(chunk[0]).ok_or(DecodeError::BadField {
-                        command,
-                        field: "mode",
-                        value: chunk[0],
-                    })?;
-                    *slot = ChannelPulse {
-                        mode,
-                        pulse_width_us: u16::from_be_bytes([chunk[1], chunk[2]]),
-                        current_ma: chunk[3],
-                    };
-                }
-                Message::StartChannelListMode(ChannelListUpdate {
-                    entries,
-                    len: (data.len() / 4) as u8,
-                })
-            }
+            Command::StartChannelListMode => f.channel_list_update()?,
             Command::StartChannelListModeAck => {
                 expect(1)?;
                 Message::StartChannelListModeAck { result: result(0) }
@@ -756,22 +704,7 @@ impl Message {
                     error: StimulationError::from_code(signed(0)),
                 }
             }
-            Command::PhaseResult => {
-                expect(16)?;
-                Message::PhaseResult(PhaseResult {
-                    phase_counter: byte(0),
-                    passive_distance_10m: word(1),
-                    active_distance_10m: word(3),
-                    average_power_w: byte(5),
-                    maximum_power_w: byte(6),
-                    phase_duration_s: word(7),
-                    active_phase_duration_s: word(9),
-                    phase_work_j: word(11),
-                    success_percent: byte(13),
-                    symmetry_left_percent: byte(14),
-                    average_muscle_tone_dnm: byte(15),
-                })
-            }
+            Command::PhaseResult => f.phase_result()?,
             Command::ActualValues => {
                 expect(6)?;
                 Message::ActualValues {
@@ -790,6 +723,114 @@ impl Message {
             }
         };
         Ok(message)
+    }
+}
+
+/// The data bytes of one received command, read by [`Message::decode`]: a short field
+/// reads as 0 after its length was checked, so no read can go out of bounds.
+struct Fields<'a> {
+    command: Command,
+    data: &'a [u8],
+}
+
+impl Fields<'_> {
+    /// The data is exactly `n` bytes long (the command's length in §4).
+    fn expect(&self, n: u8) -> Result<(), DecodeError> {
+        if self.data.len() == usize::from(n) {
+            Ok(())
+        } else {
+            Err(DecodeError::WrongDataLength {
+                command: self.command,
+                expected: n,
+                actual: u8::try_from(self.data.len()).unwrap_or(u8::MAX),
+            })
+        }
+    }
+
+    fn byte(&self, i: usize) -> u8 {
+        self.data.get(i).copied().unwrap_or(0)
+    }
+
+    fn signed(&self, i: usize) -> i8 {
+        i8::from_be_bytes([self.byte(i)])
+    }
+
+    /// A big-endian 16-bit field (§2.2: the most significant byte first).
+    fn word(&self, i: usize) -> u16 {
+        u16::from_be_bytes([self.byte(i), self.byte(i + 1)])
+    }
+
+    fn result(&self, i: usize) -> AckResult {
+        AckResult::from_code(self.signed(i))
+    }
+
+    /// GetStimulationModeAck: §4.2, "if Result != 0, then byte 8 = stop byte": an error
+    /// acknowledgement carries the result only.
+    fn mode_ack(&self) -> Result<Message, DecodeError> {
+        if self.data.len() == 1 && !self.result(0).is_ok() {
+            return Ok(Message::GetStimulationModeAck {
+                result: self.result(0),
+                mode: None,
+            });
+        }
+        self.expect(2)?;
+        let mode = StimulationMode::from_byte(self.byte(1)).ok_or(DecodeError::BadField {
+            command: self.command,
+            field: "mode",
+            value: self.byte(1),
+        })?;
+        Ok(Message::GetStimulationModeAck {
+            result: self.result(0),
+            mode: Some(mode),
+        })
+    }
+
+    /// StartChannelListMode: one to eight 4-byte channel entries (§4.3).
+    fn channel_list_update(&self) -> Result<Message, DecodeError> {
+        let (command, data) = (self.command, self.data);
+        if data.is_empty() || !data.len().is_multiple_of(4) || data.len() > MAX_COMMAND_DATA {
+            return Err(DecodeError::WrongDataLength {
+                command,
+                expected: 4 * (data.len() / 4).clamp(1, 8) as u8,
+                actual: u8::try_from(data.len()).unwrap_or(u8::MAX),
+            });
+        }
+        let mut entries = [ChannelPulse::default(); 8];
+        for (slot, chunk) in entries.iter_mut().zip(data.chunks_exact(4)) {
+            let mode = PulseMode::from_byte(chunk[0]).ok_or(DecodeError::BadField {
+                command,
+                field: "mode",
+                value: chunk[0],
+            })?;
+            *slot = ChannelPulse {
+                mode,
+                pulse_width_us: u16::from_be_bytes([chunk[1], chunk[2]]),
+                current_ma: chunk[3],
+            };
+        }
+        Ok(Message::StartChannelListMode(ChannelListUpdate {
+            entries,
+            len: (data.len() / 4) as u8,
+        }))
+    }
+
+    /// PhaseResult (§4.4, 16 bytes).
+    fn phase_result(&self) -> Result<Message, DecodeError> {
+        self.expect(16)?;
+        let (byte, word) = (|i| self.byte(i), |i| self.word(i));
+        Ok(Message::PhaseResult(PhaseResult {
+            phase_counter: byte(0),
+            passive_distance_10m: word(1),
+            active_distance_10m: word(3),
+            average_power_w: byte(5),
+            maximum_power_w: byte(6),
+            phase_duration_s: word(7),
+            active_phase_duration_s: word(9),
+            phase_work_j: word(11),
+            success_percent: byte(13),
+            symmetry_left_percent: byte(14),
+            average_muscle_tone_dnm: byte(15),
+        }))
     }
 }
 
