@@ -104,6 +104,11 @@ pub struct RecordPlan {
     pub pulses: Vec<bool>,
 }
 
+/// A refused setting, named as its flag.
+fn bad(name: &'static str, problem: String) -> Result<(), ProtocolError> {
+    Err(ProtocolError::Invalid { name, problem })
+}
+
 impl ProtocolConfig {
     /// The thesis protocol for `preset` (record length and count from 5.2.1).
     pub fn thesis(preset: Preset) -> Self {
@@ -139,8 +144,13 @@ impl ProtocolConfig {
 
     /// Checks every setting and their consistency.
     pub fn validate(&self) -> Result<(), ProtocolError> {
-        let bad =
-            |name: &'static str, problem: String| Err(ProtocolError::Invalid { name, problem });
+        self.validate_records_and_trains()?;
+        self.validate_size_and_checks()?;
+        self.validate_rich()
+    }
+
+    /// The sample period, the records and their split, the IPI and train ranges.
+    fn validate_records_and_trains(&self) -> Result<(), ProtocolError> {
         if !(self.ts_ms.is_finite() && self.ts_ms > 0.0) {
             return bad(
                 "--ts-ms",
@@ -201,6 +211,11 @@ impl ProtocolConfig {
                 ),
             );
         }
+        Ok(())
+    }
+
+    /// The memory the records take, the constant check train, the rest.
+    fn validate_size_and_checks(&self) -> Result<(), ProtocolError> {
         let total = self.samples() as f64 * self.records as f64;
         if self.samples() > MAX_RECORD_SAMPLES || total > MAX_TOTAL_SAMPLES as f64 {
             return bad(
@@ -225,6 +240,11 @@ impl ProtocolConfig {
         if !(self.rest_s.is_finite() && self.rest_s >= 0.0) {
             return bad("--rest-s", format!("{} is not a rest >= 0 s", self.rest_s));
         }
+        Ok(())
+    }
+
+    /// The rich protocol's frequency and doublet ranges.
+    fn validate_rich(&self) -> Result<(), ProtocolError> {
         // The rich-protocol settings are checked even for the thesis protocol: they are
         // stored in the data set either way.
         let max_hz = 1e3 / self.ts_ms;
