@@ -179,26 +179,22 @@ halt -f
     ))
 }
 
-/// Runs `cmd` in a fresh guest; streams its output lines to `on_line`.
-pub(crate) fn run(
-    kernel: &UmlKernel,
-    cmd: &GuestCommand,
-    on_line: &mut dyn FnMut(&str),
-) -> Result<RunOutcome, HarnessError> {
-    let lock = lock_path("fes-vcan-uml.lock");
-    let _guard = lock_file(&lock)?;
-    let (dir, umid) = RunDir::create()?;
-    let nonce = nonce();
-    let script_path = dir.path.join("init.sh");
-    let script = init_script(&dir.path, &nonce, cmd)?;
+/// Writes the guest's init script into the run's directory (executable).
+fn write_init_script(dir: &Path, nonce: &str, cmd: &GuestCommand) -> Result<PathBuf, HarnessError> {
+    let script_path = dir.join("init.sh");
+    let script = init_script(dir, nonce, cmd)?;
     let io = |what: String| move |source| HarnessError::Io { what, source };
     std::fs::write(&script_path, script)
         .map_err(io(format!("writing {}", script_path.display())))?;
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(&script_path, std::fs::Permissions::from_mode(0o755))
-            .map_err(io(format!("chmod {}", script_path.display())))?;
-    }
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&script_path, std::fs::Permissions::from_mode(0o755))
+        .map_err(io(format!("chmod {}", script_path.display())))?;
+    Ok(script_path)
+}
+
+/// The UML kernel's command line: the host's root read-write over hostfs, the init
+/// script, the console on stdin/stdout, memory from `FES_UML_MEM`.
+fn guest_command(kernel: &UmlKernel, script_path: &Path, umid: &str, dir: &Path) -> Command {
     let mem = std::env::var("FES_UML_MEM").unwrap_or_else(|_| DEFAULT_MEM.into());
     let mut command = Command::new(&kernel.binary);
     command.args([
@@ -209,9 +205,24 @@ pub(crate) fn run(
         "con=null".into(),
         "con0=fd:0,fd:1".into(),
         format!("umid={umid}"),
-        format!("uml_dir={}", dir.path.display()),
+        format!("uml_dir={}", dir.display()),
         "quiet".into(),
     ]);
+    command
+}
+
+/// Runs `cmd` in a fresh guest; streams its output lines to `on_line`.
+pub(crate) fn run(
+    kernel: &UmlKernel,
+    cmd: &GuestCommand,
+    on_line: &mut dyn FnMut(&str),
+) -> Result<RunOutcome, HarnessError> {
+    let lock = lock_path("fes-vcan-uml.lock");
+    let _guard = lock_file(&lock)?;
+    let (dir, umid) = RunDir::create()?;
+    let nonce = nonce();
+    let script_path = write_init_script(&dir.path, &nonce, cmd)?;
+    let mut command = guest_command(kernel, &script_path, &umid, &dir.path);
     let start = Instant::now();
     let mut child = Streamed::spawn(&mut command).map_err(|source| HarnessError::Spawn {
         what: kernel.binary.display().to_string(),
