@@ -484,115 +484,19 @@ impl PatternGenerator {
         let r = self.reference(input.reference);
         // At rest (a zero reference, or one ramping down to zero) the shaper rests.
         let rest = r == 0.0 || input.resting;
-        let clamp = self.shaper.config().sum == ShaperSum::Clamped;
-        let x_i = self.lcn.x_i();
-        let out = match self.measured.as_mut() {
-            None => {
-                let core_now = *self.core.state();
-                let act_core = self.core.network().activation(&core_now);
-                // The state fed back: the advanced core state, or the model state now.
-                let (act, state) = match self.delayed.as_mut() {
-                    None => (act_core, core_now),
-                    Some(ring) => {
-                        let x = ring.push(core_now);
-                        (self.core.network().activation(&x), x)
-                    }
-                };
-                let (phi, z) = (state.phi, state.ss_state());
-                let action = self.lcn.control(&act, z, clamp);
-                let planned = match self.planner.as_mut() {
-                    _ if withheld => Some(false),
-                    Some(p) if shaped => {
-                        let net = self.core.network();
-                        let mut warm = WarmStart::new(net, &self.lcn, &self.shaper, clamp);
-                        p.plan(net, &core_now, &input.preview, r, rest, &mut warm, deadline)
-                    }
-                    _ => None,
-                };
-                let (pulse, u) = decide(&mut self.shaper, action.u_cont, rest, shaped, planned);
-                if let Some(p) = self.planner.as_mut() {
-                    if withheld {
-                        p.skip(self.core.network(), &core_now);
-                    } else {
-                        p.commit(self.core.network(), &core_now, u);
-                    }
-                }
-                // The thesis's form has no prediction: its y[k] stands in for y[k+d].
-                let (y, y_ahead, ahead_fed_back) = match &mut self.core {
-                    Core::Advanced(c) => {
-                        let step = c.step_with_activation(&act_core, u);
-                        (step.y, step.y_ahead, self.delayed.is_none())
-                    }
-                    Core::Thesis(c) => {
-                        let y = c.step_with_activation(&act_core, u);
-                        (y, y, false)
-                    }
-                };
-                let y_fed_back = if ahead_fed_back { y_ahead } else { y };
-                let integrated = self.lcn.integrate(&action, y_fed_back - r);
-                TickOutput {
-                    pulse,
-                    u_cont: action.u_cont,
-                    u_raw: action.u_raw,
-                    energy: self.shaper.energy(),
-                    model_force: y,
-                    predicted_force: y_ahead,
-                    phi,
-                    x_i,
-                    z,
-                    integrated,
-                    innovation: 0.0,
-                    planned: planned.is_some(),
-                }
-            }
-            Some(m) => {
-                let net = self.core.network();
-                let upd = m.estimator.update(net, input.measured_force);
-                let mut core = upd.core;
-                let act = net.activation(&core);
-                let phi = core.phi;
-                let z = core.ss_state();
-                let action = self.lcn.control(&act, z, clamp);
-                let planned = match self.planner.as_mut() {
-                    _ if withheld => Some(false),
-                    Some(p) if shaped => {
-                        let mut warm = WarmStart::new(net, &self.lcn, &self.shaper, clamp);
-                        p.plan(net, &core, &input.preview, r, rest, &mut warm, deadline)
-                    }
-                    _ => None,
-                };
-                let (pulse, u) = decide(&mut self.shaper, action.u_cont, rest, shaped, planned);
-                if let Some(p) = self.planner.as_mut() {
-                    if withheld {
-                        p.skip(net, &core);
-                    } else {
-                        p.commit(net, &core, u);
-                    }
-                }
-                let y_ahead = net.step_with_activation(&mut core, &act, u);
-                let y_pred_now = m.predictions.push(y_ahead);
-                m.estimator.push_pulse(u);
-                let mismatch = if upd.measured {
-                    upd.innovation + upd.model_force - y_pred_now
-                } else {
-                    0.0
-                };
-                let integrated = self.lcn.integrate(&action, y_ahead - r + mismatch);
-                TickOutput {
-                    pulse,
-                    u_cont: action.u_cont,
-                    u_raw: action.u_raw,
-                    energy: self.shaper.energy(),
-                    model_force: upd.model_force,
-                    predicted_force: y_ahead,
-                    phi,
-                    x_i,
-                    z,
-                    integrated,
-                    innovation: upd.innovation,
-                    planned: planned.is_some(),
-                }
-            }
+        let facts = TickFacts {
+            preview: &input.preview,
+            r,
+            rest,
+            shaped,
+            withheld,
+            clamp: self.shaper.config().sum == ShaperSum::Clamped,
+            x_i: self.lcn.x_i(),
+        };
+        let out = if self.measured.is_some() {
+            self.advance_measured(input.measured_force, &facts, deadline)
+        } else {
+            self.advance_model(&facts, deadline)
         };
         if !out.integrated {
             self.integrator_held += 1;
@@ -601,6 +505,117 @@ impl PatternGenerator {
             self.lcn.reset();
         }
         out
+    }
+
+    /// The tick in model mode: the LCN feeds back the model's state (advanced, or the
+    /// thesis's delayed one), Fig. 6.8.
+    #[inline(always)]
+    fn advance_model(&mut self, facts: &TickFacts<'_>, deadline: &mut dyn Deadline) -> TickOutput {
+        let TickFacts { r, clamp, x_i, .. } = *facts;
+        let core_now = *self.core.state();
+        let act_core = self.core.network().activation(&core_now);
+        // The state fed back: the advanced core state, or the model state now.
+        let (act, state) = match self.delayed.as_mut() {
+            None => (act_core, core_now),
+            Some(ring) => {
+                let x = ring.push(core_now);
+                (self.core.network().activation(&x), x)
+            }
+        };
+        let (phi, z) = (state.phi, state.ss_state());
+        let action = self.lcn.control(&act, z, clamp);
+        let (pulse, u, planned) = plan_and_decide(
+            self.planner.as_mut(),
+            &mut self.shaper,
+            &self.lcn,
+            self.core.network(),
+            &core_now,
+            facts,
+            action.u_cont,
+            deadline,
+        );
+        // The thesis's form has no prediction: its y[k] stands in for y[k+d].
+        let (y, y_ahead, ahead_fed_back) = match &mut self.core {
+            Core::Advanced(c) => {
+                let step = c.step_with_activation(&act_core, u);
+                (step.y, step.y_ahead, self.delayed.is_none())
+            }
+            Core::Thesis(c) => {
+                let y = c.step_with_activation(&act_core, u);
+                (y, y, false)
+            }
+        };
+        let y_fed_back = if ahead_fed_back { y_ahead } else { y };
+        let integrated = self.lcn.integrate(&action, y_fed_back - r);
+        TickOutput {
+            pulse,
+            u_cont: action.u_cont,
+            u_raw: action.u_raw,
+            energy: self.shaper.energy(),
+            model_force: y,
+            predicted_force: y_ahead,
+            phi,
+            x_i,
+            z,
+            integrated,
+            innovation: 0.0,
+            planned: planned.is_some(),
+        }
+    }
+
+    /// The tick in measured-force mode: the LCN feeds back the estimator's state,
+    /// corrected by the measured force, Fig. 6.6(a).
+    #[inline(always)]
+    fn advance_measured(
+        &mut self,
+        measured_force: Option<f64>,
+        facts: &TickFacts<'_>,
+        deadline: &mut dyn Deadline,
+    ) -> TickOutput {
+        let Some(m) = self.measured.as_mut() else {
+            return self.advance_model(facts, deadline);
+        };
+        let TickFacts { r, clamp, x_i, .. } = *facts;
+        let net = self.core.network();
+        let upd = m.estimator.update(net, measured_force);
+        let mut core = upd.core;
+        let act = net.activation(&core);
+        let phi = core.phi;
+        let z = core.ss_state();
+        let action = self.lcn.control(&act, z, clamp);
+        let (pulse, u, planned) = plan_and_decide(
+            self.planner.as_mut(),
+            &mut self.shaper,
+            &self.lcn,
+            net,
+            &core,
+            facts,
+            action.u_cont,
+            deadline,
+        );
+        let y_ahead = net.step_with_activation(&mut core, &act, u);
+        let y_pred_now = m.predictions.push(y_ahead);
+        m.estimator.push_pulse(u);
+        let mismatch = if upd.measured {
+            upd.innovation + upd.model_force - y_pred_now
+        } else {
+            0.0
+        };
+        let integrated = self.lcn.integrate(&action, y_ahead - r + mismatch);
+        TickOutput {
+            pulse,
+            u_cont: action.u_cont,
+            u_raw: action.u_raw,
+            energy: self.shaper.energy(),
+            model_force: upd.model_force,
+            predicted_force: y_ahead,
+            phi,
+            x_i,
+            z,
+            integrated,
+            innovation: upd.innovation,
+            planned: planned.is_some(),
+        }
     }
 }
 
@@ -658,6 +673,63 @@ impl CausalRollout for WarmStart<'_> {
             self.lcn.reset();
         }
     }
+}
+
+/// What one tick's decision depends on besides the loop's state.
+#[derive(Clone, Copy)]
+struct TickFacts<'a> {
+    preview: &'a Preview,
+    /// The reference now.
+    r: f64,
+    /// At rest (zero reference or a ramp down to it).
+    rest: bool,
+    /// The shaper decides (not the continuous bypass).
+    shaped: bool,
+    /// The driver withholds this tick's pulse (the plan counts it as not fired).
+    withheld: bool,
+    /// The LCN's signed sum clamped (eq. 3.10's variant).
+    clamp: bool,
+    /// The LCN's integrator state before this tick (reported).
+    x_i: f64,
+}
+
+/// One tick's pulse decision on the network state `st`: the receding-horizon plan over
+/// the preview (the causal LCN + shaper as its warm start and fallback) when planning is
+/// on, else the shaper's ([`decide`]); the planner then learns what was applied. Returns
+/// (pulse, input applied, the plan's answer if it gave one).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn plan_and_decide(
+    planner: Option<&mut Planner>,
+    shaper: &mut PulseShaper,
+    lcn: &LocalControllerNetwork,
+    net: &Network<f64>,
+    st: &CoreState<f64>,
+    f: &TickFacts<'_>,
+    u_cont: f64,
+    deadline: &mut dyn Deadline,
+) -> (bool, f64, Option<bool>) {
+    let Some(p) = planner else {
+        // A withheld tick is not fired and leaves the shaper as it is, planning or not.
+        let planned = f.withheld.then_some(false);
+        let (pulse, u) = decide(shaper, u_cont, f.rest, f.shaped, planned);
+        return (pulse, u, planned);
+    };
+    let planned = if f.withheld {
+        Some(false)
+    } else if f.shaped {
+        let mut warm = WarmStart::new(net, lcn, shaper, f.clamp);
+        p.plan(net, st, f.preview, f.r, f.rest, &mut warm, deadline)
+    } else {
+        None
+    };
+    let (pulse, u) = decide(shaper, u_cont, f.rest, f.shaped, planned);
+    if f.withheld {
+        p.skip(net, st);
+    } else {
+        p.commit(net, st, u);
+    }
+    (pulse, u, planned)
 }
 
 /// The tick's decision: the plan's when there is one (never at rest; the shaper is not
