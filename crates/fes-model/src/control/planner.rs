@@ -713,59 +713,11 @@ impl Planner {
             self.drop_window();
             return;
         }
-        // Whether the contraction is on at tick j, by the schedule: from the next tick on
-        // the preview says (tick 0 is the tracker's target, which follows the supervisor's
-        // Reference; a Reference published late at an edge, by milliseconds on a loaded
-        // host, must not move the announced contraction).
-        let active = |j: usize| {
-            let j = j.max(1);
-            !b.rest_now[j] && b.r_now[j] > 0.0
-        };
-        // Keep the window while the contraction announced is the one planned: the same
-        // onset and end to two ticks, the same level. rt-core's clock jitters by tens of
-        // microseconds, so an edge may land a tick either way and a ramp's targets differ
-        // in the last digits from tick to tick; neither is a new contraction.
         // The contraction announced: its onset and end in ticks from now.
-        let a_new = (0..MAX_HORIZON).find(|&j| active(j));
-        let b_new = a_new.and_then(|a| (a + 1..MAX_HORIZON).find(|&j| !active(j)));
-        if let Some(w) = self.win {
-            let jn = (now - w.h0) as usize;
-            if jn < w.b {
-                // An onset announced up to two ticks from the planned one is still to come.
-                let onset_due =
-                    a_new.is_some_and(|a| a > 0 && (jn + a).abs_diff(w.a) <= EDGE_TICKS);
-                if jn >= w.a && !active(0) && !onset_due {
-                    // The contraction is announced over: an end up to two ticks early is
-                    // the one planned (its last ticks fire nothing), an earlier one is not.
-                    // (Activity is read from the next tick: the end announced is jn + 1.)
-                    if jn + 1 + EDGE_TICKS >= w.b {
-                        return;
-                    }
-                } else {
-                    let same = match (a_new, b_new) {
-                        (Some(a), Some(bb)) => {
-                            // Active now: the onset is due (announced late, at most).
-                            let onset_ok = if a == 0 {
-                                jn + 1 + EDGE_TICKS >= w.a
-                            } else {
-                                onset_due
-                            };
-                            onset_ok
-                                && (jn + bb).abs_diff(w.b) <= EDGE_TICKS
-                                && (level(&b.r_now[a..bb]) - w.level).abs() <= SAME_REFERENCE
-                        }
-                        _ => false,
-                    };
-                    if same {
-                        return;
-                    }
-                }
-                self.stats.replans += 1;
-            } else if jn < w.b + EDGE_TICKS && active(0) {
-                // An end announced up to two ticks late: the same contraction, its last
-                // ticks decided causally.
-                return;
-            }
+        let a_new = (0..MAX_HORIZON).find(|&j| self.scheduled_on(j));
+        let b_new = a_new.and_then(|a| (a + 1..MAX_HORIZON).find(|&j| !self.scheduled_on(j)));
+        if self.keeps_window(now, a_new, b_new) {
+            return;
         }
         let (a, bb) = match (a_new, b_new) {
             (Some(a), Some(bb)) => (a, bb),
@@ -782,12 +734,72 @@ impl Planner {
                 return;
             }
         };
+        self.open_window(now, st, a, bb);
+    }
+
+    /// Whether the contraction is on at tick j of the sampled preview, by the schedule:
+    /// from the next tick on the preview says (tick 0 is the tracker's target, which
+    /// follows the supervisor's Reference; a Reference published late at an edge, by
+    /// milliseconds on a loaded host, must not move the announced contraction).
+    fn scheduled_on(&self, j: usize) -> bool {
+        let j = j.max(1);
+        !self.bufs.rest_now[j] && self.bufs.r_now[j] > 0.0
+    }
+
+    /// Whether the window planned still holds the contraction announced (onset `a_new`,
+    /// end `b_new`, ticks from now); a window that does not is counted as a replan.
+    /// Kept while the contraction announced is the one planned: the same onset and end to
+    /// two ticks, the same level. rt-core's clock jitters by tens of microseconds, so an
+    /// edge may land a tick either way and a ramp's targets differ in the last digits
+    /// from tick to tick; neither is a new contraction.
+    fn keeps_window(&mut self, now: u64, a_new: Option<usize>, b_new: Option<usize>) -> bool {
+        let Some(w) = self.win else { return false };
+        let jn = (now - w.h0) as usize;
+        if jn >= w.b {
+            // An end announced up to two ticks late: the same contraction, its last
+            // ticks decided causally.
+            return jn < w.b + EDGE_TICKS && self.scheduled_on(0);
+        }
+        // An onset announced up to two ticks from the planned one is still to come.
+        let onset_due = a_new.is_some_and(|a| a > 0 && (jn + a).abs_diff(w.a) <= EDGE_TICKS);
+        let same = if jn >= w.a && !self.scheduled_on(0) && !onset_due {
+            // The contraction is announced over: an end up to two ticks early is the one
+            // planned (its last ticks fire nothing), an earlier one is not. (Activity is
+            // read from the next tick: the end announced is jn + 1.)
+            jn + 1 + EDGE_TICKS >= w.b
+        } else {
+            match (a_new, b_new) {
+                (Some(a), Some(bb)) => {
+                    // Active now: the onset is due (announced late, at most).
+                    let onset_ok = if a == 0 {
+                        jn + 1 + EDGE_TICKS >= w.a
+                    } else {
+                        onset_due
+                    };
+                    onset_ok
+                        && (jn + bb).abs_diff(w.b) <= EDGE_TICKS
+                        && (level(&self.bufs.r_now[a..bb]) - w.level).abs() <= SAME_REFERENCE
+                }
+                _ => false,
+            }
+        };
+        if !same {
+            self.stats.replans += 1;
+        }
+        same
+    }
+
+    /// A new window over the contraction announced from tick `a` to `bb` (ticks from
+    /// now), with its relaxation up to the next onset or `max_tail_ms`; the warm start
+    /// comes next.
+    fn open_window(&mut self, now: u64, st: &CoreState<f64>, a: usize, bb: usize) {
         let next = (bb + 1..MAX_HORIZON)
-            .find(|&j| active(j))
+            .find(|&j| self.scheduled_on(j))
             .unwrap_or(MAX_HORIZON);
         let e = next
             .min(bb + self.cfg.max_tail_ms as usize)
             .min(MAX_HORIZON);
+        let b = &mut *self.bufs;
         b.r[..e].copy_from_slice(&b.r_now[..e]);
         let first_ok = self.last_fire.map_or(0, |l| {
             (l + self.min_ipi as u64).saturating_sub(now) as usize
