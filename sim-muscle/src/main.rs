@@ -80,7 +80,7 @@ The host opens the --pty-link path as it would /dev/ttyUSB0, e.g. with pyScience
 
 const STIMULATOR_HELP: &str = "\
 Run the virtual stimulator on a CAN interface: the stimulator side of the FES protocol
-(docs/can-protocol.md, fes-can/dbc/fes.dbc) driving this muscle. NMT state machine,
+(docs/can-protocol.md, crates/fes-can/dbc/fes.dbc) driving this muscle. NMT state machine,
 CONFIG in pre-operational only, its own interlocks (minimum IPI, rate window, amplitude
 and width ceilings, CRC and alive counter), EMCY on every rejection, a host-heartbeat
 watchdog that stops output and waits for an explicit NMT start, FORCE every 1 ms and

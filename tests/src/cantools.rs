@@ -10,11 +10,11 @@ use fes_can::MessageKind;
 
 use crate::stack::workspace_root;
 
-/// `python3 -m cantools decode --single-line fes-can/dbc/fes.dbc < log`: one decoded line
+/// `python3 -m cantools decode --single-line crates/fes-can/dbc/fes.dbc < log`: one decoded line
 /// per frame of the log. Panics (a failed test) when cantools is missing or fails, or when
 /// any line is not a complete decode of a message of the DBC.
 pub fn decode_log(log: &Path) -> Vec<String> {
-    let dbc = workspace_root().join("fes-can/dbc/fes.dbc");
+    let dbc = workspace_root().join("crates/fes-can/dbc/fes.dbc");
     let out = Command::new("python3")
         .args(["-m", "cantools", "decode", "--single-line"])
         .arg(&dbc)

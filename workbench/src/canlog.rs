@@ -1,7 +1,7 @@
 //! `can.log`: every frame of a bench run in `candump -L` format ([`fes_can::candump`]),
 //! whatever the bus: on the host bus from its tap station (the frames every other station
 //! sent, with the kernel's receive time), on a SocketCAN interface from can-utils'
-//! `candump -L`. `cantools decode fes-can/dbc/fes.dbc < can.log` and python-can's
+//! `candump -L`. `cantools decode crates/fes-can/dbc/fes.dbc < can.log` and python-can's
 //! `can.LogReader` read it (docs/bench.md).
 
 use std::fs::File;

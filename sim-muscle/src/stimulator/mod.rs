@@ -1,5 +1,5 @@
 //! The virtual stimulator on the CAN bus: the stimulator side of the protocol in
-//! `fes-can/dbc/fes.dbc`, driving a [`MusclePlant`].
+//! `crates/fes-can/dbc/fes.dbc`, driving a [`MusclePlant`].
 //!
 //! * [`machine`]: the protocol as a pure state machine (NMT states, heartbeat producer
 //!   and consumer, CONFIG in pre-operational only, interlocks, EMCY on every rejection,

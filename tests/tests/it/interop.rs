@@ -1,7 +1,7 @@
 //! Interoperability with standard tools on the same bus: frames the Rust side sends are
 //! seen by `candump`; frames injected with `cansend` (typed by hand, or printed by the
 //! codec) are understood by the stimulator; the `candump -L` log of the run decodes with
-//! `python3 -m cantools decode fes-can/dbc/fes.dbc` with no unknown frame, and cantools
+//! `python3 -m cantools decode crates/fes-can/dbc/fes.dbc` with no unknown frame, and cantools
 //! reads the same values as the Rust decoder.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 

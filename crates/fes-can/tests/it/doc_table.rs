@@ -10,11 +10,11 @@ use can_dbc::{Dbc, MessageId, MultiplexIndicator, NumericValue, ValueType};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-const BEGIN: &str = "<!-- BEGIN GENERATED from fes-can/dbc/fes.dbc; regenerate: FES_CAN_BLESS=1 cargo test -p fes-can --lib doc_table:: -->";
+const BEGIN: &str = "<!-- BEGIN GENERATED from crates/fes-can/dbc/fes.dbc; regenerate: FES_CAN_BLESS=1 cargo test -p fes-can --lib doc_table:: -->";
 const END: &str = "<!-- END GENERATED -->";
 
 fn doc_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/can-protocol.md")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../docs/can-protocol.md")
 }
 
 fn num(v: &NumericValue) -> String {
