@@ -6,8 +6,8 @@
 //! - the CI short run: the real rt-core loop against cyclictest, with and without load,
 //!   5 s each (debug binaries: `cargo test` has built them; the ratios compare the
 //!   loop's wake-ups with cyclictest's and barely depend on the optimisation level),
-//!   passes against the stored baseline `tests/latency-baseline.json` and writes the
-//!   report, plot, summary and interval logs;
+//!   passes against the stored baseline `crates/fes-latency/latency-baseline.json` and
+//!   writes the report, plot, summary and interval logs;
 //! - the same suite with the test-only slowdown (`FES_TEST_TICK_BUSY_US=1100`: each tick
 //!   busy-waits longer than the 1 ms period) exits 1 and names the exceeded compute budget
 //!   and the lateness (the p99 ratio or the late-wake-up rate).
@@ -15,12 +15,10 @@
 //! Needs root (SCHED_FIFO), cyclictest and stress-ng, as the rt-core tests do.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
-use crate::systemd_support;
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use systemd_support::{scratch, workspace_root};
+use crate::support::{scratch, workspace_root};
 
 const BIN: &str = env!("CARGO_BIN_EXE_latency-regression");
 
@@ -343,7 +341,7 @@ mod timing {
                 "-p",
                 "rt-core",
                 "-p",
-                "fes-tests",
+                "fes-latency",
                 "--bins",
             ])
             .status()
@@ -352,14 +350,14 @@ mod timing {
             status.success(),
             "cargo build --release of the latency tools failed"
         );
-        crate::systemd_support::target_dir().join("release")
+        crate::support::target_dir().join("release")
     }
 
     #[test]
     fn short_run_passes_and_a_slowed_tick_is_caught() {
         let bins = release_tools();
         let scratch = scratch("latency-run");
-        let baseline = workspace_root().join("tests/latency-baseline.json");
+        let baseline = workspace_root().join("crates/fes-latency/latency-baseline.json");
         let out_dir = scratch.path().join("report");
         let json = scratch.path().join("summary-copy.json");
         let common = |out: &Path| {

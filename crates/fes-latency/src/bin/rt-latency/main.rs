@@ -42,7 +42,7 @@ use serde::Serialize;
 /// The driver's hlog tag for StimTick publish → PULSE written (stim-driver's telemetry).
 const TAG_TICK_TO_CAN: &str = "tick_to_can";
 
-use fes_tests::cyclictest::{self, CyclictestHistogram};
+use fes_latency::cyclictest::{self, CyclictestHistogram};
 
 /// Runs the real rt-core loop for N seconds with a subscriber process measuring IPC latency,
 /// then cyclictest with the same period, priority and core, and compares them.
@@ -86,7 +86,7 @@ struct Cli {
     #[arg(long)]
     no_cyclictest: bool,
     /// Also measure the stim-driver's forward path: run `driver-latency` (the driver's
-    /// real forward thread on a socket-pair bus with a virtual stimulator; fes-tests) at
+    /// real forward thread on a socket-pair bus with a virtual stimulator; fes-latency) at
     /// the probe's place, one priority below rt-core, and move the probe one lower.
     #[arg(long)]
     driver: bool,

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 pub const SUMMARY_SCHEMA: &str = "fes-latency-summary/1";
 
 /// How `driver_forward_us` is measured (`driver_forward_note`): this host has no CAN.
-pub const DRIVER_FORWARD_METHOD: &str = "driver-latency (fes-tests): the stim-driver's own \
+pub const DRIVER_FORWARD_METHOD: &str = "driver-latency (fes-latency): the stim-driver's own \
 forward and report threads, SCHED_FIFO one below rt-core on the probe's core, with the CAN \
 socket replaced by a Unix SOCK_SEQPACKET pair (one send per frame) to sim-muscle's virtual \
 stimulator on the other core; StimTick publish -> PULSE written (hlog tag tick_to_can)";

@@ -1,6 +1,6 @@
-//! cyclictest's histogram output read by `fes_tests::cyclictest`.
+//! cyclictest's histogram output read by `fes_latency::cyclictest`.
 
-use fes_tests::cyclictest::*;
+use fes_latency::cyclictest::*;
 
 const SAMPLE: &str = "\
 # /dev/cpu_dma_latency set to 0us

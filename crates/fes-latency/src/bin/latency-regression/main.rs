@@ -70,7 +70,7 @@ struct Cli {
     #[arg(
         long,
         value_name = "FILE",
-        default_value = "tests/latency-baseline.json"
+        default_value = "crates/fes-latency/latency-baseline.json"
     )]
     baseline: PathBuf,
     /// Measure and report without comparing.

@@ -1,0 +1,11 @@
+//! The latency tools, shipped beside the stack: `rt-latency` (the real rt-core loop against
+//! cyclictest on this machine), `driver-latency` (the stim-driver's forward path on a
+//! socket-pair bus) and `latency-regression` (the suite, its report and its gate against
+//! `crates/fes-latency/latency-baseline.json`; run by `scripts/latency-regression`,
+//! docs/latency.md).
+//!
+//! The library holds what the tools share and the tests reach:
+//!
+//! * [`cyclictest`]: running cyclictest and reading its histogram.
+
+pub mod cyclictest;
