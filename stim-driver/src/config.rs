@@ -87,9 +87,8 @@ use fes_can::{Nodes, StimLimits};
 use fes_prescription::{Ceilings, Exceeded, Prescription, pulses_per_s};
 use fes_rt::msg::service::ServiceError;
 use fes_rt::rt::RtConfig;
-use fes_rt::rt::config::{IpcConfig, OwnKeys, RtConfigError, TelemetryConfig};
+use fes_rt::rt::config::{IpcConfig, RtConfigError, TelemetryConfig};
 use fes_rt::rt::config_file::{self, FileError};
-use serde::de::{MapAccess, SeqAccess};
 use serde::{Deserialize, Serialize};
 
 use crate::forward::ForwardSettings;
@@ -458,25 +457,7 @@ impl Default for TelemetryKeys {
     }
 }
 
-impl OwnKeys for TelemetryKeys {
-    const KEYS: &'static [&'static str] = &["status_period_ms"];
-
-    fn read_value<'de, A: MapAccess<'de>>(
-        &mut self,
-        _key: &'static str,
-        map: &mut A,
-    ) -> Result<(), A::Error> {
-        self.status_period_ms = map.next_value()?;
-        Ok(())
-    }
-
-    fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
-        Ok(seq
-            .next_element()?
-            .map(|v| self.status_period_ms = v)
-            .is_some())
-    }
-}
+fes_rt::one_own_key!(TelemetryKeys, status_period_ms);
 
 /// The least `[telemetry] queue_capacity` stim-driver accepts, in events of the forward
 /// thread.

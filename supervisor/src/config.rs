@@ -5,8 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fes_rt::rt::config::{IpcConfig, OwnKeys};
-use serde::de::{MapAccess, SeqAccess};
+use fes_rt::rt::config::IpcConfig;
 use serde::{Deserialize, Serialize};
 
 use crate::contraction::ContractionSettings;
@@ -66,22 +65,7 @@ impl Default for IpcKeys {
     }
 }
 
-impl OwnKeys for IpcKeys {
-    const KEYS: &'static [&'static str] = &["node_name"];
-
-    fn read_value<'de, A: MapAccess<'de>>(
-        &mut self,
-        _key: &'static str,
-        map: &mut A,
-    ) -> Result<(), A::Error> {
-        self.node_name = map.next_value()?;
-        Ok(())
-    }
-
-    fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
-        Ok(seq.next_element()?.map(|v| self.node_name = v).is_some())
-    }
-}
+fes_rt::one_own_key!(IpcKeys, node_name);
 
 /// Reference publication.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -45,7 +45,6 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use serde::de::{MapAccess, SeqAccess};
 use serde::{Deserialize, Serialize};
 
 use super::generator::PulseSettings;
@@ -53,7 +52,7 @@ use super::reference::ReferencePolicy;
 use fes_rt::msg::StimTick;
 use fes_rt::msg::service::ServiceError;
 use fes_rt::rt::clock::{MAX_PERIOD, MIN_PERIOD};
-use fes_rt::rt::config::{IpcConfig, OwnKeys, RtConfig, RtConfigError, TelemetryConfig};
+use fes_rt::rt::config::{IpcConfig, RtConfig, RtConfigError, TelemetryConfig};
 use fes_rt::rt::config_file::{self, FileError};
 
 /// The schema tag this version reads.
@@ -191,22 +190,7 @@ impl Default for IpcKeys {
     }
 }
 
-impl OwnKeys for IpcKeys {
-    const KEYS: &'static [&'static str] = &["notify"];
-
-    fn read_value<'de, A: MapAccess<'de>>(
-        &mut self,
-        _key: &'static str,
-        map: &mut A,
-    ) -> Result<(), A::Error> {
-        self.notify = map.next_value()?;
-        Ok(())
-    }
-
-    fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
-        Ok(seq.next_element()?.map(|v| self.notify = v).is_some())
-    }
-}
+fes_rt::one_own_key!(IpcKeys, notify);
 
 /// The least `[telemetry] queue_capacity` rt-core accepts, in tick records.
 pub const MIN_QUEUE_CAPACITY: usize = 16;

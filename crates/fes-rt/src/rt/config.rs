@@ -159,6 +159,35 @@ impl OwnKeys for NoOwnKeys {
     }
 }
 
+/// Implements [`OwnKeys`] for a struct whose one own key is its field `$field`, named as the
+/// field (rt-core's `[ipc] notify`, the supervisor's `[ipc] node_name`, stim-driver's
+/// `[telemetry] status_period_ms`). The struct implements `Default` (the key's default);
+/// the crate using the macro depends on serde.
+#[macro_export]
+macro_rules! one_own_key {
+    ($ty:ty, $field:ident) => {
+        impl $crate::rt::config::OwnKeys for $ty {
+            const KEYS: &'static [&'static str] = &[stringify!($field)];
+
+            fn read_value<'de, A: ::serde::de::MapAccess<'de>>(
+                &mut self,
+                _key: &'static str,
+                map: &mut A,
+            ) -> Result<(), A::Error> {
+                self.$field = map.next_value()?;
+                Ok(())
+            }
+
+            fn read_elements<'de, A: ::serde::de::SeqAccess<'de>>(
+                &mut self,
+                seq: &mut A,
+            ) -> Result<bool, A::Error> {
+                Ok(seq.next_element()?.map(|v| self.$field = v).is_some())
+            }
+        }
+    };
+}
+
 /// `[ipc]`: where the processes of one stack meet on iceoryx2. Default prefix "fes". `K`:
 /// the keys the process adds, after `prefix` (rt-core's `notify`, the supervisor's
 /// `node_name`).
@@ -354,22 +383,7 @@ mod tests {
         }
     }
 
-    impl OwnKeys for Notify {
-        const KEYS: &'static [&'static str] = &["notify"];
-
-        fn read_value<'de, A: MapAccess<'de>>(
-            &mut self,
-            _key: &'static str,
-            map: &mut A,
-        ) -> Result<(), A::Error> {
-            self.notify = map.next_value()?;
-            Ok(())
-        }
-
-        fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
-            Ok(seq.next_element()?.map(|v| self.notify = v).is_some())
-        }
-    }
+    crate::one_own_key!(Notify, notify);
 
     /// A process's own `[telemetry]` key, as stim-driver's `status_period_ms`.
     #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -385,25 +399,7 @@ mod tests {
         }
     }
 
-    impl OwnKeys for StatusPeriod {
-        const KEYS: &'static [&'static str] = &["status_period_ms"];
-
-        fn read_value<'de, A: MapAccess<'de>>(
-            &mut self,
-            _key: &'static str,
-            map: &mut A,
-        ) -> Result<(), A::Error> {
-            self.status_period_ms = map.next_value()?;
-            Ok(())
-        }
-
-        fn read_elements<'de, A: SeqAccess<'de>>(&mut self, seq: &mut A) -> Result<bool, A::Error> {
-            Ok(seq
-                .next_element()?
-                .map(|v| self.status_period_ms = v)
-                .is_some())
-        }
-    }
+    crate::one_own_key!(StatusPeriod, status_period_ms);
 
     /// A file with the shared sections, `I` and `T` their own keys.
     #[derive(Debug, PartialEq, Serialize, Deserialize)]
