@@ -25,7 +25,7 @@ use super::interlock::{Interlock, no_looser_than};
 use super::outbox::Outbox;
 use super::pending::{PENDING_CAPACITY, PendingPulses};
 use super::watchdog::HeartbeatWatchdog;
-use crate::plant::{self, MusclePlant};
+use crate::plant::{self, Plant};
 
 /// Tick period (ns): the stimulator runs at 1 kHz.
 pub const TICK_NS: u64 = 1_000_000;
@@ -561,12 +561,7 @@ impl Stimulator {
     /// Runs tick `tick`: watchdog, FORCE, pulse application and plant step, STATUS and
     /// heartbeat when due. Missed ticks (index jumped) advance the plant without pulses;
     /// no pulse is ever repeated or caught up.
-    pub fn tick(
-        &mut self,
-        tick: Tick,
-        plant: &mut dyn MusclePlant,
-        out: &mut Outbox,
-    ) -> TickReport {
+    pub fn tick(&mut self, tick: Tick, plant: &mut dyn Plant, out: &mut Outbox) -> TickReport {
         if !self.started {
             // The periodic frames take their phase from the first tick.
             self.started = true;
@@ -676,7 +671,7 @@ impl Stimulator {
 
     /// Steps the plant one sample at tick `k`, applying `pulse` (recorded for the
     /// interlocks and counted).
-    fn apply(&mut self, k: u64, pulse: Option<Pulse>, plant: &mut dyn MusclePlant) {
+    fn apply(&mut self, k: u64, pulse: Option<Pulse>, plant: &mut dyn Plant) {
         if pulse.is_some() {
             self.interlock.record(k);
             self.pulses_delivered = self.pulses_delivered.wrapping_add(1);

@@ -22,7 +22,7 @@ use super::clock::{monotonic_ns, sleep_until};
 use super::machine::{Settings, Stimulator, TICK_NS, Tick};
 use super::outbox::Outbox;
 use super::record::{Recorder, TickRecord};
-use crate::plant::MusclePlant;
+use crate::plant::Plant;
 
 /// The oldest receive timestamp believed, ns: older means CLOCK_REALTIME was stepped
 /// between the frame's arrival and its read (a stall this long is also a watchdog fault).
@@ -259,7 +259,7 @@ fn flush(socket: &StimSocket, out: &mut Outbox, stim_nodes: &Nodes, summary: &mu
 pub fn run_loop(
     iface: &str,
     settings: Settings,
-    plant: &mut dyn MusclePlant,
+    plant: &mut dyn Plant,
     stop: &AtomicBool,
     mut recorder: Option<Recorder>,
     max_ticks: Option<u64>,

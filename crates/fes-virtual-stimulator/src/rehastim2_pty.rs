@@ -23,7 +23,7 @@ use nix::sys::termios::{
 
 use super::clock::{monotonic_ns, sleep_until};
 use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS, TestFault};
-use crate::plant::MusclePlant;
+use crate::plant::Plant;
 use fes_rt::msg::{Contract as _, ForceSample};
 
 /// `sim-muscle rehastim2 --processing-ms`'s default, ms: the device as HASOMED documents it
@@ -323,7 +323,7 @@ fn write_event(log: &mut impl std::io::Write, e: &Event) -> std::io::Result<()> 
 /// Runs the virtual RehaStim 2 on a new pty until `stop` is set (or `--duration-s`).
 pub fn run_rehastim2_until(
     args: &Rehastim2Args,
-    plant: &mut dyn MusclePlant,
+    plant: &mut dyn Plant,
     stop: &AtomicBool,
 ) -> Result<PtyRunSummary, PtyError> {
     let settings = args.settings()?;
@@ -450,7 +450,7 @@ pub fn run_rehastim2_until(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stimulator::test_plant::ChargeIntegrator;
+    use crate::test_plant::ChargeIntegrator;
     use fes_sciencemode::{AckResult, MAX_PACKET_LEN, Message, Packet, SinglePulse};
     use std::os::unix::fs::OpenOptionsExt as _;
     use std::time::{Duration, Instant};
