@@ -28,4 +28,3 @@ pub mod protocol;
 pub mod recorder;
 pub mod sensor;
 pub mod simulate;
-pub mod stimulator;

@@ -636,7 +636,7 @@ struct StimulatorCmd {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     #[command(flatten)]
-    stimulator: sim_muscle::stimulator::StimulatorArgs,
+    stimulator: fes_virtual_stimulator::StimulatorArgs,
 }
 
 fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
@@ -659,7 +659,7 @@ fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
     } else {
         chosen.plant
     };
-    sim_muscle::stimulator::run(args.stimulator, plant)
+    fes_virtual_stimulator::run(args.stimulator, Box::new(OnDevice(plant)))
 }
 
 #[derive(Args)]
@@ -676,7 +676,7 @@ struct Rehastim2Cmd {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     #[command(flatten)]
-    device: sim_muscle::stimulator::rehastim2_pty::Rehastim2Args,
+    device: fes_virtual_stimulator::rehastim2_pty::Rehastim2Args,
 }
 
 fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
@@ -697,7 +697,24 @@ fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
     } else {
         chosen.plant
     };
-    sim_muscle::stimulator::run_rehastim2(args.device, plant)
+    fes_virtual_stimulator::run_rehastim2(args.device, Box::new(OnDevice(plant)))
+}
+
+/// A muscle under an emulated device (`fes_virtual_stimulator`): the device's pulse, in the
+/// same physical units, becomes the muscle's.
+struct OnDevice(Box<dyn MusclePlant>);
+
+impl fes_virtual_stimulator::Plant for OnDevice {
+    fn ts(&self) -> f64 {
+        self.0.ts()
+    }
+
+    fn step(&mut self, pulse: Option<fes_virtual_stimulator::plant::Pulse>) -> f64 {
+        self.0.step(pulse.map(|p| Pulse {
+            amplitude_ma: p.amplitude_ma,
+            width_us: p.width_us,
+        }))
+    }
 }
 
 fn main() -> ExitCode {

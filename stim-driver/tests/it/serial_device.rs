@@ -1,8 +1,8 @@
 //! The ScienceMode transmit side against the virtual RehaStim 2: the driver's PULSE and
 //! heartbeat frames, written through [`ScienceModeTx`] to a serial port opened with
-//! [`open_serial`], reach the device (`sim_muscle`'s pty device) as single pulses with
-//! the same channel, current and width, keep its watchdog fed, and a pulse outside the
-//! device's range never reaches the line.
+//! [`open_serial`], reach the device (`fes_virtual_stimulator`'s pty device) as single
+//! pulses with the same channel, current and width, keep its watchdog fed, and a pulse
+//! outside the device's range never reaches the line.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test
 
 use std::io::{Read as _, Write as _};
@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use fes_can::{Heartbeat, Message as CanMessage, NmtState, Nodes, Pulse};
 use fes_sciencemode::{AckResult, Decoder, MAX_PACKET_LEN, Message, Packet};
-use sim_muscle::stimulator::rehastim2_pty::{Rehastim2Args, run_rehastim2_until};
-use sim_muscle::stimulator::test_plant::ChargeIntegrator;
+use fes_virtual_stimulator::rehastim2_pty::{Rehastim2Args, run_rehastim2_until};
+use fes_virtual_stimulator::test_plant::ChargeIntegrator;
 use stim_driver::serial_tx::{ScienceModeTx, open_serial};
 use stim_driver::tx::{CanTx, RetryPolicy, TxError};
 

@@ -114,7 +114,7 @@ struct BusyRun {
     late: u64,
     /// Decisions refused by the interlocks.
     refused: u64,
-    /// Commands the device took [`sim_muscle::stimulator::rehastim2::SLOW_PROCESSING_MS`]
+    /// Commands the device took [`fes_virtual_stimulator::rehastim2::SLOW_PROCESSING_MS`]
     /// to answer, over the whole run (arming and stopping included).
     slow: u64,
 }

@@ -1,4 +1,4 @@
-//! `test-stimulator`: the virtual stimulator (`sim_muscle::stimulator`) for protocol tests
+//! `test-stimulator`: the virtual stimulator (`fes_virtual_stimulator`) for protocol tests
 //! and bench checks. By default it drives the deterministic charge-integrator plant
 //! (FORCE = delivered charge, 1 N per uC), so a test sees every applied pulse;
 //! `--plant fast|slow` drives the Ding muscle preset instead.
@@ -6,10 +6,11 @@
 
 use anyhow::Context as _;
 use clap::Parser;
+use fes_virtual_stimulator::plant::{Plant, Pulse};
+use fes_virtual_stimulator::{StimulatorArgs, run, test_plant::ChargeIntegrator};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
-use sim_muscle::plant::MusclePlant;
+use sim_muscle::plant::MusclePlant as _;
 use sim_muscle::preset::Preset;
-use sim_muscle::stimulator::{StimulatorArgs, run, test_plant::ChargeIntegrator};
 
 /// The virtual stimulator with a test plant.
 #[derive(Parser, Debug)]
@@ -24,14 +25,33 @@ struct Cli {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    let plant: Box<dyn MusclePlant> = if cli.plant == "charge" {
+    let plant: Box<dyn Plant> = if cli.plant == "charge" {
         Box::new(ChargeIntegrator::new())
     } else {
         let preset: Preset = cli
             .plant
             .parse()
             .with_context(|| format!("--plant {}", cli.plant))?;
-        Box::new(Muscle::new(MuscleConfig::preset(preset)).context("building the muscle model")?)
+        Box::new(OnDevice(
+            Muscle::new(MuscleConfig::preset(preset)).context("building the muscle model")?,
+        ))
     };
     run(cli.args, plant)
+}
+
+/// The Ding muscle under the virtual stimulator: the device's pulse, in the same physical
+/// units, becomes the muscle's.
+struct OnDevice(Muscle);
+
+impl Plant for OnDevice {
+    fn ts(&self) -> f64 {
+        self.0.ts()
+    }
+
+    fn step(&mut self, pulse: Option<Pulse>) -> f64 {
+        self.0.step(pulse.map(|p| sim_muscle::plant::Pulse {
+            amplitude_ma: p.amplitude_ma,
+            width_us: p.width_us,
+        }))
+    }
 }

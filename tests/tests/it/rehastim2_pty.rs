@@ -1,4 +1,4 @@
-//! The virtual RehaStim 2 (`sim_muscle::stimulator::rehastim2_pty`) driven through its
+//! The virtual RehaStim 2 (`fes_virtual_stimulator::rehastim2_pty`) driven through its
 //! pseudo-terminal by pyScienceMode's own `Rehastim2` client (`tests/python/rehastim2_client.py`,
 //! pyScienceMode pinned and installed as in [`crate::sciencemode_peer`]): the device's pulse
 //! log must show exactly the session the client ran, and the muscle (a charge integrator
@@ -18,8 +18,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use fes_sciencemode::{AckResult, Decoder, Message, Packet};
-use sim_muscle::stimulator::rehastim2_pty::{Rehastim2Args, run_rehastim2_until};
-use sim_muscle::stimulator::test_plant::ChargeIntegrator;
+use fes_virtual_stimulator::rehastim2_pty::{Rehastim2Args, run_rehastim2_until};
+use fes_virtual_stimulator::test_plant::ChargeIntegrator;
 
 use crate::sciencemode_peer::{peer_python, python_script};
 

@@ -14,9 +14,9 @@ use fes_can::{
     AliveCounter, Heartbeat, Message, Nmt, NmtCommand, NmtState, Nodes, Pulse, StimLimits,
     StimState,
 };
-use sim_muscle::stimulator::machine::{Settings, Stimulator, TICK_NS, Tick};
-use sim_muscle::stimulator::outbox::Outbox;
-use sim_muscle::stimulator::test_plant::ChargeIntegrator;
+use fes_virtual_stimulator::machine::{Settings, Stimulator, TICK_NS, Tick};
+use fes_virtual_stimulator::outbox::Outbox;
+use fes_virtual_stimulator::test_plant::ChargeIntegrator;
 
 #[test]
 fn state_machine_allocates_nothing_per_tick() {

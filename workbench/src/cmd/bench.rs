@@ -105,7 +105,7 @@ pub struct Args {
     /// command meanwhile, as HASOMED documents the device (protocol §2.3, §5.1; the
     /// default); 0: it answers at once. The driver waits for each answer; pulses it could
     /// not send in time are counted in the summary.
-    #[arg(long, default_value_t = sim_muscle::stimulator::rehastim2_pty::DOCUMENTED_PROCESSING_MS, value_name = "MS")]
+    #[arg(long, default_value_t = fes_virtual_stimulator::rehastim2_pty::DOCUMENTED_PROCESSING_MS, value_name = "MS")]
     pub device_processing_ms: u16,
     /// With `--stimulator sciencemode`: a MOTOmed attached to the virtual RehaStim 2 (it
     /// sends ActualValues every 20 ms, unasked).

@@ -403,13 +403,13 @@ prefix = "{prefix}"
 /// The virtual stimulator in a thread of this process.
 struct Stimulator {
     stop: &'static AtomicBool,
-    thread: Option<std::thread::JoinHandle<sim_muscle::stimulator::RunSummary>>,
+    thread: Option<std::thread::JoinHandle<fes_virtual_stimulator::RunSummary>>,
 }
 
 impl Stimulator {
     fn start(iface: &str, watchdog_ms: u64) -> Self {
         let stop: &'static AtomicBool = Box::leak(Box::new(AtomicBool::new(false)));
-        let args = sim_muscle::stimulator::StimulatorArgs {
+        let args = fes_virtual_stimulator::StimulatorArgs {
             iface: iface.to_owned(),
             node_id: Nodes::DEFAULT.stim(),
             host_node_id: Nodes::DEFAULT.host(),
@@ -429,9 +429,9 @@ impl Stimulator {
         };
         let thread = std::thread::spawn(move || {
             fifo(STIMULATOR_PRIORITY);
-            sim_muscle::stimulator::run_until(
+            fes_virtual_stimulator::run_until(
                 args,
-                Box::new(sim_muscle::stimulator::test_plant::ChargeIntegrator::new()),
+                Box::new(fes_virtual_stimulator::test_plant::ChargeIntegrator::new()),
                 stop,
             )
             .expect("the virtual stimulator")
@@ -442,7 +442,7 @@ impl Stimulator {
         }
     }
 
-    fn stop(mut self) -> sim_muscle::stimulator::RunSummary {
+    fn stop(mut self) -> fes_virtual_stimulator::RunSummary {
         self.stop.store(true, Ordering::Relaxed);
         self.thread
             .take()

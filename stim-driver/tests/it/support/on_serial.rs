@@ -17,9 +17,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use fes_rt::msg::{DeviceState, DriverStatus};
-use sim_muscle::stimulator::rehastim2::{Rehastim2Settings, TestFault};
-use sim_muscle::stimulator::rehastim2_pty::{PtyRunSummary, Rehastim2Args, run_rehastim2_until};
-use sim_muscle::stimulator::test_plant::ChargeIntegrator;
+use fes_virtual_stimulator::rehastim2::{Rehastim2Settings, TestFault};
+use fes_virtual_stimulator::rehastim2_pty::{PtyRunSummary, Rehastim2Args, run_rehastim2_until};
+use fes_virtual_stimulator::test_plant::ChargeIntegrator;
 
 use crate::on_bus::{Decision, EXE, Operator, PRESCRIPTION, Publisher, amplitude_ma, tail};
 

@@ -25,7 +25,7 @@ use super::interlock::{Interlock, no_looser_than};
 use super::outbox::Outbox;
 use super::pending::{PENDING_CAPACITY, PendingPulses};
 use super::watchdog::HeartbeatWatchdog;
-use crate::plant::{self, MusclePlant};
+use crate::plant::{self, Plant};
 
 /// Tick period (ns): the stimulator runs at 1 kHz.
 pub const TICK_NS: u64 = 1_000_000;
@@ -561,12 +561,27 @@ impl Stimulator {
     /// Runs tick `tick`: watchdog, FORCE, pulse application and plant step, STATUS and
     /// heartbeat when due. Missed ticks (index jumped) advance the plant without pulses;
     /// no pulse is ever repeated or caught up.
-    pub fn tick(
-        &mut self,
-        tick: Tick,
-        plant: &mut dyn MusclePlant,
-        out: &mut Outbox,
-    ) -> TickReport {
+    pub fn tick(&mut self, tick: Tick, plant: &mut dyn Plant, out: &mut Outbox) -> TickReport {
+        let k = self.place_on_grid(tick);
+        let caught_up_pulses = self.catch_up(k, plant, out);
+        self.check_watchdog(tick.now_ns, out);
+        let published_n = self.publish_force(tick.nominal_ns, out);
+        let applied = self.pending.take_due(k);
+        self.apply(k, applied, plant);
+        self.update_stimulating(k);
+        self.send_periodic(tick.nominal_ns, out);
+        self.next_tick = k + 1;
+        TickReport {
+            force_n: published_n,
+            applied,
+            caught_up_pulses,
+            state: self.state,
+        }
+    }
+
+    /// The index this tick runs at (never behind the next one due); the first tick also
+    /// sets the phase of the periodic frames and the grid's origin.
+    fn place_on_grid(&mut self, tick: Tick) -> u64 {
         if !self.started {
             // The periodic frames take their phase from the first tick.
             self.started = true;
@@ -577,6 +592,13 @@ impl Stimulator {
         if self.grid_origin_ns.is_none() {
             self.grid_origin_ns = Some(tick.nominal_ns.saturating_sub(k * TICK_NS));
         }
+        k
+    }
+
+    /// Advances the plant through the ticks missed before `k` (at most
+    /// [`MAX_CATCH_UP_STEPS`] of them), applying the pulses due then and cancelling the
+    /// older ones; returns the number of pulses applied in the catch-up.
+    fn catch_up(&mut self, k: u64, plant: &mut dyn Plant, out: &mut Outbox) -> u32 {
         let missed = k - self.next_tick;
         let mut caught_up_pulses = 0;
         self.caught_up_len = 0;
@@ -606,15 +628,23 @@ impl Stimulator {
                 self.apply(j, p, plant);
             }
         }
+        caught_up_pulses
+    }
 
+    /// An operational stimulator whose host heartbeat expired goes to FAULT.
+    fn check_watchdog(&mut self, now_ns: u64, out: &mut Outbox) {
         if self.operational()
-            && let Some(elapsed_ns) = self.watchdog.expired(tick.now_ns)
+            && let Some(elapsed_ns) = self.watchdog.expired(now_ns)
         {
             let elapsed_ms = u16::try_from(elapsed_ns / 1_000_000).unwrap_or(u16::MAX);
             self.enter_fault(ErrorCode::HeartbeatLost, elapsed_ms, out);
         }
+    }
 
-        let sample_time_us = ((tick.nominal_ns / 1000) & 0xFF_FFFF) as u32;
+    /// Sends this tick's FORCE (the plant's force before this tick's step); a force FORCE
+    /// cannot carry is a FAULT. Returns the force published, N.
+    fn publish_force(&mut self, nominal_ns: u64, out: &mut Outbox) -> f64 {
+        let sample_time_us = ((nominal_ns / 1000) & 0xFF_FFFF) as u32;
         let published_n = self.force_n;
         let force_mn = Force::raw_force(self.force_n);
         self.send(
@@ -630,10 +660,12 @@ impl Stimulator {
             // The measurement left the range FORCE can carry (or is not a number).
             self.enter_fault(ErrorCode::Generic, 0, out);
         }
+        published_n
+    }
 
-        let applied = self.pending.take_due(k);
-        self.apply(k, applied, plant);
-
+    /// While operational: STIMULATING for a while after a pulse at or before tick `k`,
+    /// ARMED otherwise.
+    fn update_stimulating(&mut self, k: u64) {
         if self.operational() {
             let recent = self
                 .interlock
@@ -645,14 +677,17 @@ impl Stimulator {
                 StimState::Armed
             };
         }
+    }
 
+    /// STATUS and the stimulator's heartbeat, each when its period is due.
+    fn send_periodic(&mut self, nominal_ns: u64, out: &mut Outbox) {
         let status_ns = ms_to_ns(MessageKind::Status.desc().cycle_time_ms.unwrap_or(10));
-        if tick.nominal_ns >= self.next_status_ns {
+        if nominal_ns >= self.next_status_ns {
             self.send(Message::Status(self.status()), out);
             self.status_counter = (self.status_counter + 1) % 16;
-            self.next_status_ns = advance(self.next_status_ns, status_ns, tick.nominal_ns);
+            self.next_status_ns = advance(self.next_status_ns, status_ns, nominal_ns);
         }
-        if tick.nominal_ns >= self.next_heartbeat_ns {
+        if nominal_ns >= self.next_heartbeat_ns {
             self.send(
                 Message::StimHeartbeat(Heartbeat {
                     state: self.state.nmt(),
@@ -662,21 +697,14 @@ impl Stimulator {
             self.next_heartbeat_ns = advance(
                 self.next_heartbeat_ns,
                 ms_to_ns(self.settings.heartbeat_ms),
-                tick.nominal_ns,
+                nominal_ns,
             );
-        }
-        self.next_tick = k + 1;
-        TickReport {
-            force_n: published_n,
-            applied,
-            caught_up_pulses,
-            state: self.state,
         }
     }
 
     /// Steps the plant one sample at tick `k`, applying `pulse` (recorded for the
     /// interlocks and counted).
-    fn apply(&mut self, k: u64, pulse: Option<Pulse>, plant: &mut dyn MusclePlant) {
+    fn apply(&mut self, k: u64, pulse: Option<Pulse>, plant: &mut dyn Plant) {
         if pulse.is_some() {
             self.interlock.record(k);
             self.pulses_delivered = self.pulses_delivered.wrapping_add(1);

@@ -1,6 +1,6 @@
 //! A virtual Hasomed RehaStim 2: the device side of ScienceMode 2 (`fes-sciencemode`,
 //! `docs/sciencemode.md`) as a pure state machine, driven by a 1 ms tick like the CAN
-//! stimulator ([`super::machine`]) and applying its pulses to the same [`MusclePlant`].
+//! stimulator ([`super::machine`]) and applying its pulses to the same [`Plant`].
 //!
 //! What it does, as the device does:
 //!
@@ -42,7 +42,7 @@ use fes_sciencemode::{
 };
 
 use super::watchdog::HeartbeatWatchdog;
-use crate::plant::{self, MusclePlant};
+use crate::plant::{self, Plant};
 
 /// The tick period, ns.
 pub const TICK_NS: u64 = 1_000_000;
@@ -558,7 +558,7 @@ impl Rehastim2 {
 
     /// Runs one 1 ms tick: Init announcements, the watchdog, channel list cycles, and one
     /// plant step with the pulse due (if any). Answers go to `out`.
-    pub fn tick(&mut self, plant: &mut dyn MusclePlant, out: &mut Vec<u8>) {
+    pub fn tick(&mut self, plant: &mut dyn Plant, out: &mut Vec<u8>) {
         while let Some(&(due, packet)) = self.pending.front()
             && due <= self.tick
         {
@@ -690,7 +690,7 @@ fn send(packet: Packet, out: &mut Vec<u8>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stimulator::test_plant::ChargeIntegrator;
+    use crate::test_plant::ChargeIntegrator;
     use fes_sciencemode::{ChannelPulse, Decoder, PulseMode, SinglePulse};
 
     fn decode(bytes: &[u8]) -> Vec<Packet> {

@@ -19,10 +19,10 @@ use nix::errno::Errno;
 use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame as _, Socket, SocketOptions};
 
 use super::clock::{monotonic_ns, sleep_until};
-use super::machine::{Settings, Stimulator, TICK_NS, Tick};
+use super::machine::{Settings, Stimulator, TICK_NS, Tick, TickReport};
 use super::outbox::Outbox;
 use super::record::{Recorder, TickRecord};
-use crate::plant::MusclePlant;
+use crate::plant::Plant;
 
 /// The oldest receive timestamp believed, ns: older means CLOCK_REALTIME was stepped
 /// between the frame's arrival and its read (a stall this long is also a watchdog fault).
@@ -259,7 +259,7 @@ fn flush(socket: &StimSocket, out: &mut Outbox, stim_nodes: &Nodes, summary: &mu
 pub fn run_loop(
     iface: &str,
     settings: Settings,
-    plant: &mut dyn MusclePlant,
+    plant: &mut dyn Plant,
     stop: &AtomicBool,
     mut recorder: Option<Recorder>,
     max_ticks: Option<u64>,
@@ -278,7 +278,7 @@ pub fn run_loop(
     let mut state = stim.state();
     // A failure ends the loop but not before the orderly shutdown below.
     let mut failure: Option<anyhow::Error> = None;
-    'ticks: while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| k < m) {
+    while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| k < m) {
         let deadline = t0 + k * TICK_NS;
         match sleep_until(deadline) {
             Ok(()) => {}
@@ -298,35 +298,11 @@ pub fn run_loop(
         }
         let nominal = t0 + k * TICK_NS;
 
-        loop {
-            match socket.read(&settings.nodes) {
-                Ok(Some(Rx::Error(class, data))) => {
-                    let code = classify_error_frame(class, &data);
-                    stim.on_bus_error(code, (class & 0xFFFF) as u16, &mut out);
-                }
-                Ok(Some(Rx::Data(id, data, len, at))) => {
-                    summary.frames_rx += 1;
-                    stim.on_frame(at, u32::from(id), &data[..len], &mut out);
-                }
-                Ok(Some(Rx::Skip)) => {}
-                Ok(None) => break,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => {
-                    failure = Some(anyhow::Error::new(e).context(format!("reading from {iface}")));
-                    break 'ticks;
-                }
-            }
-            flush(&socket, &mut out, &settings.nodes, &mut summary);
+        if let Err(e) = read_frames(&socket, &settings.nodes, &mut stim, &mut out, &mut summary) {
+            failure = Some(e.context(format!("reading from {iface}")));
+            break;
         }
-        if summary.tx_errors > tx_errors_reported {
-            let lost = summary.tx_errors - tx_errors_reported;
-            tx_errors_reported = summary.tx_errors;
-            stim.on_bus_error(
-                ErrorCode::CanOverrun,
-                u16::try_from(lost).unwrap_or(u16::MAX),
-                &mut out,
-            );
-        }
+        report_tx_errors(&mut stim, &summary, &mut tx_errors_reported, &mut out);
         let report = stim.tick(
             Tick {
                 index: k,
@@ -342,30 +318,7 @@ pub fn run_loop(
             state = report.state;
         }
         if let Some(r) = recorder.as_mut() {
-            // Pulses applied at ticks the loop missed (a stall) get their own rows, so
-            // the record lists every delivered pulse at the tick it was applied, in the
-            // state it was applied in (operational: a pulse is only ever applied then;
-            // `report.state` is the state now, after the catch-up).
-            for c in stim.caught_up() {
-                r.push(TickRecord {
-                    tick: c.tick,
-                    nominal_ns: t0 + c.tick * TICK_NS,
-                    late_ns: now.saturating_sub(t0 + c.tick * TICK_NS),
-                    state: fes_can::StimState::Stimulating,
-                    force_n: c.force_n,
-                    pulse: Some((c.pulse.seq, c.pulse.amplitude_ma(), c.pulse.width_us)),
-                });
-            }
-            r.push(TickRecord {
-                tick: k,
-                nominal_ns: nominal,
-                late_ns,
-                state: report.state,
-                force_n: report.force_n,
-                pulse: report
-                    .applied
-                    .map(|p| (p.seq, p.amplitude_ma(), p.width_us)),
-            });
+            record_tick(r, &stim, t0, now, late_ns, k, &report);
         }
         summary.ticks += 1;
         k += 1;
@@ -383,6 +336,90 @@ pub fn run_loop(
         Some(e) => Err(e),
         None => Ok(summary),
     }
+}
+
+/// Hands the stimulator every frame received since the last tick, flushing its answers
+/// after each; a read failure (other than EINTR) is returned.
+fn read_frames(
+    socket: &StimSocket,
+    nodes: &Nodes,
+    stim: &mut Stimulator,
+    out: &mut Outbox,
+    summary: &mut RunSummary,
+) -> Result<(), anyhow::Error> {
+    loop {
+        match socket.read(nodes) {
+            Ok(Some(Rx::Error(class, data))) => {
+                let code = classify_error_frame(class, &data);
+                stim.on_bus_error(code, (class & 0xFFFF) as u16, out);
+            }
+            Ok(Some(Rx::Data(id, data, len, at))) => {
+                summary.frames_rx += 1;
+                stim.on_frame(at, u32::from(id), &data[..len], out);
+            }
+            Ok(Some(Rx::Skip)) => {}
+            Ok(None) => return Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(anyhow::Error::new(e)),
+        }
+        flush(socket, out, nodes, summary);
+    }
+}
+
+/// Frames the transmit queue refused since the last report become one EMCY (CAN overrun)
+/// with their number.
+fn report_tx_errors(
+    stim: &mut Stimulator,
+    summary: &RunSummary,
+    tx_errors_reported: &mut u64,
+    out: &mut Outbox,
+) {
+    if summary.tx_errors > *tx_errors_reported {
+        let lost = summary.tx_errors - *tx_errors_reported;
+        *tx_errors_reported = summary.tx_errors;
+        stim.on_bus_error(
+            ErrorCode::CanOverrun,
+            u16::try_from(lost).unwrap_or(u16::MAX),
+            out,
+        );
+    }
+}
+
+/// The record's rows for tick `k`: one per pulse applied at the ticks the loop missed, then
+/// the tick's own.
+fn record_tick(
+    r: &mut Recorder,
+    stim: &Stimulator,
+    t0: u64,
+    now: u64,
+    late_ns: u64,
+    k: u64,
+    report: &TickReport,
+) {
+    // Pulses applied at ticks the loop missed (a stall) get their own rows, so the record
+    // lists every delivered pulse at the tick it was applied, in the state it was applied
+    // in (operational: a pulse is only ever applied then; `report.state` is the state now,
+    // after the catch-up).
+    for c in stim.caught_up() {
+        r.push(TickRecord {
+            tick: c.tick,
+            nominal_ns: t0 + c.tick * TICK_NS,
+            late_ns: now.saturating_sub(t0 + c.tick * TICK_NS),
+            state: fes_can::StimState::Stimulating,
+            force_n: c.force_n,
+            pulse: Some((c.pulse.seq, c.pulse.amplitude_ma(), c.pulse.width_us)),
+        });
+    }
+    r.push(TickRecord {
+        tick: k,
+        nominal_ns: t0 + k * TICK_NS,
+        late_ns,
+        state: report.state,
+        force_n: report.force_n,
+        pulse: report
+            .applied
+            .map(|p| (p.seq, p.amplitude_ma(), p.width_us)),
+    });
 }
 
 #[cfg(test)]

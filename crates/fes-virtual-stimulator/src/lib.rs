@@ -1,5 +1,10 @@
-//! The virtual stimulator on the CAN bus: the stimulator side of the protocol in
-//! `crates/fes-can/dbc/fes.dbc`, driving a [`MusclePlant`].
+//! # fes-virtual-stimulator: the project's device emulators
+//!
+//! Two stimulators in software, for the tests, the bench and hosts without the hardware:
+//! the virtual CAN stimulator (the stimulator side of the protocol in `crates/fes-can/dbc/fes.dbc`)
+//! and the virtual Hasomed RehaStim 2 (ScienceMode 2 on a pseudo-terminal). Both drive a
+//! [`Plant`] every 1 ms: sim-muscle's binary (`sim-muscle stimulator`, `sim-muscle
+//! rehastim2`) puts its muscle models there, the tests the deterministic [`test_plant`].
 //!
 //! * [`machine`]: the protocol as a pure state machine (NMT states, heartbeat producer
 //!   and consumer, CONFIG in pre-operational only, interlocks, EMCY on every rejection,
@@ -7,6 +12,7 @@
 //! * [`interlock`], [`watchdog`], [`outbox`]: its parts;
 //! * `socket_loop`: the SocketCAN adapter on a 1 ms absolute-time loop;
 //! * `clock`: the loop's only timing primitives;
+//! * [`plant`]: what the devices drive ([`Plant`], [`plant::Pulse`]);
 //! * [`test_plant`]: a deterministic plant for protocol tests;
 //! * [`rehastim2`], [`rehastim2_pty`]: a virtual Hasomed RehaStim 2 speaking ScienceMode 2
 //!   on a pseudo-terminal (`docs/sciencemode.md`), on the same plant, watchdog and clock.
@@ -21,13 +27,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context as _, bail};
 use fes_can::{Nodes, StimLimits, parse_node_id};
 
-use crate::plant::MusclePlant;
-
 mod clock;
 pub mod interlock;
 pub mod machine;
 pub mod outbox;
 pub mod pending;
+pub mod plant;
 mod record;
 pub mod rehastim2;
 pub mod rehastim2_pty;
@@ -36,6 +41,7 @@ pub mod test_plant;
 pub mod watchdog;
 
 pub use machine::{Settings, SettingsError, Stimulator, Tick, TickReport};
+pub use plant::Plant;
 pub use socket_loop::RunSummary;
 
 /// Command-line options of the virtual stimulator (`sim-muscle stimulator ...`).
@@ -192,7 +198,7 @@ fn install_signal_handlers() -> anyhow::Result<()> {
 
 /// Runs the virtual stimulator until SIGINT or SIGTERM (or `--duration-s`): output off,
 /// a final STATUS, then `Ok`.
-pub fn run(args: StimulatorArgs, plant: Box<dyn MusclePlant>) -> anyhow::Result<()> {
+pub fn run(args: StimulatorArgs, plant: Box<dyn Plant>) -> anyhow::Result<()> {
     install_signal_handlers()?;
     run_until(args, plant, &SIGNALLED).map(|_| ())
 }
@@ -201,7 +207,7 @@ pub fn run(args: StimulatorArgs, plant: Box<dyn MusclePlant>) -> anyhow::Result<
 /// `--duration-s`), with `plant` as the muscle under its muscle channel.
 pub fn run_rehastim2(
     args: rehastim2_pty::Rehastim2Args,
-    mut plant: Box<dyn MusclePlant>,
+    mut plant: Box<dyn Plant>,
 ) -> anyhow::Result<()> {
     install_signal_handlers()?;
     fes_rt::rt::logging::init("sim-muscle");
@@ -223,7 +229,7 @@ pub fn run_rehastim2(
 /// [`run`] with a caller-owned stop flag instead of signal handlers.
 pub fn run_until(
     args: StimulatorArgs,
-    mut plant: Box<dyn MusclePlant>,
+    mut plant: Box<dyn Plant>,
     stop: &AtomicBool,
 ) -> anyhow::Result<RunSummary> {
     // The journal with priorities under systemd, stderr otherwise; the filter is RUST_LOG.
@@ -324,14 +330,13 @@ mod tests {
     #[test]
     fn a_plant_with_another_sample_time_is_refused() {
         struct Slow;
-        impl MusclePlant for Slow {
+        impl Plant for Slow {
             fn ts(&self) -> f64 {
                 0.005
             }
             fn step(&mut self, _: Option<crate::plant::Pulse>) -> f64 {
                 0.0
             }
-            fn reset(&mut self) {}
         }
         let stop = AtomicBool::new(false);
         let e = run_until(parse(&[]).unwrap(), Box::new(Slow), &stop).unwrap_err();

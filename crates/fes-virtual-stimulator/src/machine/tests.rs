@@ -2,7 +2,7 @@
 //! integrator, so the FORCE stream shows exactly which pulses reached the output.
 
 use super::*;
-use crate::stimulator::test_plant::ChargeIntegrator;
+use crate::test_plant::ChargeIntegrator;
 use fes_can::{AliveCounter, Frame, Nmt, decode};
 
 const T0: u64 = 5_000_000_000;

@@ -23,7 +23,7 @@ use nix::sys::termios::{
 
 use super::clock::{monotonic_ns, sleep_until};
 use super::rehastim2::{Event, PulseSource, Rehastim2, Rehastim2Settings, TICK_NS, TestFault};
-use crate::plant::MusclePlant;
+use crate::plant::Plant;
 use fes_rt::msg::{Contract as _, ForceSample};
 
 /// `sim-muscle rehastim2 --processing-ms`'s default, ms: the device as HASOMED documents it
@@ -320,10 +320,13 @@ fn write_event(log: &mut impl std::io::Write, e: &Event) -> std::io::Result<()> 
     }
 }
 
+/// The pulse log being written and its path (for the error messages).
+type PulseLog = (BufWriter<File>, PathBuf);
+
 /// Runs the virtual RehaStim 2 on a new pty until `stop` is set (or `--duration-s`).
 pub fn run_rehastim2_until(
     args: &Rehastim2Args,
-    plant: &mut dyn MusclePlant,
+    plant: &mut dyn Plant,
     stop: &AtomicBool,
 ) -> Result<PtyRunSummary, PtyError> {
     let settings = args.settings()?;
@@ -334,19 +337,7 @@ pub fn run_rehastim2_until(
             plant.ts()
         )));
     }
-    let mut log = match &args.pulse_log {
-        Some(p) => {
-            let mut w =
-                BufWriter::new(File::create(p).map_err(io_err("creating the pulse log", p))?);
-            writeln!(
-                w,
-                "t_ms,event,channel,width_us,current_ma,source,applied,detail"
-            )
-            .map_err(io_err("writing the pulse log", p))?;
-            Some((w, p.clone()))
-        }
-        None => None,
-    };
+    let mut log = open_pulse_log(args.pulse_log.as_deref())?;
     let mut pty = open_pty()?;
     let _ = std::fs::remove_file(&args.pty_link);
     std::os::unix::fs::symlink(&pty.path, &args.pty_link)
@@ -364,81 +355,25 @@ pub fn run_rehastim2_until(
     let mut device = Rehastim2::new(settings);
     let mut decoder = Decoder::new();
     let mut out = Vec::with_capacity(4096);
-    let mut rx = [0u8; 512];
     let mut summary = PtyRunSummary::default();
-    let start_ns = monotonic_ns();
-    let mut deadline = start_ns;
+    let mut deadline = monotonic_ns();
     while !stop.load(Ordering::Relaxed) && max_ticks.is_none_or(|m| summary.ticks < m) {
         deadline += TICK_NS;
-        loop {
-            match pty.master.read(&mut rx) {
-                Ok(0) => break,
-                Ok(n) => {
-                    for r in decoder.feed(&rx[..n]) {
-                        match r {
-                            Ok(p) => {
-                                summary.packets_rx += 1;
-                                device.on_packet(p, &mut out);
-                            }
-                            Err(DecodeError::UnknownCommand { number, command }) => {
-                                summary.bad_packets += 1;
-                                device.on_unknown_command(number, command, &mut out);
-                            }
-                            Err(e) => {
-                                summary.bad_packets += 1;
-                                device.on_decode_error(e);
-                            }
-                        }
-                    }
-                }
-                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                Err(e) if e.kind() == ErrorKind::Interrupted => continue,
-                // EIO: no slave open (cannot happen while we hold one); treat as no data.
-                Err(_) => break,
-            }
-        }
+        read_packets(
+            &mut pty.master,
+            &mut decoder,
+            &mut device,
+            &mut out,
+            &mut summary,
+        );
         device.tick(plant, &mut out);
         summary.ticks += 1;
         if let Some(f) = force_out.as_mut() {
             f.publish(device.force_n());
         }
-        if !out.is_empty() {
-            match pty.master.write(&out) {
-                Ok(n) => summary.tx_dropped += (out.len() - n) as u64,
-                Err(_) => summary.tx_dropped += out.len() as u64,
-            }
-            out.clear();
-        }
-        let mut wrote = false;
-        summary.busy_sent = device.busy_sent();
-        summary.slow_commands = device.slow_commands();
-        summary.wrong_mode_sent = device.wrong_mode_sent();
-        for e in device.drain_events() {
-            match e {
-                Event::Pulse { .. } => summary.pulses += 1,
-                Event::WatchdogExpired { silent_ms, .. } => tracing::warn!(
-                    "watchdog: {silent_ms} ms without a packet from the host: stimulation stopped, modes reset, Init again"
-                ),
-                Event::BadPacket { error, .. } => tracing::warn!("bad packet: {error}"),
-            }
-            if let Some((w, p)) = log.as_mut() {
-                write_event(w, &e).map_err(io_err("writing the pulse log", p))?;
-                wrote = true;
-            }
-        }
-        if wrote && let Some((w, p)) = log.as_mut() {
-            w.flush().map_err(io_err("writing the pulse log", p))?;
-        }
-        while sleep_until(deadline).is_err() {
-            if stop.load(Ordering::Relaxed) {
-                break;
-            }
-        }
-        // A stall longer than a tick: run on from now, no catch-up burst.
-        let now = monotonic_ns();
-        if now > deadline + TICK_NS {
-            deadline = now;
-        }
+        write_answers(&mut pty.master, &mut out, &mut summary);
+        account_events(&mut device, &mut summary, log.as_mut())?;
+        deadline = sleep_to(deadline, stop);
     }
     if let Some((mut w, p)) = log {
         w.flush().map_err(io_err("writing the pulse log", &p))?;
@@ -447,10 +382,121 @@ pub fn run_rehastim2_until(
     Ok(summary)
 }
 
+/// Creates the pulse log at `path` (if any) with its header line.
+fn open_pulse_log(path: Option<&Path>) -> Result<Option<PulseLog>, PtyError> {
+    let Some(p) = path else {
+        return Ok(None);
+    };
+    let mut w = BufWriter::new(File::create(p).map_err(io_err("creating the pulse log", p))?);
+    writeln!(
+        w,
+        "t_ms,event,channel,width_us,current_ma,source,applied,detail"
+    )
+    .map_err(io_err("writing the pulse log", p))?;
+    Ok(Some((w, p.to_path_buf())))
+}
+
+/// Hands the device every packet the host wrote since the last tick (the master side is
+/// non-blocking: it reads until nothing is left).
+fn read_packets(
+    master: &mut File,
+    decoder: &mut Decoder,
+    device: &mut Rehastim2,
+    out: &mut Vec<u8>,
+    summary: &mut PtyRunSummary,
+) {
+    let mut rx = [0u8; 512];
+    loop {
+        match master.read(&mut rx) {
+            Ok(0) => break,
+            Ok(n) => {
+                for r in decoder.feed(&rx[..n]) {
+                    match r {
+                        Ok(p) => {
+                            summary.packets_rx += 1;
+                            device.on_packet(p, out);
+                        }
+                        Err(DecodeError::UnknownCommand { number, command }) => {
+                            summary.bad_packets += 1;
+                            device.on_unknown_command(number, command, out);
+                        }
+                        Err(e) => {
+                            summary.bad_packets += 1;
+                            device.on_decode_error(e);
+                        }
+                    }
+                }
+            }
+            Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+            // EIO: no slave open (cannot happen while we hold one); treat as no data.
+            Err(_) => break,
+        }
+    }
+}
+
+/// Writes the device's answers to the host; what the pty does not take is dropped and
+/// counted.
+fn write_answers(master: &mut File, out: &mut Vec<u8>, summary: &mut PtyRunSummary) {
+    if !out.is_empty() {
+        match master.write(out) {
+            Ok(n) => summary.tx_dropped += (out.len() - n) as u64,
+            Err(_) => summary.tx_dropped += out.len() as u64,
+        }
+        out.clear();
+    }
+}
+
+/// Takes the device's counters and events into the summary, the log (tracing) and the
+/// pulse log.
+fn account_events(
+    device: &mut Rehastim2,
+    summary: &mut PtyRunSummary,
+    mut log: Option<&mut PulseLog>,
+) -> Result<(), PtyError> {
+    let mut wrote = false;
+    summary.busy_sent = device.busy_sent();
+    summary.slow_commands = device.slow_commands();
+    summary.wrong_mode_sent = device.wrong_mode_sent();
+    for e in device.drain_events() {
+        match e {
+            Event::Pulse { .. } => summary.pulses += 1,
+            Event::WatchdogExpired { silent_ms, .. } => tracing::warn!(
+                "watchdog: {silent_ms} ms without a packet from the host: stimulation stopped, modes reset, Init again"
+            ),
+            Event::BadPacket { error, .. } => tracing::warn!("bad packet: {error}"),
+        }
+        if let Some((w, p)) = log.as_deref_mut() {
+            write_event(w, &e).map_err(io_err("writing the pulse log", p))?;
+            wrote = true;
+        }
+    }
+    if wrote && let Some((w, p)) = log {
+        w.flush().map_err(io_err("writing the pulse log", p))?;
+    }
+    Ok(())
+}
+
+/// Sleeps until `deadline` (or `stop`); returns the deadline to count the next tick from:
+/// after a stall longer than a tick, now (run on from now, no catch-up burst).
+fn sleep_to(deadline: u64, stop: &AtomicBool) -> u64 {
+    while sleep_until(deadline).is_err() {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+    }
+    let now = monotonic_ns();
+    if now > deadline + TICK_NS {
+        now
+    } else {
+        deadline
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stimulator::test_plant::ChargeIntegrator;
+    use crate::test_plant::ChargeIntegrator;
     use fes_sciencemode::{AckResult, MAX_PACKET_LEN, Message, Packet, SinglePulse};
     use std::os::unix::fs::OpenOptionsExt as _;
     use std::time::{Duration, Instant};

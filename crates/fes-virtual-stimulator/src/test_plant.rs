@@ -1,9 +1,9 @@
 //! A deterministic test plant for the stimulator: the "force" is the electric charge
 //! delivered so far, so every applied pulse is visible, with its amplitude and width, in
 //! the FORCE stream. It stands in for the muscle in protocol tests (the physiological
-//! models live elsewhere in this crate).
+//! models live in sim-muscle).
 
-use crate::plant::{MusclePlant, Pulse};
+use crate::plant::{Plant, Pulse};
 
 /// Force (N) = cumulative charge per phase (uC) of the applied pulses; 1 ms samples.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -37,9 +37,14 @@ impl ChargeIntegrator {
     pub const fn pulses(&self) -> u64 {
         self.pulses
     }
+
+    /// Returns the plant to rest (no charge, no steps, no pulses).
+    pub fn reset(&mut self) {
+        *self = Self::new();
+    }
 }
 
-impl MusclePlant for ChargeIntegrator {
+impl Plant for ChargeIntegrator {
     fn ts(&self) -> f64 {
         1e-3
     }
@@ -52,10 +57,6 @@ impl MusclePlant for ChargeIntegrator {
         self.steps += 1;
         self.charge_uc
     }
-
-    fn reset(&mut self) {
-        *self = Self::new();
-    }
 }
 
 #[cfg(test)]
@@ -67,7 +68,11 @@ mod tests {
         let mut p = ChargeIntegrator::new();
         assert_eq!(p.step(None), 0.0);
         // 20 mA x 200 us = 4 uC.
-        assert!((p.step(Some(Pulse::SUPRAMAXIMAL)) - 4.0).abs() < 1e-12);
+        let supramaximal = Pulse {
+            amplitude_ma: 20.0,
+            width_us: 200.0,
+        };
+        assert!((p.step(Some(supramaximal)) - 4.0).abs() < 1e-12);
         assert!(
             (p.step(Some(Pulse {
                 amplitude_ma: 1.5,

@@ -1,5 +1,5 @@
 //! Property tests of the virtual stimulator's own safety (the stimulator side of the
-//! interlocks, `sim_muscle::stimulator::machine`), which must hold whatever the host sends:
+//! interlocks, `fes_virtual_stimulator::machine`), which must hold whatever the host sends:
 //! for arbitrary sequences of frames (valid PULSEs with any fields, corrupted ones, NMT
 //! commands to any node, CONFIGs tighter or looser than the ceiling, host heartbeats, raw
 //! frames on any identifier with any payload) and of ticks (on time, several frames per
@@ -20,10 +20,10 @@ use fes_can::counter::AliveCounter;
 use fes_can::{
     Frame, Heartbeat, Message, Nmt, NmtCommand, NmtState, Nodes, Pulse, StimLimits, StimState,
 };
+use fes_virtual_stimulator::machine::{Settings, Stimulator, TICK_NS, Tick};
+use fes_virtual_stimulator::outbox::Outbox;
+use fes_virtual_stimulator::test_plant::ChargeIntegrator;
 use proptest::prelude::*;
-use sim_muscle::stimulator::machine::{Settings, Stimulator, TICK_NS, Tick};
-use sim_muscle::stimulator::outbox::Outbox;
-use sim_muscle::stimulator::test_plant::ChargeIntegrator;
 
 const NODES: Nodes = Nodes::DEFAULT;
 const HOST_HEARTBEAT_MS: u16 = 10;
