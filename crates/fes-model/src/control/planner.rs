@@ -13,7 +13,11 @@
 //! ```
 //!
 //! the objective of the thesis's optimal patterns (6.4: force-time integral against the
-//! number of pulses) written as tracking error plus a price per pulse. `y_core[j]` is the
+//! number of pulses) written as tracking error plus a price per pulse. The price is
+//! `lambda` itself ([`LambdaScale::Fixed`], eq. 6.4's constant weight) or `lambda` times
+//! the contraction's level ([`LambdaScale::Level`], the default: the error a pulse removes
+//! grows with the level, and a fixed price buys one pulse too few at low levels and one
+//! too many at high ones). `y_core[j]` is the
 //! network's core output (the force `d` samples after `j`, the advanced form), so a pulse
 //! decided at `j` is judged by the force it causes, exactly as the LCN's integrator judges it.
 //!
@@ -71,6 +75,20 @@ pub enum PlanningMode {
     RecedingHorizon,
 }
 
+/// How the plan prices a pulse (`lambda_scale` of the controller file's `planning`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LambdaScale {
+    /// `lambda` itself, the same at every level: eq. 6.4's constant weight of the pulse
+    /// count (the rule of files without the key).
+    #[default]
+    Fixed,
+    /// `lambda` times the contraction's level: the squared error a pulse can remove grows
+    /// with the level, so a fixed price is dear at low levels (one pulse too few) and cheap
+    /// at high ones. Measured on the in-process bench (docs/control.md, section 11).
+    Level,
+}
+
 /// Planner settings (controller file `planning`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -80,6 +98,9 @@ pub struct PlanningConfig {
     /// Price of one pulse, in the units of the summed squared error (normalised force
     /// squared, summed over 1 ms ticks). 0: as many pulses as track best.
     pub lambda: f64,
+    /// Whether `lambda` is the price at every level or scales with the contraction's.
+    #[serde(default)]
+    pub lambda_scale: LambdaScale,
     /// Lowest and highest frequency of the train candidates, Hz.
     pub min_hz: u32,
     /// Highest train frequency, Hz.
@@ -119,14 +140,16 @@ impl Default for PlanningConfig {
 
 impl PlanningConfig {
     /// Planning on with the settings measured on the in-process bench (docs/control.md,
-    /// section 11): `lambda` 0.5 (fast muscle: fewest pulses that still beat every
-    /// constant train from 0.2 to 0.9), `mean_weight` 20 with the supervisor's plateau
+    /// section 11): a pulse priced at the contraction's level (`lambda` 1.0, scale
+    /// `level`: every constant train beaten from 0.1 to 0.9 on the fast muscle, where the
+    /// fixed 0.5 lost 0.1), `mean_weight` 20 with the supervisor's plateau
     /// (the second half of the contraction), trains 5-100 Hz, a relaxation of up to
     /// 500 ms, 3000 network steps (about 150 µs on this project's 2-core VM) and 200 µs
     /// per tick.
     pub const RECOMMENDED: PlanningConfig = PlanningConfig {
         mode: PlanningMode::RecedingHorizon,
-        lambda: 0.5,
+        lambda: 1.0,
+        lambda_scale: LambdaScale::Level,
         mean_weight: 20.0,
         plateau_start: 0.5,
         count_change: 2.0,
@@ -174,6 +197,15 @@ pub enum PlanningConfigError {
 }
 
 impl PlanningConfig {
+    /// The price of one pulse in a contraction of `level` (its highest target): `lambda`,
+    /// times `level` under [`LambdaScale::Level`].
+    pub fn price(&self, level: f64) -> f64 {
+        match self.lambda_scale {
+            LambdaScale::Fixed => self.lambda,
+            LambdaScale::Level => self.lambda * level,
+        }
+    }
+
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), PlanningConfigError> {
         if !(self.lambda.is_finite() && self.lambda >= 0.0) {
@@ -936,7 +968,7 @@ impl Planner {
     /// (better than none: kept only if the incumbent is worse).
     fn warm_start(&mut self, net: &Network<f64>, w: &Window, warm: &mut dyn CausalRollout) {
         let keep = self.history(w);
-        let lambda = self.cfg.lambda;
+        let lambda = self.cfg.price(w.level);
         let min_ipi = self.min_ipi;
         let (price, n_prev) = (self.cfg.count_change, self.n_prev);
         let change = move |n| count_change(price, n_prev, n);
@@ -1061,7 +1093,7 @@ impl Planner {
         mut st: CoreState<f64>,
         mut sse: Acc,
     ) -> Phase {
-        let lambda = self.cfg.lambda;
+        let lambda = self.cfg.price(w.level);
         let mu = self.cfg.mean_weight;
         let b = &*self.bufs;
         let seen = hz > self.cfg.min_hz && b.train[..m] == b.prev_train[..m];
@@ -1180,7 +1212,7 @@ impl Planner {
             &mut self.stats,
         );
         b.inc.j = sse.cost(self.cfg.mean_weight, w)
-            + self.cfg.lambda * (b.inc.n - keep) as f64
+            + self.cfg.price(w.level) * (b.inc.n - keep) as f64
             + count_change(self.cfg.count_change, self.n_prev, b.inc.n);
     }
 
@@ -1335,7 +1367,7 @@ impl Planner {
         } else {
             (w.base, Acc::ZERO, w.base_at, keep)
         };
-        let lambda = self.cfg.lambda;
+        let lambda = self.cfg.price(w.level);
         let b = &mut *self.bufs;
         let priced = lambda * (b.cand.n - keep) as f64
             + count_change(self.cfg.count_change, self.n_prev, b.cand.n);

@@ -7,7 +7,7 @@
 use super::control_support::{TS, fast_muscle, table_6_1_specs};
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_model::control::pattern_generator::{PatternGenerator, TickInput, TickOutput};
-use fes_model::control::planner::{Deadline, PlanningConfig, train_times};
+use fes_model::control::planner::{Deadline, LambdaScale, PlanningConfig, train_times};
 use fes_model::control::preview::{Preview, PreviewPoint, slew};
 use fes_model::model::AdvancedForm;
 
@@ -257,6 +257,29 @@ fn decisions_are_deterministic() {
     pg.reset();
     let c = run(&mut pg, CARDIAC, 2500, true);
     assert_eq!(a, c);
+}
+
+/// The price scaled by the level is the fixed price of the level's size, contraction by
+/// contraction: at 0.3, `lambda` 1.0 by level decides every pulse as a fixed 0.3 does, and
+/// differently from a fixed 1.0 (so the scale is applied, not ignored).
+#[test]
+fn a_price_by_level_is_the_fixed_price_of_that_level() {
+    let with = |lambda, lambda_scale| {
+        let cfg = PlanningConfig {
+            lambda,
+            lambda_scale,
+            ..planning()
+        };
+        pulses(&run(
+            &mut controller(cfg).pattern_generator().unwrap(),
+            CARDIAC,
+            2500,
+            true,
+        ))
+    };
+    let by_level = with(1.0, LambdaScale::Level);
+    assert_eq!(by_level, with(CARDIAC.level, LambdaScale::Fixed));
+    assert_ne!(by_level, with(1.0, LambdaScale::Fixed));
 }
 
 /// A deadline that has always expired.
