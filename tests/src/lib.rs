@@ -4,7 +4,7 @@
 //!
 //! * [`cantools`]: decoding a `candump -L` log with cantools against the DBC.
 //! * [`stack`]: building the four binaries and reading the virtual stimulator's record,
-//!   for tests that run the whole stack (`workbench::bench::Stack`).
+//!   for tests that run the whole stack (`fes_bench::bench::Stack`).
 // A testkit: its helpers panic on a failed setup step by design (a failed test).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -1,4 +1,4 @@
-//! Helpers for tests that run the four processes of the stack (`workbench::bench::Stack`):
+//! Helpers for tests that run the four processes of the stack (`fes_bench::bench::Stack`):
 //! building their binaries and reading the virtual stimulator's per-tick record.
 
 use std::path::{Path, PathBuf};

@@ -10,6 +10,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fes_bench::simulation::{SimSettings, simulate};
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_testkit::control;
 use sim_muscle::muscle::MuscleConfig;
@@ -19,7 +20,6 @@ use supervisor::limits::ReferenceLimits;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use workbench::plots::{BeatLine, plot_beats};
-use workbench::simulation::{SimSettings, simulate};
 
 const TARGET: f64 = 0.3;
 

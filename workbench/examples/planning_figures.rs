@@ -11,13 +11,13 @@
 
 use std::path::PathBuf;
 
+use fes_bench::simulation::{SimSettings, simulate};
 use fes_model::control::file::Controller;
 use fes_model::control::planner::PlanningMode;
 use sim_muscle::preset::Preset;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use workbench::plots::{RunSeries, plot_front_compare, plot_run};
-use workbench::simulation::{SimSettings, simulate};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

@@ -358,13 +358,13 @@ pub fn plot_latency(out: &Path, title: &str, curves: &[LatencyCurve]) -> Result<
     })
 }
 
-/// The CFT front (issue 17, [`crate::cft`]): RMS tracking error against pulses per
+/// The CFT front (issue 17, [`fes_bench::cft`]): RMS tracking error against pulses per
 /// contraction of every constant-frequency train (labelled every 10 Hz), the trains of
 /// equal FTI (within 5 %) filled green, and the LCN's point.
 pub fn plot_front(
     out: &Path,
     title: &str,
-    verdict: &crate::cft::FrontVerdict,
+    verdict: &fes_bench::cft::FrontVerdict,
 ) -> Result<(), PlotError> {
     plot_front_compare(out, title, verdict, &[])
 }
@@ -374,13 +374,13 @@ pub fn plot_front(
 pub fn plot_front_compare(
     out: &Path,
     title: &str,
-    verdict: &crate::cft::FrontVerdict,
-    others: &[(&str, &crate::cft::FrontPoint)],
+    verdict: &fes_bench::cft::FrontVerdict,
+    others: &[(&str, &fes_bench::cft::FrontPoint)],
 ) -> Result<(), PlotError> {
     let e = fail(out);
     on_figure!(out, (1000, 650), |root| {
         root.fill(&WHITE).map_err(|x| e(&x))?;
-        let pts: Vec<&crate::cft::FrontPoint> = verdict
+        let pts: Vec<&fes_bench::cft::FrontPoint> = verdict
             .cft_front
             .iter()
             .chain(std::iter::once(&verdict.lcn))
@@ -428,12 +428,12 @@ type FrontChart<'a, 'b, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, R
 /// point named.
 fn draw_trains<DB: DrawingBackend>(
     chart: &mut FrontChart<'_, '_, DB>,
-    verdict: &crate::cft::FrontVerdict,
+    verdict: &fes_bench::cft::FrontVerdict,
     e: &dyn Fn(&dyn std::fmt::Display) -> PlotError,
 ) -> Result<(), PlotError> {
     let reference = verdict.reference_fti_per_contraction;
-    let equal = |p: &crate::cft::FrontPoint| {
-        (p.fti_per_contraction - reference).abs() <= crate::cft::EQUAL_FTI * reference
+    let equal = |p: &fes_bench::cft::FrontPoint| {
+        (p.fti_per_contraction - reference).abs() <= fes_bench::cft::EQUAL_FTI * reference
     };
     // The lower envelope: the best train for each pulse count.
     let mut best: std::collections::BTreeMap<u64, f64> = std::collections::BTreeMap::new();
@@ -485,8 +485,8 @@ fn draw_trains<DB: DrawingBackend>(
 /// The pattern generator's point (red) and the other runs' (orange), each in the legend.
 fn draw_runs<DB: DrawingBackend>(
     chart: &mut FrontChart<'_, '_, DB>,
-    verdict: &crate::cft::FrontVerdict,
-    others: &[(&str, &crate::cft::FrontPoint)],
+    verdict: &fes_bench::cft::FrontVerdict,
+    others: &[(&str, &fes_bench::cft::FrontPoint)],
     e: &dyn Fn(&dyn std::fmt::Display) -> PlotError,
 ) -> Result<(), PlotError> {
     let l = &verdict.lcn;

@@ -6,7 +6,7 @@
 //! arms, runs the cardiac profile, stops everything and prints the summary.
 //!
 //! `--in-process` runs the same chain in one process in simulated time instead
-//! ([`workbench::simulation`]: the supervisor's profile and outer loop, rt-core's reference
+//! ([`fes_bench::simulation`]: the supervisor's profile and outer loop, rt-core's reference
 //! tracking and pattern generator with the same controller file, the same sim-muscle preset
 //! and force sensor): no CAN, no processes, no latencies; the same summary otherwise.
 
@@ -15,16 +15,16 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use fes_bench::baseline::{BeatShape, baseline_40hz};
+use fes_bench::bench::{ChainTiming, Stack, StackOptions, StimulatorKind, process_logs};
+use fes_bench::canlog::CanLog;
+use fes_bench::summary::{
+    AnalysisInput, BaselineFn, Latency, RunTiming, Series, Summary, analyse, read_series, summarise,
+};
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Command;
-use workbench::baseline::{BeatShape, baseline_40hz};
-use workbench::bench::{ChainTiming, Stack, StackOptions, StimulatorKind, process_logs};
-use workbench::canlog::CanLog;
 use workbench::plots::{
     LatencyCurve, RunSeries, percentile_grid, plot_front, plot_latency, plot_run,
-};
-use workbench::summary::{
-    AnalysisInput, BaselineFn, Latency, RunTiming, Series, Summary, analyse, read_series, summarise,
 };
 
 use supervisor::cli::OnOff;
@@ -406,7 +406,7 @@ fn start_healthy(
         env: Vec::new(),
         pulse_amplitude_ua: None,
         stimulator: a.stimulator,
-        rehastim2: workbench::bench::Rehastim2Options {
+        rehastim2: fes_bench::bench::Rehastim2Options {
             processing_ms: a.device_processing_ms,
             motomed: a.device_motomed,
         },
@@ -476,7 +476,7 @@ fn summarise_recording(
     uml: bool,
     unclean: &[String],
 ) -> anyhow::Result<()> {
-    let rec = workbench::bench::recordings_in(&out.join("recording"));
+    let rec = fes_bench::bench::recordings_in(&out.join("recording"));
     let Some(rec) = rec.last() else {
         bail!(
             "the supervisor wrote no recording under {}",
@@ -487,7 +487,7 @@ fn summarise_recording(
     let front = fes_model::control::file::Controller::load(a.controller())
         .ok()
         .and_then(|c| {
-            workbench::simulation::SimSettings::bench_muscle(
+            fes_bench::simulation::SimSettings::bench_muscle(
                 &c,
                 a.muscle.preset(),
                 a.fatigue,
@@ -537,7 +537,7 @@ fn baseline(
 
 /// `--in-process`: the chain in simulated time, with the bench's muscle and sensor.
 fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
-    use workbench::simulation::{SimSettings, simulate};
+    use fes_bench::simulation::{SimSettings, simulate};
 
     let controller = fes_model::control::file::Controller::load(a.controller())
         .with_context(|| format!("controller {}", a.controller().display()))?;
@@ -567,7 +567,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         text += &format!(
             "{},{:.3},{},{:.6},{:.6},{},{:.6},{:.6}\n",
             m.beat.index,
-            (m.beat.start_ns - workbench::simulation::T0_NS) as f64 * 1e-9,
+            (m.beat.start_ns - fes_bench::simulation::T0_NS) as f64 * 1e-9,
             m.plateau_mean.map_or(String::new(), |p| format!("{p:.6}")),
             m.peak,
             m.fti,
@@ -867,7 +867,7 @@ fn print_summary(s: &Summary, plots: &[PathBuf], unclean: &[String]) {
 
 /// The CFT front's verdict on the run: the user's question first answered by the pulses
 /// and RMS of the best train with no more pulses.
-fn print_front(v: &workbench::cft::FrontVerdict) {
+fn print_front(v: &fes_bench::cft::FrontVerdict) {
     let opt = |x: Option<f64>, d: usize| x.map_or("none".into(), |x| fmt(x, d));
     let cheapest = v
         .cft_front

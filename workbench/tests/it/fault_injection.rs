@@ -19,6 +19,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use fes_bench::bench::{ChainTiming, PROCESSES, Stack, process_logs};
 use fes_can::{Emcy, ErrorCode, Message, Nodes, StimState};
 use fes_dataset::DataSet;
 use fes_hostbus::{HostBus, RawFrame, Station};
@@ -30,7 +31,6 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Status;
-use workbench::bench::{ChainTiming, PROCESSES, Stack, process_logs};
 
 use crate::stack_support;
 
@@ -137,7 +137,7 @@ impl Bench {
         let meta: serde_json::Value = serde_json::from_str(&meta).unwrap_or_default();
         assert_eq!(
             meta["prescription_sha256"].as_str(),
-            Some(fes_prescription::sha256_hex(workbench::bench::PRESCRIPTION.as_bytes()).as_str()),
+            Some(fes_prescription::sha256_hex(fes_bench::bench::PRESCRIPTION.as_bytes()).as_str()),
             "{}: dataset.json prescription_sha256",
             run.display()
         );
@@ -1260,9 +1260,9 @@ fn start_unarmed(
     tag: &str,
     pulse_amplitude_ua: Option<u32>,
     env: Vec<(&'static str, String, String)>,
-) -> (Result<Stack, workbench::bench::BenchError>, Scratch) {
+) -> (Result<Stack, fes_bench::bench::BenchError>, Scratch) {
     let dir = Scratch::new(&format!("fi-{tag}"));
-    let stack = Stack::start(workbench::bench::StackOptions {
+    let stack = Stack::start(fes_bench::bench::StackOptions {
         dir: dir.to_path_buf(),
         bin_dir: stack_binaries(),
         controller: fes_tests::stack::workspace_root().join("models/fast.lcn.json"),
@@ -1275,8 +1275,8 @@ fn start_unarmed(
         prefix: format!("fi{}{tag}", std::process::id()),
         env,
         pulse_amplitude_ua,
-        stimulator: workbench::bench::StimulatorKind::Can,
-        rehastim2: workbench::bench::Rehastim2Options::default(),
+        stimulator: fes_bench::bench::StimulatorKind::Can,
+        rehastim2: fes_bench::bench::Rehastim2Options::default(),
     });
     (stack, dir)
 }

@@ -9,6 +9,8 @@
 
 use std::path::Path;
 
+use fes_bench::simulation::{SimSettings, simulate};
+use fes_bench::summary::{AnalysisInput, RunTiming, summarise};
 use fes_ident::analysis::osp::ForceResponse;
 use fes_ident::analysis::osp::lcn::{StepScore, StepSettings, evaluate_step};
 use fes_model::control::file::Controller;
@@ -17,8 +19,6 @@ use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
-use workbench::simulation::{SimSettings, simulate};
-use workbench::summary::{AnalysisInput, RunTiming, summarise};
 
 const LEVELS: [f64; 7] = [0.1, 0.15, 0.2, 0.3, 0.5, 0.7, 0.9];
 

@@ -9,13 +9,13 @@
 
 use std::path::Path;
 
+use fes_bench::cft::FrontVerdict;
+use fes_bench::simulation::{SimSettings, simulate};
 use fes_model::control::file::Controller;
 use fes_model::control::planner::{LambdaScale, PlanningMode};
 use sim_muscle::preset::Preset;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
-use workbench::cft::FrontVerdict;
-use workbench::simulation::{SimSettings, simulate};
 
 fn shipped(name: &str) -> Controller {
     Controller::load(

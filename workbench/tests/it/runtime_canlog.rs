@@ -7,9 +7,9 @@
 use std::process::Command;
 use std::time::Duration;
 
+use fes_bench::bench::ChainTiming;
+use fes_bench::canlog::{CanLog, HOSTBUS_CHANNEL};
 use fes_tests::stack::stack_binaries;
-use workbench::bench::ChainTiming;
-use workbench::canlog::{CanLog, HOSTBUS_CHANNEL};
 
 use crate::stack_support;
 
@@ -50,10 +50,10 @@ fn a_runs_can_log_decodes_with_cantools_and_python_can() {
     // The recording's ledger: every pulse the driver sent is on the bus, and the virtual
     // stimulator applied every one it accounted for (STATUS counts them in order); at most
     // the last STATUS period's pulses may be unaccounted when the recording ended.
-    let run = workbench::bench::recordings_in(&root)
+    let run = fes_bench::bench::recordings_in(&root)
         .pop()
         .expect("the run's recording");
-    let ledger = workbench::summary::PulseLedger::read(&run.join("pulses.csv"))
+    let ledger = fes_bench::summary::PulseLedger::read(&run.join("pulses.csv"))
         .expect("read pulses.csv")
         .expect("the recording has pulses.csv");
     assert!(

@@ -1,5 +1,5 @@
 //! The outer loop against a simulated plant: the Ding fast muscle with fatigue, driven by
-//! the pattern generator, all in process ([`workbench::simulation`]).
+//! the pattern generator, all in process ([`fes_bench::simulation`]).
 //!
 //! The controller is the control tests' fixture (a fast-muscle-like LMN, thesis Table 6.1
 //! rise times), which is *not* fitted to the Ding muscle: the model mismatch is part of
@@ -8,6 +8,7 @@
 
 use std::path::Path;
 
+use fes_bench::simulation::{SimResult, SimSettings, simulate};
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_testkit::control;
 use sim_muscle::muscle::MuscleConfig;
@@ -16,7 +17,6 @@ use supervisor::contraction::ContractionSettings;
 use supervisor::limits::ReferenceLimits;
 use supervisor::outer_loop::OuterLoopSettings;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
-use workbench::simulation::{SimResult, SimSettings, simulate};
 
 const TARGET: f64 = 0.3;
 

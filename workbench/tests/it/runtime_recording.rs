@@ -403,7 +403,7 @@ fn disk_full_is_an_error_not_a_panic() {
 // ---- The whole stack on CAN: killing any one process ----------------------------------
 
 use crate::stack_support;
-use workbench::bench::ChainTiming;
+use fes_bench::bench::ChainTiming;
 
 use fes_tests::stack::{stack_binaries, stimulator_rows};
 
@@ -433,10 +433,10 @@ fn kill_one(
     victim: &str,
     after_ms: u64,
 ) -> Result<(), String> {
+    use fes_bench::bench::process_logs;
     use nix::sys::signal::Signal;
     use std::time::{Duration, Instant};
     use supervisor::protocol::Command as Cmd;
-    use workbench::bench::process_logs;
 
     let dir = tempdir(&format!("kill-{victim}"));
     let iface = iface.map_or_else(

@@ -4,11 +4,11 @@
 use std::path::Path;
 use std::time::Duration;
 
+use fes_bench::bench::{ChainTiming, Stack, StackOptions, process_logs};
 use fes_tests::stack::workspace_root;
 use supervisor::core::FaultCause;
 use supervisor::profile::{CardiacSpec, ProfileSpec};
 use supervisor::protocol::Status;
-use workbench::bench::{ChainTiming, Stack, StackOptions, process_logs};
 
 /// One whole stack at a time in this test binary: the cases share two cores and run their
 /// loops at SCHED_FIFO, and two stacks at once stall each other into timing trips.
@@ -46,8 +46,8 @@ pub fn start_armed(
         prefix,
         env,
         pulse_amplitude_ua: None,
-        stimulator: workbench::bench::StimulatorKind::Can,
-        rehastim2: workbench::bench::Rehastim2Options::default(),
+        stimulator: fes_bench::bench::StimulatorKind::Can,
+        rehastim2: fes_bench::bench::Rehastim2Options::default(),
     })
     .unwrap_or_else(|e| panic!("{what}: the stack did not start: {e}"));
     let healthy_s = if timing == ChainTiming::Uml { 90 } else { 20 };

@@ -3,8 +3,8 @@
 //! as separate processes on one CAN interface, driven through the control socket.
 //!
 //! [`Stack`] starts, watches and stops the processes (tests use it to kill one mid-run);
-//! `fes bench` (the binary's `cmd::bench`) runs a cardiac profile for a set time, stops
-//! everything and summarises the recording ([`crate::summary`]).
+//! `fes bench` (the workbench binary's `cmd::bench`) runs a cardiac profile for a set time,
+//! stops everything and summarises the recording ([`crate::summary`]).
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -173,7 +173,7 @@ impl StimulatorKind {
 }
 
 /// The prescription every stack runs under: the rig's default (deploy/etc/fes).
-pub const PRESCRIPTION: &str = include_str!("../../deploy/etc/fes/prescription.toml");
+pub const PRESCRIPTION: &str = include_str!("../../../deploy/etc/fes/prescription.toml");
 
 struct Proc1 {
     name: &'static str,
