@@ -118,6 +118,21 @@ pub enum LambdaScaleArg {
     Level,
 }
 
+/// The planner's settings from the `--plan-*` options, the rest as recommended.
+fn planning_config(args: &Args) -> PlanningConfig {
+    PlanningConfig {
+        lambda: args.plan_lambda,
+        lambda_scale: match args.plan_lambda_scale {
+            LambdaScaleArg::Fixed => LambdaScale::Fixed,
+            LambdaScaleArg::Level => LambdaScale::Level,
+        },
+        mean_weight: args.plan_mean_weight,
+        count_change: args.plan_count_change,
+        budget_us: args.plan_budget_us,
+        ..PlanningConfig::RECOMMENDED
+    }
+}
+
 /// Rise times in seconds, one per unit, from `--rise-ms` (a list or `auto`).
 pub fn rise_times(text: &str, units: usize) -> Result<Vec<f64>> {
     let text = text.trim();
@@ -241,17 +256,7 @@ pub fn run(args: Args) -> Result<()> {
         FeedbackState::Delayed => PlanningArg::Off,
     });
     if planning == PlanningArg::RecedingHorizon {
-        settings.planning = PlanningConfig {
-            lambda: args.plan_lambda,
-            lambda_scale: match args.plan_lambda_scale {
-                LambdaScaleArg::Fixed => LambdaScale::Fixed,
-                LambdaScaleArg::Level => LambdaScale::Level,
-            },
-            mean_weight: args.plan_mean_weight,
-            count_change: args.plan_count_change,
-            budget_us: args.plan_budget_us,
-            ..PlanningConfig::RECOMMENDED
-        };
+        settings.planning = planning_config(&args);
     }
     let ts = lmn.ts;
     let controller = Controller::design(lmn, &specs, settings)
