@@ -23,16 +23,7 @@ pub fn workspace_root() -> PathBuf {
 /// and everything on them a second time, minutes of a cold CI run (docs/architecture.md,
 /// "Tests").
 pub fn stack_binaries() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .map(|d| {
-            if d.is_absolute() {
-                d
-            } else {
-                workspace_root().join(d)
-            }
-        })
-        .unwrap_or_else(|| workspace_root().join("target"));
+    let target = fes_testkit::target_dir(&workspace_root());
     if std::env::var_os("FES_VCAN_IFACE").is_none() {
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
         let ok = Command::new(cargo)

@@ -12,6 +12,7 @@
 //! * [`child`]: test children die with the test thread that started them;
 //! * [`assert_refused`]: the bad-input sweeps' one check that a run refused its input
 //!   clearly (exit code, no panic, the offending name in a short message);
+//! * [`target_dir`]: the cargo target directory the tests were built in;
 //! * [`noise`]: the host's own wake-up noise, measured beside a timing check, so that the
 //!   check is judged against what the host allowed in the same run (docs/latency.md);
 //! * `control` (feature `control`): the control tests' fixture, muscle-like Local Model
@@ -35,3 +36,13 @@ pub mod vcan;
 
 pub use refused::assert_refused;
 pub use scratch::Scratch;
+
+/// The cargo target directory of the workspace at `workspace_root`: `CARGO_TARGET_DIR`
+/// (relative to the root when relative), else `target` under the root.
+pub fn target_dir(workspace_root: &std::path::Path) -> std::path::PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR").map(std::path::PathBuf::from) {
+        Some(dir) if dir.is_absolute() => dir,
+        Some(dir) => workspace_root.join(dir),
+        None => workspace_root.join("target"),
+    }
+}

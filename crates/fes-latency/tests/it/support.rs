@@ -13,17 +13,7 @@ pub fn workspace_root() -> PathBuf {
 
 /// The cargo target directory the tests were built in.
 pub fn target_dir() -> PathBuf {
-    match std::env::var_os("CARGO_TARGET_DIR") {
-        Some(dir) => {
-            let dir = PathBuf::from(dir);
-            if dir.is_absolute() {
-                dir
-            } else {
-                workspace_root().join(dir)
-            }
-        }
-        None => workspace_root().join("target"),
-    }
+    fes_testkit::target_dir(&workspace_root())
 }
 
 /// A scratch directory inside the target directory, from the testkit: removed when the
