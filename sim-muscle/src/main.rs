@@ -14,7 +14,7 @@ use sim_muscle::ding::{FatigueParams, PulseWidthParams};
 use sim_muscle::lmn_plant::LmnPlant;
 use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
 use sim_muscle::pattern::{constant_train, from_samples, from_times_ms, samples_on_grid};
-use sim_muscle::plant::{MusclePlant, Pulse};
+use sim_muscle::plant::{MusclePlant, OnDevice, Pulse};
 use sim_muscle::plot::{default_selection, plot_records};
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::{ProtocolConfig, ProtocolKind};
@@ -698,23 +698,6 @@ fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
         chosen.plant
     };
     fes_virtual_stimulator::run_rehastim2(args.device, Box::new(OnDevice(plant)))
-}
-
-/// A muscle under an emulated device (`fes_virtual_stimulator`): the device's pulse, in the
-/// same physical units, becomes the muscle's.
-struct OnDevice(Box<dyn MusclePlant>);
-
-impl fes_virtual_stimulator::Plant for OnDevice {
-    fn ts(&self) -> f64 {
-        self.0.ts()
-    }
-
-    fn step(&mut self, pulse: Option<fes_virtual_stimulator::plant::Pulse>) -> f64 {
-        self.0.step(pulse.map(|p| Pulse {
-            amplitude_ma: p.amplitude_ma,
-            width_us: p.width_us,
-        }))
-    }
 }
 
 fn main() -> ExitCode {

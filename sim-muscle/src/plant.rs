@@ -64,3 +64,22 @@ impl<P: MusclePlant + ?Sized> MusclePlant for Box<P> {
         (**self).rest(seconds)
     }
 }
+
+/// A muscle plant under an emulated device (`fes_virtual_stimulator`): the device's pulse,
+/// in the same physical units, becomes the muscle's. The emulators drive their own narrow
+/// plant trait so that they need no muscle model; this is the one adapter, used by
+/// `sim-muscle stimulator`, `sim-muscle rehastim2` and `test-stimulator`.
+pub struct OnDevice<P>(pub P);
+
+impl<P: MusclePlant> fes_virtual_stimulator::Plant for OnDevice<P> {
+    fn ts(&self) -> f64 {
+        self.0.ts()
+    }
+
+    fn step(&mut self, pulse: Option<fes_virtual_stimulator::plant::Pulse>) -> f64 {
+        self.0.step(pulse.map(|p| Pulse {
+            amplitude_ma: p.amplitude_ma,
+            width_us: p.width_us,
+        }))
+    }
+}

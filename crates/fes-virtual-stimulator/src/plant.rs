@@ -1,7 +1,8 @@
 //! What the emulated devices drive: a muscle (or a test plant) stepped every 1 ms with the
 //! pulse the device delivered. The emulators own this narrow interface so that they need
-//! no muscle model; the muscle models (sim-muscle's plants) are adapted to it by their
-//! callers (`sim-muscle stimulator`, `sim-muscle rehastim2`, `test-stimulator`).
+//! no muscle model; the muscle models (sim-muscle's plants) are adapted to it by
+//! `sim_muscle::plant::OnDevice` (`sim-muscle stimulator`, `sim-muscle rehastim2`,
+//! `test-stimulator`).
 
 /// One stimulation pulse as the device delivered it, in physical units.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,10 +6,10 @@
 
 use anyhow::Context as _;
 use clap::Parser;
-use fes_virtual_stimulator::plant::{Plant, Pulse};
+use fes_virtual_stimulator::plant::Plant;
 use fes_virtual_stimulator::{StimulatorArgs, run, test_plant::ChargeIntegrator};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
-use sim_muscle::plant::MusclePlant as _;
+use sim_muscle::plant::OnDevice;
 use sim_muscle::preset::Preset;
 
 /// The virtual stimulator with a test plant.
@@ -37,21 +37,4 @@ fn main() -> anyhow::Result<()> {
         ))
     };
     run(cli.args, plant)
-}
-
-/// The Ding muscle under the virtual stimulator: the device's pulse, in the same physical
-/// units, becomes the muscle's.
-struct OnDevice(Muscle);
-
-impl Plant for OnDevice {
-    fn ts(&self) -> f64 {
-        self.0.ts()
-    }
-
-    fn step(&mut self, pulse: Option<Pulse>) -> f64 {
-        self.0.step(pulse.map(|p| sim_muscle::plant::Pulse {
-            amplitude_ma: p.amplitude_ma,
-            width_us: p.width_us,
-        }))
-    }
 }
