@@ -643,22 +643,7 @@ fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
     // A panicking thread aborts the virtual stimulator (its output ends with it), as a
     // real stimulator's firmware would reset.
     fes_rt::rt::panic::install("sim-muscle stimulator");
-    let ts_s = 1e-3;
-    let s = &args.sensor;
-    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
-    {
-        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
-    }
-    let mut chosen = choose_plant(&args.muscle, ts_s, |_| Ok(()))?;
-    let plant: Box<dyn MusclePlant> = if args.measured {
-        let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
-        Box::new(Measured::new(
-            chosen.plant,
-            ForceSensor::new(sensor, ts_s).context("sensor settings")?,
-        ))
-    } else {
-        chosen.plant
-    };
+    let plant = device_plant(&args.muscle, args.measured, &args.sensor, args.seed)?;
     fes_virtual_stimulator::run(args.stimulator, Box::new(OnDevice(plant)))
 }
 
@@ -681,23 +666,36 @@ struct Rehastim2Cmd {
 
 fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
     fes_rt::rt::panic::install("sim-muscle rehastim2");
-    let s = &args.sensor;
-    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
+    let plant = device_plant(&args.muscle, args.measured, &args.sensor, args.seed)?;
+    fes_virtual_stimulator::run_rehastim2(args.device, Box::new(OnDevice(plant)))
+}
+
+/// The muscle a virtual device drives at 1 ms: the model's force, or with `measured` the
+/// force as the sensor measures it (the sensor options need `--measured`).
+fn device_plant(
+    muscle: &MuscleArgs,
+    measured: bool,
+    sensor: &SensorArgs,
+    seed: u64,
+) -> Result<Box<dyn MusclePlant>> {
+    let ts_s = 1e-3;
+    if !measured
+        && (sensor.noise_std_n.is_some()
+            || sensor.offset_n.is_some()
+            || sensor.sensor_tau_ms != 0.0)
     {
         bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
     }
-    let ts_s = 1e-3;
-    let mut chosen = choose_plant(&args.muscle, ts_s, |_| Ok(()))?;
-    let plant: Box<dyn MusclePlant> = if args.measured {
-        let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
+    let mut chosen = choose_plant(muscle, ts_s, |_| Ok(()))?;
+    Ok(if measured {
+        let config = sensor_config(sensor, chosen.plant.as_mut(), seed)?;
         Box::new(Measured::new(
             chosen.plant,
-            ForceSensor::new(sensor, ts_s).context("sensor settings")?,
+            ForceSensor::new(config, ts_s).context("sensor settings")?,
         ))
     } else {
         chosen.plant
-    };
-    fes_virtual_stimulator::run_rehastim2(args.device, Box::new(OnDevice(plant)))
+    })
 }
 
 fn main() -> ExitCode {
