@@ -40,6 +40,14 @@ mod socket_loop;
 pub mod test_plant;
 pub mod watchdog;
 
+// The integration tests (tests/it) compile into this crate's one test binary: they use only
+// the public API, through the crate's own name (docs/architecture.md, "Tests").
+#[cfg(test)]
+extern crate self as fes_virtual_stimulator;
+#[cfg(test)]
+#[path = "../tests/it/main.rs"]
+mod it;
+
 pub use machine::{Settings, SettingsError, Stimulator, Tick, TickReport};
 pub use plant::Plant;
 pub use socket_loop::RunSummary;
