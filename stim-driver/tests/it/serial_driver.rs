@@ -166,7 +166,7 @@ fn busy_device_run(name: &str) -> BusyRun {
 mod timing {
     /// On a quiet host, the pulses lost to the busy device are those behind its slow
     /// answers: a 100 ms answer holds the line over at most 4 decisions 30 ms apart (each
-    /// dropped past the 3 ms lateness bound), so the losses stay within 4 per slow answer,
+    /// dropped past the lateness bound), so the losses stay within 4 per slow answer,
     /// plus 3 for the host and the query that confirms the arming. How many slow answers
     /// a run meets is the device's draw (3 % of commands): counting against it keeps the
     /// check about the driver. 93-94 of 100 were delivered with 2 slow answers on an idle
