@@ -24,7 +24,11 @@
 //! The verdict: `beats_every_cft` when every train with no more pulses per contraction than
 //! the run tracks strictly worse (a higher RMS error): the question a user asks of a
 //! pattern generator ("is there a constant train, as easy to set, that does as well with no
-//! more pulses?"); `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
+//! more pulses?"), counting the run's mean per contraction as it is; and
+//! `beats_every_cft_whole_count`, the same against every train with no more pulses than that
+//! mean rounded to the nearest whole pulse: a user sees a plan of 2.97 pulses and a train
+//! of 3 as the same count, so a plan that leaves out one pulse in a few dozen beats must
+//! not rule out the trains of its own count; `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
 //! the reference's has no more pulses and no larger RMS error than the LCN, one of them
 //! strictly less; `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest
 //! CFT that tracks at least as well (none: `None`); `ftipp_vs_best_cft`, the LCN's FTIpP
@@ -141,6 +145,14 @@ pub struct FrontVerdict {
     /// The train with the lowest RMS error among those with no more pulses per contraction
     /// than the LCN (`None`: no train has so few).
     pub best_cft_no_more_pulses: Option<FrontPoint>,
+    /// Every train with no more pulses per contraction than the LCN's rounded to the
+    /// nearest whole pulse tracks worse (module docs). Summaries written before it: false.
+    #[serde(default)]
+    pub beats_every_cft_whole_count: bool,
+    /// The train with the lowest RMS error among those with no more pulses than the LCN's
+    /// count rounded to the nearest whole pulse.
+    #[serde(default)]
+    pub best_cft_whole_count: Option<FrontPoint>,
     /// FTI of one beat of the profile's reference, normalised force x s.
     pub reference_fti_per_contraction: f64,
     /// Some CFT of equal FTI has pulses <= and RMS <= the LCN's, one strictly.
@@ -356,6 +368,8 @@ impl FrontSettings {
                 reference_fti_per_contraction: f64::NAN,
                 beats_every_cft: false,
                 best_cft_no_more_pulses: None,
+                beats_every_cft_whole_count: false,
+                best_cft_whole_count: None,
                 lcn_dominated: false,
                 pulses_vs_equal_rms_cft: None,
                 ftipp_vs_best_cft: None,
@@ -406,23 +420,18 @@ impl FrontSettings {
             .filter(equal_fti)
             .map(|p| p.ftipp)
             .fold(f64::NEG_INFINITY, f64::max);
-        // "No more pulses": a train's count against the run's mean per contraction.
-        let no_more =
-            |p: &&FrontPoint| p.pulses_per_contraction <= lcn.pulses_per_contraction + 1e-9;
-        let best_cft_no_more_pulses = front
-            .iter()
-            .filter(no_more)
-            .min_by(|a, b| a.rms_error.total_cmp(&b.rms_error))
-            .copied();
-        let beats_every_cft = lcn.rms_error.is_finite()
-            && front
-                .iter()
-                .filter(no_more)
-                .all(|p| p.rms_error > lcn.rms_error);
+        // "No more pulses": a train's count against the run's mean per contraction, as it
+        // is and rounded to the nearest whole pulse.
+        let (best_cft_no_more_pulses, beats_every_cft) =
+            beats_every_train_up_to(&front, &lcn, lcn.pulses_per_contraction);
+        let (best_cft_whole_count, beats_every_cft_whole_count) =
+            beats_every_train_up_to(&front, &lcn, lcn.pulses_per_contraction.round());
         Ok(FrontVerdict {
             hz_range: (self.min_hz, self.max_hz),
             beats_every_cft,
             best_cft_no_more_pulses,
+            beats_every_cft_whole_count,
+            best_cft_whole_count,
             pulses_vs_equal_rms_cft: cheapest
                 .is_finite()
                 .then(|| lcn.pulses_per_contraction / cheapest),
@@ -433,6 +442,27 @@ impl FrontSettings {
             lcn_dominated,
         })
     }
+}
+
+/// The best train of `front` with at most `pulses` per contraction, and whether the run
+/// `lcn` tracks strictly better than every such train.
+fn beats_every_train_up_to(
+    front: &[FrontPoint],
+    lcn: &FrontPoint,
+    pulses: f64,
+) -> (Option<FrontPoint>, bool) {
+    let no_more = |p: &&FrontPoint| p.pulses_per_contraction <= pulses + 1e-9;
+    let best = front
+        .iter()
+        .filter(no_more)
+        .min_by(|a, b| a.rms_error.total_cmp(&b.rms_error))
+        .copied();
+    let beats = lcn.rms_error.is_finite()
+        && front
+            .iter()
+            .filter(no_more)
+            .all(|p| p.rms_error > lcn.rms_error);
+    (best, beats)
 }
 
 #[cfg(test)]
@@ -564,36 +594,8 @@ mod tests {
             lead_ms: lead,
             ..settings()
         };
-        let (period, on, beats) = (800usize, 320usize - lead, 4usize);
-        let n = period * beats + 100;
-        let mut pulse = vec![false; n];
-        for b in 0..beats {
-            for t in constant_train(20.0, 0, on, 1e-3).unwrap() {
-                pulse[b * period + t] = true;
-            }
-        }
-        let measured = s.measured(&pulse).unwrap();
-        let series = Series {
-            t_ns: (0..n as u64)
-                .map(|k| 1_000_000_000 + k * 1_000_000)
-                .collect(),
-            reference: vec![0.0; n],
-            model: vec![0.0; n],
-            measured,
-            pulse,
-            beats: (0..beats as u64)
-                .map(|b| BeatRow {
-                    start_ns: 1_000_000_000 + b * period as u64 * 1_000_000,
-                    period_ns: period as u64 * 1_000_000,
-                    on_ns: on as u64 * 1_000_000,
-                    plateau: f64::NAN,
-                    pulses: 0,
-                    fti: 0.0,
-                    pulses_refused: 0,
-                })
-                .collect(),
-        };
-        let v = s.verdict(&series).unwrap();
+        let on = 320usize - lead;
+        let v = s.verdict(&train_run(&s, 20.0, on, 4, None)).unwrap();
         // Every CFT(f, n): the whole train of each frequency (one per Hz, 5..=100) and each
         // of its prefixes, a train that stops after n pulses, counted once per pulse set.
         let whole = |p: &&FrontPoint| {
@@ -638,5 +640,86 @@ mod tests {
         );
         // The reference's FTI: 0.3 over (about) 320 ms, less the ramps.
         assert!((v.reference_fti_per_contraction - 0.3 * 0.32).abs() < 0.3 * 0.32 * 0.1);
+    }
+
+    /// A run of `beats` beats (800 ms) of the `hz` train over `on` ms, the muscle of `s`
+    /// answering; `leave_out` = (beat, pulse) removes that pulse from that beat.
+    fn train_run(
+        s: &FrontSettings,
+        hz: f64,
+        on: usize,
+        beats: usize,
+        leave_out: Option<(usize, usize)>,
+    ) -> Series {
+        let period = 800usize;
+        let n = period * beats + 100;
+        let mut pulse = vec![false; n];
+        for b in 0..beats {
+            for (j, t) in constant_train(hz, 0, on, 1e-3)
+                .unwrap()
+                .into_iter()
+                .enumerate()
+            {
+                pulse[b * period + t] = leave_out != Some((b, j));
+            }
+        }
+        let measured = s.measured(&pulse).unwrap();
+        Series {
+            t_ns: (0..n as u64)
+                .map(|k| 1_000_000_000 + k * 1_000_000)
+                .collect(),
+            reference: vec![0.0; n],
+            model: vec![0.0; n],
+            measured,
+            pulse,
+            beats: (0..beats as u64)
+                .map(|b| BeatRow {
+                    start_ns: 1_000_000_000 + b * period as u64 * 1_000_000,
+                    period_ns: period as u64 * 1_000_000,
+                    on_ns: on as u64 * 1_000_000,
+                    plateau: f64::NAN,
+                    pulses: 0,
+                    fti: 0.0,
+                    pulses_refused: 0,
+                })
+                .collect(),
+        }
+    }
+
+    /// The 20 Hz train (7 pulses) with its onset pulse left out in one beat of eight: 6.875
+    /// pulses per contraction, and that beat tracks worse than the whole train. Against
+    /// its mean count no 7-pulse train is compared, so the whole 20 Hz train cannot beat
+    /// it; at the count rounded to 7 it does, and the whole-count verdict says so.
+    #[test]
+    fn a_pulse_left_out_now_and_then_does_not_rule_out_the_trains_of_its_count() {
+        let s = settings();
+        let v = s
+            .verdict(&train_run(&s, 20.0, 320, 8, Some((3, 0))))
+            .unwrap();
+        assert!((v.lcn.pulses_per_contraction - 6.875).abs() < 1e-9);
+        let own = v
+            .cft_front
+            .iter()
+            .find(|p| p.hz == Some(20) && p.n == Some(7))
+            .unwrap();
+        assert!(own.rms_error < v.lcn.rms_error, "{own:?} vs {:?}", v.lcn);
+        let mean_best = v.best_cft_no_more_pulses.unwrap();
+        assert!(mean_best.n.unwrap() <= 6, "{mean_best:?}");
+        let best_up_to = |n: u32| {
+            v.cft_front
+                .iter()
+                .filter(|p| p.n.unwrap() <= n)
+                .min_by(|a, b| a.rms_error.total_cmp(&b.rms_error))
+                .copied()
+        };
+        assert_eq!(Some(mean_best), best_up_to(6));
+        let whole_best = v.best_cft_whole_count.unwrap();
+        assert_eq!(Some(whole_best), best_up_to(7));
+        assert_eq!(
+            whole_best.n,
+            Some(7),
+            "a 7-pulse train is the best of the count"
+        );
+        assert!(!v.beats_every_cft_whole_count);
     }
 }

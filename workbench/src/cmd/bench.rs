@@ -912,6 +912,24 @@ fn print_front(v: &fes_bench::cft::FrontVerdict) {
             (None, false) => "none has so few pulses".to_string(),
         }
     );
+    // The same at the run's count rounded to a whole pulse: 2.97 pulses and a 3-pulse train
+    // are the same count to a user.
+    let whole = v.lcn.pulses_per_contraction.round();
+    if (whole - v.lcn.pulses_per_contraction).abs() > 1e-9 {
+        println!(
+            "    ... with no more than {whole} pulses (the count rounded): {}",
+            match (&v.best_cft_whole_count, v.beats_every_cft_whole_count) {
+                (_, true) => "none (the run beats every one)".to_string(),
+                (Some(p), false) => format!(
+                    "{} Hz x {} pulses, RMS {}",
+                    p.hz.unwrap_or(0),
+                    p.n.unwrap_or(0),
+                    fmt(p.rms_error, 4)
+                ),
+                (None, false) => "none has so few pulses".to_string(),
+            }
+        );
+    }
 }
 
 fn print_latency(s: &Summary) {
