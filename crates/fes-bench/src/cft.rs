@@ -28,7 +28,10 @@
 //! `beats_every_cft_whole_count`, the same against every train with no more pulses than that
 //! mean rounded to the nearest whole pulse: a user sees a plan of 2.97 pulses and a train
 //! of 3 as the same count, so a plan that leaves out one pulse in a few dozen beats must
-//! not rule out the trains of its own count; `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
+//! not rule out the trains of its own count; `beats_every_cft_holding_level`, the same
+//! whole count among the trains whose contraction misses the level by no more than the
+//! run's (the plateau mean the outer loop regulates): a train that tracks better by
+//! stopping short of the level is not a pattern that does as well; `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
 //! the reference's has no more pulses and no larger RMS error than the LCN, one of them
 //! strictly less; `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest
 //! CFT that tracks at least as well (none: `None`); `ftipp_vs_best_cft`, the LCN's FTIpP
@@ -39,6 +42,8 @@ use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::pattern::constant_train;
 use sim_muscle::plant::{MusclePlant, Pulse};
 use sim_muscle::sensor::{ForceSensor, SensorConfig};
+
+use supervisor::contraction::ContractionSettings;
 
 use crate::baseline::BeatShape;
 use crate::summary::Series;
@@ -127,6 +132,15 @@ pub struct FrontPoint {
     pub ftipp: f64,
     /// FTI per contraction (eq. 6.2), normalised force x s.
     pub fti_per_contraction: f64,
+    /// How far the contraction's level misses the profile's amplitude: the mean over the
+    /// beats of |plateau mean - amplitude| / amplitude, the plateau being the window the
+    /// outer loop regulates ([`supervisor::contraction`]). Summaries written before it: NaN.
+    #[serde(default = "not_measured")]
+    pub level_error: f64,
+}
+
+fn not_measured() -> f64 {
+    f64::NAN
 }
 
 /// The verdict of a run against the CFT front (module docs).
@@ -153,6 +167,15 @@ pub struct FrontVerdict {
     /// count rounded to the nearest whole pulse.
     #[serde(default)]
     pub best_cft_whole_count: Option<FrontPoint>,
+    /// Every train with no more pulses than the LCN's whole count that misses the level by
+    /// no more than the LCN ([`FrontPoint::level_error`]) tracks worse (module docs).
+    /// Summaries written before it: false.
+    #[serde(default)]
+    pub beats_every_cft_holding_level: bool,
+    /// The train with the lowest RMS error among those with no more pulses than the LCN's
+    /// whole count and a level error no larger than the LCN's.
+    #[serde(default)]
+    pub best_cft_holding_level: Option<FrontPoint>,
     /// FTI of one beat of the profile's reference, normalised force x s.
     pub reference_fti_per_contraction: f64,
     /// Some CFT of equal FTI has pulses <= and RMS <= the LCN's, one strictly.
@@ -318,8 +341,10 @@ impl FrontSettings {
     ) -> FrontPoint {
         let n = measured.len();
         let (mut pulses, mut sq, mut count, mut fti) = (0usize, 0.0, 0usize, 0.0);
+        let (mut level_error, mut levels) = (0.0, 0usize);
         for b in beats {
-            let reference = self.shape(b).reference();
+            let shape = self.shape(b);
+            let reference = shape.reference();
             pulses += (b.start..(b.start + b.period).min(n))
                 .filter(|&k| pulse[k])
                 .count();
@@ -330,6 +355,10 @@ impl FrontSettings {
                     count += 1;
                     fti += measured[k] * 1e-3;
                 }
+            }
+            if let Some(plateau) = self.plateau_mean(b, shape.on_ms, measured) {
+                level_error += (plateau - self.amplitude).abs() / self.amplitude;
+                levels += 1;
             }
         }
         let beats_n = beats.len().max(1) as f64;
@@ -346,7 +375,24 @@ impl FrontSettings {
             },
             ftipp: fti_pc / (fti_1 * ppc),
             fti_per_contraction: fti_pc,
+            level_error: if levels > 0 {
+                level_error / levels as f64
+            } else {
+                f64::NAN
+            },
         }
+    }
+
+    /// The plateau mean of beat `b` whose contraction lasts `on` ms: the measured force
+    /// over the outer loop's window, the contraction's second part shifted by the delay
+    /// (`supervisor::contraction`, `plateau_start`), if every sample of it was measured.
+    fn plateau_mean(&self, b: &BeatWindow, on: usize, measured: &[f64]) -> Option<f64> {
+        let plateau_start = ContractionSettings::default().plateau_start;
+        let from = b.start + (plateau_start * on as f64).round() as usize + self.delay;
+        let to = b.start + on + self.delay;
+        let window = measured.get(from..to)?;
+        (!window.is_empty() && window.iter().all(|f| f.is_finite()))
+            .then(|| window.iter().sum::<f64>() / window.len() as f64)
     }
 
     /// The CFT front and the verdict for a run: its beats, pulses and measured force.
@@ -364,12 +410,15 @@ impl FrontSettings {
                     rms_error: f64::NAN,
                     ftipp: f64::NAN,
                     fti_per_contraction: f64::NAN,
+                    level_error: f64::NAN,
                 },
                 reference_fti_per_contraction: f64::NAN,
                 beats_every_cft: false,
                 best_cft_no_more_pulses: None,
                 beats_every_cft_whole_count: false,
                 best_cft_whole_count: None,
+                beats_every_cft_holding_level: false,
+                best_cft_holding_level: None,
                 lcn_dominated: false,
                 pulses_vs_equal_rms_cft: None,
                 ftipp_vs_best_cft: None,
@@ -424,14 +473,25 @@ impl FrontSettings {
         // is and rounded to the nearest whole pulse.
         let (best_cft_no_more_pulses, beats_every_cft) =
             beats_every_train_up_to(&front, &lcn, lcn.pulses_per_contraction);
+        let whole = lcn.pulses_per_contraction.round();
         let (best_cft_whole_count, beats_every_cft_whole_count) =
-            beats_every_train_up_to(&front, &lcn, lcn.pulses_per_contraction.round());
+            beats_every_train_up_to(&front, &lcn, whole);
+        // The level as well: only the trains whose contraction is as close to the level.
+        let holding: Vec<FrontPoint> = front
+            .iter()
+            .filter(|p| p.level_error <= lcn.level_error)
+            .copied()
+            .collect();
+        let (best_cft_holding_level, beats_every_cft_holding_level) =
+            beats_every_train_up_to(&holding, &lcn, whole);
         Ok(FrontVerdict {
             hz_range: (self.min_hz, self.max_hz),
             beats_every_cft,
             best_cft_no_more_pulses,
             beats_every_cft_whole_count,
             best_cft_whole_count,
+            beats_every_cft_holding_level,
+            best_cft_holding_level,
             pulses_vs_equal_rms_cft: cheapest
                 .is_finite()
                 .then(|| lcn.pulses_per_contraction / cheapest),
@@ -721,5 +781,51 @@ mod tests {
             "a 7-pulse train is the best of the count"
         );
         assert!(!v.beats_every_cft_whole_count);
+        // Holding the level: the best of the same count among the trains whose level
+        // error is no larger than the run's.
+        let holding = v
+            .cft_front
+            .iter()
+            .filter(|p| p.n.unwrap() <= 7 && p.level_error <= v.lcn.level_error)
+            .min_by(|a, b| a.rms_error.total_cmp(&b.rms_error))
+            .copied();
+        assert_eq!(v.best_cft_holding_level, holding);
+        assert!(v.cft_front.iter().all(|p| p.level_error.is_finite()));
+    }
+
+    /// The level error is the plateau's relative miss over the outer loop's window (the
+    /// contraction's second half, shifted by the delay): a force of 1.1 x the amplitude
+    /// there and anything outside misses it by 10 %, one sample earlier counts too.
+    #[test]
+    fn the_level_error_is_the_plateaus_relative_miss() {
+        let s = settings();
+        let beats: Vec<BeatWindow> = (0..3)
+            .map(|i| BeatWindow {
+                start: i * 800,
+                period: 800,
+                on: 320,
+            })
+            .collect();
+        let n = 3 * 800 + 50;
+        let plateau = |b: &BeatWindow| (b.start + 160 + s.delay)..(b.start + 320 + s.delay);
+        let mut measured = vec![5.0; n];
+        for b in &beats {
+            for k in plateau(b) {
+                measured[k] = 1.1 * s.amplitude;
+            }
+        }
+        let pulse = vec![false; n];
+        let p = s.score(None, &beats, &pulse, &measured, 1.0);
+        assert!((p.level_error - 0.1).abs() < 1e-12, "{}", p.level_error);
+        // The sample before the window does not count; its first one does.
+        measured[plateau(&beats[1]).start - 1] = 0.0;
+        measured[plateau(&beats[1]).start] = 0.0;
+        let p = s.score(None, &beats, &pulse, &measured, 1.0);
+        let expected = (0.1 + (1.1 * 159.0 / 160.0 - 1.0) + 0.1) / 3.0;
+        assert!(
+            (p.level_error - expected).abs() < 1e-12,
+            "{}",
+            p.level_error
+        );
     }
 }

@@ -18,6 +18,7 @@ use anyhow::{Context, bail};
 use fes_bench::baseline::{BeatShape, baseline_40hz};
 use fes_bench::bench::{ChainTiming, Stack, StackOptions, StimulatorKind, process_logs};
 use fes_bench::canlog::CanLog;
+use fes_bench::cft::FrontPoint;
 use fes_bench::summary::{
     AnalysisInput, BaselineFn, Latency, RunTiming, Series, Summary, analyse, read_series, summarise,
 };
@@ -912,24 +913,30 @@ fn print_front(v: &fes_bench::cft::FrontVerdict) {
             (None, false) => "none has so few pulses".to_string(),
         }
     );
-    // The same at the run's count rounded to a whole pulse: 2.97 pulses and a 3-pulse train
-    // are the same count to a user.
+    // The same at the run's count rounded to a whole pulse (2.97 pulses and a 3-pulse
+    // train are the same count to a user), and among the trains that hold the level as
+    // closely as the run.
     let whole = v.lcn.pulses_per_contraction.round();
-    if (whole - v.lcn.pulses_per_contraction).abs() > 1e-9 {
-        println!(
-            "    ... with no more than {whole} pulses (the count rounded): {}",
-            match (&v.best_cft_whole_count, v.beats_every_cft_whole_count) {
-                (_, true) => "none (the run beats every one)".to_string(),
-                (Some(p), false) => format!(
-                    "{} Hz x {} pulses, RMS {}",
-                    p.hz.unwrap_or(0),
-                    p.n.unwrap_or(0),
-                    fmt(p.rms_error, 4)
-                ),
-                (None, false) => "none has so few pulses".to_string(),
-            }
-        );
-    }
+    let train = |best: &Option<FrontPoint>, beats: bool| match (best, beats) {
+        (_, true) => "none (the run beats every one)".to_string(),
+        (Some(p), false) => format!(
+            "{} Hz x {} pulses, RMS {}, level missed by {:.1} %",
+            p.hz.unwrap_or(0),
+            p.n.unwrap_or(0),
+            fmt(p.rms_error, 4),
+            100.0 * p.level_error
+        ),
+        (None, false) => "none has so few pulses".to_string(),
+    };
+    println!(
+        "    ... with no more than {whole} pulses (the count rounded): {}",
+        train(&v.best_cft_whole_count, v.beats_every_cft_whole_count)
+    );
+    println!(
+        "    ... of those, missing the level by no more than the run ({:.1} %): {}",
+        100.0 * v.lcn.level_error,
+        train(&v.best_cft_holding_level, v.beats_every_cft_holding_level)
+    );
 }
 
 fn print_latency(s: &Summary) {

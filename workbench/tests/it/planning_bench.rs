@@ -79,6 +79,16 @@ fn assert_beats_every_train_of_its_whole_count(v: &FrontVerdict, amplitude: f64)
     );
 }
 
+/// The same among the trains that miss the level (the plateau the outer loop regulates) by
+/// no more than the run (`beats_every_cft_holding_level`).
+fn assert_beats_every_train_holding_the_level(v: &FrontVerdict, amplitude: f64) {
+    assert!(
+        v.beats_every_cft_holding_level,
+        "{amplitude}: planned {} pulses, RMS {:.4}, level missed by {:.4}; {:?}",
+        v.lcn.pulses_per_contraction, v.lcn.rms_error, v.lcn.level_error, v.best_cft_holding_level
+    );
+}
+
 fn off(mut c: Controller) -> Controller {
     c.settings.planning.mode = PlanningMode::Off;
     c
@@ -100,6 +110,7 @@ fn planning_beats_every_train_on_the_fast_muscle() {
         if amplitude > 0.1 {
             assert_beats_every_train_of_its_whole_count(&v, amplitude);
         }
+        assert_beats_every_train_holding_the_level(&v, amplitude);
         // Only the first beat, which starts with the profile (nothing announced ahead).
         assert!(fallbacks < 320, "{amplitude}: {fallbacks} causal ticks");
         let (v_off, _) = bench(&off(c.clone()), Preset::Fast, amplitude);
@@ -161,6 +172,26 @@ fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
             v.lcn.rms_error,
             v_off.lcn.rms_error
         );
+    }
+}
+
+/// Slow muscle, 0.3 and 0.5: a train of fewer pulses tracks better, but only by missing the
+/// level the outer loop regulates (one twitch holds the plateau at 0.125; docs/bench.md,
+/// "Why the slow muscle's low levels lose"); among the trains that hold the level as
+/// closely as the plan, none of its whole count tracks as well.
+#[test]
+fn on_the_slow_muscle_the_trains_that_track_better_miss_the_level() {
+    let c = shipped("slow.lcn.json");
+    for amplitude in [0.3, 0.5] {
+        let (v, _) = bench(&c, Preset::Slow, amplitude);
+        assert!(!v.beats_every_cft, "{amplitude}: {:?}", v.lcn);
+        let best = v.best_cft_no_more_pulses.unwrap();
+        assert!(
+            best.level_error > 0.05 && v.lcn.level_error < 0.02,
+            "{amplitude}: {best:?} vs {:?}",
+            v.lcn
+        );
+        assert_beats_every_train_holding_the_level(&v, amplitude);
     }
 }
 
