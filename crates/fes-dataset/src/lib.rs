@@ -513,15 +513,6 @@ impl DataSet {
     pub fn write(&self, dir: impl AsRef<Path>, mode: WriteMode) -> Result<(), WriteError> {
         let dir = dir.as_ref();
         self.validate(dir)?;
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| WriteError::Io { path, source }
-        };
-        prepare_dir(dir, mode)?;
-        for r in &self.records {
-            let path = dir.join(&r.file);
-            fs::write(&path, record_csv(r)).map_err(io(&path))?;
-        }
         let meta = MetaFile {
             schema: SCHEMA.to_string(),
             source: self.header.source.clone(),
@@ -545,17 +536,38 @@ impl DataSet {
                 })
                 .collect(),
         };
-        let meta_path = dir.join(META_FILE);
-        let mut text = serde_json::to_string_pretty(&meta).map_err(|e| FormatError::Json {
-            path: meta_path.clone(),
-            line: 0,
-            column: 0,
-            message: e.to_string(),
-        })?;
-        text.push('\n');
-        fs::write(&meta_path, text).map_err(io(&meta_path))?;
-        Ok(())
+        let files = self.records.iter().map(|r| (&r.file, record_csv(r)));
+        write_files(dir, mode, files, &meta)
     }
+}
+
+/// Writes a data set into `dir` ([`prepare_dir`]): the record files (name, text) first,
+/// then `meta` as `dataset.json`, so an interrupted write leaves no readable half data set.
+fn write_files<N: AsRef<Path>>(
+    dir: &Path,
+    mode: WriteMode,
+    records: impl IntoIterator<Item = (N, String)>,
+    meta: &impl Serialize,
+) -> Result<(), WriteError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| WriteError::Io { path, source }
+    };
+    prepare_dir(dir, mode)?;
+    for (file, text) in records {
+        let path = dir.join(file);
+        fs::write(&path, text).map_err(io(&path))?;
+    }
+    let meta_path = dir.join(META_FILE);
+    let mut text = serde_json::to_string_pretty(meta).map_err(|e| FormatError::Json {
+        path: meta_path.clone(),
+        line: 0,
+        column: 0,
+        message: e.to_string(),
+    })?;
+    text.push('\n');
+    fs::write(&meta_path, text).map_err(io(&meta_path))?;
+    Ok(())
 }
 
 /// Makes `dir` ready for a data set: created if missing; if it is not empty, refused

@@ -368,15 +368,6 @@ impl SignalSet {
     pub fn write(&self, dir: impl AsRef<Path>, mode: WriteMode) -> Result<(), WriteError> {
         let dir = dir.as_ref();
         self.validate(dir)?;
-        crate::prepare_dir(dir, mode)?;
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| WriteError::Io { path, source }
-        };
-        for r in &self.records {
-            let path = dir.join(&r.file);
-            fs::write(&path, self.record_csv(r)).map_err(io(&path))?;
-        }
         let h = &self.header;
         let meta = MetaV2 {
             schema: SCHEMA_V2.into(),
@@ -398,16 +389,8 @@ impl SignalSet {
                 })
                 .collect(),
         };
-        let meta_path = dir.join(META_FILE);
-        let mut text = serde_json::to_string_pretty(&meta).map_err(|e| FormatError::Json {
-            path: meta_path.clone(),
-            line: 0,
-            column: 0,
-            message: e.to_string(),
-        })?;
-        text.push('\n');
-        fs::write(&meta_path, text).map_err(io(&meta_path))?;
-        Ok(())
+        let files = self.records.iter().map(|r| (&r.file, self.record_csv(r)));
+        crate::write_files(dir, mode, files, &meta)
     }
 
     /// The header line of a record file.
