@@ -822,30 +822,25 @@ impl DriverConfig {
     /// `[transport]` with kind = "can": no serial keys, an interface named.
     fn validate_can_transport(&self) -> Result<(), ConfigError> {
         let t = &self.transport;
-        config_file::range(
-            t.device.is_none(),
+        let device = t.device.as_deref().map(Path::display);
+        absent_with_can(
+            device,
             "transport.device",
-            t.device
-                .as_deref()
-                .map_or(String::new(), |d| d.display().to_string()),
             "absent with kind = \"can\" (a serial device is for kind = \"sciencemode\")",
         )?;
-        config_file::range(
-            t.poll_ms.is_none(),
+        absent_with_can(
+            t.poll_ms,
             "transport.poll_ms",
-            t.poll_ms.unwrap_or(0),
             "absent with kind = \"can\" (the stimulator sends STATUS by itself)",
         )?;
-        config_file::range(
-            t.max_lateness_ms.is_none(),
+        absent_with_can(
+            t.max_lateness_ms,
             "transport.max_lateness_ms",
-            t.max_lateness_ms.unwrap_or(0),
             "absent with kind = \"can\" (a CAN write never waits for an answer)",
         )?;
-        config_file::range(
-            t.min_interval_ms.is_none(),
+        absent_with_can(
+            t.min_interval_ms,
             "transport.min_interval_ms",
-            t.min_interval_ms.unwrap_or(0),
             "absent with kind = \"can\" (the stimulator takes a PULSE any tick)",
         )?;
         config_file::range(
@@ -993,6 +988,16 @@ impl DriverConfig {
         // tables, arrays); serialisation of this type cannot fail.
         toml::to_string_pretty(self).expect("DriverConfig serialises to TOML")
     }
+}
+
+/// A serial-transport key that kind = "can" refuses, with the value it was given.
+fn absent_with_can<T: ToString>(
+    value: Option<T>,
+    field: &'static str,
+    allowed: &'static str,
+) -> Result<(), FileError> {
+    let given = value.as_ref().map_or(String::new(), T::to_string);
+    config_file::range(value.is_none(), field, given, allowed)
 }
 
 /// `[watchdog]`'s liveness keys: the check period, the grace of an unknown liveness, and

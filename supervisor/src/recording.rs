@@ -835,8 +835,9 @@ impl Recorder {
         self.guard(r)
     }
 
-    fn flush_all(&mut self) -> Result<(), RecordingError> {
-        for s in [
+    /// Every stream of the recording (not the record in progress).
+    fn streams(&mut self) -> [&mut Stream; 10] {
+        [
             &mut self.ticks,
             &mut self.force,
             &mut self.references,
@@ -847,7 +848,11 @@ impl Recorder {
             &mut self.timing,
             &mut self.beats,
             &mut self.events,
-        ] {
+        ]
+    }
+
+    fn flush_all(&mut self) -> Result<(), RecordingError> {
+        for s in self.streams() {
             s.flush()?;
         }
         if let Some(r) = &mut self.record {
@@ -863,18 +868,7 @@ impl Recorder {
         let far = now_ns.saturating_add(FORCE_WAIT_NS.max(OUTCOME_WAIT_NS).max(APPLIED_WAIT_NS));
         self.drain(far)?;
         self.end_record()?;
-        for s in [
-            &mut self.ticks,
-            &mut self.force,
-            &mut self.references,
-            &mut self.previews,
-            &mut self.status,
-            &mut self.outcomes,
-            &mut self.pulses,
-            &mut self.timing,
-            &mut self.beats,
-            &mut self.events,
-        ] {
+        for s in self.streams() {
             s.sync()?;
         }
         File::open(&self.dir)

@@ -85,6 +85,26 @@ fn fail(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
     }
 }
 
+/// Draws the chart's legend in a white, black-bordered box at `position`.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    e: &dyn Fn(&dyn std::fmt::Display) -> PlotError,
+) -> Result<(), PlotError> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .position(position)
+        .draw()
+        .map_err(|x| e(&x))
+}
+
+/// The legend entry of a 2 px line in `color`.
+fn line_legend(color: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+}
+
 /// Time series of a run, 1 ms apart.
 #[derive(Debug, Clone, Default)]
 pub struct RunSeries {
@@ -171,35 +191,29 @@ pub fn plot_run(
             (&run.model, BLUE, "model force (rt-core LMN)"),
             (&run.measured, RED, "measured force"),
         ] {
-            let c = color;
             bottom
-                .draw_series(LineSeries::new(in_window(series), c.stroke_width(2)))
+                .draw_series(LineSeries::new(in_window(series), color.stroke_width(2)))
                 .map_err(|x| e(&x))?
                 .label(label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
+                .legend(line_legend(color));
         }
-        bottom
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|x| e(&x))?;
+        legend(&mut bottom, SeriesLabelPosition::UpperRight, &e)?;
         root.present().map_err(|x| e(&x))?;
         Ok(())
     })
 }
 
-/// One line of per-beat values.
+/// A labelled line of points.
 #[derive(Debug, Clone)]
-pub struct BeatLine {
+pub struct Curve {
     /// Legend text.
     pub label: String,
-    /// (time of the beat, s; value).
+    /// The points (x, y).
     pub points: Vec<(f64, f64)>,
 }
+
+/// One line of per-beat values: (time of the beat, s; value).
+pub type BeatLine = Curve;
 
 /// Draws per-beat contraction lines with the target and a +-`band` fraction around it.
 pub fn plot_beats(
@@ -262,33 +276,19 @@ pub fn plot_beats(
                 .draw_series(LineSeries::new(l.points.clone(), c.stroke_width(2)))
                 .map_err(|x| e(&x))?
                 .label(l.label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
+                .legend(line_legend(c));
             chart
                 .draw_series(l.points.iter().map(|&p| Circle::new(p, 3, c.filled())))
                 .map_err(|x| e(&x))?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::LowerLeft)
-            .draw()
-            .map_err(|x| e(&x))?;
+        legend(&mut chart, SeriesLabelPosition::LowerLeft, &e)?;
         root.present().map_err(|x| e(&x))?;
         Ok(())
     })
 }
 
 /// One latency distribution: (percentile in [0, 100), latency in µs) points.
-#[derive(Debug, Clone)]
-pub struct LatencyCurve {
-    /// Legend text.
-    pub label: String,
-    /// Points of the percentile curve.
-    pub points: Vec<(f64, f64)>,
-}
+pub type LatencyCurve = Curve;
 
 /// Percentiles drawn: 0, 50, 90, 99, 99.9, 99.99 and the steps between, as
 /// `-log10(1 - q)` on the x axis (the usual HdrHistogram percentile plot).
@@ -342,17 +342,9 @@ pub fn plot_latency(out: &Path, title: &str, curves: &[LatencyCurve]) -> Result<
                 .draw_series(LineSeries::new(pts, color.stroke_width(2)))
                 .map_err(|x| e(&x))?
                 .label(c.label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
+                .legend(line_legend(color));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(|x| e(&x))?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft, &e)?;
         root.present().map_err(|x| e(&x))?;
         Ok(())
     })
@@ -408,13 +400,7 @@ pub fn plot_front_compare(
             .map_err(|x| e(&x))?;
         draw_trains(&mut chart, verdict, &e)?;
         draw_runs(&mut chart, verdict, others, &e)?;
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|x| e(&x))?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight, &e)?;
         root.present().map_err(|x| e(&x))?;
         Ok(())
     })

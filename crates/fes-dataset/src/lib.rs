@@ -409,16 +409,7 @@ impl DataSet {
     /// Reads and validates the data set in `dir`.
     pub fn read(dir: impl AsRef<Path>) -> Result<DataSet, ReadError> {
         let dir = dir.as_ref();
-        if !dir.is_dir() {
-            return Err(ReadError::MissingDir {
-                path: dir.to_path_buf(),
-            });
-        }
-        let meta_path = dir.join(META_FILE);
-        let bytes = fs::read(&meta_path).map_err(|source| ReadError::Io {
-            path: meta_path.clone(),
-            source,
-        })?;
+        let (meta_path, bytes) = read_meta(dir)?;
         let meta = parse_meta(&meta_path, &bytes)?;
         let header = Header {
             source: meta.source,
@@ -437,10 +428,7 @@ impl DataSet {
         let mut records = Vec::with_capacity(meta.records.len());
         for entry in meta.records {
             let path = dir.join(&entry.file);
-            let bytes = fs::read(&path).map_err(|source| ReadError::Io {
-                path: path.clone(),
-                source,
-            })?;
+            let bytes = read_file(&path)?;
             let cols = parse_record_csv(&path, &bytes, header.ts_s)?;
             let record = Record {
                 file: entry.file,
@@ -450,24 +438,8 @@ impl DataSet {
                 force: cols.force,
                 decided: cols.decided,
             };
-            if record.len() != entry.samples {
-                return Err(FormatError::Mismatch {
-                    path,
-                    what: "samples",
-                    found: record.len(),
-                    listed: entry.samples,
-                }
-                .into());
-            }
-            if record.pulses() != entry.pulses {
-                return Err(FormatError::Mismatch {
-                    path,
-                    what: "pulses",
-                    found: record.pulses(),
-                    listed: entry.pulses,
-                }
-                .into());
-            }
+            check_listed(&path, "samples", record.len(), entry.samples)?;
+            check_listed(&path, "pulses", record.pulses(), entry.pulses)?;
             records.push(record);
         }
         Ok(DataSet { header, records })
@@ -513,15 +485,6 @@ impl DataSet {
     pub fn write(&self, dir: impl AsRef<Path>, mode: WriteMode) -> Result<(), WriteError> {
         let dir = dir.as_ref();
         self.validate(dir)?;
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| WriteError::Io { path, source }
-        };
-        prepare_dir(dir, mode)?;
-        for r in &self.records {
-            let path = dir.join(&r.file);
-            fs::write(&path, record_csv(r)).map_err(io(&path))?;
-        }
         let meta = MetaFile {
             schema: SCHEMA.to_string(),
             source: self.header.source.clone(),
@@ -545,16 +508,76 @@ impl DataSet {
                 })
                 .collect(),
         };
-        let meta_path = dir.join(META_FILE);
-        let mut text = serde_json::to_string_pretty(&meta).map_err(|e| FormatError::Json {
-            path: meta_path.clone(),
-            line: 0,
-            column: 0,
-            message: e.to_string(),
-        })?;
-        text.push('\n');
-        fs::write(&meta_path, text).map_err(io(&meta_path))?;
+        let files = self.records.iter().map(|r| (&r.file, record_csv(r)));
+        write_files(dir, mode, files, &meta)
+    }
+}
+
+/// Writes a data set into `dir` ([`prepare_dir`]): the record files (name, text) first,
+/// then `meta` as `dataset.json`, so an interrupted write leaves no readable half data set.
+fn write_files<N: AsRef<Path>>(
+    dir: &Path,
+    mode: WriteMode,
+    records: impl IntoIterator<Item = (N, String)>,
+    meta: &impl Serialize,
+) -> Result<(), WriteError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| WriteError::Io { path, source }
+    };
+    prepare_dir(dir, mode)?;
+    for (file, text) in records {
+        let path = dir.join(file);
+        fs::write(&path, text).map_err(io(&path))?;
+    }
+    let meta_path = dir.join(META_FILE);
+    let mut text = serde_json::to_string_pretty(meta).map_err(|e| FormatError::Json {
+        path: meta_path.clone(),
+        line: 0,
+        column: 0,
+        message: e.to_string(),
+    })?;
+    text.push('\n');
+    fs::write(&meta_path, text).map_err(io(&meta_path))?;
+    Ok(())
+}
+
+/// The path and bytes of the `dataset.json` of the data set in `dir` (either version).
+fn read_meta(dir: &Path) -> Result<(PathBuf, Vec<u8>), ReadError> {
+    if !dir.is_dir() {
+        return Err(ReadError::MissingDir {
+            path: dir.to_path_buf(),
+        });
+    }
+    let meta_path = dir.join(META_FILE);
+    let bytes = read_file(&meta_path)?;
+    Ok((meta_path, bytes))
+}
+
+/// The bytes of a data set's file.
+fn read_file(path: &Path) -> Result<Vec<u8>, ReadError> {
+    fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// A record whose `what` (samples, pulses) differs from what `dataset.json` lists for it.
+fn check_listed(
+    path: &Path,
+    what: &'static str,
+    found: usize,
+    listed: usize,
+) -> Result<(), FormatError> {
+    if found == listed {
         Ok(())
+    } else {
+        Err(FormatError::Mismatch {
+            path: path.to_path_buf(),
+            what,
+            found,
+            listed,
+        })
     }
 }
 
@@ -662,15 +685,8 @@ fn utf8<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str, FormatError> {
 
 /// Parses `dataset.json`, checking the schema before anything else.
 fn parse_meta(path: &Path, bytes: &[u8]) -> Result<MetaFile, FormatError> {
-    let text = utf8(path, bytes)?;
-    let json_error = |e: serde_json::Error| FormatError::Json {
-        path: path.to_path_buf(),
-        line: e.line(),
-        column: e.column(),
-        message: e.to_string(),
-    };
-    let value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
-    match value.get("schema") {
+    let (text, schema) = meta_schema(path, bytes)?;
+    match schema {
         Some(serde_json::Value::String(s)) if s == SCHEMA => {}
         Some(other) => {
             return Err(FormatError::Schema {
@@ -685,7 +701,28 @@ fn parse_meta(path: &Path, bytes: &[u8]) -> Result<MetaFile, FormatError> {
             });
         }
     }
-    serde_json::from_str(text).map_err(json_error)
+    serde_json::from_str(text).map_err(json_error(path))
+}
+
+/// The text of a `dataset.json` (either version) and its `schema` field, which the
+/// reader checks before anything else.
+fn meta_schema<'b>(
+    path: &Path,
+    bytes: &'b [u8],
+) -> Result<(&'b str, Option<serde_json::Value>), FormatError> {
+    let text = utf8(path, bytes)?;
+    let value: serde_json::Value = serde_json::from_str(text).map_err(json_error(path))?;
+    Ok((text, value.get("schema").cloned()))
+}
+
+/// A JSON error in the file at `path`, with its line and column.
+fn json_error(path: &Path) -> impl Fn(serde_json::Error) -> FormatError + '_ {
+    |e| FormatError::Json {
+        path: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        message: e.to_string(),
+    }
 }
 
 /// Checks the metadata fields that do not depend on the record files.

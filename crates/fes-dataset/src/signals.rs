@@ -294,25 +294,9 @@ impl SignalSet {
     /// Reads and validates the signal data set in `dir`.
     pub fn read(dir: impl AsRef<Path>) -> Result<SignalSet, ReadError> {
         let dir = dir.as_ref();
-        if !dir.is_dir() {
-            return Err(ReadError::MissingDir {
-                path: dir.to_path_buf(),
-            });
-        }
-        let meta_path = dir.join(META_FILE);
-        let bytes = fs::read(&meta_path).map_err(|source| ReadError::Io {
-            path: meta_path.clone(),
-            source,
-        })?;
-        let text = crate::utf8(&meta_path, &bytes)?;
-        let json_error = |e: serde_json::Error| FormatError::Json {
-            path: meta_path.clone(),
-            line: e.line(),
-            column: e.column(),
-            message: e.to_string(),
-        };
-        let value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
-        match value.get("schema") {
+        let (meta_path, bytes) = crate::read_meta(dir)?;
+        let (text, schema) = crate::meta_schema(&meta_path, &bytes)?;
+        match schema {
             Some(serde_json::Value::String(s)) if s == SCHEMA_V2 => {}
             other => {
                 return Err(FormatError::Field {
@@ -326,7 +310,7 @@ impl SignalSet {
                 .into());
             }
         }
-        let meta: MetaV2 = serde_json::from_str(text).map_err(json_error)?;
+        let meta: MetaV2 = serde_json::from_str(text).map_err(crate::json_error(&meta_path))?;
         let header = SignalHeader {
             source: meta.source,
             seed: meta.seed,
@@ -342,20 +326,9 @@ impl SignalSet {
         let mut records = Vec::with_capacity(meta.records.len());
         for entry in meta.records {
             let path = dir.join(&entry.file);
-            let bytes = fs::read(&path).map_err(|source| ReadError::Io {
-                path: path.clone(),
-                source,
-            })?;
+            let bytes = crate::read_file(&path)?;
             let record = parse_csv(&path, &bytes, &header, entry.file, entry.kind)?;
-            if record.len() != entry.samples {
-                return Err(FormatError::Mismatch {
-                    path,
-                    what: "samples",
-                    found: record.len(),
-                    listed: entry.samples,
-                }
-                .into());
-            }
+            crate::check_listed(&path, "samples", record.len(), entry.samples)?;
             records.push(record);
         }
         let set = SignalSet { header, records };
@@ -368,15 +341,6 @@ impl SignalSet {
     pub fn write(&self, dir: impl AsRef<Path>, mode: WriteMode) -> Result<(), WriteError> {
         let dir = dir.as_ref();
         self.validate(dir)?;
-        crate::prepare_dir(dir, mode)?;
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| WriteError::Io { path, source }
-        };
-        for r in &self.records {
-            let path = dir.join(&r.file);
-            fs::write(&path, self.record_csv(r)).map_err(io(&path))?;
-        }
         let h = &self.header;
         let meta = MetaV2 {
             schema: SCHEMA_V2.into(),
@@ -398,16 +362,8 @@ impl SignalSet {
                 })
                 .collect(),
         };
-        let meta_path = dir.join(META_FILE);
-        let mut text = serde_json::to_string_pretty(&meta).map_err(|e| FormatError::Json {
-            path: meta_path.clone(),
-            line: 0,
-            column: 0,
-            message: e.to_string(),
-        })?;
-        text.push('\n');
-        fs::write(&meta_path, text).map_err(io(&meta_path))?;
-        Ok(())
+        let files = self.records.iter().map(|r| (&r.file, self.record_csv(r)));
+        crate::write_files(dir, mode, files, &meta)
     }
 
     /// The header line of a record file.

@@ -10,83 +10,88 @@ use crate::error::{DecodeError, EncodeError};
 /// The most data bytes (unstuffed) any command here carries: a channel list of eight.
 pub const MAX_COMMAND_DATA: usize = 32;
 
-/// Command identifiers (the command byte of §2.2), for the commands this codec implements.
-///
-/// The MOTOmed commands (50..=90, §3.4) are not used by the controller. The ones a device
-/// sends unasked with a MOTOmed attached (the information packets of §3.5: PhaseResult,
-/// ActualValues every 20 ms, MotomedCommandDone, MotomedError) are decoded, so that a host
-/// can skip them; the decoder reports the others as [`DecodeError::UnknownCommand`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum Command {
-    /// Device → host: the device is ready and announces its protocol version.
-    Init = 1,
-    /// Host → device: answer to [`Command::Init`].
-    InitAck = 2,
-    /// Device → host: the device did not recognise a command.
-    UnknownCommand = 3,
-    /// Host → device: keep-alive (see [`Message::Watchdog`]).
-    Watchdog = 4,
-    /// Host → device: ask for the stimulation mode.
-    GetStimulationMode = 10,
-    /// Device → host: answer to [`Command::GetStimulationMode`].
-    GetStimulationModeAck = 11,
-    /// Host → device: initialise channel list mode (§4.3).
-    InitChannelListMode = 30,
-    /// Device → host: answer to [`Command::InitChannelListMode`].
-    InitChannelListModeAck = 31,
-    /// Host → device: start, or update, channel list mode (§4.3).
-    StartChannelListMode = 32,
-    /// Device → host: answer to [`Command::StartChannelListMode`].
-    StartChannelListModeAck = 33,
-    /// Host → device: stop channel list mode (§4.3).
-    StopChannelListMode = 34,
-    /// Device → host: answer to [`Command::StopChannelListMode`].
-    StopChannelListModeAck = 35,
-    /// Host → device: one pulse, now (§4.3).
-    SinglePulse = 36,
-    /// Device → host: answer to [`Command::SinglePulse`].
-    SinglePulseAck = 37,
-    /// Device → host, unsolicited: the stimulation failed (§4.3).
-    StimulationError = 38,
-    /// Device → host, unsolicited: the results of the last MOTOmed phase (§4.4).
-    PhaseResult = 58,
-    /// Device → host, unsolicited, every 20 ms with a MOTOmed (§2.3 ActualValuesInterval,
-    /// §4.4): crank angle, speed and torque.
-    ActualValues = 60,
-    /// Device → host, unsolicited: the last MOTOmed command is done (§4.4).
-    MotomedCommandDone = 89,
-    /// Device → host, unsolicited: a MOTOmed error (§4.4).
-    MotomedError = 90,
+/// Declares a `#[repr(u8)]` enumeration of the protocol with its `ALL` (every value, in
+/// declaration order) and `from_byte` (the value of a byte, if any): the variants and
+/// their codes stand once, in the declaration.
+macro_rules! byte_enum {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            $($(#[$vmeta:meta])* $variant:ident = $code:literal,)+
+        }
+    ) => {
+        $(#[$meta])*
+        #[repr(u8)]
+        pub enum $name {
+            $($(#[$vmeta])* $variant = $code,)+
+        }
+
+        impl $name {
+            /// Every value, in declaration order.
+            pub const ALL: &'static [$name] = &[$($name::$variant),+];
+
+            fn from_byte(b: u8) -> Option<$name> {
+                $name::ALL.iter().copied().find(|v| *v as u8 == b)
+            }
+        }
+    };
+}
+
+byte_enum! {
+    /// Command identifiers (the command byte of §2.2), for the commands this codec implements.
+    ///
+    /// The MOTOmed commands (50..=90, §3.4) are not used by the controller. The ones a device
+    /// sends unasked with a MOTOmed attached (the information packets of §3.5: PhaseResult,
+    /// ActualValues every 20 ms, MotomedCommandDone, MotomedError) are decoded, so that a host
+    /// can skip them; the decoder reports the others as [`DecodeError::UnknownCommand`].
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum Command {
+        /// Device → host: the device is ready and announces its protocol version.
+        Init = 1,
+        /// Host → device: answer to [`Command::Init`].
+        InitAck = 2,
+        /// Device → host: the device did not recognise a command.
+        UnknownCommand = 3,
+        /// Host → device: keep-alive (see [`Message::Watchdog`]).
+        Watchdog = 4,
+        /// Host → device: ask for the stimulation mode.
+        GetStimulationMode = 10,
+        /// Device → host: answer to [`Command::GetStimulationMode`].
+        GetStimulationModeAck = 11,
+        /// Host → device: initialise channel list mode (§4.3).
+        InitChannelListMode = 30,
+        /// Device → host: answer to [`Command::InitChannelListMode`].
+        InitChannelListModeAck = 31,
+        /// Host → device: start, or update, channel list mode (§4.3).
+        StartChannelListMode = 32,
+        /// Device → host: answer to [`Command::StartChannelListMode`].
+        StartChannelListModeAck = 33,
+        /// Host → device: stop channel list mode (§4.3).
+        StopChannelListMode = 34,
+        /// Device → host: answer to [`Command::StopChannelListMode`].
+        StopChannelListModeAck = 35,
+        /// Host → device: one pulse, now (§4.3).
+        SinglePulse = 36,
+        /// Device → host: answer to [`Command::SinglePulse`].
+        SinglePulseAck = 37,
+        /// Device → host, unsolicited: the stimulation failed (§4.3).
+        StimulationError = 38,
+        /// Device → host, unsolicited: the results of the last MOTOmed phase (§4.4).
+        PhaseResult = 58,
+        /// Device → host, unsolicited, every 20 ms with a MOTOmed (§2.3 ActualValuesInterval,
+        /// §4.4): crank angle, speed and torque.
+        ActualValues = 60,
+        /// Device → host, unsolicited: the last MOTOmed command is done (§4.4).
+        MotomedCommandDone = 89,
+        /// Device → host, unsolicited: a MOTOmed error (§4.4).
+        MotomedError = 90,
+    }
 }
 
 impl Command {
-    /// Every command, in identifier order.
-    pub const ALL: &'static [Command] = &[
-        Command::Init,
-        Command::InitAck,
-        Command::UnknownCommand,
-        Command::Watchdog,
-        Command::GetStimulationMode,
-        Command::GetStimulationModeAck,
-        Command::InitChannelListMode,
-        Command::InitChannelListModeAck,
-        Command::StartChannelListMode,
-        Command::StartChannelListModeAck,
-        Command::StopChannelListMode,
-        Command::StopChannelListModeAck,
-        Command::SinglePulse,
-        Command::SinglePulseAck,
-        Command::StimulationError,
-        Command::PhaseResult,
-        Command::ActualValues,
-        Command::MotomedCommandDone,
-        Command::MotomedError,
-    ];
-
     /// The command with identifier `id`, if this codec implements it.
     pub fn from_id(id: u8) -> Option<Command> {
-        Command::ALL.iter().copied().find(|c| *c as u8 == id)
+        Command::from_byte(id)
     }
 
     /// The identifier byte.
@@ -185,53 +190,36 @@ impl StimulationError {
     }
 }
 
-/// The device's stimulation mode, as [`Message::GetStimulationModeAck`] reports it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum StimulationMode {
-    /// 0: start mode (nothing initialised).
-    Start = 0,
-    /// 1: channel list mode initialised, not stimulating.
-    Initialised = 1,
-    /// 2: channel list mode stimulating.
-    Started = 2,
-}
-
-impl StimulationMode {
-    /// Every mode.
-    pub const ALL: &'static [StimulationMode] = &[
-        StimulationMode::Start,
-        StimulationMode::Initialised,
-        StimulationMode::Started,
-    ];
-
-    fn from_byte(b: u8) -> Option<StimulationMode> {
-        StimulationMode::ALL.iter().copied().find(|m| *m as u8 == b)
+byte_enum! {
+    /// The device's stimulation mode, as [`Message::GetStimulationModeAck`] reports it.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum StimulationMode {
+        /// 0: start mode (nothing initialised).
+        Start = 0,
+        /// 1: channel list mode initialised, not stimulating.
+        Initialised = 1,
+        /// 2: channel list mode stimulating.
+        Started = 2,
     }
 }
 
-/// How many pulses a channel list entry fires per main stimulation interval (§4.3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-#[repr(u8)]
-pub enum PulseMode {
-    /// 0: one pulse.
-    #[default]
-    Single = 0,
-    /// 1: two pulses, the inter-pulse interval apart.
-    Doublet = 1,
-    /// 2: three pulses, the inter-pulse interval apart.
-    Triplet = 2,
+impl StimulationMode {}
+
+byte_enum! {
+    /// How many pulses a channel list entry fires per main stimulation interval (§4.3).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+    pub enum PulseMode {
+        /// 0: one pulse.
+        #[default]
+        Single = 0,
+        /// 1: two pulses, the inter-pulse interval apart.
+        Doublet = 1,
+        /// 2: three pulses, the inter-pulse interval apart.
+        Triplet = 2,
+    }
 }
 
 impl PulseMode {
-    /// Every mode.
-    pub const ALL: &'static [PulseMode] =
-        &[PulseMode::Single, PulseMode::Doublet, PulseMode::Triplet];
-
-    fn from_byte(b: u8) -> Option<PulseMode> {
-        PulseMode::ALL.iter().copied().find(|m| *m as u8 == b)
-    }
-
     /// Pulses per main stimulation interval.
     pub const fn pulses(self) -> u8 {
         self as u8 + 1

@@ -779,21 +779,18 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
         .map(|t| fit_and_rrse(std::slice::from_ref(t)))
         .collect();
     let opt = |x: Option<f64>, digits: usize| x.map_or(String::new(), |v| format!("{v:.digits$}"));
-    let rows: Vec<Vec<String>> = d
-        .test
-        .iter()
-        .zip(&v.fits)
-        .zip(&per_record)
-        .map(|((s, f), (fit, rrse))| {
-            vec![
-                s.name.clone(),
-                s.kind.clone(),
-                format!("{}", f.msse),
-                fit.map_or(String::new(), |v| v.to_string()),
-                rrse.map_or(String::new(), |v| v.to_string()),
-            ]
+    // One row per test record: its name and kind, then its MSSE, fit and RRSE as `cells`
+    // writes them (the CSV in full, the report rounded).
+    let table = |cells: &dyn Fn(f64, Option<f64>, Option<f64>) -> [String; 3]| {
+        let rows = d.test.iter().zip(&v.fits).zip(&per_record);
+        rows.map(|((s, f), (fit, rrse))| {
+            let [msse, fit, rrse] = cells(f.msse, *fit, *rrse);
+            vec![s.name.clone(), s.kind.clone(), msse, fit, rrse]
         })
-        .collect();
+        .collect::<Vec<Vec<String>>>()
+    };
+    let full = |x: Option<f64>| x.map_or(String::new(), |v| v.to_string());
+    let rows = table(&|msse, fit, rrse| [format!("{msse}"), full(fit), full(rrse)]);
     write_csv(
         &args.out.join("validation.csv"),
         &["record", "kind", "msse", "fit_percent", "rrse"],
@@ -839,21 +836,7 @@ fn validation_section(md: &mut String, args: &Args, net: &Network<f64>, d: &Data
         );
     }
     let _ = writeln!(md, "![validation](validation.{})\n", args.format.ext());
-    let md_rows: Vec<Vec<String>> = d
-        .test
-        .iter()
-        .zip(&v.fits)
-        .zip(&per_record)
-        .map(|((s, f), (fit, rrse))| {
-            vec![
-                s.name.clone(),
-                s.kind.clone(),
-                sci(f.msse),
-                opt(*fit, 1),
-                opt(*rrse, 4),
-            ]
-        })
-        .collect();
+    let md_rows = table(&|msse, fit, rrse| [sci(msse), opt(fit, 1), opt(rrse, 4)]);
     md.push_str(&md_table(
         &["test record", "kind", "MSSE", "fit %", "RRSE"],
         &md_rows,

@@ -87,10 +87,19 @@ pub fn records(
 /// Mean squared error (eq. B.8) over every sample of the records, in simulation (MSSE) or
 /// prediction (MSPE) mode; infinite if the simulation diverges.
 pub fn mse(model: &MisoArx, recs: &[MisoRecord], horizon: Horizon) -> Result<f64, IdentError> {
+    mean_squared(recs, |r| run(model, r, horizon))
+}
+
+/// Mean squared error (eq. B.8) of `output` (a record's model output) against every
+/// record's y; infinite when not finite (a diverging simulation).
+fn mean_squared<E>(
+    recs: &[MisoRecord],
+    mut output: impl FnMut(&MisoRecord) -> Result<Vec<f64>, E>,
+) -> Result<f64, E> {
     let mut sum = 0.0;
     let mut n = 0usize;
     for r in recs {
-        let yh = run(model, r, horizon)?;
+        let yh = output(r)?;
         sum += yh
             .iter()
             .zip(&r.y)
@@ -194,79 +203,45 @@ pub trait FreeRun: Clone + Sync {
     -> Result<(), MisoError>;
 }
 
-impl FreeRun for MisoArx {
-    fn theta(&self) -> &[f64] {
-        &self.theta
-    }
-    fn with_theta(&self, p: &[f64]) -> Self {
-        let mut m = self.clone();
-        m.theta = p.to_vec();
-        m
-    }
-    fn run<S: Scalar>(
-        &self,
-        theta: &[S],
-        rec: &MisoRecord,
-        out: &mut [S],
-    ) -> Result<(), MisoError> {
-        let net = MisoArx {
-            ts: self.ts,
-            structure: self.structure.clone(),
-            validity: self.validity,
-            validity2: self.validity2,
-            theta: theta.to_vec(),
-        };
-        net.simulate(&rec.inputs(), rec.y[0], out)
-    }
+/// The [`FreeRun`] of a network whose parameters are its `theta`: the types differ only
+/// in how `$net` (the network with the candidate's parameters) runs over `$rec` into `$out`.
+macro_rules! free_run {
+    ($ty:ident, |$net:ident, $rec:ident, $out:ident| $simulate:expr) => {
+        impl FreeRun for $ty {
+            fn theta(&self) -> &[f64] {
+                &self.theta
+            }
+            fn with_theta(&self, p: &[f64]) -> Self {
+                self.with_params(p.to_vec())
+            }
+            fn run<S: Scalar>(
+                &self,
+                theta: &[S],
+                $rec: &MisoRecord,
+                $out: &mut [S],
+            ) -> Result<(), MisoError> {
+                let $net = self.with_params(theta.to_vec());
+                $simulate
+            }
+        }
+    };
 }
 
-impl FreeRun for MisoSs {
-    fn theta(&self) -> &[f64] {
-        &self.theta
-    }
-    fn with_theta(&self, p: &[f64]) -> Self {
-        let mut m = self.clone();
-        m.theta = p.to_vec();
-        m
-    }
-    fn run<S: Scalar>(
-        &self,
-        theta: &[S],
-        rec: &MisoRecord,
-        out: &mut [S],
-    ) -> Result<(), MisoError> {
-        let net = MisoSs {
-            ts: self.ts,
-            delays: self.delays.clone(),
-            scheduling_input: self.scheduling_input,
-            scheduling_delay: self.scheduling_delay,
-            validity: self.validity,
-            eigenvectors: self.eigenvectors,
-            theta: theta.to_vec(),
-        };
-        net.simulate(&rec.inputs(), out)
-    }
-}
+free_run!(MisoArx, |net, rec, out| net.simulate(
+    &rec.inputs(),
+    rec.y[0],
+    out
+));
+free_run!(MisoSs, |net, rec, out| net.simulate(&rec.inputs(), out));
 
 /// Simulation MSE (eq. B.8) of any [`FreeRun`] network; infinite if it diverges or
 /// cannot be run.
 pub fn msse<M: FreeRun>(model: &M, recs: &[MisoRecord]) -> f64 {
-    let mut sum = 0.0;
-    let mut n = 0usize;
-    for r in recs {
+    mean_squared(recs, |r| {
         let mut yh = vec![0.0; r.y.len()];
-        if model.run(model.theta(), r, &mut yh).is_err() {
-            return f64::INFINITY;
-        }
-        sum += yh
-            .iter()
-            .zip(&r.y)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>();
-        n += r.y.len();
-    }
-    let m = sum / n.max(1) as f64;
-    if m.is_finite() { m } else { f64::INFINITY }
+        model.run(model.theta(), r, &mut yh).map(|()| yh)
+    })
+    .unwrap_or(f64::INFINITY)
 }
 
 /// One record's weighted residuals and their derivatives with respect to a block of `N`

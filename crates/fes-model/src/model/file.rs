@@ -436,147 +436,92 @@ trait UnitDoc: Sized {
     ) -> Result<LocalModelSet, FileError>;
 }
 
-/// An `ss-direct` unit.
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SsDirectDoc {
-    a: Pair<Pair<Num>>,
-    b: Pair<Num>,
-    c: Pair<Num>,
-    #[serde(default, deserialize_with = "present")]
-    #[serde(skip_serializing_if = "Option::is_none")]
-    dx: Option<Pair<Num>>,
-    #[serde(default, deserialize_with = "present")]
-    #[serde(skip_serializing_if = "Option::is_none")]
-    dy: Option<Num>,
-}
-
-impl SsDirectDoc {
-    fn new(m: &SsLocalModel<f64>, zero_offsets: bool) -> Self {
-        let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
-        Self {
-            a: Pair(m.a.map(Pair::of)),
-            b: Pair::of(m.b),
-            c: Pair::of(m.c),
-            dx,
-            dy,
+/// One state-space unit struct per form, with its writer (`new`) and reader (`into_unit`):
+/// the forms differ only in their matrices' fields (stored name = model name, in file
+/// order); `dx` and `dy` follow them, omitted together with `zero_offsets`. With `local`,
+/// also the [`UnitDoc`] that puts the units in that variant of [`LocalModelSet`].
+macro_rules! ss_unit_doc {
+    (
+        $(#[$meta:meta])*
+        $doc:ident for $unit:ident { $($field:ident: $stored:ty = $model:ident),* $(,)? }
+        $(local: $variant:ident)?
+    ) => {
+        $(#[$meta])*
+        #[derive(Serialize, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct $doc {
+            $($field: $stored,)*
+            #[serde(default, deserialize_with = "present")]
+            #[serde(skip_serializing_if = "Option::is_none")]
+            dx: Option<Pair<Num>>,
+            #[serde(default, deserialize_with = "present")]
+            #[serde(skip_serializing_if = "Option::is_none")]
+            dy: Option<Num>,
         }
-    }
 
-    fn into_model(self, i: usize, zero_offsets: bool) -> Result<SsLocalModel<f64>, FileError> {
-        let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
-        Ok(SsLocalModel {
-            a: self.a.0.map(Pair::get),
-            b: self.b.get(),
-            c: self.c.get(),
-            dx,
-            dy,
-        })
-    }
-}
+        impl $doc {
+            fn new(m: &$unit<f64>, zero_offsets: bool) -> Self {
+                let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
+                Self {
+                    $($field: <$stored>::of(m.$model),)*
+                    dx,
+                    dy,
+                }
+            }
 
-impl UnitDoc for SsDirectDoc {
-    fn local(
-        units: Vec<Self>,
-        _: Structure,
-        zero_offsets: bool,
-        _: Option<usize>,
-    ) -> Result<LocalModelSet, FileError> {
-        let units = each(units, |i, u| u.into_model(i, zero_offsets))?;
-        Ok(LocalModelSet::SsDirect(units))
-    }
-}
-
-/// An `ss-eig-local` unit.
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct EigLocalDoc {
-    eigenvalues: Pair<Num>,
-    eigenvector_angles_rad: Pair<Num>,
-    b: Pair<Num>,
-    c: Pair<Num>,
-    #[serde(default, deserialize_with = "present")]
-    #[serde(skip_serializing_if = "Option::is_none")]
-    dx: Option<Pair<Num>>,
-    #[serde(default, deserialize_with = "present")]
-    #[serde(skip_serializing_if = "Option::is_none")]
-    dy: Option<Num>,
-}
-
-impl EigLocalDoc {
-    fn new(m: &EigLocalUnit<f64>, zero_offsets: bool) -> Self {
-        let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
-        Self {
-            eigenvalues: Pair::of(m.eigenvalues),
-            eigenvector_angles_rad: Pair::of(m.eigenvector_angles),
-            b: Pair::of(m.b),
-            c: Pair::of(m.c),
-            dx,
-            dy,
+            fn into_unit(self, i: usize, zero_offsets: bool) -> Result<$unit<f64>, FileError> {
+                let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
+                Ok($unit {
+                    $($model: self.$field.get(),)*
+                    dx,
+                    dy,
+                })
+            }
         }
-    }
 
-    fn into_unit(self, i: usize, zero_offsets: bool) -> Result<EigLocalUnit<f64>, FileError> {
-        let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
-        Ok(EigLocalUnit {
-            eigenvalues: self.eigenvalues.get(),
-            eigenvector_angles: self.eigenvector_angles_rad.get(),
-            b: self.b.get(),
-            c: self.c.get(),
-            dx,
-            dy,
-        })
-    }
+        $(
+            impl UnitDoc for $doc {
+                fn local(
+                    units: Vec<Self>,
+                    _: Structure,
+                    zero_offsets: bool,
+                    _: Option<usize>,
+                ) -> Result<LocalModelSet, FileError> {
+                    let units = each(units, |i, u| u.into_unit(i, zero_offsets))?;
+                    Ok(LocalModelSet::$variant(units))
+                }
+            }
+        )?
+    };
 }
 
-impl UnitDoc for EigLocalDoc {
-    fn local(
-        units: Vec<Self>,
-        _: Structure,
-        zero_offsets: bool,
-        _: Option<usize>,
-    ) -> Result<LocalModelSet, FileError> {
-        let units = each(units, |i, u| u.into_unit(i, zero_offsets))?;
-        Ok(LocalModelSet::SsEigLocal(units))
+ss_unit_doc! {
+    /// An `ss-direct` unit.
+    SsDirectDoc for SsLocalModel {
+        a: Pair<Pair<Num>> = a,
+        b: Pair<Num> = b,
+        c: Pair<Num> = c,
     }
+    local: SsDirect
 }
 
-/// An `ss-eig-common` unit (modal coordinates).
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct EigCommonDoc {
-    eigenvalues: Pair<Num>,
-    b: Pair<Num>,
-    c: Pair<Num>,
-    #[serde(default, deserialize_with = "present")]
-    #[serde(skip_serializing_if = "Option::is_none")]
-    dx: Option<Pair<Num>>,
-    #[serde(default, deserialize_with = "present")]
-    #[serde(skip_serializing_if = "Option::is_none")]
-    dy: Option<Num>,
+ss_unit_doc! {
+    /// An `ss-eig-local` unit.
+    EigLocalDoc for EigLocalUnit {
+        eigenvalues: Pair<Num> = eigenvalues,
+        eigenvector_angles_rad: Pair<Num> = eigenvector_angles,
+        b: Pair<Num> = b,
+        c: Pair<Num> = c,
+    }
+    local: SsEigLocal
 }
 
-impl EigCommonDoc {
-    fn new(m: &EigCommonUnit<f64>, zero_offsets: bool) -> Self {
-        let (dx, dy) = offsets_out(zero_offsets, m.dx, m.dy);
-        Self {
-            eigenvalues: Pair::of(m.eigenvalues),
-            b: Pair::of(m.b),
-            c: Pair::of(m.c),
-            dx,
-            dy,
-        }
-    }
-
-    fn into_unit(self, i: usize, zero_offsets: bool) -> Result<EigCommonUnit<f64>, FileError> {
-        let (dx, dy) = offsets_in(i, zero_offsets, self.dx, self.dy)?;
-        Ok(EigCommonUnit {
-            eigenvalues: self.eigenvalues.get(),
-            b: self.b.get(),
-            c: self.c.get(),
-            dx,
-            dy,
-        })
+ss_unit_doc! {
+    /// An `ss-eig-common` unit (modal coordinates).
+    EigCommonDoc for EigCommonUnit {
+        eigenvalues: Pair<Num> = eigenvalues,
+        b: Pair<Num> = b,
+        c: Pair<Num> = c,
     }
 }
 
@@ -684,7 +629,7 @@ fn offsets_out(zero_offsets: bool, dx: [f64; 2], dy: f64) -> (Option<Pair<Num>>,
     if zero_offsets {
         (None, None)
     } else {
-        (Some(Pair::of(dx)), Some(Num(dy)))
+        (Some(Pair::<Num>::of(dx)), Some(Num(dy)))
     }
 }
 
@@ -729,6 +674,16 @@ impl Pair<Num> {
 
     fn get(self) -> [f64; 2] {
         self.0.map(|v| v.0)
+    }
+}
+
+impl Pair<Pair<Num>> {
+    fn of(x: [[f64; 2]; 2]) -> Self {
+        Self(x.map(Pair::<Num>::of))
+    }
+
+    fn get(self) -> [[f64; 2]; 2] {
+        self.0.map(Pair::<Num>::get)
     }
 }
 

@@ -611,36 +611,29 @@ impl Lmn {
     /// Per-unit stability (delta-domain poles and max |1 + Ts p|).
     pub fn stability(&self) -> Vec<UnitStability> {
         let ts = self.ts;
+        let unit = |(unit, (poles, radius)): (usize, (Vec<Complex<f64>>, f64))| UnitStability {
+            unit,
+            poles,
+            radius,
+            stable: radius < 1.0,
+        };
         if let Some(units) = self.ss_units() {
             units
                 .iter()
+                .map(|m| (m.poles().to_vec(), m.stability_radius(ts)))
                 .enumerate()
-                .map(|(unit, m)| {
-                    let poles = m.poles().to_vec();
-                    let radius = m.stability_radius(ts);
-                    UnitStability {
-                        unit,
-                        poles,
-                        radius,
-                        stable: radius < 1.0,
-                    }
-                })
+                .map(unit)
                 .collect()
         } else if let Some((n, units)) = self.arx_shift_units() {
             units
                 .iter()
-                .enumerate()
-                .map(|(unit, m)| {
+                .map(|m| {
                     let z = shift_poles(m, n);
                     let radius = z.iter().map(|z| z.norm()).fold(0.0, f64::max);
-                    let poles = z.iter().map(|z| (z - 1.0) / ts).collect();
-                    UnitStability {
-                        unit,
-                        poles,
-                        radius,
-                        stable: radius < 1.0,
-                    }
+                    (z.iter().map(|z| (z - 1.0) / ts).collect(), radius)
                 })
+                .enumerate()
+                .map(unit)
                 .collect()
         } else {
             Vec::new()

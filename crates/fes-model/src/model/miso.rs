@@ -254,6 +254,20 @@ impl MisoLocal {
     }
 }
 
+impl<S> MisoArx<S> {
+    /// The same network with parameters `theta`, in any scalar type (a candidate of the
+    /// identification, e.g. with dual numbers for its derivatives).
+    pub fn with_params<T>(&self, theta: Vec<T>) -> MisoArx<T> {
+        MisoArx {
+            ts: self.ts,
+            structure: self.structure.clone(),
+            validity: self.validity,
+            validity2: self.validity2,
+            theta,
+        }
+    }
+}
+
 impl<S: Scalar> MisoArx<S> {
     /// A network; theta must hold units x regressors entries.
     pub fn new(

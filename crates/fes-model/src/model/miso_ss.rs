@@ -90,6 +90,22 @@ pub fn theta_len(inputs: usize, units: usize, eigenvectors: Eigenvectors) -> usi
     common + units * unit_params(inputs, eigenvectors)
 }
 
+impl<S> MisoSs<S> {
+    /// The same network with parameters `theta`, in any scalar type (a candidate of the
+    /// identification, e.g. with dual numbers for its derivatives).
+    pub fn with_params<T>(&self, theta: Vec<T>) -> MisoSs<T> {
+        MisoSs {
+            ts: self.ts,
+            delays: self.delays.clone(),
+            scheduling_input: self.scheduling_input,
+            scheduling_delay: self.scheduling_delay,
+            validity: self.validity,
+            eigenvectors: self.eigenvectors,
+            theta,
+        }
+    }
+}
+
 impl<S: Scalar> MisoSs<S> {
     /// Number of inputs in the data vector.
     pub fn inputs(&self) -> usize {

@@ -384,14 +384,16 @@ impl ParamLayout {
             .collect()
     }
 
+    /// The two eigenvalues a unit's parameters `t[k]`, `t[k + 1]` (eta_1, eta_2) stand for.
+    fn eigenvalues<S: Scalar>(&self, t: &[S], k: usize) -> [S; 2] {
+        [t[k], t[k + 1]].map(|eta| eigenvalue_from_eta(eta, self.ts))
+    }
+
     fn ss_eig_local<S: Scalar>(&self, t: &[S]) -> Vec<EigLocalUnit<S>> {
         (0..self.units)
             .map(|i| {
                 let mut k = self.offsets[i];
-                let eigenvalues = [
-                    eigenvalue_from_eta(t[k], self.ts),
-                    eigenvalue_from_eta(t[k + 1], self.ts),
-                ];
+                let eigenvalues = self.eigenvalues(t, k);
                 let eigenvector_angles = [t[k + 2], t[k + 3]];
                 k += 4;
                 let (b, c, dx, dy) = self.ss_tail(t, &mut k, false);
@@ -411,10 +413,7 @@ impl ParamLayout {
         (0..self.units)
             .map(|i| {
                 let mut k = self.offsets[i];
-                let eigenvalues = [
-                    eigenvalue_from_eta(t[k], self.ts),
-                    eigenvalue_from_eta(t[k + 1], self.ts),
-                ];
+                let eigenvalues = self.eigenvalues(t, k);
                 k += 2;
                 let (b, c, dx, dy) = self.ss_tail(t, &mut k, i == self.reference_unit);
                 EigCommonUnit {

@@ -4,38 +4,21 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_DRIVER_COMMAND};
-use super::validate::{ValidationError, int_in_range, nonzero_seq, reserved_zero};
+use super::validate::{ValidationError, int_in_range, nonzero_seq, reserved_zero, u8_enum};
 
-/// What the supervisor asks the driver to do.
-#[repr(u8)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum DriverCommandKind {
-    /// Start forwarding pulses: NMT start to the stimulator. The driver checks its own
-    /// preconditions (link up, stimulator configured, StimTicks flowing) and refuses (and
-    /// reports) when one is missing. The only way out of the driver's safe state.
-    Arm = 1,
-    /// Stop forwarding pulses: NMT stop to the stimulator; not a fault.
-    Disarm = 2,
-    /// Emergency stop ordered by the supervisor: NMT stop, the driver enters its safe state
-    /// and reports it as a fault until re-armed.
-    SafeStop = 3,
-}
-
-impl TryFrom<u8> for DriverCommandKind {
-    type Error = ValidationError;
-
-    fn try_from(value: u8) -> Result<Self, Self::Error> {
-        Ok(match value {
-            1 => Self::Arm,
-            2 => Self::Disarm,
-            3 => Self::SafeStop,
-            other => {
-                return Err(ValidationError::UnknownEnum {
-                    field: "command",
-                    value: other.into(),
-                });
-            }
-        })
+u8_enum! {
+    /// What the supervisor asks the driver to do.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum DriverCommandKind: "command" {
+        /// Start forwarding pulses: NMT start to the stimulator. The driver checks its own
+        /// preconditions (link up, stimulator configured, StimTicks flowing) and refuses (and
+        /// reports) when one is missing. The only way out of the driver's safe state.
+        Arm = 1,
+        /// Stop forwarding pulses: NMT stop to the stimulator; not a fault.
+        Disarm = 2,
+        /// Emergency stop ordered by the supervisor: NMT stop, the driver enters its safe state
+        /// and reports it as a fault until re-armed.
+        SafeStop = 3,
     }
 }
 

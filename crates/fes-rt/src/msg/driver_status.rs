@@ -4,48 +4,27 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_DRIVER_STATUS};
-use super::validate::{ValidationError, nonzero_seq, reserved_zero};
+use super::validate::{ValidationError, nonzero_seq, reserved_zero, u8_enum};
 
-/// Life-cycle state of the driver or the stimulator (the stimulator's STATUS frame states).
-#[repr(u8)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum DeviceState {
-    /// Starting up; no output.
-    Boot = 0,
-    /// Configurable, not armed; no output.
-    PreOperational = 1,
-    /// Armed: will stimulate on the next pulse command.
-    Armed = 2,
-    /// Delivering pulses.
-    Stimulating = 3,
-    /// Safe state after a fault; output off until explicitly re-armed.
-    Fault = 4,
-    /// Stopped on command (NMT stop, a disarm): output off until explicitly re-armed, but
-    /// nothing went wrong. Only the stimulator reports it.
-    Stopped = 5,
-    /// Not known (e.g. no STATUS frame received from the stimulator yet).
-    Unknown = 255,
-}
-
-impl TryFrom<u8> for DeviceState {
-    type Error = ValidationError;
-
-    fn try_from(value: u8) -> Result<Self, Self::Error> {
-        Ok(match value {
-            0 => Self::Boot,
-            1 => Self::PreOperational,
-            2 => Self::Armed,
-            3 => Self::Stimulating,
-            4 => Self::Fault,
-            5 => Self::Stopped,
-            255 => Self::Unknown,
-            other => {
-                return Err(ValidationError::UnknownEnum {
-                    field: "state",
-                    value: other.into(),
-                });
-            }
-        })
+u8_enum! {
+    /// Life-cycle state of the driver or the stimulator (the stimulator's STATUS frame states).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum DeviceState: "state" {
+        /// Starting up; no output.
+        Boot = 0,
+        /// Configurable, not armed; no output.
+        PreOperational = 1,
+        /// Armed: will stimulate on the next pulse command.
+        Armed = 2,
+        /// Delivering pulses.
+        Stimulating = 3,
+        /// Safe state after a fault; output off until explicitly re-armed.
+        Fault = 4,
+        /// Stopped on command (NMT stop, a disarm): output off until explicitly re-armed, but
+        /// nothing went wrong. Only the stimulator reports it.
+        Stopped = 5,
+        /// Not known (e.g. no STATUS frame received from the stimulator yet).
+        Unknown = 255,
     }
 }
 

@@ -74,14 +74,8 @@ impl ReferencePreview {
 
 impl Contract for ReferencePreview {
     const TOPIC: &'static str = TOPIC_REFERENCE_PREVIEW;
-    const QOS: PubSubQos = PubSubQos {
-        // One commander, as for the reference.
-        max_publishers: 1,
-        max_subscribers: 8,
-        subscriber_buffer: 8,
-        history: 1,
-        max_loaned_samples: 2,
-    };
+    /// One commander, as for the reference: the two travel together.
+    const QOS: PubSubQos = <super::Reference as Contract>::QOS;
 
     fn validate(&self) -> Result<(), ValidationError> {
         nonzero_seq(self.seq)?;

@@ -4,38 +4,20 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_TIMING};
-use super::validate::{ValidationError, known_flags, nonzero_seq};
+use super::validate::{ValidationError, known_flags, nonzero_seq, u8_enum};
 
-/// Who sent a [`TimingReport`].
-#[repr(u8)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum TimingSource {
-    /// The rt-core pattern generator.
-    RtCore = 1,
-    /// The stimulator driver.
-    StimDriver = 2,
-    /// The virtual muscle / stimulator.
-    SimMuscle = 3,
-    /// A measurement probe (rt-probe).
-    Probe = 4,
-}
-
-impl TryFrom<u8> for TimingSource {
-    type Error = ValidationError;
-
-    fn try_from(value: u8) -> Result<Self, Self::Error> {
-        Ok(match value {
-            1 => Self::RtCore,
-            2 => Self::StimDriver,
-            3 => Self::SimMuscle,
-            4 => Self::Probe,
-            other => {
-                return Err(ValidationError::UnknownEnum {
-                    field: "source",
-                    value: other.into(),
-                });
-            }
-        })
+u8_enum! {
+    /// Who sent a [`TimingReport`].
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum TimingSource: "source" {
+        /// The rt-core pattern generator.
+        RtCore = 1,
+        /// The stimulator driver.
+        StimDriver = 2,
+        /// The virtual muscle / stimulator.
+        SimMuscle = 3,
+        /// A measurement probe (rt-probe).
+        Probe = 4,
     }
 }
 

@@ -1,6 +1,40 @@
 //! The typed error every [`Contract::validate`](super::Contract::validate) returns, and the
 //! small checks the message types share.
 
+/// Declares a `#[repr(u8)]` enumeration that travels as a raw `u8` (module docs of
+/// [`super`]) and its `TryFrom<u8>`: each value decodes to its variant, any other is
+/// [`ValidationError::UnknownEnum`] naming `$field`. The codes stand once, in the
+/// declaration.
+macro_rules! u8_enum {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident: $field:literal {
+            $($(#[$vmeta:meta])* $variant:ident = $code:literal,)+
+        }
+    ) => {
+        $(#[$meta])*
+        #[repr(u8)]
+        pub enum $name {
+            $($(#[$vmeta])* $variant = $code,)+
+        }
+
+        impl TryFrom<u8> for $name {
+            type Error = ValidationError;
+
+            fn try_from(value: u8) -> Result<Self, Self::Error> {
+                match value {
+                    $($code => Ok(Self::$variant),)+
+                    other => Err(ValidationError::UnknownEnum {
+                        field: $field,
+                        value: other.into(),
+                    }),
+                }
+            }
+        }
+    };
+}
+pub(super) use u8_enum;
+
 /// Why a received message was rejected. `Copy`, with the offending field named, so a
 /// real-time receiver can count and report it without allocating.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

@@ -1,16 +1,15 @@
 //! `--method iterative` (thesis 6.4, Fig. 6.4): pulses added one at a time, each at the IPI
 //! of the largest FTIpP.
 
-use std::fmt::Write as _;
-
 use anyhow::{Context, Result};
 use fes_ident::analysis::osp::PatternResult;
 use fes_ident::analysis::osp::iterative::{Iterative, iterative_method};
 
-use super::super::inputs::{md_table, progress, write_csv};
+use super::super::inputs::{md_table, progress};
 use super::super::plots::{self, Figure, Line, Markers, Panel, color};
 use super::{
-    Args, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, pulses_ms, truncation_note,
+    Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, pulses_ms,
+    truncation_note,
 };
 
 /// One subject's iterative method.
@@ -76,18 +75,18 @@ fn report(args: &Args, out: &IterativeOutcome, md: &mut String) -> Result<()> {
         &args.format.file(&args.out, "iterative"),
         (560 * out.subjects.len() as u32 + 80, 820),
     )?;
-    write_csv(
-        &args.out.join("iterative.csv"),
-        &["subject", "pulses", "last_ipi_ms", "peak", "fti", "ftipp"],
-        &csv_rows(out),
-    )?;
-    let _ = writeln!(md, "## Iterative method (6.4, Fig. 6.4)\n");
-    let _ = writeln!(
-        md,
-        "Each stage adds one pulse after the previous one, sweeping its IPI over {}..{} ms in 1-sample steps, and keeps the IPI of the largest FTIpP. Table of every sweep: `iterative.csv`.\n",
-        args.ipi_min_ms, args.ipi_max_ms
-    );
-    let _ = writeln!(md, "![iterative method](iterative.png)\n");
+    Section {
+        stem: "iterative",
+        csv_header: &["subject", "pulses", "last_ipi_ms", "peak", "fti", "ftipp"],
+        csv_rows: csv_rows(out),
+        heading: "Iterative method (6.4, Fig. 6.4)",
+        intro: format!(
+            "Each stage adds one pulse after the previous one, sweeping its IPI over {}..{} ms in 1-sample steps, and keeps the IPI of the largest FTIpP. Table of every sweep: `iterative.csv`.",
+            args.ipi_min_ms, args.ipi_max_ms
+        ),
+        figure: "iterative method",
+    }
+    .write(args, md)?;
     let table: Vec<Vec<String>> = out.subjects.iter().flat_map(chosen_rows).collect();
     md.push_str(&md_table(
         &[

@@ -33,7 +33,7 @@ use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 
-use super::inputs::{open_model, out_dir, parse_list};
+use super::inputs::{open_model, out_dir, parse_list, write_csv};
 
 /// The methods.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -297,6 +297,28 @@ fn pulses_ms(p: &[usize], ts: f64) -> String {
         .map(|&k| format!("{}", (k as f64 * ts * 1e6).round() / 1e3))
         .collect::<Vec<_>>()
         .join(";")
+}
+
+/// A method's table of every run, written as `<stem>.csv`, and the start of its report
+/// section: `heading`, `intro` and the figure (`<stem>.png`, described as `figure`).
+struct Section<'a> {
+    stem: &'a str,
+    csv_header: &'a [&'a str],
+    csv_rows: Vec<Vec<String>>,
+    heading: &'a str,
+    intro: String,
+    figure: &'a str,
+}
+
+impl Section<'_> {
+    fn write(&self, args: &Args, md: &mut String) -> Result<()> {
+        let csv = args.out.join(format!("{}.csv", self.stem));
+        write_csv(&csv, self.csv_header, &self.csv_rows)?;
+        let _ = writeln!(md, "## {}\n", self.heading);
+        let _ = writeln!(md, "{}\n", self.intro);
+        let _ = writeln!(md, "![{}]({}.png)\n", self.figure, self.stem);
+        Ok(())
+    }
 }
 
 fn truncation_note(md: &mut String, worst: f64) {

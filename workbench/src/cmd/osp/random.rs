@@ -1,16 +1,16 @@
 //! `--method random` (thesis 6.2, Figs. 6.1-6.2): FTIpP of random patterns of the thesis
 //! protocol (5.1) against their average frequency; best and worst patterns.
 
-use std::fmt::Write as _;
-
 use anyhow::{Context, Result};
 use fes_ident::analysis::osp::random::{RandomPattern, best_and_worst, random_method};
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::ProtocolConfig;
 
-use super::super::inputs::{md_table, progress, write_csv};
+use super::super::inputs::{md_table, progress};
 use super::super::plots::{self, Figure, Line, Markers, Panel, color};
-use super::{Args, Subject, SubjectInfo, evaluator, need_subjects, pulses_ms, truncation_note};
+use super::{
+    Args, Section, Subject, SubjectInfo, evaluator, need_subjects, pulses_ms, truncation_note,
+};
 
 /// The random patterns of every subject.
 struct RandomOutcome {
@@ -114,9 +114,9 @@ fn report(args: &Args, out: &RandomOutcome, md: &mut String) -> Result<()> {
         &args.format.file(&args.out, "random"),
         (560 * out.subjects.len() as u32 + 80, 760),
     )?;
-    write_csv(
-        &args.out.join("random.csv"),
-        &[
+    Section {
+        stem: "random",
+        csv_header: &[
             "subject",
             "pattern",
             "pulses",
@@ -125,15 +125,15 @@ fn report(args: &Args, out: &RandomOutcome, md: &mut String) -> Result<()> {
             "ftipp",
             "pulse_times_ms",
         ],
-        &csv_rows(out),
-    )?;
-    let _ = writeln!(md, "## Random pattern method (6.2, Figs. 6.1-6.2)\n");
-    let _ = writeln!(
-        md,
-        "{} patterns drawn with the thesis protocol (5.1: random IPIs 1-70 ms, trains of 100-300 ms; seed {}); average frequency eq. (6.6). Table: `random.csv`.\n",
-        out.patterns, args.seed
-    );
-    let _ = writeln!(md, "![random pattern method](random.png)\n");
+        csv_rows: csv_rows(out),
+        heading: "Random pattern method (6.2, Figs. 6.1-6.2)",
+        intro: format!(
+            "{} patterns drawn with the thesis protocol (5.1: random IPIs 1-70 ms, trains of 100-300 ms; seed {}); average frequency eq. (6.6). Table: `random.csv`.",
+            out.patterns, args.seed
+        ),
+        figure: "random pattern method",
+    }
+    .write(args, md)?;
     let summary: Vec<Vec<String>> = out.subjects.iter().map(summary_row).collect();
     md.push_str(&md_table(
         &[

@@ -6,9 +6,11 @@ use std::fmt::Write as _;
 use anyhow::{Context, Result};
 use fes_ident::analysis::osp::trains::{TrainSurface, train_surface};
 
-use super::super::inputs::{md_table, progress, write_csv};
+use super::super::inputs::{md_table, progress};
 use super::super::plots::{self, HeatMap};
-use super::{Args, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, truncation_note};
+use super::{
+    Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, truncation_note,
+};
 
 /// One subject's train surface.
 struct SubjectSurface {
@@ -91,18 +93,18 @@ fn report(args: &Args, out: &TrainsOutcome, md: &mut String) -> Result<()> {
         &args.format.file(&args.out, "trains_3d"),
         (560 * n, 520),
     )?;
-    write_csv(
-        &args.out.join("trains.csv"),
-        &["subject", "pulses", "ipi_ms", "fti", "ftipp", "peak"],
-        &csv_rows(out),
-    )?;
-    let _ = writeln!(md, "## Constant-frequency train method (6.3, Fig. 6.3)\n");
-    let _ = writeln!(
-        md,
-        "Trains of 1..{} pulses at constant IPIs of {}..{} ms, first pulse at 0. Table: `trains.csv`.\n",
-        args.train_pulses, args.ipi_min_ms, args.ipi_max_ms
-    );
-    let _ = writeln!(md, "![constant-frequency trains](trains.png)\n");
+    Section {
+        stem: "trains",
+        csv_header: &["subject", "pulses", "ipi_ms", "fti", "ftipp", "peak"],
+        csv_rows: csv_rows(out),
+        heading: "Constant-frequency train method (6.3, Fig. 6.3)",
+        intro: format!(
+            "Trains of 1..{} pulses at constant IPIs of {}..{} ms, first pulse at 0. Table: `trains.csv`.",
+            args.train_pulses, args.ipi_min_ms, args.ipi_max_ms
+        ),
+        figure: "constant-frequency trains",
+    }
+    .write(args, md)?;
     let _ = writeln!(md, "![constant-frequency trains, surface](trains_3d.png)\n");
     let summary: Vec<Vec<String>> = out.surfaces.iter().map(summary_row).collect();
     md.push_str(&md_table(
