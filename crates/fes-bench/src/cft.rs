@@ -395,6 +395,41 @@ impl FrontSettings {
             .then(|| window.iter().sum::<f64>() / window.len() as f64)
     }
 
+    /// Every CFT(f, n) over `beats` (contraction `on` samples, `n` samples in all), scored;
+    /// trains with the same pulses counted once, by their lowest frequency.
+    fn front(
+        &self,
+        beats: &[BeatWindow],
+        on: usize,
+        n: usize,
+        fti_1: f64,
+    ) -> Result<Vec<FrontPoint>, sim_muscle::ding::ParamError> {
+        let zero = self.zero_reading(n)?;
+        let mut front: Vec<FrontPoint> = Vec::new();
+        let mut seen: std::collections::HashSet<Vec<usize>> = std::collections::HashSet::new();
+        for hz in self.min_hz..=self.max_hz {
+            let times = constant_train(hz as f64, 0, on, 1e-3).unwrap_or_default();
+            for k in 1..=times.len() {
+                if !seen.insert(times[..k].to_vec()) {
+                    continue;
+                }
+                let measured = self.train_measured(beats, n, &times[..k], zero.as_deref())?;
+                let mut pulse = vec![false; n];
+                for b in beats {
+                    for &t in &times[..k] {
+                        if b.start + t < n {
+                            pulse[b.start + t] = true;
+                        }
+                    }
+                }
+                let mut point = self.score(Some(hz), beats, &pulse, &measured, fti_1);
+                point.n = Some(k as u32);
+                front.push(point);
+            }
+        }
+        Ok(front)
+    }
+
     /// The CFT front and the verdict for a run: its beats, pulses and measured force.
     pub fn verdict(&self, run: &Series) -> Result<FrontVerdict, sim_muscle::ding::ParamError> {
         let beats = beat_windows(run);
@@ -427,29 +462,7 @@ impl FrontSettings {
         let fti_1 = self.twitch_fti(first)?;
         let reference_fti = self.shape(first).reference().iter().sum::<f64>() * 1e-3;
         let lcn = self.score(None, &beats, &run.pulse, &run.measured, fti_1);
-        let zero = self.zero_reading(n)?;
-        let mut front: Vec<FrontPoint> = Vec::new();
-        let mut seen: std::collections::HashSet<Vec<usize>> = std::collections::HashSet::new();
-        for hz in self.min_hz..=self.max_hz {
-            let times = constant_train(hz as f64, 0, first.on, 1e-3).unwrap_or_default();
-            for k in 1..=times.len() {
-                if !seen.insert(times[..k].to_vec()) {
-                    continue;
-                }
-                let measured = self.train_measured(&beats, n, &times[..k], zero.as_deref())?;
-                let mut pulse = vec![false; n];
-                for b in &beats {
-                    for &t in &times[..k] {
-                        if b.start + t < n {
-                            pulse[b.start + t] = true;
-                        }
-                    }
-                }
-                let mut point = self.score(Some(hz), &beats, &pulse, &measured, fti_1);
-                point.n = Some(k as u32);
-                front.push(point);
-            }
-        }
+        let front = self.front(&beats, first.on, n, fti_1)?;
         let equal_fti = |p: &&FrontPoint| {
             (p.fti_per_contraction - reference_fti).abs() <= EQUAL_FTI * reference_fti
         };
