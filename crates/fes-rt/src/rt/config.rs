@@ -10,7 +10,6 @@
 
 mod section;
 
-use std::borrow::Cow;
 use std::path::PathBuf;
 
 use serde::de::{IgnoredAny, MapAccess, SeqAccess};
@@ -297,23 +296,16 @@ impl<K> TelemetryConfig<K> {
     /// of at least `min_queue_capacity` records, a floor each process sets for its records
     /// (rt-core 16 tick records, stim-driver 256 events).
     pub fn validate(&self, min_queue_capacity: usize) -> Result<(), FileError> {
-        config_file::range(
-            (10..=60_000).contains(&self.report_period_ms),
+        config_file::within(
             "telemetry.report_period_ms",
             self.report_period_ms,
-            "10..=60000",
+            10..=60_000,
         )?;
-        if !(min_queue_capacity..=Self::MAX_QUEUE_CAPACITY).contains(&self.queue_capacity) {
-            return Err(FileError::Range {
-                field: "telemetry.queue_capacity",
-                value: self.queue_capacity.to_string(),
-                allowed: Cow::Owned(format!(
-                    "{min_queue_capacity}..={}",
-                    Self::MAX_QUEUE_CAPACITY
-                )),
-            });
-        }
-        Ok(())
+        config_file::within(
+            "telemetry.queue_capacity",
+            self.queue_capacity,
+            min_queue_capacity..=Self::MAX_QUEUE_CAPACITY,
+        )
     }
 }
 
