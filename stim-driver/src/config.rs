@@ -709,12 +709,7 @@ impl DriverConfig {
         }
         self.telemetry.validate(MIN_QUEUE_CAPACITY)?;
         let status_period_ms = self.telemetry.own.status_period_ms;
-        config_file::range(
-            (10..=10_000).contains(&status_period_ms),
-            "telemetry.status_period_ms",
-            status_period_ms,
-            "10..=10000",
-        )?;
+        config_file::within("telemetry.status_period_ms", status_period_ms, 10..=10_000)?;
         self.ipc.validate()?;
         Ok(())
     }
@@ -738,12 +733,7 @@ impl DriverConfig {
             )?,
         }
         self.nodes()?;
-        config_file::range(
-            (1..=1000).contains(&c.heartbeat_ms),
-            "can.heartbeat_ms",
-            c.heartbeat_ms,
-            "1..=1000",
-        )?;
+        config_file::within("can.heartbeat_ms", c.heartbeat_ms, 1..=1000)?;
         config_file::range(
             c.tx_retry_budget_us <= 1000,
             "can.tx_retry_budget_us",
@@ -757,12 +747,7 @@ impl DriverConfig {
             c.tx_retry_interval_us,
             "10..=tx_retry_budget_us",
         )?;
-        config_file::range(
-            (50..=60_000).contains(&c.bringup_retry_ms),
-            "can.bringup_retry_ms",
-            c.bringup_retry_ms,
-            "50..=60000",
-        )?;
+        config_file::within("can.bringup_retry_ms", c.bringup_retry_ms, 50..=60_000)?;
         Ok(())
     }
 
@@ -770,41 +755,23 @@ impl DriverConfig {
     /// publishers' liveness.
     fn validate_watchdog(&self) -> Result<(), ConfigError> {
         let w = &self.watchdog;
-        config_file::range(
-            (100..=1_000_000).contains(&w.tick_period_us),
-            "watchdog.tick_period_us",
-            w.tick_period_us,
-            "100..=1000000",
-        )?;
-        config_file::range(
-            (1..=10_000).contains(&w.timeout_ticks),
-            "watchdog.timeout_ticks",
-            w.timeout_ticks,
-            "1..=10000",
-        )?;
-        config_file::range(
-            (1..=10_000).contains(&w.stale_after_ticks),
+        config_file::within("watchdog.tick_period_us", w.tick_period_us, 100..=1_000_000)?;
+        config_file::within("watchdog.timeout_ticks", w.timeout_ticks, 1..=10_000)?;
+        config_file::within(
             "watchdog.stale_after_ticks",
             w.stale_after_ticks,
-            "1..=10000",
+            1..=10_000,
         )?;
-        config_file::range(
-            (20..=10_000).contains(&self.stimulator_timeout_ms()),
+        config_file::within(
             "watchdog.stimulator_timeout_ms",
             self.stimulator_timeout_ms(),
-            "20..=10000",
+            20..=10_000,
         )?;
-        config_file::range(
-            (20..=10_000).contains(&w.arm_confirm_ms),
-            "watchdog.arm_confirm_ms",
-            w.arm_confirm_ms,
-            "20..=10000",
-        )?;
-        config_file::range(
-            (1..=10_000).contains(&w.command_max_age_ms),
+        config_file::within("watchdog.arm_confirm_ms", w.arm_confirm_ms, 20..=10_000)?;
+        config_file::within(
             "watchdog.command_max_age_ms",
             w.command_max_age_ms,
-            "1..=10000",
+            1..=10_000,
         )?;
         validate_liveness(w)
     }
@@ -870,19 +837,9 @@ impl DriverConfig {
             "absent with transport kind \"sciencemode\" (no CAN interface is used)",
         )?;
         let poll_ms = t.poll_ms();
-        config_file::range(
-            (5..=1000).contains(&poll_ms),
-            "transport.poll_ms",
-            poll_ms,
-            "5..=1000",
-        )?;
+        config_file::within("transport.poll_ms", poll_ms, 5..=1000)?;
         let min_interval = t.min_interval_ms();
-        config_file::range(
-            (1..=200).contains(&min_interval),
-            "transport.min_interval_ms",
-            min_interval,
-            "1..=200",
-        )?;
+        config_file::within("transport.min_interval_ms", min_interval, 1..=200)?;
         let lateness = t.max_lateness_ms();
         config_file::range(
             lateness <= 20,
@@ -1003,17 +960,11 @@ fn absent_with_can<T: ToString>(
 /// `[watchdog]`'s liveness keys: the check period, the grace of an unknown liveness, and
 /// the systemd units the publishers must run in.
 fn validate_liveness(w: &WatchdogConfig) -> Result<(), ConfigError> {
-    config_file::range(
-        (1..=1000).contains(&w.liveness_check_ms),
-        "watchdog.liveness_check_ms",
-        w.liveness_check_ms,
-        "1..=1000",
-    )?;
-    config_file::range(
-        (1..=10_000).contains(&w.liveness_unknown_grace_ms),
+    config_file::within("watchdog.liveness_check_ms", w.liveness_check_ms, 1..=1000)?;
+    config_file::within(
         "watchdog.liveness_unknown_grace_ms",
         w.liveness_unknown_grace_ms,
-        "1..=10000",
+        1..=10_000,
     )?;
     for (key, unit) in [
         ("watchdog.supervisor_unit", &w.supervisor_unit),

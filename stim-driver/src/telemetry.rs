@@ -1,4 +1,4 @@
-//! The driver's timing: bounded HdrHistograms (rt-core's [`LatencyHistogram`]) filled from
+//! The driver's timing: bounded HdrHistograms (fes-rt's [`Quantity`]) filled from
 //! the forward thread's events on the report thread, written as `.hlog` intervals and
 //! summarised in a [`TimingReport`] with `source = StimDriver`.
 //!
@@ -14,10 +14,9 @@
 
 use std::time::Duration;
 
-use fes_rt::msg::{LatencySummary, TimingReport, TimingSource};
-use fes_rt::rt::histogram::LatencyHistogram;
+use fes_rt::msg::{TimingReport, TimingSource};
 use fes_rt::rt::hlog::{HlogError, HlogWriter};
-use fes_rt::rt::telemetry::{TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_WAKE};
+use fes_rt::rt::telemetry::{Quantity, TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_WAKE};
 
 use crate::event::{Counters, DriverEvent};
 
@@ -27,29 +26,6 @@ pub const TAG_TICK_TO_CAN: &str = "tick_to_can";
 pub const TAG_CAN_WRITE: &str = "can_write";
 /// hlog tag: StimTick publish → kernel transmit timestamp of the PULSE.
 pub const TAG_TICK_TO_TX_STAMP: &str = "tick_to_tx_stamp";
-
-/// A cumulative histogram and the current interval's.
-#[derive(Debug, Clone, Default)]
-pub struct Quantity {
-    total: LatencyHistogram,
-    interval: LatencyHistogram,
-}
-
-impl Quantity {
-    fn record(&mut self, ns: u64) {
-        self.total.record(ns);
-        self.interval.record(ns);
-    }
-
-    /// Everything recorded since start.
-    pub fn total(&self) -> &LatencyHistogram {
-        &self.total
-    }
-
-    fn summary(&self) -> LatencySummary {
-        self.total.summary()
-    }
-}
 
 /// The driver's histograms.
 #[derive(Debug, Clone, Default)]
@@ -136,8 +112,7 @@ impl DriverTelemetry {
         duration: Duration,
     ) -> Result<(), HlogError> {
         for (tag, q) in self.quantities() {
-            log.write(&q.interval, tag, start, duration)?;
-            q.interval.reset();
+            q.write_interval(log, tag, start, duration)?;
         }
         log.flush()
     }

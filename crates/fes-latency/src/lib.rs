@@ -7,5 +7,10 @@
 //! The library holds what the tools share and the tests reach:
 //!
 //! * [`cyclictest`]: running cyclictest and reading its histogram.
+//! * [`Percentiles`]: the latency quantiles rt-latency writes and latency-regression reads,
+//!   and their table.
 
 pub mod cyclictest;
+mod percentiles;
+
+pub use percentiles::Percentiles;

@@ -3,5 +3,6 @@
 //! numerics nor plotting, so the stimulator driver that depends on it does not either.
 #![deny(clippy::missing_safety_doc)]
 
+mod code_enum;
 pub mod msg;
 pub mod rt;

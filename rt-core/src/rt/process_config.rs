@@ -289,24 +289,14 @@ impl RtCoreConfig {
         }
         self.rt.validate()?;
         let r = &self.reference;
-        config_file::range(
-            (1..=10_000).contains(&r.stale_after_ms),
-            "reference.stale_after_ms",
-            r.stale_after_ms,
-            "1..=10000",
-        )?;
+        config_file::within("reference.stale_after_ms", r.stale_after_ms, 1..=10_000)?;
         config_file::range(
             (0.0..=1000.0).contains(&r.stale_ramp_per_s),
             "reference.stale_ramp_per_s",
             r.stale_ramp_per_s,
             "0..=1000, finite",
         )?;
-        config_file::range(
-            (1..=1000).contains(&self.feedback.max_age_ms),
-            "feedback.max_age_ms",
-            self.feedback.max_age_ms,
-            "1..=1000",
-        )?;
+        config_file::within("feedback.max_age_ms", self.feedback.max_age_ms, 1..=1000)?;
         let p = &self.pulse;
         config_file::range(
             p.channel <= StimTick::MAX_CHANNEL,

@@ -487,17 +487,7 @@ fn summarise_recording(
     // The same muscle and sensor as the stimulator's, simulated for the CFT front.
     let front = fes_model::control::file::Controller::load(a.controller())
         .ok()
-        .and_then(|c| {
-            fes_bench::simulation::SimSettings::bench_muscle(
-                &c,
-                a.muscle.preset(),
-                a.fatigue,
-                ProfileSpec::Cardiac(cardiac(a)),
-                outer_settings(a),
-                a.seconds,
-            )
-            .ok()
-        })
+        .and_then(|c| sim_settings(&c, a).ok())
         .map(|s| s.front(a.amplitude, a.stim_lead_ms as usize));
     let summary = analyse(
         rec,
@@ -536,9 +526,25 @@ fn baseline(
     })
 }
 
+/// The bench's muscle, sensor, cardiac profile and outer loop under `controller`: what both
+/// the CFT front and `--in-process` simulate.
+fn sim_settings(
+    controller: &fes_model::control::file::Controller,
+    a: &Args,
+) -> Result<fes_bench::simulation::SimSettings, fes_bench::simulation::SimError> {
+    fes_bench::simulation::SimSettings::bench_muscle(
+        controller,
+        a.muscle.preset(),
+        a.fatigue,
+        ProfileSpec::Cardiac(cardiac(a)),
+        outer_settings(a),
+        a.seconds,
+    )
+}
+
 /// `--in-process`: the chain in simulated time, with the bench's muscle and sensor.
 fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
-    use fes_bench::simulation::{SimSettings, simulate};
+    use fes_bench::simulation::simulate;
 
     let controller = fes_model::control::file::Controller::load(a.controller())
         .with_context(|| format!("controller {}", a.controller().display()))?;
@@ -549,14 +555,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
         if a.fatigue { " with fatigue" } else { "" },
         a.controller().display()
     );
-    let settings = SimSettings::bench_muscle(
-        &controller,
-        a.muscle.preset(),
-        a.fatigue,
-        ProfileSpec::Cardiac(cardiac(a)),
-        outer_settings(a),
-        a.seconds,
-    )?;
+    let settings = sim_settings(&controller, a)?;
     let front = settings.front(a.amplitude, a.stim_lead_ms as usize);
     let run = simulate(&controller, &settings)?;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;

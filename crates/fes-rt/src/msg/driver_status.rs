@@ -41,39 +41,40 @@ pub enum CommandResult {
     Refused = 2,
 }
 
-/// Why the driver refused a command (`command_reason` of a [`DriverStatus`]).
-#[repr(u8)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum CommandRefusal {
-    /// The stimulator is not configured yet (or refused the configuration).
-    NotConfigured = 1,
-    /// The bus link is down, or a stop is still waiting to be written.
-    LinkDown = 2,
-    /// No recent STATUS from the stimulator.
-    StimulatorSilent = 3,
-    /// The stimulator does not report the driver's configuration.
-    StimulatorConfigMismatch = 4,
-    /// No valid StimTick within the watchdog time.
-    NoTicks = 5,
-    /// The StimTick publisher is not alive.
-    PublisherNotAlive = 6,
-    /// The supervisor's node was last seen dead.
-    SupervisorDead = 7,
-    /// The pattern generator has published its final tick.
-    GeneratorStopped = 8,
-    /// The command was too old, from the future, or not newer than the last one.
-    StaleCommand = 9,
-    /// The NMT start could not be written.
-    TxFailed = 10,
-    /// The command did not validate.
-    InvalidCommand = 11,
-    /// The stimulator does not read back the limits the driver configured (or read back
-    /// none).
-    StimulatorLimitsMismatch = 12,
-    /// The pattern generator's minimum pulse interval (StimTick `min_gap_ticks`) is
-    /// shorter than the transport can deliver (a RehaStim 2 answers one command at a
-    /// time): its pulses would wait and be dropped.
-    GeneratorGapTooShort = 13,
+u8_enum! {
+    /// Why the driver refused a command (`command_reason` of a [`DriverStatus`]).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum CommandRefusal: "command_reason" {
+        /// The stimulator is not configured yet (or refused the configuration).
+        NotConfigured = 1,
+        /// The bus link is down, or a stop is still waiting to be written.
+        LinkDown = 2,
+        /// No recent STATUS from the stimulator.
+        StimulatorSilent = 3,
+        /// The stimulator does not report the driver's configuration.
+        StimulatorConfigMismatch = 4,
+        /// No valid StimTick within the watchdog time.
+        NoTicks = 5,
+        /// The StimTick publisher is not alive.
+        PublisherNotAlive = 6,
+        /// The supervisor's node was last seen dead.
+        SupervisorDead = 7,
+        /// The pattern generator has published its final tick.
+        GeneratorStopped = 8,
+        /// The command was too old, from the future, or not newer than the last one.
+        StaleCommand = 9,
+        /// The NMT start could not be written.
+        TxFailed = 10,
+        /// The command did not validate.
+        InvalidCommand = 11,
+        /// The stimulator does not read back the limits the driver configured (or read back
+        /// none).
+        StimulatorLimitsMismatch = 12,
+        /// The pattern generator's minimum pulse interval (StimTick `min_gap_ticks`) is
+        /// shorter than the transport can deliver (a RehaStim 2 answers one command at a
+        /// time): its pulses would wait and be dropped.
+        GeneratorGapTooShort = 13,
+    }
 }
 
 impl CommandRefusal {
@@ -113,21 +114,6 @@ impl CommandRefusal {
                 "the pattern generator's minimum pulse interval is shorter than the transport delivers"
             }
         }
-    }
-}
-
-impl TryFrom<u8> for CommandRefusal {
-    type Error = ValidationError;
-
-    fn try_from(v: u8) -> Result<Self, ValidationError> {
-        Self::ALL
-            .iter()
-            .copied()
-            .find(|r| *r as u8 == v)
-            .ok_or(ValidationError::UnknownEnum {
-                field: "command_reason",
-                value: v.into(),
-            })
     }
 }
 

@@ -6,6 +6,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 use super::service::{Contract, PubSubQos, TOPIC_PULSE_OUTCOME};
 use super::validate::{ValidationError, int_in_range, nonzero_seq, reserved_zero};
+use crate::code_enum::code_enum;
 
 /// The driver's outcome for one StimTick that fired a pulse: sent to the stimulator, or not
 /// and why. Published for every such tick the driver received, in tick order; for a pulse
@@ -29,51 +30,43 @@ pub struct PulseOutcome {
     pub reserved: [u8; 7],
 }
 
-/// What became of a pulse decision.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum PulseFate {
-    /// Written to the stimulator as a PULSE frame.
-    Sent = 1,
-    /// Refused by the driver's interlocks (late, minimum IPI, rate, ceilings, a stream
-    /// fault): not sent, reported.
-    Refused = 2,
-    /// The driver was not armed: not sent.
-    NotArmed = 3,
-    /// The frame could not be written (the bus): not sent.
-    NotWritten = 4,
-    /// The transport was still waiting for the stimulator's answer to its previous
-    /// command (ScienceMode 2 is stop-and-wait) beyond the driver's lateness bound, or a
-    /// newer pulse decision took its place: not sent.
-    Late = 5,
-    /// A pulse sent earlier: the stimulator counted it as applied (its STATUS pulse count,
-    /// in the order the pulses were written; a RehaStim 2's SinglePulse acknowledgement).
-    Applied = 6,
-    /// A pulse sent earlier that the stimulator did not apply: it rejected it (EMCY naming
-    /// the pulse, a busy answer), or no STATUS counted it within the driver's confirmation
-    /// window (a lost frame, a stimulator that stopped).
-    NotApplied = 7,
+code_enum! {
+    /// What became of a pulse decision.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum PulseFate {
+        /// Written to the stimulator as a PULSE frame.
+        Sent = 1,
+        /// Refused by the driver's interlocks (late, minimum IPI, rate, ceilings, a stream
+        /// fault): not sent, reported.
+        Refused = 2,
+        /// The driver was not armed: not sent.
+        NotArmed = 3,
+        /// The frame could not be written (the bus): not sent.
+        NotWritten = 4,
+        /// The transport was still waiting for the stimulator's answer to its previous
+        /// command (ScienceMode 2 is stop-and-wait) beyond the driver's lateness bound, or a
+        /// newer pulse decision took its place: not sent.
+        Late = 5,
+        /// A pulse sent earlier: the stimulator counted it as applied (its STATUS pulse count,
+        /// in the order the pulses were written; a RehaStim 2's SinglePulse acknowledgement).
+        Applied = 6,
+        /// A pulse sent earlier that the stimulator did not apply: it rejected it (EMCY naming
+        /// the pulse, a busy answer), or no STATUS counted it within the driver's confirmation
+        /// window (a lost frame, a stimulator that stopped).
+        NotApplied = 7,
+    }
 }
 
 impl TryFrom<u8> for PulseFate {
     type Error = ValidationError;
 
     fn try_from(v: u8) -> Result<Self, ValidationError> {
-        match v {
-            1 => Ok(PulseFate::Sent),
-            2 => Ok(PulseFate::Refused),
-            3 => Ok(PulseFate::NotArmed),
-            4 => Ok(PulseFate::NotWritten),
-            5 => Ok(PulseFate::Late),
-            6 => Ok(PulseFate::Applied),
-            7 => Ok(PulseFate::NotApplied),
-            _ => Err(ValidationError::IntOutOfRange {
-                field: "fate",
-                value: u64::from(v),
-                min: 1,
-                max: 7,
-            }),
-        }
+        Self::from_code(v).ok_or(ValidationError::IntOutOfRange {
+            field: "fate",
+            value: u64::from(v),
+            min: 1,
+            max: 7,
+        })
     }
 }
 

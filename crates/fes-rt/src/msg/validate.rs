@@ -4,31 +4,25 @@
 /// Declares a `#[repr(u8)]` enumeration that travels as a raw `u8` (module docs of
 /// [`super`]) and its `TryFrom<u8>`: each value decodes to its variant, any other is
 /// [`ValidationError::UnknownEnum`] naming `$field`. The codes stand once, in the
-/// declaration.
+/// declaration (`code_enum!`).
 macro_rules! u8_enum {
     (
         $(#[$meta:meta])*
-        pub enum $name:ident: $field:literal {
-            $($(#[$vmeta:meta])* $variant:ident = $code:literal,)+
-        }
+        pub enum $name:ident: $field:literal { $($body:tt)* }
     ) => {
-        $(#[$meta])*
-        #[repr(u8)]
-        pub enum $name {
-            $($(#[$vmeta])* $variant = $code,)+
+        crate::code_enum::code_enum! {
+            $(#[$meta])*
+            pub enum $name { $($body)* }
         }
 
         impl TryFrom<u8> for $name {
             type Error = ValidationError;
 
             fn try_from(value: u8) -> Result<Self, Self::Error> {
-                match value {
-                    $($code => Ok(Self::$variant),)+
-                    other => Err(ValidationError::UnknownEnum {
-                        field: $field,
-                        value: other.into(),
-                    }),
-                }
+                Self::from_code(value).ok_or(ValidationError::UnknownEnum {
+                    field: $field,
+                    value: u64::from(value),
+                })
             }
         }
     };

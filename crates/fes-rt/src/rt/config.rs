@@ -10,7 +10,6 @@
 
 mod section;
 
-use std::borrow::Cow;
 use std::path::PathBuf;
 
 use serde::de::{IgnoredAny, MapAccess, SeqAccess};
@@ -188,6 +187,52 @@ macro_rules! one_own_key {
     };
 }
 
+/// Implements `Deserialize` and `section::Section` for the shared section `$ty<K>`, whose
+/// shared keys are its fields `$field`, in their order, with the process's own keys after
+/// the first `$own_at`: the list of keys and the reading of each stand once.
+macro_rules! shared_section {
+    ($ty:ident, own keys after $own_at:literal: $($field:ident),+) => {
+        impl<'de, K: OwnKeys> Deserialize<'de> for $ty<K> {
+            fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                section::deserialize(d)
+            }
+        }
+
+        impl<K: OwnKeys> section::Section for $ty<K> {
+            const NAME: &'static str = stringify!($ty);
+            const SHARED: &'static [&'static str] = &[$(stringify!($field)),+];
+            const OWN_AT: usize = $own_at;
+            type Own = K;
+
+            fn own_mut(&mut self) -> &mut K {
+                &mut self.own
+            }
+
+            fn read_shared<'de, A: MapAccess<'de>>(
+                &mut self,
+                i: usize,
+                map: &mut A,
+            ) -> Result<(), A::Error> {
+                $(if Self::SHARED[i] == stringify!($field) {
+                    self.$field = map.next_value()?;
+                })+
+                Ok(())
+            }
+
+            fn read_shared_element<'de, A: SeqAccess<'de>>(
+                &mut self,
+                i: usize,
+                seq: &mut A,
+            ) -> Result<bool, A::Error> {
+                $(if Self::SHARED[i] == stringify!($field) {
+                    return Ok(seq.next_element()?.map(|v| self.$field = v).is_some());
+                })+
+                Ok(false)
+            }
+        }
+    };
+}
+
 /// `[ipc]`: where the processes of one stack meet on iceoryx2. Default prefix "fes". `K`:
 /// the keys the process adds, after `prefix` (rt-core's `notify`, the supervisor's
 /// `node_name`).
@@ -217,39 +262,7 @@ impl<K> IpcConfig<K> {
     }
 }
 
-impl<'de, K: OwnKeys> Deserialize<'de> for IpcConfig<K> {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        section::deserialize(d)
-    }
-}
-
-impl<K: OwnKeys> section::Section for IpcConfig<K> {
-    const NAME: &'static str = "IpcConfig";
-    const SHARED: &'static [&'static str] = &["prefix"];
-    const OWN_AT: usize = 1;
-    type Own = K;
-
-    fn own_mut(&mut self) -> &mut K {
-        &mut self.own
-    }
-
-    fn read_shared<'de, A: MapAccess<'de>>(
-        &mut self,
-        _i: usize,
-        map: &mut A,
-    ) -> Result<(), A::Error> {
-        self.prefix = map.next_value()?;
-        Ok(())
-    }
-
-    fn read_shared_element<'de, A: SeqAccess<'de>>(
-        &mut self,
-        _i: usize,
-        seq: &mut A,
-    ) -> Result<bool, A::Error> {
-        Ok(seq.next_element()?.map(|p| self.prefix = p).is_some())
-    }
-}
+shared_section! { IpcConfig, own keys after 1: prefix }
 
 /// `[telemetry]` of a process with a real-time thread: what it measures and reports, and
 /// the queue its real-time thread hands its records to the telemetry thread through.
@@ -297,74 +310,21 @@ impl<K> TelemetryConfig<K> {
     /// of at least `min_queue_capacity` records, a floor each process sets for its records
     /// (rt-core 16 tick records, stim-driver 256 events).
     pub fn validate(&self, min_queue_capacity: usize) -> Result<(), FileError> {
-        config_file::range(
-            (10..=60_000).contains(&self.report_period_ms),
+        config_file::within(
             "telemetry.report_period_ms",
             self.report_period_ms,
-            "10..=60000",
+            10..=60_000,
         )?;
-        if !(min_queue_capacity..=Self::MAX_QUEUE_CAPACITY).contains(&self.queue_capacity) {
-            return Err(FileError::Range {
-                field: "telemetry.queue_capacity",
-                value: self.queue_capacity.to_string(),
-                allowed: Cow::Owned(format!(
-                    "{min_queue_capacity}..={}",
-                    Self::MAX_QUEUE_CAPACITY
-                )),
-            });
-        }
-        Ok(())
+        config_file::within(
+            "telemetry.queue_capacity",
+            self.queue_capacity,
+            min_queue_capacity..=Self::MAX_QUEUE_CAPACITY,
+        )
     }
 }
 
-impl<'de, K: OwnKeys> Deserialize<'de> for TelemetryConfig<K> {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        section::deserialize(d)
-    }
-}
-
-impl<K: OwnKeys> section::Section for TelemetryConfig<K> {
-    const NAME: &'static str = "TelemetryConfig";
-    const SHARED: &'static [&'static str] = &[
-        "hlog",
-        "report_period_ms",
-        "queue_capacity",
-        "trace_allocations",
-    ];
-    const OWN_AT: usize = 2;
-    type Own = K;
-
-    fn own_mut(&mut self) -> &mut K {
-        &mut self.own
-    }
-
-    fn read_shared<'de, A: MapAccess<'de>>(
-        &mut self,
-        i: usize,
-        map: &mut A,
-    ) -> Result<(), A::Error> {
-        match i {
-            0 => self.hlog = map.next_value()?,
-            1 => self.report_period_ms = map.next_value()?,
-            2 => self.queue_capacity = map.next_value()?,
-            _ => self.trace_allocations = map.next_value()?,
-        }
-        Ok(())
-    }
-
-    fn read_shared_element<'de, A: SeqAccess<'de>>(
-        &mut self,
-        i: usize,
-        seq: &mut A,
-    ) -> Result<bool, A::Error> {
-        Ok(match i {
-            0 => seq.next_element()?.map(|v| self.hlog = v),
-            1 => seq.next_element()?.map(|v| self.report_period_ms = v),
-            2 => seq.next_element()?.map(|v| self.queue_capacity = v),
-            _ => seq.next_element()?.map(|v| self.trace_allocations = v),
-        }
-        .is_some())
-    }
+shared_section! {
+    TelemetryConfig, own keys after 2: hlog, report_period_ms, queue_capacity, trace_allocations
 }
 
 #[cfg(test)]

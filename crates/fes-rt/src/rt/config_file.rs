@@ -6,6 +6,8 @@
 //! [`FileError`] in its own error type, next to its own checks.
 
 use std::borrow::Cow;
+use std::fmt;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
@@ -120,6 +122,24 @@ pub fn range<T: ToString>(
             field,
             value: value.to_string(),
             allowed: Cow::Borrowed(allowed),
+        })
+    }
+}
+
+/// `Ok` when `value` lies in `allowed`; otherwise the range error of `field`, naming the
+/// range as `lo..=hi`, so the bounds are written once.
+pub fn within<T: PartialOrd + fmt::Display>(
+    field: &'static str,
+    value: T,
+    allowed: RangeInclusive<T>,
+) -> Result<(), FileError> {
+    if allowed.contains(&value) {
+        Ok(())
+    } else {
+        Err(FileError::Range {
+            field,
+            value: value.to_string(),
+            allowed: Cow::Owned(format!("{}..={}", allowed.start(), allowed.end())),
         })
     }
 }

@@ -35,36 +35,35 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
+use crate::code_enum::code_enum;
 use crate::msg::Contract;
 use crate::msg::service::{ServiceError, open_pubsub};
 
-/// Liveness of a service's publisher, as a check found it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Liveness {
-    /// Not checked yet, or its node's state could not be read.
-    Unknown = 0,
-    /// A publisher exists and its node's process is alive.
-    Alive = 1,
-    /// The publisher's node is dead (its process died without cleaning up).
-    Dead = 2,
-    /// The service has no publisher.
-    NoPublisher = 3,
-    /// Its publisher's process runs outside the systemd unit the monitor requires
-    /// ([`LivenessMonitor::in_unit`]): a squatter, never the real one.
-    Foreign = 4,
+code_enum! {
+    /// Liveness of a service's publisher, as a check found it.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Liveness {
+        /// Not checked yet, or its node's state could not be read.
+        Unknown = 0,
+        /// A publisher exists and its node's process is alive.
+        Alive = 1,
+        /// The publisher's node is dead (its process died without cleaning up).
+        Dead = 2,
+        /// The service has no publisher.
+        NoPublisher = 3,
+        /// Its publisher's process runs outside the systemd unit the monitor requires
+        /// ([`LivenessMonitor::in_unit`]): a squatter, never the real one.
+        Foreign = 4,
+    }
 }
 
 impl Liveness {
     /// Decodes a liveness stored as its `u8` (an atomic that one thread writes and another
     /// reads); an unknown value is [`Liveness::Unknown`].
     pub const fn from_u8(v: u8) -> Self {
-        match v {
-            1 => Liveness::Alive,
-            2 => Liveness::Dead,
-            3 => Liveness::NoPublisher,
-            4 => Liveness::Foreign,
-            _ => Liveness::Unknown,
+        match Self::from_code(v) {
+            Some(l) => l,
+            None => Liveness::Unknown,
         }
     }
 }

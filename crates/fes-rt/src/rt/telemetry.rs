@@ -182,17 +182,52 @@ pub const TAG_IPC: &str = "ipc";
 /// hlog tag of a receiver's own receive cost: from its wake-up to the sample in hand.
 pub const TAG_RECEIVE: &str = "receive";
 
+/// A cumulative histogram and the current interval's: one measured quantity, as rt-core's
+/// loop and stim-driver both record, report and log them.
+#[derive(Debug, Clone, Default)]
+pub struct Quantity {
+    total: LatencyHistogram,
+    interval: LatencyHistogram,
+}
+
+impl Quantity {
+    /// Records one measurement, ns.
+    pub fn record(&mut self, ns: u64) {
+        self.total.record(ns);
+        self.interval.record(ns);
+    }
+
+    /// Everything recorded since start.
+    pub fn total(&self) -> &LatencyHistogram {
+        &self.total
+    }
+
+    /// The summary of everything recorded since start.
+    pub fn summary(&self) -> LatencySummary {
+        self.total.summary()
+    }
+
+    /// Writes the current interval under `tag` and starts a new one.
+    pub fn write_interval(
+        &mut self,
+        log: &mut HlogWriter,
+        tag: &str,
+        start: Duration,
+        duration: Duration,
+    ) -> Result<(), HlogError> {
+        log.write(&self.interval, tag, start, duration)?;
+        self.interval.reset();
+        Ok(())
+    }
+}
+
 /// The telemetry thread's state: cumulative and per-interval histograms.
 #[derive(Debug, Clone, Default)]
 pub struct TimingAggregator {
-    wake: LatencyHistogram,
-    input: LatencyHistogram,
-    compute: LatencyHistogram,
-    publish: LatencyHistogram,
-    interval_wake: LatencyHistogram,
-    interval_input: LatencyHistogram,
-    interval_compute: LatencyHistogram,
-    interval_publish: LatencyHistogram,
+    wake: Quantity,
+    input: Quantity,
+    compute: Quantity,
+    publish: Quantity,
 }
 
 impl TimingAggregator {
@@ -207,10 +242,6 @@ impl TimingAggregator {
         self.input.record(t.input_ns);
         self.compute.record(t.compute_ns);
         self.publish.record(t.publish_ns);
-        self.interval_wake.record(t.lateness_ns);
-        self.interval_input.record(t.input_ns);
-        self.interval_compute.record(t.compute_ns);
-        self.interval_publish.record(t.publish_ns);
     }
 
     /// Drains every queued record of `channel`; returns how many.
@@ -225,22 +256,22 @@ impl TimingAggregator {
 
     /// Cumulative wake-up lateness.
     pub fn wake(&self) -> &LatencyHistogram {
-        &self.wake
+        self.wake.total()
     }
 
     /// Cumulative input time.
     pub fn input(&self) -> &LatencyHistogram {
-        &self.input
+        self.input.total()
     }
 
     /// Cumulative compute time.
     pub fn compute(&self) -> &LatencyHistogram {
-        &self.compute
+        self.compute.total()
     }
 
     /// Cumulative publish time.
     pub fn publish(&self) -> &LatencyHistogram {
-        &self.publish
+        self.publish.total()
     }
 
     /// Writes the current interval (tags [`TAG_WAKE`], [`TAG_INPUT`], [`TAG_COMPUTE`],
@@ -251,14 +282,14 @@ impl TimingAggregator {
         start: Duration,
         duration: Duration,
     ) -> Result<(), HlogError> {
-        log.write(&self.interval_wake, TAG_WAKE, start, duration)?;
-        log.write(&self.interval_input, TAG_INPUT, start, duration)?;
-        log.write(&self.interval_compute, TAG_COMPUTE, start, duration)?;
-        log.write(&self.interval_publish, TAG_PUBLISH, start, duration)?;
-        self.interval_wake.reset();
-        self.interval_input.reset();
-        self.interval_compute.reset();
-        self.interval_publish.reset();
+        for (tag, q) in [
+            (TAG_WAKE, &mut self.wake),
+            (TAG_INPUT, &mut self.input),
+            (TAG_COMPUTE, &mut self.compute),
+            (TAG_PUBLISH, &mut self.publish),
+        ] {
+            q.write_interval(log, tag, start, duration)?;
+        }
         Ok(())
     }
 

@@ -5,7 +5,9 @@ use std::path::Path;
 
 use crate::check_line;
 use crate::gate::Check;
-use crate::summary::{Condition, ConditionSummary, Percentiles, Summary, Unconfirmed};
+use fes_latency::Percentiles;
+
+use crate::summary::{Condition, ConditionSummary, Summary, Unconfirmed};
 
 /// The rows of one condition's table.
 fn rows(s: &ConditionSummary) -> Vec<(&'static str, Option<Percentiles>)> {
@@ -34,16 +36,10 @@ pub fn print_table(summary: &Summary) {
             s.rounds,
             s.load.as_deref().unwrap_or("none")
         );
-        println!(
-            "{:<28} {:>9} {:>9} {:>9} {:>9}",
-            "latency (us)", "p50", "p99", "p99.9", "max"
-        );
+        Percentiles::print_header();
         for (name, p) in rows(s) {
             match p {
-                Some(p) => println!(
-                    "{:<28} {:>9.1} {:>9.1} {:>9.1} {:>9.1}",
-                    name, p.p50, p.p99, p.p999, p.max
-                ),
+                Some(p) => p.print_row(name),
                 None => println!("{name:<28} {:>9}", "absent"),
             }
         }

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use fes_latency::Percentiles;
 use serde::{Deserialize, Serialize};
 
 /// Schema tag of the summary.
@@ -15,19 +16,6 @@ pub const DRIVER_FORWARD_METHOD: &str = "driver-latency (fes-latency): the stim-
 forward and report threads, SCHED_FIFO one below rt-core on the probe's core, with the CAN \
 socket replaced by a Unix SOCK_SEQPACKET pair (one send per frame) to sim-muscle's virtual \
 stimulator on the other core; StimTick publish -> PULSE written (hlog tag tick_to_can)";
-
-/// p50 / p99 / p99.9 / max, µs.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Percentiles {
-    /// Median.
-    pub p50: f64,
-    /// 99th percentile.
-    pub p99: f64,
-    /// 99.9th percentile.
-    pub p999: f64,
-    /// Largest value.
-    pub max: f64,
-}
 
 /// The load conditions the suite measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]

@@ -42,6 +42,7 @@ use serde::Serialize;
 /// The driver's hlog tag for StimTick publish → PULSE written (stim-driver's telemetry).
 const TAG_TICK_TO_CAN: &str = "tick_to_can";
 
+use fes_latency::Percentiles;
 use fes_latency::cyclictest::{self, CyclictestHistogram};
 
 /// Runs the real rt-core loop for N seconds with a subscriber process measuring IPC latency,
@@ -94,36 +95,6 @@ struct Cli {
     /// so that both see the same background on a shared machine. Default: 10 s rounds.
     #[arg(long)]
     rounds: Option<u64>,
-}
-
-/// p50 / p99 / p99.9 / max in microseconds.
-#[derive(Debug, Clone, Copy, Serialize)]
-struct Percentiles {
-    p50: f64,
-    p99: f64,
-    p999: f64,
-    max: f64,
-}
-
-impl Percentiles {
-    fn from_histogram(h: &LatencyHistogram) -> Self {
-        let us = |ns: u64| ns as f64 / 1000.0;
-        Self {
-            p50: us(h.quantile_ns(0.5)),
-            p99: us(h.quantile_ns(0.99)),
-            p999: us(h.quantile_ns(0.999)),
-            max: us(h.max_ns()),
-        }
-    }
-
-    fn from_cyclictest(h: &CyclictestHistogram) -> Self {
-        Self {
-            p50: h.quantile_us(0.5) as f64,
-            p99: h.quantile_us(0.99) as f64,
-            p999: h.quantile_us(0.999) as f64,
-            max: h.max_us as f64,
-        }
-    }
 }
 
 /// The JSON document (`--json`).
@@ -935,16 +906,8 @@ fn print_table(r: &Results) {
         r.core,
         r.load.as_deref().unwrap_or("none")
     );
-    println!(
-        "{:<28} {:>9} {:>9} {:>9} {:>9}",
-        "latency (us)", "p50", "p99", "p99.9", "max"
-    );
-    let row = |name: &str, p: &Percentiles| {
-        println!(
-            "{:<28} {:>9.1} {:>9.1} {:>9.1} {:>9.1}",
-            name, p.p50, p.p99, p.p999, p.max
-        );
-    };
+    Percentiles::print_header();
+    let row = |name: &str, p: &Percentiles| p.print_row(name);
     row("wake-up lateness", &r.wake_us);
     row("input (receive references)", &r.input_us);
     row("compute (tick source)", &r.compute_us);
