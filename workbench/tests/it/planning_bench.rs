@@ -49,44 +49,37 @@ fn bench(c: &Controller, preset: Preset, amplitude: f64) -> (FrontVerdict, u64) 
     (verdict, run.planner.causal_fallbacks)
 }
 
-/// The run beats every train with no more pulses per contraction; the message names the
-/// best such train.
+/// Which trains a verdict compares the run with.
+#[derive(Debug, Clone, Copy)]
+enum Trains {
+    /// No more pulses per contraction than the run's mean (`beats_every_cft`).
+    NoMorePulses,
+    /// No more than the run's count rounded to a whole pulse
+    /// (`beats_every_cft_whole_count`): a plan of 4.97 pulses against every train of 5.
+    WholeCount,
+    /// Those of the whole count that miss the level (the plateau the outer loop
+    /// regulates) by no more than the run (`beats_every_cft_holding_level`).
+    HoldingTheLevel,
+}
+
+/// The run beats every train of `trains`; the message names the best of them.
+fn assert_beats_every(trains: Trains, v: &FrontVerdict, amplitude: f64) {
+    let (beats, best) = match trains {
+        Trains::NoMorePulses => (v.beats_every_cft, v.best_cft_no_more_pulses),
+        Trains::WholeCount => (v.beats_every_cft_whole_count, v.best_cft_whole_count),
+        Trains::HoldingTheLevel => (v.beats_every_cft_holding_level, v.best_cft_holding_level),
+    };
+    assert!(
+        beats,
+        "{amplitude}, {trains:?}: planned {} pulses, RMS {:.4}, level missed by {:.4}; \
+         the best train {best:?}",
+        v.lcn.pulses_per_contraction, v.lcn.rms_error, v.lcn.level_error
+    );
+}
+
+/// The run beats every train with no more pulses per contraction.
 fn assert_beats_every_train(v: &FrontVerdict, amplitude: f64) {
-    let best = v.best_cft_no_more_pulses.unwrap();
-    assert!(
-        v.beats_every_cft,
-        "{amplitude}: planned {} pulses, RMS {:.4}; {} Hz x {} tracks at RMS {:.4}",
-        v.lcn.pulses_per_contraction,
-        v.lcn.rms_error,
-        best.hz.unwrap(),
-        best.n.unwrap(),
-        best.rms_error
-    );
-}
-
-/// The same at the run's count rounded to a whole pulse (`beats_every_cft_whole_count`):
-/// a plan of 4.97 pulses against every train of 5 or fewer.
-fn assert_beats_every_train_of_its_whole_count(v: &FrontVerdict, amplitude: f64) {
-    let best = v.best_cft_whole_count.unwrap();
-    assert!(
-        v.beats_every_cft_whole_count,
-        "{amplitude}: planned {} pulses, RMS {:.4}; {} Hz x {} tracks at RMS {:.4}",
-        v.lcn.pulses_per_contraction,
-        v.lcn.rms_error,
-        best.hz.unwrap(),
-        best.n.unwrap(),
-        best.rms_error
-    );
-}
-
-/// The same among the trains that miss the level (the plateau the outer loop regulates) by
-/// no more than the run (`beats_every_cft_holding_level`).
-fn assert_beats_every_train_holding_the_level(v: &FrontVerdict, amplitude: f64) {
-    assert!(
-        v.beats_every_cft_holding_level,
-        "{amplitude}: planned {} pulses, RMS {:.4}, level missed by {:.4}; {:?}",
-        v.lcn.pulses_per_contraction, v.lcn.rms_error, v.lcn.level_error, v.best_cft_holding_level
-    );
+    assert_beats_every(Trains::NoMorePulses, v, amplitude);
 }
 
 fn off(mut c: Controller) -> Controller {
@@ -108,9 +101,9 @@ fn planning_beats_every_train_on_the_fast_muscle() {
         let (v, fallbacks) = bench(&c, Preset::Fast, amplitude);
         assert_beats_every_train(&v, amplitude);
         if amplitude > 0.1 {
-            assert_beats_every_train_of_its_whole_count(&v, amplitude);
+            assert_beats_every(Trains::WholeCount, &v, amplitude);
         }
-        assert_beats_every_train_holding_the_level(&v, amplitude);
+        assert_beats_every(Trains::HoldingTheLevel, &v, amplitude);
         // Only the first beat, which starts with the profile (nothing announced ahead).
         assert!(fallbacks < 320, "{amplitude}: {fallbacks} causal ticks");
         let (v_off, _) = bench(&off(c.clone()), Preset::Fast, amplitude);
@@ -164,7 +157,7 @@ fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
         assert_beats_every_train(&v, amplitude);
         // At 0.9 (13.70 pulses) an 89 Hz train of 14 tracks 0.3 % better.
         if amplitude < 0.9 {
-            assert_beats_every_train_of_its_whole_count(&v, amplitude);
+            assert_beats_every(Trains::WholeCount, &v, amplitude);
         }
         assert!(
             v.lcn.rms_error < v_off.lcn.rms_error,
@@ -191,7 +184,7 @@ fn on_the_slow_muscle_the_trains_that_track_better_miss_the_level() {
             "{amplitude}: {best:?} vs {:?}",
             v.lcn
         );
-        assert_beats_every_train_holding_the_level(&v, amplitude);
+        assert_beats_every(Trains::HoldingTheLevel, &v, amplitude);
     }
 }
 
