@@ -622,12 +622,15 @@ fn plot_cmd(args: PlotArgs) -> Result<()> {
     Ok(())
 }
 
+/// The muscle under a virtual device and how its force is read: the options both device
+/// commands share.
 #[derive(Args)]
-struct StimulatorCmd {
+struct DevicePlantArgs {
     #[command(flatten)]
     muscle: MuscleArgs,
-    /// Publish the force as a force sensor measures it (offset, noise, low-pass) instead
-    /// of the exact model force.
+    /// Report the force as a force sensor measures it (offset, noise, low-pass) instead
+    /// of the exact model force: the stimulator's FORCE frames, or the virtual RehaStim
+    /// 2's `--force-prefix` samples.
     #[arg(long)]
     measured: bool,
     #[command(flatten)]
@@ -635,6 +638,12 @@ struct StimulatorCmd {
     /// Seed of the sensor noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+}
+
+#[derive(Args)]
+struct StimulatorCmd {
+    #[command(flatten)]
+    plant: DevicePlantArgs,
     #[command(flatten)]
     stimulator: fes_virtual_stimulator::StimulatorArgs,
 }
@@ -643,41 +652,34 @@ fn stimulator_cmd(args: StimulatorCmd) -> Result<()> {
     // A panicking thread aborts the virtual stimulator (its output ends with it), as a
     // real stimulator's firmware would reset.
     fes_rt::rt::panic::install("sim-muscle stimulator");
-    let plant = device_plant(&args.muscle, args.measured, &args.sensor, args.seed)?;
+    let plant = device_plant(&args.plant)?;
     fes_virtual_stimulator::run(args.stimulator, Box::new(OnDevice(plant)))
 }
 
 #[derive(Args)]
 struct Rehastim2Cmd {
     #[command(flatten)]
-    muscle: MuscleArgs,
-    /// Measure the force as a force sensor does (offset, noise, low-pass) for
-    /// `--force-prefix` instead of the exact model force.
-    #[arg(long)]
-    measured: bool,
-    #[command(flatten)]
-    sensor: SensorArgs,
-    /// Seed of the sensor noise.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    plant: DevicePlantArgs,
     #[command(flatten)]
     device: fes_virtual_stimulator::rehastim2_pty::Rehastim2Args,
 }
 
 fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
     fes_rt::rt::panic::install("sim-muscle rehastim2");
-    let plant = device_plant(&args.muscle, args.measured, &args.sensor, args.seed)?;
+    let plant = device_plant(&args.plant)?;
     fes_virtual_stimulator::run_rehastim2(args.device, Box::new(OnDevice(plant)))
 }
 
 /// The muscle a virtual device drives at 1 ms: the model's force, or with `measured` the
 /// force as the sensor measures it (the sensor options need `--measured`).
-fn device_plant(
-    muscle: &MuscleArgs,
-    measured: bool,
-    sensor: &SensorArgs,
-    seed: u64,
-) -> Result<Box<dyn MusclePlant>> {
+fn device_plant(args: &DevicePlantArgs) -> Result<Box<dyn MusclePlant>> {
+    let DevicePlantArgs {
+        muscle,
+        measured,
+        sensor,
+        seed,
+    } = args;
+    let (measured, seed) = (*measured, *seed);
     let ts_s = 1e-3;
     if !measured
         && (sensor.noise_std_n.is_some()
