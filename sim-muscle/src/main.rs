@@ -234,7 +234,16 @@ struct SimulateArgs {
     /// below 200 us recruit fewer motor units; 200 us gives the base model.
     #[arg(long, value_name = "US", conflicts_with = "model")]
     pulse_width_us: Option<f64>,
-    /// Print the measured force (sensor offset, noise, low-pass) instead of the true one.
+    #[command(flatten)]
+    force: ForceReading,
+}
+
+/// How a command reads the muscle's force: exact, or as the force sensor measures it.
+#[derive(Args)]
+struct ForceReading {
+    /// Read the force as a force sensor measures it (offset, noise, low-pass) instead of
+    /// the exact model force: what `simulate` prints, the stimulator's FORCE frames, the
+    /// virtual RehaStim 2's `--force-prefix` samples.
     #[arg(long)]
     measured: bool,
     #[command(flatten)]
@@ -242,6 +251,33 @@ struct SimulateArgs {
     /// Seed of the sensor noise (with --measured).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+}
+
+impl ForceReading {
+    /// Refuses sensor options given without `--measured` (they would be ignored).
+    fn check(&self) -> Result<()> {
+        let s = &self.sensor;
+        if !self.measured
+            && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
+        {
+            bail!(
+                "--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured"
+            );
+        }
+        Ok(())
+    }
+
+    /// `plant` read this way, sampled every `ts_s`: as it is, or behind the sensor.
+    fn read(&self, mut plant: Box<dyn MusclePlant>, ts_s: f64) -> Result<Box<dyn MusclePlant>> {
+        if !self.measured {
+            return Ok(plant);
+        }
+        let config = sensor_config(&self.sensor, plant.as_mut(), self.seed)?;
+        Ok(Box::new(Measured::new(
+            plant,
+            ForceSensor::new(config, ts_s).context("sensor settings")?,
+        )))
+    }
 }
 
 #[derive(Args)]
@@ -462,17 +498,13 @@ fn sensor_config(
 
 fn simulate_cmd(args: SimulateArgs) -> Result<()> {
     let ts_s = 1e-3;
-    let s = &args.sensor;
-    if !args.measured && (s.noise_std_n.is_some() || s.offset_n.is_some() || s.sensor_tau_ms != 0.0)
-    {
-        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
-    }
+    args.force.check()?;
     if let Some(w) = args.pulse_width_us
         && !(w.is_finite() && w > 0.0)
     {
         bail!("--pulse-width-us {w}: must be a width > 0 us");
     }
-    let mut chosen = choose_plant(&args.muscle, ts_s, |cfg| {
+    let chosen = choose_plant(&args.muscle, ts_s, |cfg| {
         if args.pulse_width_us.is_some() {
             cfg.pulse_width = Some(PulseWidthParams::DING_2007);
         }
@@ -519,13 +551,7 @@ fn simulate_cmd(args: SimulateArgs) -> Result<()> {
             train[k] = one[k % p];
         }
     }
-    let force = if args.measured {
-        let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
-        let mut plant = Measured::new(chosen.plant, ForceSensor::new(sensor, ts_s)?);
-        simulate(&mut plant, &train, pulse)
-    } else {
-        simulate(chosen.plant.as_mut(), &train, pulse)
-    };
+    let force = simulate(args.force.read(chosen.plant, ts_s)?.as_mut(), &train, pulse);
     let stdout = io::stdout();
     let mut out = BufWriter::new(stdout.lock());
     let result = (|| -> io::Result<()> {
@@ -628,16 +654,8 @@ fn plot_cmd(args: PlotArgs) -> Result<()> {
 struct DevicePlantArgs {
     #[command(flatten)]
     muscle: MuscleArgs,
-    /// Report the force as a force sensor measures it (offset, noise, low-pass) instead
-    /// of the exact model force: the stimulator's FORCE frames, or the virtual RehaStim
-    /// 2's `--force-prefix` samples.
-    #[arg(long)]
-    measured: bool,
     #[command(flatten)]
-    sensor: SensorArgs,
-    /// Seed of the sensor noise.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    force: ForceReading,
 }
 
 #[derive(Args)]
@@ -673,31 +691,10 @@ fn rehastim2_cmd(args: Rehastim2Cmd) -> Result<()> {
 /// The muscle a virtual device drives at 1 ms: the model's force, or with `measured` the
 /// force as the sensor measures it (the sensor options need `--measured`).
 fn device_plant(args: &DevicePlantArgs) -> Result<Box<dyn MusclePlant>> {
-    let DevicePlantArgs {
-        muscle,
-        measured,
-        sensor,
-        seed,
-    } = args;
-    let (measured, seed) = (*measured, *seed);
     let ts_s = 1e-3;
-    if !measured
-        && (sensor.noise_std_n.is_some()
-            || sensor.offset_n.is_some()
-            || sensor.sensor_tau_ms != 0.0)
-    {
-        bail!("--noise-std-n, --offset-n and --sensor-tau-ms describe the sensor: add --measured");
-    }
-    let mut chosen = choose_plant(muscle, ts_s, |_| Ok(()))?;
-    Ok(if measured {
-        let config = sensor_config(sensor, chosen.plant.as_mut(), seed)?;
-        Box::new(Measured::new(
-            chosen.plant,
-            ForceSensor::new(config, ts_s).context("sensor settings")?,
-        ))
-    } else {
-        chosen.plant
-    })
+    args.force.check()?;
+    let chosen = choose_plant(&args.muscle, ts_s, |_| Ok(()))?;
+    args.force.read(chosen.plant, ts_s)
 }
 
 fn main() -> ExitCode {
