@@ -898,43 +898,42 @@ fn print_front(v: &fes_bench::cft::FrontVerdict) {
         )),
         opt(v.ftipp_vs_best_cft, 3)
     );
-    // The user's question: does any train with no more pulses track as well?
-    println!(
-        "    a train with no more pulses that tracks as well: {}",
-        match (&v.best_cft_no_more_pulses, v.beats_every_cft) {
-            (_, true) => "none (the run beats every one)".to_string(),
-            (Some(p), false) => format!(
-                "{} Hz x {} pulses, RMS {}",
-                p.hz.unwrap_or(0),
-                p.n.unwrap_or(0),
-                fmt(p.rms_error, 4)
-            ),
-            (None, false) => "none has so few pulses".to_string(),
-        }
-    );
-    // The same at the run's count rounded to a whole pulse (2.97 pulses and a 3-pulse
-    // train are the same count to a user), and among the trains that hold the level as
-    // closely as the run.
-    let whole = v.lcn.pulses_per_contraction.round();
-    let train = |best: &Option<FrontPoint>, beats: bool| match (best, beats) {
+    // The user's question: does any train with no more pulses track as well? Then the same
+    // at the run's count rounded to a whole pulse (2.97 pulses and a 3-pulse train are the
+    // same count to a user), and among the trains that hold the level as closely as the
+    // run (those lines name the best train's level error too).
+    let train = |best: &Option<FrontPoint>, beats: bool, level: bool| match (best, beats) {
         (_, true) => "none (the run beats every one)".to_string(),
         (Some(p), false) => format!(
-            "{} Hz x {} pulses, RMS {}, level missed by {:.1} %",
+            "{} Hz x {} pulses, RMS {}{}",
             p.hz.unwrap_or(0),
             p.n.unwrap_or(0),
             fmt(p.rms_error, 4),
-            100.0 * p.level_error
+            if level {
+                format!(", level missed by {:.1} %", 100.0 * p.level_error)
+            } else {
+                String::new()
+            }
         ),
         (None, false) => "none has so few pulses".to_string(),
     };
     println!(
-        "    ... with no more than {whole} pulses (the count rounded): {}",
-        train(&v.best_cft_whole_count, v.beats_every_cft_whole_count)
+        "    a train with no more pulses that tracks as well: {}",
+        train(&v.best_cft_no_more_pulses, v.beats_every_cft, false)
+    );
+    println!(
+        "    ... with no more than {} pulses (the count rounded): {}",
+        v.lcn.pulses_per_contraction.round(),
+        train(&v.best_cft_whole_count, v.beats_every_cft_whole_count, true)
     );
     println!(
         "    ... of those, missing the level by no more than the run ({:.1} %): {}",
         100.0 * v.lcn.level_error,
-        train(&v.best_cft_holding_level, v.beats_every_cft_holding_level)
+        train(
+            &v.best_cft_holding_level,
+            v.beats_every_cft_holding_level,
+            true
+        )
     );
 }
 
