@@ -14,6 +14,7 @@
 //!   force times the window length so that a lost sample does not bias it.
 
 use std::collections::VecDeque;
+use std::ops::Range;
 
 use serde::{Deserialize, Serialize};
 
@@ -57,6 +58,14 @@ impl ContractionSettings {
             self.min_coverage,
             Interval::left_open(0.0, 1.0),
         )
+    }
+
+    /// The plateau window of a beat starting at `start` whose contraction lasts `on`, the
+    /// force lagging by `delay`, all in one time unit (ns here, 1 ms samples on the bench):
+    /// `[start + round(plateau_start on) + delay, start + on + delay)`.
+    pub fn plateau_window(&self, start: u64, on: u64, delay: u64) -> Range<u64> {
+        let offset = (self.plateau_start * on as f64).round() as u64;
+        start + offset + delay..start + on + delay
     }
 }
 
@@ -122,13 +131,15 @@ impl ContractionEstimator {
     /// Opens the window of `beat`.
     pub fn begin(&mut self, beat: Beat) {
         let delay = (self.settings.delay_ms * 1e6).round() as u64;
-        let plateau_offset = (self.settings.plateau_start * beat.on_ns as f64).round() as u64;
+        let plateau = self
+            .settings
+            .plateau_window(beat.start_ns, beat.on_ns, delay);
         self.open.push_back(Window {
             beat,
             from_ns: beat.start_ns + delay,
             to_ns: beat.end_ns() + delay,
-            plateau_from_ns: beat.start_ns + plateau_offset + delay,
-            plateau_to_ns: beat.start_ns + beat.on_ns + delay,
+            plateau_from_ns: plateau.start,
+            plateau_to_ns: plateau.end,
             sum: 0.0,
             n: 0,
             plateau_sum: 0.0,

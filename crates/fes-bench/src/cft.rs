@@ -31,11 +31,12 @@
 //! not rule out the trains of its own count; `beats_every_cft_holding_level`, the same
 //! whole count among the trains whose contraction misses the level by no more than the
 //! run's (the plateau mean the outer loop regulates): a train that tracks better by
-//! stopping short of the level is not a pattern that does as well; `lcn_dominated` when some CFT whose FTI per contraction is within 5 % of
-//! the reference's has no more pulses and no larger RMS error than the LCN, one of them
-//! strictly less; `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest
-//! CFT that tracks at least as well (none: `None`); `ftipp_vs_best_cft`, the LCN's FTIpP
-//! over the best of the CFTs of equal FTI (within 5 %).
+//! stopping short of the level is not a pattern that does as well; `lcn_dominated` when
+//! some CFT whose FTI per contraction is within 5 % of the reference's has no more pulses
+//! and no larger RMS error than the LCN, one of them strictly less;
+//! `pulses_vs_equal_rms_cft`, the LCN's pulses over those of the cheapest CFT that tracks
+//! at least as well (none: `None`); `ftipp_vs_best_cft`, the LCN's FTIpP over the best of
+//! the CFTs of equal FTI (within 5 %).
 
 use serde::{Deserialize, Serialize};
 use sim_muscle::muscle::{Muscle, MuscleConfig};
@@ -387,10 +388,12 @@ impl FrontSettings {
     /// over the outer loop's window, the contraction's second part shifted by the delay
     /// (`supervisor::contraction`, `plateau_start`), if every sample of it was measured.
     fn plateau_mean(&self, b: &BeatWindow, on: usize, measured: &[f64]) -> Option<f64> {
-        let plateau_start = ContractionSettings::default().plateau_start;
-        let from = b.start + (plateau_start * on as f64).round() as usize + self.delay;
-        let to = b.start + on + self.delay;
-        let window = measured.get(from..to)?;
+        let w = ContractionSettings::default().plateau_window(
+            b.start as u64,
+            on as u64,
+            self.delay as u64,
+        );
+        let window = measured.get(w.start as usize..w.end as usize)?;
         (!window.is_empty() && window.iter().all(|f| f.is_finite()))
             .then(|| window.iter().sum::<f64>() / window.len() as f64)
     }
