@@ -584,6 +584,7 @@ mod tests {
                 amplitude,
                 edge_rate_per_s: None,
                 outer_loop: None,
+                start_rest_ms: Some(0.0),
             }),
         }
     }

@@ -18,6 +18,10 @@ use crate::limits::{ReferenceLimits, Rejection};
 pub const HEART_RATE_BPM: (f64, f64) = (60.0, 200.0);
 /// Duty-cycle range of the cardiac profile (fraction of the beat that contracts).
 pub const DUTY: (f64, f64) = (0.05, 0.95);
+/// Default rest before a cardiac profile's first contraction, ms ([`CardiacSpec::start_rest_ms`]).
+pub const DEFAULT_START_REST_MS: f64 = 200.0;
+/// Longest rest before a cardiac profile's first contraction, ms.
+pub const MAX_START_REST_MS: f64 = 2000.0;
 /// Most steps or ramp points in one profile.
 pub const MAX_POINTS: usize = 1000;
 
@@ -58,6 +62,14 @@ pub struct CardiacSpec {
     /// Switch the outer loop on or off with this profile; absent: leave it as it is.
     #[serde(default)]
     pub outer_loop: Option<bool>,
+    /// Rest before the first contraction, ms, in [0, [`MAX_START_REST_MS`]]; absent:
+    /// [`DEFAULT_START_REST_MS`]. The first onset is announced in the reference preview from the
+    /// start, so rt-core's planner gets this long to plan the first contraction, as it gets
+    /// the rest phase to plan every later one (with no rest the first contraction is seen
+    /// only at its onset, and its first pulses are decided before the plan is complete).
+    /// Applies when the profile starts; a retune of a running profile ignores it.
+    #[serde(default)]
+    pub start_rest_ms: Option<f64>,
 }
 
 impl CardiacSpec {
@@ -69,6 +81,11 @@ impl CardiacSpec {
     /// Contraction (on-phase) length, ns.
     pub fn on_ns(&self) -> u64 {
         (self.duty * 60.0e9 / self.bpm).round() as u64
+    }
+
+    /// Rest before the first contraction, ns.
+    pub fn start_rest_ns(&self) -> u64 {
+        (self.start_rest_ms.unwrap_or(DEFAULT_START_REST_MS) * 1e6).round() as u64
     }
 }
 
@@ -281,6 +298,17 @@ impl CardiacSpec {
             });
         }
         limits.check_force("amplitude", self.amplitude)?;
+        if let Some(rest) = self.start_rest_ms
+            && (!rest.is_finite() || !(0.0..=MAX_START_REST_MS).contains(&rest))
+        {
+            return Err(Rejection::Outside {
+                what: "rest before the first contraction".into(),
+                value: rest,
+                unit: " ms",
+                allowed: format!("[0, {MAX_START_REST_MS}]"),
+                why: "",
+            });
+        }
         let rate = self.edge_rate(limits);
         limits.check_rate("edge rate", rate)?;
         let edge_s = self.amplitude / rate;
@@ -347,9 +375,9 @@ impl CardiacRun {
             };
             events.push(ProfileEvent::BeatStarted(self.beat));
         }
-        let in_beat = now_ns.saturating_sub(self.beat.start_ns);
         let rate = self.current.edge_rate(limits);
-        if in_beat < self.beat.on_ns {
+        // Before the first beat (the start rest): rest.
+        if now_ns >= self.beat.start_ns && now_ns - self.beat.start_ns < self.beat.on_ns {
             Setpoint {
                 force: self.beat.amplitude,
                 rate_per_s: rate,
@@ -436,7 +464,7 @@ impl ProfileRunner {
                 pending: None,
                 beat: Beat {
                     index: 0,
-                    start_ns: now_ns,
+                    start_ns: now_ns + c.start_rest_ns(),
                     period_ns: c.period_ns(),
                     on_ns: c.on_ns(),
                     bpm: c.bpm,
@@ -530,7 +558,8 @@ impl ProfileRunner {
     }
 
     /// The setpoint changes scheduled after `now_ns`, in time order, into `out` (returns how
-    /// many): for a cardiac profile the running contraction's end, then the onset and end
+    /// many): for a cardiac profile the running contraction's end (in the rest before the
+    /// first beat: its onset and end), then the onset and end
     /// of the next two beats (the next at the amplitude the outer loop has set for it, the
     /// one after at the same, its best guess). Other profiles announce nothing (an
     /// operator's setpoint, steps and ramps: rt-core decides causally). Call after
@@ -552,6 +581,8 @@ impl ProfileRunner {
         };
         let beat = run.beat;
         let rate = run.current.edge_rate(&self.limits);
+        // In the rest before the first beat, its onset is the first edge.
+        push(beat.start_ns, beat.amplitude, rate);
         push(beat.start_ns + beat.on_ns, 0.0, rate);
         let next = run.pending.unwrap_or(run.current);
         let next_rate = next.edge_rate(&self.limits);
@@ -602,6 +633,9 @@ impl ProfileRunner {
             }
             ProfileSpec::Cardiac(_) => {
                 let run = self.cardiac?;
+                if now_ns < run.beat.start_ns {
+                    return Some(run.beat.start_ns);
+                }
                 let on_end = run.beat.start_ns + run.beat.on_ns;
                 if now_ns < on_end {
                     return Some(on_end);
@@ -635,6 +669,7 @@ mod tests {
         ReferenceLimits::default()
     }
 
+    /// A cardiac profile whose first beat starts at once (no start rest).
     fn cardiac(bpm: f64, duty: f64, amplitude: f64) -> CardiacSpec {
         CardiacSpec {
             bpm,
@@ -642,7 +677,56 @@ mod tests {
             amplitude,
             edge_rate_per_s: None,
             outer_loop: None,
+            start_rest_ms: Some(0.0),
         }
+    }
+
+    /// By default the profile rests 200 ms before its first contraction, and the preview
+    /// announces that contraction from the start (onset and end, then the next beat's), so
+    /// rt-core's planner has the rest to plan it, as it has the rest phase before every
+    /// later one. The beats keep their period from the first onset, and the next change is
+    /// the onset. A rest outside [0, 2000] ms, or not a number, is refused.
+    #[test]
+    fn the_first_contraction_is_announced_through_the_start_rest() {
+        let t0 = 5_000 * MS;
+        let spec = CardiacSpec {
+            start_rest_ms: None,
+            ..cardiac(75.0, 0.4, 0.3)
+        };
+        assert_eq!(spec.start_rest_ns(), 200 * MS);
+        let mut run = ProfileRunner::start(ProfileSpec::Cardiac(spec), limits(), t0);
+        let mut ev = Vec::new();
+        for k in [0, 100, 199] {
+            assert_eq!(run.advance(t0 + k * MS, &mut ev).force, 0.0, "at {k} ms");
+        }
+        assert_eq!(run.next_change_ns(t0), Some(t0 + 200 * MS));
+        let mut edges = [PreviewEdge::default(); 6];
+        let n = run.preview(t0, &mut edges);
+        let times: Vec<_> = edges[..n].iter().map(|e| (e.t_ns - t0) / MS).collect();
+        assert_eq!(times, [200, 520, 1000, 1320, 1800, 2120]);
+        assert_eq!(edges[0].force, 0.3);
+        assert_eq!(run.advance(t0 + 200 * MS, &mut ev).force, 0.3);
+        assert_eq!(run.advance(t0 + 519 * MS, &mut ev).force, 0.3);
+        assert_eq!(run.advance(t0 + 520 * MS, &mut ev).force, 0.0);
+        assert_eq!(run.advance(t0 + 1000 * MS, &mut ev).force, 0.3);
+        let b = run.beat().unwrap();
+        assert_eq!((b.index, b.start_ns), (1, t0 + 1000 * MS));
+        for bad in [-1.0, 2000.5, f64::NAN] {
+            let spec = CardiacSpec {
+                start_rest_ms: Some(bad),
+                ..spec
+            };
+            assert!(
+                matches!(spec.validate(&limits()), Err(Rejection::Outside { .. })),
+                "{bad}"
+            );
+        }
+        CardiacSpec {
+            start_rest_ms: Some(2000.0),
+            ..spec
+        }
+        .validate(&limits())
+        .unwrap();
     }
 
     /// The preview announces what the setpoints will do: inside a contraction its end,

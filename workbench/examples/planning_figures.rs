@@ -32,6 +32,7 @@ fn main() {
         amplitude,
         edge_rate_per_s: None,
         outer_loop: Some(true),
+        start_rest_ms: None,
     });
     let mut verdicts = Vec::new();
     for (name, c) in [("on", &planned), ("off", &causal)] {

@@ -168,6 +168,11 @@ enum ProfileKind {
         /// Switch the outer loop on or off with this profile.
         #[arg(long, value_enum)]
         outer_loop: Option<OnOff>,
+        /// Rest before the first contraction, ms, 0..=2000 (default: the profile's, 200).
+        /// The first onset is announced from the start, so rt-core's planner plans the
+        /// first contraction as it plans the others.
+        #[arg(long)]
+        start_rest_ms: Option<f64>,
     },
     /// A constant force.
     Constant {
@@ -273,6 +278,7 @@ pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
         duty,
         amplitude,
         edge_rate,
+        start_rest_ms,
         ..
     } = &a.kind
     {
@@ -280,6 +286,7 @@ pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
         finite("--duty", Some(*duty))?;
         finite("--amplitude", Some(*amplitude))?;
         finite("--edge-rate", *edge_rate)?;
+        finite("--start-rest-ms", *start_rest_ms)?;
     }
     if let ProfileKind::Constant { force, rate } = &a.kind {
         finite("--force", Some(*force))?;
@@ -292,12 +299,14 @@ pub fn profile(a: ProfileArgs) -> anyhow::Result<()> {
             amplitude,
             edge_rate,
             outer_loop,
+            start_rest_ms,
         } => ProfileSpec::Cardiac(CardiacSpec {
             bpm: hr,
             duty,
             amplitude,
             edge_rate_per_s: edge_rate,
             outer_loop: outer_loop.map(|o| o == OnOff::On),
+            start_rest_ms,
         }),
         ProfileKind::Constant { force, rate } => ProfileSpec::Constant {
             force,

@@ -57,6 +57,11 @@ pub struct Args {
     /// docs/bench.md, "The CFT front"). 0: stimulate the whole contraction.
     #[arg(long, default_value_t = 0)]
     pub stim_lead_ms: u32,
+    /// Rest before the first contraction, ms (default: the profile's). The first onset is
+    /// announced in the reference preview from the start, so the planner plans the first
+    /// contraction as it plans every later one (docs/control.md, section 11).
+    #[arg(long)]
+    pub start_rest_ms: Option<f64>,
     /// Outer loop (thesis Controller 1).
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub outer_loop: OnOff,
@@ -238,6 +243,7 @@ fn cardiac(a: &Args) -> CardiacSpec {
         amplitude: a.amplitude,
         edge_rate_per_s: None,
         outer_loop: Some(a.outer_loop == OnOff::On),
+        start_rest_ms: a.start_rest_ms,
     }
 }
 

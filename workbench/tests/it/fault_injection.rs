@@ -592,6 +592,7 @@ fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
                 amplitude: 0.3,
                 edge_rate_per_s: None,
                 outer_loop: None,
+                start_rest_ms: None,
             }))
             .expect("re-arm");
         std::thread::sleep(Duration::from_millis(500));
@@ -1298,6 +1299,7 @@ fn a_5x_amplitude_slip_in_rt_core_is_refused_before_any_pulse() {
                 amplitude: 0.3,
                 edge_rate_per_s: None,
                 outer_loop: None,
+                start_rest_ms: None,
             }));
             std::thread::sleep(Duration::from_millis(1500));
             let _ = stack.stop(Duration::from_secs(5));
@@ -1344,6 +1346,7 @@ fn a_stimulator_that_applies_a_looser_limit_is_refused_at_arm() {
         amplitude: 0.3,
         edge_rate_per_s: None,
         outer_loop: None,
+        start_rest_ms: None,
     }));
     std::thread::sleep(Duration::from_millis(500));
     let _ = stack.stop(Duration::from_secs(5));

@@ -60,6 +60,7 @@ fn cardiac() -> ProfileSpec {
         amplitude: TARGET,
         edge_rate_per_s: None,
         outer_loop: None,
+        start_rest_ms: None,
     })
 }
 

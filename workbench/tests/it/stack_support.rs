@@ -61,6 +61,7 @@ pub fn start_armed(
             amplitude: 0.3,
             edge_rate_per_s: None,
             outer_loop: None,
+            start_rest_ms: None,
         }))
         .unwrap_or_else(|e| panic!("{what}: arm and cardiac profile: {e}"));
     stack
