@@ -11,7 +11,7 @@
 
 use std::path::PathBuf;
 
-use fes_bench::simulation::{SimSettings, simulate};
+use fes_bench::simulation::{SimResult, SimSettings, T0_NS, simulate};
 use fes_model::control::file::Controller;
 use fes_model::control::planner::PlanningMode;
 use sim_muscle::preset::Preset;
@@ -69,7 +69,7 @@ fn main() {
                 v.lcn.pulses_per_contraction, v.lcn.rms_error
             ),
             &rs,
-            (8.0, 8.8),
+            beat_window(&run, 10),
         )
         .unwrap();
         println!("{}: {:?}", path.display(), v.lcn);
@@ -84,4 +84,12 @@ fn main() {
     )
     .unwrap();
     println!("{}", path.display());
+}
+
+/// The time span of beat `index` (s from the run's start): the beats start after the
+/// profile's start rest.
+fn beat_window(run: &SimResult, index: usize) -> (f64, f64) {
+    let b = run.beats[index].measurement.beat;
+    let start = (b.start_ns - T0_NS) as f64 * 1e-9;
+    (start, start + b.period_ns as f64 * 1e-9)
 }
