@@ -29,30 +29,31 @@ const HALF: i32 = 40;
 
 type Res<DB> = Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
 
+/// Where a label's `at` point lies on its text.
+#[derive(Clone, Copy)]
+enum Anchor {
+    /// The text's top left corner.
+    TopLeft,
+    /// The text's centre.
+    Centre,
+}
+
 fn text<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     s: &str,
     at: (i32, i32),
     size: u32,
     color: &RGBColor,
+    anchor: Anchor,
 ) -> Res<DB> {
     let style = TextStyle::from(("sans-serif", size).into_font()).color(color);
-    root.draw(&Text::new(s.to_string(), at, style))
-}
-
-fn centred<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    s: &str,
-    at: (i32, i32),
-    size: u32,
-    color: &RGBColor,
-) -> Res<DB> {
-    let style = TextStyle::from(("sans-serif", size).into_font())
-        .color(color)
-        .pos(text_anchor::Pos::new(
+    let style = match anchor {
+        Anchor::TopLeft => style,
+        Anchor::Centre => style.pos(text_anchor::Pos::new(
             text_anchor::HPos::Center,
             text_anchor::VPos::Center,
-        ));
+        )),
+    };
     root.draw(&Text::new(s.to_string(), at, style))
 }
 
@@ -91,12 +92,13 @@ fn arrow<DB: DrawingBackend>(
 /// Draws the sketch on `root` (of [`SIZE`]).
 pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
     root.fill(&WHITE)?;
-    centred(
+    text(
         root,
         "Fig. E.1: the heat-transfer process (sim-heat)",
         (500, 24),
         22,
         &BLACK,
+        Anchor::Centre,
     )?;
     let (top, bottom) = (AXIS - HALF, AXIS + HALF);
 
@@ -112,7 +114,7 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
     for y in [top, bottom] {
         path(root, vec![(t0, y), (t1, y)], &WALL, 4)?;
     }
-    centred(root, "tube", (640, bottom + 22), 17, &BLACK)?;
+    text(root, "tube", (640, bottom + 22), 17, &BLACK, Anchor::Centre)?;
 
     // The heating resistor at the tube input, across the air stream, fed with u.
     let rx = 405;
@@ -129,7 +131,7 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
 
     // Air out.
     arrow(root, (t1 + 5, AXIS), (975, AXIS), &HOT)?;
-    centred(root, "air out", (940, AXIS + 22), 16, &HOT)?;
+    text(root, "air out", (940, AXIS + 22), 16, &HOT, Anchor::Centre)?;
 
     // What the sketch means for the model.
     draw_notes(root)?;
@@ -139,7 +141,7 @@ pub fn draw_rig<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
 /// Draws the air inlet: the duct with the throttle valve at angle alpha.
 fn draw_inlet<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: i32, bottom: i32) -> Res<DB> {
     arrow(root, (20, AXIS), (95, AXIS), &AIR)?;
-    centred(root, "air in", (55, AXIS + 22), 16, &AIR)?;
+    text(root, "air in", (55, AXIS + 22), 16, &AIR, Anchor::Centre)?;
     for y in [top, bottom] {
         path(root, vec![(100, y), (230, y)], &WALL, 4)?;
     }
@@ -170,14 +172,22 @@ fn draw_inlet<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: i32, botto
         .collect();
     path(root, vec![(vx, vy), (vx, vy - 34)], &VALVE, 1)?;
     path(root, arc, &VALVE, 2)?;
-    text(root, "α", (vx + 24, vy - 38), 22, &VALVE)?;
-    centred(root, "throttle valve", (vx, top - 70), 17, &VALVE)?;
-    centred(
+    text(root, "α", (vx + 24, vy - 38), 22, &VALVE, Anchor::TopLeft)?;
+    text(
+        root,
+        "throttle valve",
+        (vx, top - 70),
+        17,
+        &VALVE,
+        Anchor::Centre,
+    )?;
+    text(
         root,
         "angle α: 20° nearly closed … 120° open",
         (vx, top - 50),
         15,
         &VALVE,
+        Anchor::Centre,
     )?;
     Ok(())
 }
@@ -205,7 +215,7 @@ fn draw_fan<DB: DrawingBackend>(
         ))?;
     }
     root.draw(&Circle::new((fx, fy), 7, WALL.filled()))?;
-    centred(root, "fan", (fx, fy + fr + 20), 17, &BLACK)?;
+    text(root, "fan", (fx, fy + fr + 20), 17, &BLACK, Anchor::Centre)?;
     Ok(())
 }
 
@@ -238,15 +248,23 @@ fn draw_resistor<DB: DrawingBackend>(
         path(root, vec![(rx - w, y), (rx + w, y)], &HOT, 2)?;
     }
     root.draw(&Circle::new((ux, uy), 20, HOT.stroke_width(3)))?;
-    centred(root, "u", (ux, uy), 22, &HOT)?;
+    text(root, "u", (ux, uy), 22, &HOT, Anchor::Centre)?;
     text(
         root,
         "heating resistor, voltage u (0 … 10 V)",
         (ux + 30, uy - 8),
         17,
         &HOT,
+        Anchor::TopLeft,
     )?;
-    text(root, "heat ∝ u²", (ux + 30, uy + 14), 15, &HOT)?;
+    text(
+        root,
+        "heat ∝ u²",
+        (ux + 30, uy + 14),
+        15,
+        &HOT,
+        Anchor::TopLeft,
+    )?;
     Ok(())
 }
 
@@ -260,33 +278,36 @@ fn draw_thermocouple<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, top: i32
         [(cx - 22, 95), (cx + 22, 135)],
         SIGNAL.stroke_width(3),
     ))?;
-    centred(root, "y", (cx, 115), 22, &SIGNAL)?;
-    centred(
+    text(root, "y", (cx, 115), 22, &SIGNAL, Anchor::Centre)?;
+    text(
         root,
         "thermocouple: outlet temperature y",
         (cx - 60, 70),
         17,
         &SIGNAL,
+        Anchor::Centre,
     )?;
     Ok(())
 }
 
 /// Writes what the sketch means for the model under it.
 fn draw_notes<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> Res<DB> {
-    centred(
+    text(
         root,
         "inputs α, u; output y; sampled every 50 ms. Opening the valve moves more air: \
          lower gain u → y, shorter delay, faster response.",
         (500, 395),
         15,
         &BLACK,
+        Anchor::Centre,
     )?;
-    centred(
+    text(
         root,
         "The delay u → y is the resistor's conduction plus the air's transit to the thermocouple.",
         (500, 418),
         15,
         &BLACK,
+        Anchor::Centre,
     )?;
     Ok(())
 }
