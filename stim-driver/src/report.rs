@@ -25,6 +25,7 @@ use fes_rt::rt::clock::monotonic_ns;
 use fes_rt::rt::hlog::HlogWriter;
 use fes_rt::rt::liveness::{Liveness, LivenessMonitor};
 use fes_rt::rt::node::{RunError, create_node};
+use fes_rt::rt::telemetry::IntervalQuantities;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::ipc;
 use tracing::{debug, error, info, warn};
@@ -443,6 +444,7 @@ impl<'a> Reporter<'a> {
                     now.saturating_sub(self.interval_start),
                 )
                 .map_err(RunError::Hlog)?;
+            log.flush().map_err(RunError::Hlog)?;
         }
         self.interval_start = now;
         self.report_seq += 1;

@@ -12,11 +12,10 @@
 //! | `input` | wake-up → every input taken and handled | wake-up | `input` |
 //! | `wake` | lateness of timed wake-ups (watchdog, heartbeat) behind their deadline | timed wake-up | `wake` |
 
-use std::time::Duration;
-
 use fes_rt::msg::{TimingReport, TimingSource};
-use fes_rt::rt::hlog::{HlogError, HlogWriter};
-use fes_rt::rt::telemetry::{Quantity, TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_WAKE};
+use fes_rt::rt::telemetry::{
+    IntervalQuantities, Quantity, TAG_COMPUTE, TAG_INPUT, TAG_IPC, TAG_WAKE,
+};
 
 use crate::event::{Counters, DriverEvent};
 
@@ -92,31 +91,6 @@ impl DriverTelemetry {
         self.tick_to_tx_stamp.record(ns);
     }
 
-    fn quantities(&mut self) -> [(&'static str, &mut Quantity); 7] {
-        [
-            (TAG_TICK_TO_CAN, &mut self.tick_to_can),
-            (TAG_CAN_WRITE, &mut self.can_write),
-            (TAG_TICK_TO_TX_STAMP, &mut self.tick_to_tx_stamp),
-            (TAG_IPC, &mut self.ipc),
-            (TAG_COMPUTE, &mut self.compute),
-            (TAG_INPUT, &mut self.input),
-            (TAG_WAKE, &mut self.wake),
-        ]
-    }
-
-    /// Writes the current interval of every quantity and starts new ones.
-    pub fn write_interval(
-        &mut self,
-        log: &mut HlogWriter,
-        start: Duration,
-        duration: Duration,
-    ) -> Result<(), HlogError> {
-        for (tag, q) in self.quantities() {
-            q.write_interval(log, tag, start, duration)?;
-        }
-        log.flush()
-    }
-
     /// A cumulative [`TimingReport`] (`source = StimDriver`; field mapping in the module
     /// documentation): `ticks` = StimTicks received, `misses` = ticks lost, `overruns` =
     /// `seq` gaps, `rejected_inputs` = refused ticks and commands.
@@ -147,6 +121,20 @@ impl DriverTelemetry {
             flags,
             prescription: [0; 6],
         }
+    }
+}
+
+impl IntervalQuantities for DriverTelemetry {
+    fn quantities(&mut self) -> impl IntoIterator<Item = (&'static str, &mut Quantity)> {
+        [
+            (TAG_TICK_TO_CAN, &mut self.tick_to_can),
+            (TAG_CAN_WRITE, &mut self.can_write),
+            (TAG_TICK_TO_TX_STAMP, &mut self.tick_to_tx_stamp),
+            (TAG_IPC, &mut self.ipc),
+            (TAG_COMPUTE, &mut self.compute),
+            (TAG_INPUT, &mut self.input),
+            (TAG_WAKE, &mut self.wake),
+        ]
     }
 }
 

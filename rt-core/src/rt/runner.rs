@@ -33,7 +33,9 @@ use fes_rt::rt::alloc;
 use fes_rt::rt::clock::{PeriodicClock, Wakeup, monotonic_ns};
 use fes_rt::rt::hlog::HlogWriter;
 use fes_rt::rt::realtime::{RtStatus, enter_realtime};
-use fes_rt::rt::telemetry::{LoopCounters, TelemetryChannel, TickTiming, TimingAggregator};
+use fes_rt::rt::telemetry::{
+    IntervalQuantities, LoopCounters, TelemetryChannel, TickTiming, TimingAggregator,
+};
 
 /// How a finished real-time loop went.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -10,7 +10,8 @@ use fes_rt::msg::{Contract, TimingSource};
 use fes_rt::rt::histogram::LatencyHistogram;
 use fes_rt::rt::hlog::{HlogWriter, merge_by_tag, read_intervals};
 use fes_rt::rt::telemetry::{
-    TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE, TelemetryChannel, TickTiming, TimingAggregator,
+    IntervalQuantities, TAG_COMPUTE, TAG_INPUT, TAG_PUBLISH, TAG_WAKE, TelemetryChannel,
+    TickTiming, TimingAggregator,
 };
 use hdrhistogram::serialization::Deserializer;
 use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};

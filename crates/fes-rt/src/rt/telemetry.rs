@@ -221,6 +221,26 @@ impl Quantity {
     }
 }
 
+/// A process's histograms written together as one `.hlog` interval: every process writes
+/// its intervals the same way and only names its quantities.
+pub trait IntervalQuantities {
+    /// Each quantity with its hlog tag, in the order they are written.
+    fn quantities(&mut self) -> impl IntoIterator<Item = (&'static str, &mut Quantity)>;
+
+    /// Writes the current interval of every quantity and starts new ones.
+    fn write_interval(
+        &mut self,
+        log: &mut HlogWriter,
+        start: Duration,
+        duration: Duration,
+    ) -> Result<(), HlogError> {
+        for (tag, q) in self.quantities() {
+            q.write_interval(log, tag, start, duration)?;
+        }
+        Ok(())
+    }
+}
+
 /// The telemetry thread's state: cumulative and per-interval histograms.
 #[derive(Debug, Clone, Default)]
 pub struct TimingAggregator {
@@ -274,25 +294,6 @@ impl TimingAggregator {
         self.publish.total()
     }
 
-    /// Writes the current interval (tags [`TAG_WAKE`], [`TAG_INPUT`], [`TAG_COMPUTE`],
-    /// [`TAG_PUBLISH`]) and starts a new one.
-    pub fn write_interval(
-        &mut self,
-        log: &mut HlogWriter,
-        start: Duration,
-        duration: Duration,
-    ) -> Result<(), HlogError> {
-        for (tag, q) in [
-            (TAG_WAKE, &mut self.wake),
-            (TAG_INPUT, &mut self.input),
-            (TAG_COMPUTE, &mut self.compute),
-            (TAG_PUBLISH, &mut self.publish),
-        ] {
-            q.write_interval(log, tag, start, duration)?;
-        }
-        Ok(())
-    }
-
     /// A cumulative [`TimingReport`] (without `ipc`, which receivers measure).
     pub fn report(
         &self,
@@ -321,5 +322,17 @@ impl TimingAggregator {
             flags,
             prescription: [0; 6],
         }
+    }
+}
+
+/// Tags [`TAG_WAKE`], [`TAG_INPUT`], [`TAG_COMPUTE`], [`TAG_PUBLISH`].
+impl IntervalQuantities for TimingAggregator {
+    fn quantities(&mut self) -> impl IntoIterator<Item = (&'static str, &mut Quantity)> {
+        [
+            (TAG_WAKE, &mut self.wake),
+            (TAG_INPUT, &mut self.input),
+            (TAG_COMPUTE, &mut self.compute),
+            (TAG_PUBLISH, &mut self.publish),
+        ]
     }
 }
