@@ -2,6 +2,7 @@
 //! pulses x IPI `--ipi-min-ms`..`--ipi-max-ms`, as heat maps and 3-D surfaces.
 
 use std::fmt::Write as _;
+use std::path::Path;
 
 use anyhow::{Context, Result};
 use fes_ident::analysis::osp::trains::{TrainSurface, train_surface};
@@ -77,22 +78,32 @@ fn report(args: &Args, out: &TrainsOutcome, md: &mut String) -> Result<()> {
     let (lo, hi) = out.scale();
     let maps: Vec<HeatMap> = out.surfaces.iter().map(heat_map).collect();
     let n = out.surfaces.len() as u32;
-    plots::save_heatmaps(
-        &maps,
-        "constant-frequency train method (6.3, Fig. 6.3): FTIpP (red > 1 > blue)",
-        (lo, 1.0, hi),
-        "FTIpP",
-        &args.format.file(&args.out, "trains"),
-        (520 * n + 110, 520),
-    )?;
-    plots::save_surfaces(
-        &maps,
-        "constant-frequency train method (6.3, Fig. 6.3): FTIpP surface",
-        (lo, 1.0, hi),
-        "FTIpP",
-        &args.format.file(&args.out, "trains_3d"),
-        (560 * n, 520),
-    )?;
+    // The same maps drawn flat and in 3-D: figure, title, file stem, size.
+    type Save = fn(&[HeatMap], &str, (f64, f64, f64), &str, &Path, (u32, u32)) -> Result<()>;
+    let figures: [(Save, &str, &str, (u32, u32)); 2] = [
+        (
+            plots::save_heatmaps,
+            "constant-frequency train method (6.3, Fig. 6.3): FTIpP (red > 1 > blue)",
+            "trains",
+            (520 * n + 110, 520),
+        ),
+        (
+            plots::save_surfaces,
+            "constant-frequency train method (6.3, Fig. 6.3): FTIpP surface",
+            "trains_3d",
+            (560 * n, 520),
+        ),
+    ];
+    for (save, title, stem, size) in figures {
+        save(
+            &maps,
+            title,
+            (lo, 1.0, hi),
+            "FTIpP",
+            &args.format.file(&args.out, stem),
+            size,
+        )?;
+    }
     Section {
         stem: "trains",
         csv_header: &["subject", "pulses", "ipi_ms", "fti", "ftipp", "peak"],
