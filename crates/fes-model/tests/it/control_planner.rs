@@ -466,6 +466,16 @@ fn a_stall_at_rest_leaves_the_plan_on_the_schedule() {
     assert_eq!((s.replans, s.skipped_ticks), (0, 6), "{s:?}");
 }
 
+/// The ticks that fired in `n` ticks of `c` with the shipped planning and no stall.
+fn calm_pulses(c: Cardiac, n: usize) -> Vec<usize> {
+    pulses(&run(
+        &mut controller(planning()).pattern_generator().unwrap(),
+        c,
+        n,
+        true,
+    ))
+}
+
 #[test]
 fn a_plateau_pulse_lost_in_a_stall_is_fired_late_not_left_out() {
     // A 6-period stall over a planned pulse in the middle of the third contraction's
@@ -477,12 +487,7 @@ fn a_plateau_pulse_lost_in_a_stall_is_fired_late_not_left_out() {
     let c = CARDIAC;
     let n = 4 * c.period;
     let onset = 2 * c.period;
-    let calm = pulses(&run(
-        &mut controller(planning()).pattern_generator().unwrap(),
-        c,
-        n,
-        true,
-    ));
+    let calm = calm_pulses(c, n);
     let in_third = |v: &[usize]| {
         v.iter()
             .copied()
@@ -522,12 +527,7 @@ fn a_pulse_lost_in_a_stall_is_planned_around_without_a_replan() {
     let c = CARDIAC;
     let n = 4 * c.period;
     let onset = 2 * c.period;
-    let calm = pulses(&run(
-        &mut controller(planning()).pattern_generator().unwrap(),
-        c,
-        n,
-        true,
-    ));
+    let calm = calm_pulses(c, n);
     assert!(
         calm.contains(&onset),
         "the calm plan fires at the onset: {calm:?}"
