@@ -73,8 +73,27 @@ class FormatError(ValueError):
     """A file violates its format; the message names the file and line."""
 
 
+class _Records:
+    """What both data set versions answer from their ``samples`` and ``meta["split"]``."""
+
+    samples: pd.DataFrame
+    meta: dict
+
+    def record(self, i: int) -> pd.DataFrame:
+        """The samples of record ``i`` (numbered from 0, as in dataset.json)."""
+        return self.samples[self.samples["record"] == i].reset_index(drop=True)
+
+    def train(self) -> pd.DataFrame:
+        """The samples of the training records."""
+        return self.samples[self.samples["record"].isin(self.meta["split"]["train"])]
+
+    def test(self) -> pd.DataFrame:
+        """The samples of the test records."""
+        return self.samples[self.samples["record"].isin(self.meta["split"]["test"])]
+
+
 @dataclass
-class DataSet:
+class DataSet(_Records):
     """A fes-dataset/1 data set.
 
     meta     dataset.json without its record list (schema, source, scale_n, offset_n, ts_s,
@@ -91,21 +110,9 @@ class DataSet:
     records: pd.DataFrame
     samples: pd.DataFrame
 
-    def record(self, i: int) -> pd.DataFrame:
-        """The samples of record ``i`` (numbered from 0, as in dataset.json)."""
-        return self.samples[self.samples["record"] == i].reset_index(drop=True)
-
-    def train(self) -> pd.DataFrame:
-        """The samples of the training records."""
-        return self.samples[self.samples["record"].isin(self.meta["split"]["train"])]
-
-    def test(self) -> pd.DataFrame:
-        """The samples of the test records."""
-        return self.samples[self.samples["record"].isin(self.meta["split"]["test"])]
-
 
 @dataclass
-class SignalSet:
+class SignalSet(_Records):
     """A fes-dataset/2 data set: named continuous channels sampled every ``ts_s`` seconds.
 
     meta     dataset.json without its record list (schema, source, seed, parameters,
@@ -132,18 +139,6 @@ class SignalSet:
     def channels(self) -> list:
         """The channel names, inputs first, as the record files' columns after ``t_s``."""
         return list(self.inputs["name"]) + list(self.outputs["name"])
-
-    def record(self, i: int) -> pd.DataFrame:
-        """The samples of record ``i`` (numbered from 0, as in dataset.json)."""
-        return self.samples[self.samples["record"] == i].reset_index(drop=True)
-
-    def train(self) -> pd.DataFrame:
-        """The samples of the training records."""
-        return self.samples[self.samples["record"].isin(self.meta["split"]["train"])]
-
-    def test(self) -> pd.DataFrame:
-        """The samples of the test records."""
-        return self.samples[self.samples["record"].isin(self.meta["split"]["test"])]
 
     def physical(self, name: str, samples: pd.DataFrame | None = None) -> pd.Series:
         """Channel ``name`` of ``samples`` (default: every sample) in physical units:
