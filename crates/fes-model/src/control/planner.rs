@@ -42,9 +42,10 @@
 //! fired. When the state the generator hands in differs from the one the plan predicted
 //! (the measured-force mode's estimator corrected it, or the causal loop decided before a
 //! plan existed, or a pulse it wanted fell in a period the caller skipped, which then
-//! moves to the first tick allowed after it), the plan is re-evaluated from the state now; when the announced contraction changes (the outer
-//! loop moved the next level, an operator's change), it is made again. A stall is not a
-//! change: the clock counts the periods skipped ([`Planner::skip`]).
+//! moves to the first tick allowed after it), the plan is re-evaluated from the state
+//! now; when the announced contraction changes (the outer loop moved the next level, an
+//! operator's change), it is made again. A stall is not a change: the clock counts the
+//! periods skipped ([`Planner::skip`]).
 //!
 //! **Budget.** Work is counted in network steps: at most `budget_steps` per tick (plus one
 //! rollout already started), and a caller's deadline ([`Deadline`], rt-core's clock) is
