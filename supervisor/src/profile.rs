@@ -377,7 +377,7 @@ impl CardiacRun {
         }
         let rate = self.current.edge_rate(limits);
         // Before the first beat (the start rest): rest.
-        if now_ns >= self.beat.start_ns && now_ns - self.beat.start_ns < self.beat.on_ns {
+        if (self.beat.start_ns..self.beat.start_ns + self.beat.on_ns).contains(&now_ns) {
             Setpoint {
                 force: self.beat.amplitude,
                 rate_per_s: rate,
