@@ -428,7 +428,8 @@ impl SupervisorCore {
     fn start_profile(&mut self, spec: ProfileSpec, now_ns: u64) {
         self.contraction = ContractionEstimator::new(self.contraction_settings);
         let run = ProfileRunner::start(spec, self.limits, now_ns);
-        if let Some(b) = run.first_beat() {
+        // Just started, the running beat is the first: announce it now.
+        if let Some(b) = run.beat() {
             self.contraction.begin(b);
             self.beat_starts.push(b);
         }

@@ -595,11 +595,6 @@ impl ProfileRunner {
         n
     }
 
-    /// The first beat of a cardiac profile (to announce it when the profile starts).
-    pub fn first_beat(&self) -> Option<Beat> {
-        self.cardiac.map(|c| c.beat)
-    }
-
     /// The next time after `now_ns` at which the setpoint changes, if any (so the caller
     /// can publish edges on time instead of on its next period).
     pub fn next_change_ns(&self, now_ns: u64) -> Option<u64> {
