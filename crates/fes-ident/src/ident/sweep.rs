@@ -157,60 +157,45 @@ pub fn setups(quick: bool, seed: u64) -> Vec<Setup> {
         ..IdentOptions::default()
     };
     ROWS.iter()
-        .map(|r| Setup {
-            scheduling: r.scheduling,
-            domain: r.domain,
-            mode: r.mode,
-            options: IdentOptions {
-                structure: r.structure,
-                mode: r.mode,
-                scheduling: r.kind,
-                zero_offsets: r.zero_offsets,
-                ..base.clone()
+        .map(
+            |&Row(scheduling, domain, structure, mode, kind, zero_offsets)| Setup {
+                scheduling,
+                domain,
+                mode,
+                options: IdentOptions {
+                    structure,
+                    mode,
+                    scheduling: kind,
+                    zero_offsets,
+                    ..base.clone()
+                },
+                units: match (scheduling, mode) {
+                    ("(linear)", _) => 1..=1,
+                    (_, Mode::Prediction) => 1..=pred_max,
+                    (_, Mode::Simulation) => 1..=sim_max,
+                },
+                ts_factors: match (scheduling, structure) {
+                    ("(linear)", Structure::ArxShift) => vec![1, 5, 10],
+                    (_, Structure::ArxShift) => Vec::new(),
+                    _ => vec![1],
+                },
             },
-            units: match (r.scheduling, r.mode) {
-                ("(linear)", _) => 1..=1,
-                (_, Mode::Prediction) => 1..=pred_max,
-                (_, Mode::Simulation) => 1..=sim_max,
-            },
-            ts_factors: match (r.scheduling, r.structure) {
-                ("(linear)", Structure::ArxShift) => vec![1, 5, 10],
-                (_, Structure::ArxShift) => Vec::new(),
-                _ => vec![1],
-            },
-        })
+        )
         .collect()
 }
 
-/// One row of Tables 5.1 / 5.2 as [`setups`] builds it: linear rows fit one unit and try
-/// the periods 1, 5 and 10 (shift) or 1 (delta); network shift rows take the linear rows'
-/// best period; delta and state-space rows run at the data's period.
-struct Row {
-    scheduling: &'static str,
-    domain: &'static str,
-    structure: Structure,
-    mode: Mode,
-    kind: SchedulingKind,
-    zero_offsets: bool,
-}
-
-const fn row(
-    scheduling: &'static str,
-    domain: &'static str,
-    structure: Structure,
-    mode: Mode,
-    kind: SchedulingKind,
-    zero_offsets: bool,
-) -> Row {
-    Row {
-        scheduling,
-        domain,
-        structure,
-        mode,
-        kind,
-        zero_offsets,
-    }
-}
+/// One row of Tables 5.1 / 5.2 as [`setups`] builds it: scheduling, domain, structure,
+/// mode, scheduling kind, zero offsets. Linear rows fit one unit and try the periods 1, 5
+/// and 10 (shift) or 1 (delta); network shift rows take the linear rows' best period;
+/// delta and state-space rows run at the data's period.
+struct Row(
+    &'static str,
+    &'static str,
+    Structure,
+    Mode,
+    SchedulingKind,
+    bool,
+);
 
 /// The rows, in the order of the tables.
 const ROWS: [Row; 11] = {
@@ -218,17 +203,17 @@ const ROWS: [Row; 11] = {
     use SchedulingKind::{Input as I, Output as O};
     use Structure::*;
     [
-        row("(linear)", "shift", ArxShift, P, I, false),
-        row("(linear)", "shift", ArxShift, S, I, false),
-        row("(linear)", "delta", ArxDelta, S, I, false),
-        row("output", "shift", ArxShift, P, O, false),
-        row("output", "delta", ArxDelta, S, O, false),
-        row("input", "shift", ArxShift, P, I, false),
-        row("input", "shift", ArxShift, S, I, false),
-        row("input", "delta", ArxDelta, S, I, false),
-        row("input", "ss, local eigenvectors", SsEigLocal, S, I, false),
-        row("input", "ss, common eigenvectors", SsEigCommon, S, I, false),
-        row(
+        Row("(linear)", "shift", ArxShift, P, I, false),
+        Row("(linear)", "shift", ArxShift, S, I, false),
+        Row("(linear)", "delta", ArxDelta, S, I, false),
+        Row("output", "shift", ArxShift, P, O, false),
+        Row("output", "delta", ArxDelta, S, O, false),
+        Row("input", "shift", ArxShift, P, I, false),
+        Row("input", "shift", ArxShift, S, I, false),
+        Row("input", "delta", ArxDelta, S, I, false),
+        Row("input", "ss, local eigenvectors", SsEigLocal, S, I, false),
+        Row("input", "ss, common eigenvectors", SsEigCommon, S, I, false),
+        Row(
             "input",
             "ss, common eigenvectors, zero offsets",
             SsEigCommon,
