@@ -163,6 +163,25 @@ pub enum FormatError {
     },
 }
 
+/// An I/O error on one file or directory of a data set, reading or writing: one type, so
+/// both directions name the path the same way.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", path.display())]
+pub struct FileError {
+    /// The file or directory.
+    pub path: PathBuf,
+    /// The I/O error.
+    pub source: io::Error,
+}
+
+impl FileError {
+    /// Tags an I/O error on `path` (for `map_err`).
+    fn at(path: &Path) -> impl FnOnce(io::Error) -> Self + use<> {
+        let path = path.to_path_buf();
+        move |source| Self { path, source }
+    }
+}
+
 /// Why a data set could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
@@ -173,13 +192,8 @@ pub enum ReadError {
         path: PathBuf,
     },
     /// A file could not be read (missing, permissions...).
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileError),
     /// The content violates the format.
     #[error(transparent)]
     Format(#[from] FormatError),
@@ -195,14 +209,9 @@ pub enum WriteError {
         /// The directory.
         path: PathBuf,
     },
-    /// A file could not be written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file or directory.
-        path: PathBuf,
-        /// The I/O error.
-        source: io::Error,
-    },
+    /// A file or directory could not be written.
+    #[error(transparent)]
+    Io(#[from] FileError),
     /// The data set violates the format.
     #[error(transparent)]
     Format(#[from] FormatError),
@@ -521,14 +530,10 @@ fn write_files<N: AsRef<Path>>(
     records: impl IntoIterator<Item = (N, String)>,
     meta: &impl Serialize,
 ) -> Result<(), WriteError> {
-    let io = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| WriteError::Io { path, source }
-    };
     prepare_dir(dir, mode)?;
     for (file, text) in records {
         let path = dir.join(file);
-        fs::write(&path, text).map_err(io(&path))?;
+        fs::write(&path, text).map_err(FileError::at(&path))?;
     }
     let meta_path = dir.join(META_FILE);
     let mut text = serde_json::to_string_pretty(meta).map_err(|e| FormatError::Json {
@@ -538,7 +543,7 @@ fn write_files<N: AsRef<Path>>(
         message: e.to_string(),
     })?;
     text.push('\n');
-    fs::write(&meta_path, text).map_err(io(&meta_path))?;
+    fs::write(&meta_path, text).map_err(FileError::at(&meta_path))?;
     Ok(())
 }
 
@@ -556,10 +561,7 @@ fn read_meta(dir: &Path) -> Result<(PathBuf, Vec<u8>), ReadError> {
 
 /// The bytes of a data set's file.
 fn read_file(path: &Path) -> Result<Vec<u8>, ReadError> {
-    fs::read(path).map_err(|source| ReadError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(fs::read(path).map_err(FileError::at(path))?)
 }
 
 /// A record whose `what` (samples, pulses) differs from what `dataset.json` lists for it.
@@ -584,12 +586,8 @@ fn check_listed(
 /// Makes `dir` ready for a data set: created if missing; if it is not empty, refused
 /// ([`WriteMode::CreateNew`]) or the previous data set removed ([`WriteMode::Overwrite`]).
 fn prepare_dir(dir: &Path, mode: WriteMode) -> Result<(), WriteError> {
-    let io = |source| WriteError::Io {
-        path: dir.to_path_buf(),
-        source,
-    };
     if dir.exists() {
-        let mut entries = fs::read_dir(dir).map_err(io)?;
+        let mut entries = fs::read_dir(dir).map_err(FileError::at(dir))?;
         if entries.next().is_some() {
             match mode {
                 WriteMode::CreateNew => {
@@ -601,7 +599,7 @@ fn prepare_dir(dir: &Path, mode: WriteMode) -> Result<(), WriteError> {
             }
         }
     } else {
-        fs::create_dir_all(dir).map_err(io)?;
+        fs::create_dir_all(dir).map_err(FileError::at(dir))?;
     }
     Ok(())
 }
@@ -626,15 +624,12 @@ fn remove_previous(dir: &Path) -> Result<(), WriteError> {
             if is_plain_file_name(&f.file) {
                 let path = dir.join(&f.file);
                 if path.is_file() {
-                    fs::remove_file(&path).map_err(|source| WriteError::Io { path, source })?;
+                    fs::remove_file(&path).map_err(FileError::at(&path))?;
                 }
             }
         }
     }
-    fs::remove_file(&meta_path).map_err(|source| WriteError::Io {
-        path: meta_path,
-        source,
-    })
+    Ok(fs::remove_file(&meta_path).map_err(FileError::at(&meta_path))?)
 }
 
 /// The CSV text of a record. Numbers use Rust's shortest round-trip form, so reading
