@@ -124,40 +124,17 @@ pub enum ImportError {
         problem: String,
     },
     /// A record spans less than two grid samples.
-    #[error("{}:{first_line}-{last_line}: record {record} spans {span_ms} ms, less than two samples of {ts_ms} ms; {hint}", path.display())]
+    #[error("{span}, less than two samples of {ts_ms} ms; {hint}", ts_ms = span.ts_ms)]
     RecordTooShort {
-        /// The file.
-        path: PathBuf,
-        /// Record index.
-        record: usize,
-        /// Its first line.
-        first_line: usize,
-        /// Its last line.
-        last_line: usize,
-        /// Its span, ms.
-        span_ms: f64,
-        /// The grid's sample period, ms.
-        ts_ms: f64,
+        /// The record.
+        span: RecordSpan,
         /// What splits records.
         hint: String,
     },
     /// A record would be longer than [`MAX_GRID_SAMPLES`] on the grid (a time in the wrong
     /// unit, or a missing split).
-    #[error("{}:{first_line}-{last_line}: record {record} spans {span_ms} ms: more than {max} samples of {ts_ms} ms; check the time unit and the record split", path.display(), max = MAX_GRID_SAMPLES)]
-    RecordTooLong {
-        /// The file.
-        path: PathBuf,
-        /// Record index.
-        record: usize,
-        /// Its first line.
-        first_line: usize,
-        /// Its last line.
-        last_line: usize,
-        /// Its span, ms.
-        span_ms: f64,
-        /// The grid's sample period, ms.
-        ts_ms: f64,
-    },
+    #[error("{0}: more than {max} samples of {ts_ms} ms; check the time unit and the record split", ts_ms = .0.ts_ms, max = MAX_GRID_SAMPLES)]
+    RecordTooLong(RecordSpan),
     /// Fewer than two records: a data set needs a train and a test record.
     #[error("{}: {count} record(s); a data set needs at least 2 (train and test): {hint}", path.display())]
     TooFewRecords {
@@ -215,6 +192,38 @@ pub enum ImportError {
     /// every rule is checked before).
     #[error(transparent)]
     Format(#[from] FormatError),
+}
+
+/// A record whose span does not fit the grid ([`ImportError::RecordTooShort`],
+/// [`ImportError::RecordTooLong`]); shown as where it is and how long it is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordSpan {
+    /// The file.
+    pub path: PathBuf,
+    /// Record index.
+    pub record: usize,
+    /// Its first line.
+    pub first_line: usize,
+    /// Its last line.
+    pub last_line: usize,
+    /// Its span, ms.
+    pub span_ms: f64,
+    /// The grid's sample period, ms.
+    pub ts_ms: f64,
+}
+
+impl std::fmt::Display for RecordSpan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}:{}-{}: record {} spans {} ms",
+            self.path.display(),
+            self.first_line,
+            self.last_line,
+            self.record,
+            self.span_ms
+        )
+    }
 }
 
 /// Two pulses on one tick of the grid ([`ImportError::PulseCollision`]).
@@ -988,25 +997,21 @@ impl<'a> Importer<'a> {
             let (t0, t1) = (s.t[0], s.last_t());
             let span = t1 - t0;
             let steps = (span / ts_ms + 1e-6).floor();
+            let record_span = || RecordSpan {
+                path: self.path.to_path_buf(),
+                record: i,
+                first_line: s.lines[0],
+                last_line: s.lines[s.lines.len() - 1],
+                span_ms: span,
+                ts_ms,
+            };
             if steps.is_nan() || steps >= MAX_GRID_SAMPLES as f64 {
-                return Err(ImportError::RecordTooLong {
-                    path: self.path.to_path_buf(),
-                    record: i,
-                    first_line: s.lines[0],
-                    last_line: s.lines[s.lines.len() - 1],
-                    span_ms: span,
-                    ts_ms,
-                });
+                return Err(ImportError::RecordTooLong(record_span()));
             }
             let n = steps as usize + 1;
             if n < 2 {
                 return Err(ImportError::RecordTooShort {
-                    path: self.path.to_path_buf(),
-                    record: i,
-                    first_line: s.lines[0],
-                    last_line: s.lines[s.lines.len() - 1],
-                    span_ms: span,
-                    ts_ms,
+                    span: record_span(),
                     hint: self.split_hint(),
                 });
             }
