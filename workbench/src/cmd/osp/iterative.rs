@@ -5,11 +5,10 @@ use anyhow::{Context, Result};
 use fes_ident::analysis::osp::PatternResult;
 use fes_ident::analysis::osp::iterative::{Iterative, iterative_method};
 
-use super::super::inputs::{md_table, progress};
+use super::super::inputs::progress;
 use super::super::plots::{self, Figure, Line, Markers, Panel, color};
 use super::{
     Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, pulses_ms,
-    truncation_note,
 };
 
 /// One subject's iterative method.
@@ -84,12 +83,8 @@ fn report(args: &Args, out: &IterativeOutcome, md: &mut String) -> Result<()> {
             "Each stage adds one pulse after the previous one, sweeping its IPI over {}..{} ms in 1-sample steps, and keeps the IPI of the largest FTIpP. Table of every sweep: `iterative.csv`.",
             args.ipi_min_ms, args.ipi_max_ms
         ),
-        figure: "iterative method",
-    }
-    .write(args, md)?;
-    let table: Vec<Vec<String>> = out.subjects.iter().flat_map(chosen_rows).collect();
-    md.push_str(&md_table(
-        &[
+        figures: &[("iterative method", "iterative")],
+        summary_header: &[
             "subject",
             "pulses",
             "optimal IPI (ms)",
@@ -97,11 +92,10 @@ fn report(args: &Args, out: &IterativeOutcome, md: &mut String) -> Result<()> {
             "FTIpP",
             "pattern (ms)",
         ],
-        &table,
-    ));
-    md.push('\n');
-    truncation_note(md, out.worst_end());
-    Ok(())
+        summary: out.subjects.iter().flat_map(chosen_rows).collect(),
+        worst_end: out.worst_end(),
+    }
+    .write(args, md)
 }
 
 /// The report's rows of one subject: the twitch, then each stage's chosen pattern.

@@ -33,7 +33,7 @@ use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 
-use super::inputs::{open_model, out_dir, parse_list, write_csv};
+use super::inputs::{md_table, open_model, out_dir, parse_list, write_csv};
 
 /// The methods.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -299,15 +299,19 @@ fn pulses_ms(p: &[usize], ts: f64) -> String {
         .join(";")
 }
 
-/// A method's table of every run, written as `<stem>.csv`, and the start of its report
-/// section: `heading`, `intro` and the figure (`<stem>.png`, described as `figure`).
+/// A method's table of every run, written as `<stem>.csv`, and its report section:
+/// `heading`, `intro`, the figures (description, file stem of the PNG), the summary table
+/// and the note on responses cut by the window (every method ends its section so).
 struct Section<'a> {
     stem: &'a str,
     csv_header: &'a [&'a str],
     csv_rows: Vec<Vec<String>>,
     heading: &'a str,
     intro: String,
-    figure: &'a str,
+    figures: &'a [(&'a str, &'a str)],
+    summary_header: &'a [&'a str],
+    summary: Vec<Vec<String>>,
+    worst_end: f64,
 }
 
 impl Section<'_> {
@@ -316,7 +320,12 @@ impl Section<'_> {
         write_csv(&csv, self.csv_header, &self.csv_rows)?;
         let _ = writeln!(md, "## {}\n", self.heading);
         let _ = writeln!(md, "{}\n", self.intro);
-        let _ = writeln!(md, "![{}]({}.png)\n", self.figure, self.stem);
+        for (description, stem) in self.figures {
+            let _ = writeln!(md, "![{description}]({stem}.png)\n");
+        }
+        md.push_str(&md_table(self.summary_header, &self.summary));
+        md.push('\n');
+        truncation_note(md, self.worst_end);
         Ok(())
     }
 }

@@ -6,11 +6,9 @@ use fes_ident::analysis::osp::random::{RandomPattern, best_and_worst, random_met
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::ProtocolConfig;
 
-use super::super::inputs::{md_table, progress};
+use super::super::inputs::progress;
 use super::super::plots::{self, Figure, Line, Markers, Panel, color};
-use super::{
-    Args, Section, Subject, SubjectInfo, evaluator, need_subjects, pulses_ms, truncation_note,
-};
+use super::{Args, Section, Subject, SubjectInfo, evaluator, need_subjects, pulses_ms};
 
 /// The random patterns of every subject.
 struct RandomOutcome {
@@ -131,22 +129,17 @@ fn report(args: &Args, out: &RandomOutcome, md: &mut String) -> Result<()> {
             "{} patterns drawn with the thesis protocol (5.1: random IPIs 1-70 ms, trains of 100-300 ms; seed {}); average frequency eq. (6.6). Table: `random.csv`.",
             out.patterns, args.seed
         ),
-        figure: "random pattern method",
-    }
-    .write(args, md)?;
-    let summary: Vec<Vec<String>> = out.subjects.iter().map(summary_row).collect();
-    md.push_str(&md_table(
-        &[
+        figures: &[("random pattern method", "random")],
+        summary_header: &[
             "subject",
             "best FTIpP (f_av)",
             "worst FTIpP (f_av)",
             "corr(FTIpP, f_av)",
         ],
-        &summary,
-    ));
-    md.push('\n');
-    truncation_note(md, out.worst_end());
-    Ok(())
+        summary: out.subjects.iter().map(summary_row).collect(),
+        worst_end: out.worst_end(),
+    }
+    .write(args, md)
 }
 
 /// One row per subject and pattern.

@@ -1,17 +1,14 @@
 //! `--method trains` (thesis 6.3, Fig. 6.3): FTIpP of constant-IPI trains, 1..`--train-pulses`
 //! pulses x IPI `--ipi-min-ms`..`--ipi-max-ms`, as heat maps and 3-D surfaces.
 
-use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
 use fes_ident::analysis::osp::trains::{TrainSurface, train_surface};
 
-use super::super::inputs::{md_table, progress};
+use super::super::inputs::progress;
 use super::super::plots::{self, HeatMap};
-use super::{
-    Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, truncation_note,
-};
+use super::{Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects};
 
 /// One subject's train surface.
 struct SubjectSurface {
@@ -113,24 +110,21 @@ fn report(args: &Args, out: &TrainsOutcome, md: &mut String) -> Result<()> {
             "Trains of 1..{} pulses at constant IPIs of {}..{} ms, first pulse at 0. Table: `trains.csv`.",
             args.train_pulses, args.ipi_min_ms, args.ipi_max_ms
         ),
-        figure: "constant-frequency trains",
-    }
-    .write(args, md)?;
-    let _ = writeln!(md, "![constant-frequency trains, surface](trains_3d.png)\n");
-    let summary: Vec<Vec<String>> = out.surfaces.iter().map(summary_row).collect();
-    md.push_str(&md_table(
-        &[
+        figures: &[
+            ("constant-frequency trains", "trains"),
+            ("constant-frequency trains, surface", "trains_3d"),
+        ],
+        summary_header: &[
             "subject",
             "largest FTIpP",
             "cells with FTIpP > 1",
             "3 pulses at 5 ms",
             "5 pulses at 20 ms",
         ],
-        &summary,
-    ));
-    md.push('\n');
-    truncation_note(md, out.worst_end());
-    Ok(())
+        summary: out.surfaces.iter().map(summary_row).collect(),
+        worst_end: out.worst_end(),
+    }
+    .write(args, md)
 }
 
 /// One row per subject, pulse count and IPI.
