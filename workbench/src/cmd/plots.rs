@@ -541,13 +541,23 @@ pub fn diverging(v: f64, lo: f64, mid: f64, hi: f64) -> RGBColor {
     }
 }
 
-/// Draws heat maps side by side with one shared diverging colour scale `lo..mid..hi` and
-/// a colour bar.
-pub fn save_heatmaps(
+/// How [`save_maps`] draws the grids.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MapView {
+    /// Flat heat maps with a colour bar; the label names the scale.
+    Flat,
+    /// 3-D surfaces (thesis Fig. 6.3 style); the label names the height.
+    Surface,
+}
+
+/// Draws heat maps side by side, flat or as surfaces, with one shared diverging colour
+/// scale `lo..mid..hi`; `label` names the value (the colour bar's or the height's).
+pub fn save_maps(
+    view: MapView,
     maps: &[HeatMap],
     title: &str,
     scale: (f64, f64, f64),
-    scale_label: &str,
+    label: &str,
     path: &Path,
     size: (u32, u32),
 ) -> Result<()> {
@@ -557,12 +567,22 @@ pub fn save_heatmaps(
             let root = root
                 .titled(title, ("sans-serif", 18))
                 .map_err(drawing_failed)?;
-            let (maps_area, bar_area) = root.split_horizontally(size.0 as i32 - 110);
-            let areas = maps_area.split_evenly((1, maps.len().max(1)));
-            for (m, area) in maps.iter().zip(areas) {
-                draw_heatmap(&area, m, scale)?;
+            match view {
+                MapView::Flat => {
+                    let (maps_area, bar_area) = root.split_horizontally(size.0 as i32 - 110);
+                    let areas = maps_area.split_evenly((1, maps.len().max(1)));
+                    for (m, area) in maps.iter().zip(areas) {
+                        draw_heatmap(&area, m, scale)?;
+                    }
+                    draw_colour_bar(&bar_area, scale, label)?;
+                }
+                MapView::Surface => {
+                    let areas = root.split_evenly((1, maps.len().max(1)));
+                    for (m, area) in maps.iter().zip(areas) {
+                        draw_surface(&area, m, scale, label)?;
+                    }
+                }
             }
-            draw_colour_bar(&bar_area, scale, scale_label)?;
             root.present().map_err(drawing_failed)?;
             Ok(())
         })
@@ -685,70 +705,57 @@ where
     Ok(())
 }
 
-/// Draws the heat maps' grids as 3-D surfaces side by side (thesis Fig. 6.3 style), coloured
-/// with the same diverging scale `lo..mid..hi`; `z_label` names the height.
-pub fn save_surfaces(
-    maps: &[HeatMap],
-    title: &str,
-    scale: (f64, f64, f64),
+/// One heat map's grid in `area` as a 3-D surface coloured with the diverging scale
+/// `lo..mid..hi`; `z_label` names the height.
+fn draw_surface<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    m: &HeatMap,
+    (lo, mid, hi): (f64, f64, f64),
     z_label: &str,
-    path: &Path,
-    size: (u32, u32),
-) -> Result<()> {
-    let (lo, mid, hi) = scale;
-    let draw = || -> Result<()> {
-        workbench::on_figure!(path, size, |root| {
-            root.fill(&WHITE).map_err(drawing_failed)?;
-            let root = root
-                .titled(title, ("sans-serif", 18))
-                .map_err(drawing_failed)?;
-            let areas = root.split_evenly((1, maps.len().max(1)));
-            for (m, area) in maps.iter().zip(areas) {
-                let (x0, x1) = (m.xs[0], m.xs[m.xs.len() - 1]);
-                let (z0, z1) = (m.ys[0], m.ys[m.ys.len() - 1]);
-                let mut chart = ChartBuilder::on(&area)
-                    .margin(10)
-                    .caption(
-                        format!(
-                            "{}: {} along the front, {} to the right, {z_label} up",
-                            m.title, m.x_label, m.y_label
-                        ),
-                        ("sans-serif", 14),
-                    )
-                    .build_cartesian_3d(x0..x1, lo..hi, z0..z1)
-                    .map_err(drawing_failed)?;
-                chart.with_projection(|mut pb| {
-                    pb.yaw = 0.6;
-                    pb.pitch = 0.35;
-                    pb.scale = 0.8;
-                    pb.into_matrix()
-                });
-                chart
-                    .configure_axes()
-                    .light_grid_style(RGBColor(230, 230, 230))
-                    .max_light_lines(2)
-                    .label_style(("sans-serif", 12))
-                    .x_formatter(&|v| format!("{v:.0}"))
-                    .z_formatter(&|v| format!("{v:.0}"))
-                    .y_formatter(&|v| format!("{v:.2}"))
-                    .draw()
-                    .map_err(drawing_failed)?;
-                let value = |x: f64, z: f64| {
-                    let ix = m.xs.iter().position(|&v| v == x).unwrap_or(0);
-                    let iz = m.ys.iter().position(|&v| v == z).unwrap_or(0);
-                    m.z[iz][ix].clamp(lo, hi)
-                };
-                let style = |y: &f64| diverging(*y, lo, mid, hi).filled();
-                chart
-                    .draw_series(
-                        SurfaceSeries::xoz(m.xs.iter().copied(), m.ys.iter().copied(), value)
-                            .style_func(&style),
-                    )
-                    .map_err(drawing_failed)?;
-            }
-            root.present().map_err(drawing_failed)?;
-            Ok(())
-        })
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let (x0, x1) = (m.xs[0], m.xs[m.xs.len() - 1]);
+    let (z0, z1) = (m.ys[0], m.ys[m.ys.len() - 1]);
+    let mut chart = ChartBuilder::on(area)
+        .margin(10)
+        .caption(
+            format!(
+                "{}: {} along the front, {} to the right, {z_label} up",
+                m.title, m.x_label, m.y_label
+            ),
+            ("sans-serif", 14),
+        )
+        .build_cartesian_3d(x0..x1, lo..hi, z0..z1)
+        .map_err(drawing_failed)?;
+    chart.with_projection(|mut pb| {
+        pb.yaw = 0.6;
+        pb.pitch = 0.35;
+        pb.scale = 0.8;
+        pb.into_matrix()
+    });
+    chart
+        .configure_axes()
+        .light_grid_style(RGBColor(230, 230, 230))
+        .max_light_lines(2)
+        .label_style(("sans-serif", 12))
+        .x_formatter(&|v| format!("{v:.0}"))
+        .z_formatter(&|v| format!("{v:.0}"))
+        .y_formatter(&|v| format!("{v:.2}"))
+        .draw()
+        .map_err(drawing_failed)?;
+    let value = |x: f64, z: f64| {
+        let ix = m.xs.iter().position(|&v| v == x).unwrap_or(0);
+        let iz = m.ys.iter().position(|&v| v == z).unwrap_or(0);
+        m.z[iz][ix].clamp(lo, hi)
     };
-    draw().with_context(|| format!("writing {}", path.display()))
+    let style = |y: &f64| diverging(*y, lo, mid, hi).filled();
+    chart
+        .draw_series(
+            SurfaceSeries::xoz(m.xs.iter().copied(), m.ys.iter().copied(), value)
+                .style_func(&style),
+        )
+        .map_err(drawing_failed)?;
+    Ok(())
 }

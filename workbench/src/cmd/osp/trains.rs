@@ -1,13 +1,11 @@
 //! `--method trains` (thesis 6.3, Fig. 6.3): FTIpP of constant-IPI trains, 1..`--train-pulses`
 //! pulses x IPI `--ipi-min-ms`..`--ipi-max-ms`, as heat maps and 3-D surfaces.
 
-use std::path::Path;
-
 use anyhow::{Context, Result};
 use fes_ident::analysis::osp::trains::{TrainSurface, train_surface};
 
 use super::super::inputs::progress;
-use super::super::plots::{self, HeatMap};
+use super::super::plots::{self, HeatMap, MapView};
 use super::{Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects};
 
 /// One subject's train surface.
@@ -75,24 +73,24 @@ fn report(args: &Args, out: &TrainsOutcome, md: &mut String) -> Result<()> {
     let (lo, hi) = out.scale();
     let maps: Vec<HeatMap> = out.surfaces.iter().map(heat_map).collect();
     let n = out.surfaces.len() as u32;
-    // The same maps drawn flat and in 3-D: figure, title, file stem, size.
-    type Save = fn(&[HeatMap], &str, (f64, f64, f64), &str, &Path, (u32, u32)) -> Result<()>;
-    let figures: [(Save, &str, &str, (u32, u32)); 2] = [
+    // The same maps drawn flat and in 3-D: view, title, file stem, size.
+    let figures = [
         (
-            plots::save_heatmaps,
+            MapView::Flat,
             "constant-frequency train method (6.3, Fig. 6.3): FTIpP (red > 1 > blue)",
             "trains",
             (520 * n + 110, 520),
         ),
         (
-            plots::save_surfaces,
+            MapView::Surface,
             "constant-frequency train method (6.3, Fig. 6.3): FTIpP surface",
             "trains_3d",
             (560 * n, 520),
         ),
     ];
-    for (save, title, stem, size) in figures {
-        save(
+    for (view, title, stem, size) in figures {
+        plots::save_maps(
+            view,
             &maps,
             title,
             (lo, 1.0, hi),
