@@ -161,28 +161,22 @@ fn padded((lo, hi): (f64, f64), frac: f64) -> (f64, f64) {
 }
 
 impl Panel {
+    /// The points of the lines and the markers, which both axes' default ranges span.
+    fn points(&self) -> impl Iterator<Item = &(f64, f64)> {
+        let lines = self.lines.iter().flat_map(|l| &l.points);
+        lines.chain(self.markers.iter().flat_map(|m| &m.points))
+    }
+
     fn ranges(&self) -> (Range<f64>, Range<f64>) {
         let xs = self
-            .lines
-            .iter()
-            .flat_map(|l| l.points.iter().map(|p| p.0))
-            .chain(
-                self.markers
-                    .iter()
-                    .flat_map(|m| m.points.iter().map(|p| p.0)),
-            )
+            .points()
+            .map(|p| p.0)
             .chain(self.impulses.iter().copied());
         let x = self.x.or_else(|| finite_range(xs)).unwrap_or((0.0, 1.0));
         let x = if x.1 > x.0 { x } else { padded(x, 0.05) };
         let ys = self
-            .lines
-            .iter()
-            .flat_map(|l| l.points.iter().map(|p| p.1))
-            .chain(
-                self.markers
-                    .iter()
-                    .flat_map(|m| m.points.iter().map(|p| p.1)),
-            )
+            .points()
+            .map(|p| p.1)
             .chain(self.hline)
             .chain((!self.impulses.is_empty()).then_some(1.0));
         let y = self
