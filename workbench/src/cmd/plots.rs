@@ -220,11 +220,13 @@ where
     DB::ErrorType: 'static,
 {
     let (xr, yr) = p.ranges();
-    let mut chart = panel_chart(area, p, &xr, &yr)?;
-    draw_bands(&mut chart, p, &xr, &yr)?;
-    draw_guides(&mut chart, p, &xr, &yr)?;
-    draw_lines(&mut chart, p, &xr, &yr)?;
-    draw_markers(&mut chart, p)?;
+    let chart = panel_chart(area, p, &xr, &yr)?;
+    let mut steps = PanelChart { chart, p, xr, yr };
+    steps.bands()?;
+    steps.guides()?;
+    steps.lines()?;
+    steps.markers()?;
+    let chart = &mut steps.chart;
     for (x, y, t) in &p.texts {
         chart
             .draw_series(std::iter::once(Text::new(
@@ -291,146 +293,136 @@ where
     Ok(chart)
 }
 
-/// The shaded x intervals, clipped to `xr`, over the whole height.
-fn draw_bands<DB: DrawingBackend>(
-    chart: &mut Chart<'_, DB>,
-    p: &Panel,
-    xr: &Range<f64>,
-    yr: &Range<f64>,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    for b in &p.bands {
-        let x0 = b.x0.max(xr.start);
-        let x1 = b.x1.min(xr.end);
-        if x1 <= x0 {
-            continue;
-        }
-        let color = b.color;
-        let s = chart
-            .draw_series(std::iter::once(Rectangle::new(
-                [(x0, yr.start), (x1, yr.end)],
-                lighten(color, 0.8).filled(),
-            )))
-            .map_err(drawing_failed)?;
-        if let Some(l) = &b.label {
-            s.label(l.as_str()).legend(move |(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 18, y + 5)], lighten(color, 0.6).filled())
-            });
-        }
-    }
-    Ok(())
+/// A panel's chart over its ranges `xr` x `yr`: what each of [`draw_panel`]'s steps draws on.
+struct PanelChart<'a, 'p, DB: DrawingBackend> {
+    chart: Chart<'a, DB>,
+    p: &'p Panel,
+    xr: Range<f64>,
+    yr: Range<f64>,
 }
 
-/// The horizontal reference line, the vertical separators and the impulses (pulses).
-fn draw_guides<DB: DrawingBackend>(
-    chart: &mut Chart<'_, DB>,
-    p: &Panel,
-    xr: &Range<f64>,
-    yr: &Range<f64>,
-) -> Result<()>
+impl<DB: DrawingBackend> PanelChart<'_, '_, DB>
 where
     DB::ErrorType: 'static,
 {
-    if let Some(h) = p.hline {
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                vec![(xr.start, h), (xr.end, h)],
-                BLACK.mix(0.4).stroke_width(1),
-            )))
-            .map_err(drawing_failed)?;
+    /// The shaded x intervals, clipped to `xr`, over the whole height.
+    fn bands(&mut self) -> Result<()> {
+        let Self { chart, p, xr, yr } = self;
+        for b in &p.bands {
+            let x0 = b.x0.max(xr.start);
+            let x1 = b.x1.min(xr.end);
+            if x1 <= x0 {
+                continue;
+            }
+            let color = b.color;
+            let s = chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(x0, yr.start), (x1, yr.end)],
+                    lighten(color, 0.8).filled(),
+                )))
+                .map_err(drawing_failed)?;
+            if let Some(l) = &b.label {
+                s.label(l.as_str()).legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 18, y + 5)], lighten(color, 0.6).filled())
+                });
+            }
+        }
+        Ok(())
     }
-    for &x in &p.separators {
+
+    /// The horizontal reference line, the vertical separators and the impulses (pulses).
+    fn guides(&mut self) -> Result<()> {
+        let Self { chart, p, xr, yr } = self;
+        if let Some(h) = p.hline {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(xr.start, h), (xr.end, h)],
+                    BLACK.mix(0.4).stroke_width(1),
+                )))
+                .map_err(drawing_failed)?;
+        }
+        for &x in &p.separators {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(x, yr.start), (x, yr.end)],
+                    BLACK.mix(0.3).stroke_width(1),
+                )))
+                .map_err(drawing_failed)?;
+        }
         chart
-            .draw_series(std::iter::once(PathElement::new(
-                vec![(x, yr.start), (x, yr.end)],
-                BLACK.mix(0.3).stroke_width(1),
-            )))
+            .draw_series(
+                p.impulses
+                    .iter()
+                    .map(|&x| PathElement::new(vec![(x, 0.0), (x, 1.0)], BLACK.stroke_width(1))),
+            )
             .map_err(drawing_failed)?;
+        Ok(())
     }
-    chart
-        .draw_series(
-            p.impulses
+
+    /// The lines, split at non-finite points and clamped into the ranges; a labelled line's
+    /// first segment carries its legend entry.
+    fn lines(&mut self) -> Result<()> {
+        let Self { chart, p, xr, yr } = self;
+        for l in &p.lines {
+            let style = l.color.stroke_width(l.width);
+            let mut first = true;
+            for seg in segments(&l.points, xr, yr) {
+                let anno = if l.dashed {
+                    chart
+                        .draw_series(DashedLineSeries::new(seg, 7, 5, style))
+                        .map_err(drawing_failed)?
+                } else {
+                    chart
+                        .draw_series(LineSeries::new(seg, style))
+                        .map_err(drawing_failed)?
+                };
+                if first && let Some(label) = &l.label {
+                    let c = l.color;
+                    let dashed = l.dashed;
+                    anno.label(label.as_str()).legend(move |(x, y)| {
+                        if dashed {
+                            PathElement::new(vec![(x, y), (x + 7, y)], c.stroke_width(2))
+                        } else {
+                            PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2))
+                        }
+                    });
+                }
+                first = false;
+            }
+        }
+        Ok(())
+    }
+
+    /// The marker sets (filled circles or crosses) at their finite points.
+    fn markers(&mut self) -> Result<()> {
+        let Self { chart, p, .. } = self;
+        for m in &p.markers {
+            let (c, size, filled) = (m.color, m.size, m.filled);
+            let pts: Vec<(f64, f64)> = m
+                .points
                 .iter()
-                .map(|&x| PathElement::new(vec![(x, 0.0), (x, 1.0)], BLACK.stroke_width(1))),
-        )
-        .map_err(drawing_failed)?;
-    Ok(())
-}
-
-/// The lines, split at non-finite points and clamped into the ranges; a labelled line's
-/// first segment carries its legend entry.
-fn draw_lines<DB: DrawingBackend>(
-    chart: &mut Chart<'_, DB>,
-    p: &Panel,
-    xr: &Range<f64>,
-    yr: &Range<f64>,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    for l in &p.lines {
-        let style = l.color.stroke_width(l.width);
-        let mut first = true;
-        for seg in segments(&l.points, xr, yr) {
-            let anno = if l.dashed {
+                .copied()
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .collect();
+            let anno = if filled {
                 chart
-                    .draw_series(DashedLineSeries::new(seg, 7, 5, style))
+                    .draw_series(pts.iter().map(|&pt| Circle::new(pt, size, c.filled())))
                     .map_err(drawing_failed)?
             } else {
                 chart
-                    .draw_series(LineSeries::new(seg, style))
+                    .draw_series(
+                        pts.iter()
+                            .map(|&pt| Cross::new(pt, size, c.stroke_width(1))),
+                    )
                     .map_err(drawing_failed)?
             };
-            if first && let Some(label) = &l.label {
-                let c = l.color;
-                let dashed = l.dashed;
-                anno.label(label.as_str()).legend(move |(x, y)| {
-                    if dashed {
-                        PathElement::new(vec![(x, y), (x + 7, y)], c.stroke_width(2))
-                    } else {
-                        PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2))
-                    }
-                });
+            if let Some(label) = &m.label {
+                anno.label(label.as_str())
+                    .legend(move |(x, y)| Circle::new((x + 9, y), size.min(5), c.filled()));
             }
-            first = false;
         }
+        Ok(())
     }
-    Ok(())
-}
-
-/// The marker sets (filled circles or crosses) at their finite points.
-fn draw_markers<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, p: &Panel) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    for m in &p.markers {
-        let (c, size, filled) = (m.color, m.size, m.filled);
-        let pts: Vec<(f64, f64)> = m
-            .points
-            .iter()
-            .copied()
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-            .collect();
-        let anno = if filled {
-            chart
-                .draw_series(pts.iter().map(|&pt| Circle::new(pt, size, c.filled())))
-                .map_err(drawing_failed)?
-        } else {
-            chart
-                .draw_series(
-                    pts.iter()
-                        .map(|&pt| Cross::new(pt, size, c.stroke_width(1))),
-                )
-                .map_err(drawing_failed)?
-        };
-        if let Some(label) = &m.label {
-            anno.label(label.as_str())
-                .legend(move |(x, y)| Circle::new((x + 9, y), size.min(5), c.filled()));
-        }
-    }
-    Ok(())
 }
 
 /// A tick label: 4 significant digits, trailing zeros dropped; scientific outside
