@@ -6,9 +6,10 @@ use fes_ident::analysis::osp::PatternResult;
 use fes_ident::analysis::osp::iterative::{Iterative, iterative_method};
 
 use super::super::inputs::progress;
-use super::super::plots::{self, Figure, Line, Markers, Panel, color};
+use super::super::plots::{Line, Markers, Panel, color};
 use super::{
     Args, Section, Subject, SubjectInfo, evaluator, ipi_samples, need_subjects, pulses_ms,
+    save_subject_columns,
 };
 
 /// One subject's iterative method.
@@ -63,17 +64,11 @@ fn compute(args: &Args, subjects: &[Subject]) -> Result<IterativeOutcome> {
 /// `iterative.png`, `iterative.csv` and the report's section.
 fn report(args: &Args, out: &IterativeOutcome, md: &mut String) -> Result<()> {
     let columns = out.subjects.iter().map(panels).collect();
-    plots::save(
-        &Figure {
-            title: format!(
-                "iterative method (6.4, Fig. 6.4): up to {} pulses",
-                args.iterative_pulses
-            ),
-            columns,
-        },
-        &args.format.file(&args.out, "iterative"),
-        (560 * out.subjects.len() as u32 + 80, 820),
-    )?;
+    let title = format!(
+        "iterative method (6.4, Fig. 6.4): up to {} pulses",
+        args.iterative_pulses
+    );
+    save_subject_columns(args, "iterative", title, columns, 820)?;
     Section {
         stem: "iterative",
         csv_header: &["subject", "pulses", "last_ipi_ms", "peak", "fti", "ftipp"],

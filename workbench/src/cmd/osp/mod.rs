@@ -34,6 +34,7 @@ use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 
 use super::inputs::{md_table, open_model, out_dir, parse_list, write_csv};
+use super::plots::{self, Figure, Panel};
 
 /// The methods.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -297,6 +298,23 @@ fn pulses_ms(p: &[usize], ts: f64) -> String {
         .map(|&k| format!("{}", (k as f64 * ts * 1e6).round() / 1e3))
         .collect::<Vec<_>>()
         .join(";")
+}
+
+/// A method's figure `<stem>` (PNG or SVG by `--format`): one column of panels per
+/// subject, 560 px wide each, `height` px high.
+fn save_subject_columns(
+    args: &Args,
+    stem: &str,
+    title: String,
+    columns: Vec<Vec<(u32, Panel)>>,
+    height: u32,
+) -> Result<()> {
+    let width = 560 * columns.len() as u32 + 80;
+    plots::save(
+        &Figure { title, columns },
+        &args.format.file(&args.out, stem),
+        (width, height),
+    )
 }
 
 /// A method's table of every run, written as `<stem>.csv`, and its report section:

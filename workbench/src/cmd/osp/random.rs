@@ -7,8 +7,10 @@ use sim_muscle::preset::Preset;
 use sim_muscle::protocol::ProtocolConfig;
 
 use super::super::inputs::progress;
-use super::super::plots::{self, Figure, Line, Markers, Panel, color};
-use super::{Args, Section, Subject, SubjectInfo, evaluator, need_subjects, pulses_ms};
+use super::super::plots::{Line, Markers, Panel, color};
+use super::{
+    Args, Section, Subject, SubjectInfo, evaluator, need_subjects, pulses_ms, save_subject_columns,
+};
 
 /// The random patterns of every subject.
 struct RandomOutcome {
@@ -101,17 +103,11 @@ fn report(args: &Args, out: &RandomOutcome, md: &mut String) -> Result<()> {
         .iter()
         .map(|s| panels(s, out.record_ms))
         .collect();
-    plots::save(
-        &Figure {
-            title: format!(
-                "random pattern method (6.2): {} patterns of the thesis protocol",
-                out.patterns
-            ),
-            columns,
-        },
-        &args.format.file(&args.out, "random"),
-        (560 * out.subjects.len() as u32 + 80, 760),
-    )?;
+    let title = format!(
+        "random pattern method (6.2): {} patterns of the thesis protocol",
+        out.patterns
+    );
+    save_subject_columns(args, "random", title, columns, 760)?;
     Section {
         stem: "random",
         csv_header: &[
