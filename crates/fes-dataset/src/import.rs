@@ -30,7 +30,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::{DataSet, FORCE_SLACK, FormatError, Header, Record, Split};
+use crate::{DataSet, FORCE_SLACK, FormatError, Header, Record, Split, line_of};
 
 /// The most samples one record may have on the grid (about 2.8 hours at 1 ms): beyond it a
 /// time column is in the wrong unit or records are not split.
@@ -481,14 +481,6 @@ struct Table {
     names: Vec<String>,
     header: bool,
     rows: Vec<Row>,
-}
-
-/// Line number (1-based) of byte `offset` in `bytes`.
-fn line_of(bytes: &[u8], offset: usize) -> usize {
-    1 + bytes[..offset.min(bytes.len())]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
 }
 
 fn utf8<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str, ImportError> {

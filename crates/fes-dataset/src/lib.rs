@@ -662,8 +662,8 @@ fn record_csv(r: &Record) -> String {
     s
 }
 
-/// Line number (1-based) of byte `offset` in `bytes`.
-fn line_of(bytes: &[u8], offset: usize) -> usize {
+/// Line number (1-based) of byte `offset` in `bytes` (also the importer's).
+pub(crate) fn line_of(bytes: &[u8], offset: usize) -> usize {
     1 + bytes[..offset.min(bytes.len())]
         .iter()
         .filter(|&&b| b == b'\n')
