@@ -9,8 +9,11 @@
 //! * [`cyclictest`]: running cyclictest and reading its histogram.
 //! * [`Percentiles`]: the latency quantiles rt-latency writes and latency-regression reads,
 //!   and their table.
+//! * [`DriverCounters`]: the driver's counters driver-latency writes and rt-latency sums.
 
 pub mod cyclictest;
+mod driver_counters;
 mod percentiles;
 
+pub use driver_counters::DriverCounters;
 pub use percentiles::Percentiles;

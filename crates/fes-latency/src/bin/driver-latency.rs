@@ -28,6 +28,7 @@ use std::time::Duration;
 use anyhow::{Context as _, anyhow, bail};
 use clap::Parser;
 use fes_can::Nodes;
+use fes_latency::DriverCounters;
 use fes_rt::msg::port;
 use fes_rt::msg::{DeviceState, DriverCommand, DriverCommandKind, LatencySummary};
 use fes_rt::rt::alloc::CountingAllocator;
@@ -81,32 +82,11 @@ struct Cli {
 /// What a run did (the JSON summary).
 #[derive(Debug, Serialize)]
 struct Summary {
-    /// StimTicks the driver received.
-    ticks_received: u64,
-    /// StimTicks missing (seq gaps).
-    ticks_lost: u64,
-    /// StimTicks refused as defective or late.
-    ticks_refused: u64,
-    /// PULSE frames written.
-    pulses_sent: u64,
-    /// Pulses refused by the driver's interlocks.
-    pulses_rejected: u64,
-    /// Pulse decisions while not armed (before the Arm, after a trip).
-    pulses_not_armed: u64,
-    /// Pulses the virtual stimulator applied.
-    stimulator_pulses: u32,
-    /// Frame writes that failed.
-    can_tx_errors: u64,
-    /// Trips into the safe state, and those of the watchdog conditions.
-    trips: u32,
-    /// Of which watchdog trips.
-    watchdog_trips: u32,
+    /// The driver's counters, at the top level of the JSON as rt-latency reads them.
+    #[serde(flatten)]
+    counters: DriverCounters,
     /// Last fault code (0 = none).
     fault_code: u16,
-    /// Times the supervisor stand-in armed the driver (1 + re-arms after trips).
-    arms: u64,
-    /// Heap allocations on the forward thread's hot path (0 is the requirement).
-    hot_path_allocations: u64,
     /// StimTick publish → PULSE written, ns.
     tick_to_can: Latency,
     /// The forward thread's real-time status.
@@ -332,21 +312,23 @@ fn summary(shared: &Shared, ended: Ended) -> anyhow::Result<Summary> {
     } = ended;
     let c = shared.status.load();
     Ok(Summary {
-        ticks_received: c.ticks_received,
-        ticks_lost: c.ticks_lost,
-        ticks_refused: c.ticks_refused,
-        pulses_sent: c.pulses_sent,
-        pulses_rejected: c.pulses_rejected,
-        pulses_not_armed: c.pulses_not_armed,
-        stimulator_pulses: c.stimulator_pulses,
-        can_tx_errors: c.can_tx_errors,
-        trips: c.trips,
-        watchdog_trips: c.watchdog_trips,
+        counters: DriverCounters {
+            ticks_received: c.ticks_received,
+            ticks_lost: c.ticks_lost,
+            ticks_refused: c.ticks_refused,
+            pulses_sent: c.pulses_sent,
+            pulses_rejected: c.pulses_rejected,
+            pulses_not_armed: c.pulses_not_armed,
+            stimulator_pulses: c.stimulator_pulses.into(),
+            can_tx_errors: c.can_tx_errors,
+            trips: c.trips.into(),
+            watchdog_trips: c.watchdog_trips.into(),
+            arms,
+            hot_path_allocations: outcome
+                .hot_path_allocations
+                .ok_or_else(|| anyhow!("the counting allocator is not installed"))?,
+        },
         fault_code: c.fault_code,
-        arms,
-        hot_path_allocations: outcome
-            .hot_path_allocations
-            .ok_or_else(|| anyhow!("the counting allocator is not installed"))?,
         tick_to_can: report.timing.publish.into(),
         rt: outcome.rt.to_string(),
     })
@@ -354,15 +336,16 @@ fn summary(shared: &Shared, ended: Ended) -> anyhow::Result<Summary> {
 
 /// Logs the summary's counters and forward latency in one line.
 fn log_summary(summary: &Summary) {
+    let c = &summary.counters;
     tracing::info!(
         "{} StimTicks, {} pulses written ({} refused, {} while not armed), stimulator applied {}, {} trips, {} arms; StimTick->write p50/p99/max {:.1}/{:.1}/{:.1} us",
-        summary.ticks_received,
-        summary.pulses_sent,
-        summary.pulses_rejected,
-        summary.pulses_not_armed,
-        summary.stimulator_pulses,
-        summary.trips,
-        summary.arms,
+        c.ticks_received,
+        c.pulses_sent,
+        c.pulses_rejected,
+        c.pulses_not_armed,
+        c.stimulator_pulses,
+        c.trips,
+        c.arms,
         summary.tick_to_can.p50_ns as f64 / 1e3,
         summary.tick_to_can.p99_ns as f64 / 1e3,
         summary.tick_to_can.max_ns as f64 / 1e3,

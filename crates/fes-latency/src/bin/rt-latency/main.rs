@@ -25,6 +25,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
 use clap::Parser;
+use fes_latency::DriverCounters;
 use fes_rt::msg::Reference;
 use fes_rt::msg::port;
 use fes_rt::rt::MissingRightsPolicy;
@@ -120,7 +121,7 @@ struct Results {
     /// StimTick publish → PULSE written by the driver (`--driver`).
     driver_forward_us: Option<Percentiles>,
     /// The driver's counters summed over the rounds (`--driver`).
-    driver: Option<DriverTotals>,
+    driver: Option<DriverCounters>,
     hot_path_allocations: u64,
     queue_overflows: u64,
     seconds: u64,
@@ -132,41 +133,6 @@ struct Results {
     cyclictest_command: Option<String>,
     kernel: String,
     sched_rt_runtime_us: String,
-}
-
-/// The driver's counters (`driver-latency`'s summary), summed over the rounds.
-#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
-#[serde(default)]
-struct DriverTotals {
-    ticks_received: u64,
-    ticks_lost: u64,
-    ticks_refused: u64,
-    pulses_sent: u64,
-    pulses_rejected: u64,
-    pulses_not_armed: u64,
-    stimulator_pulses: u64,
-    can_tx_errors: u64,
-    trips: u64,
-    watchdog_trips: u64,
-    arms: u64,
-    hot_path_allocations: u64,
-}
-
-impl DriverTotals {
-    fn add(&mut self, o: &DriverTotals) {
-        self.ticks_received += o.ticks_received;
-        self.ticks_lost += o.ticks_lost;
-        self.ticks_refused += o.ticks_refused;
-        self.pulses_sent += o.pulses_sent;
-        self.pulses_rejected += o.pulses_rejected;
-        self.pulses_not_armed += o.pulses_not_armed;
-        self.stimulator_pulses += o.stimulator_pulses;
-        self.can_tx_errors += o.can_tx_errors;
-        self.trips += o.trips;
-        self.watchdog_trips += o.watchdog_trips;
-        self.arms += o.arms;
-        self.hot_path_allocations += o.hot_path_allocations;
-    }
 }
 
 fn main() -> std::process::ExitCode {
@@ -527,7 +493,7 @@ struct RoundTotals {
     received: u64,
     lost: u64,
     driver_forward: LatencyHistogram,
-    driver: Option<DriverTotals>,
+    driver: Option<DriverCounters>,
 }
 
 impl RoundTotals {
@@ -742,11 +708,11 @@ fn run_rt_core(
 fn driver_totals(
     status: std::process::ExitStatus,
     summary: &std::path::Path,
-) -> anyhow::Result<DriverTotals> {
+) -> anyhow::Result<DriverCounters> {
     if !status.success() {
         bail!("driver-latency ended with {status}");
     }
-    let totals: DriverTotals =
+    let totals: DriverCounters =
         serde_json::from_slice(&std::fs::read(summary).context("reading the driver summary")?)
             .context("parsing the driver summary")?;
     Ok(totals)
@@ -756,7 +722,7 @@ fn driver_totals(
 fn round_totals(
     probe_status: std::process::ExitStatus,
     files: &RoundFiles,
-    driver_totals: Option<DriverTotals>,
+    driver_totals: Option<DriverCounters>,
 ) -> anyhow::Result<RoundTotals> {
     if !probe_status.success() {
         bail!("rt-probe ended with {probe_status}");
