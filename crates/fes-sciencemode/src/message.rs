@@ -37,6 +37,43 @@ macro_rules! byte_enum {
     };
 }
 
+/// Declares an enumeration of a signed code byte (§4.3's result and error codes), with
+/// `Other` keeping any code it does not name, and its `from_code` and `code`: the named
+/// codes stand once, in the declaration, so the two directions cannot disagree.
+macro_rules! signed_code_enum {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            $($(#[$vmeta:meta])* $variant:ident = $code:literal,)+
+        }
+    ) => {
+        $(#[$meta])*
+        pub enum $name {
+            $($(#[$vmeta])* $variant,)+
+            /// Any other code, kept as received.
+            Other(i8),
+        }
+
+        impl $name {
+            /// The value of the signed byte `code` (every byte has one).
+            pub const fn from_code(code: i8) -> $name {
+                match code {
+                    $($code => $name::$variant,)+
+                    other => $name::Other(other),
+                }
+            }
+
+            /// The signed byte on the wire.
+            pub const fn code(self) -> i8 {
+                match self {
+                    $($name::$variant => $code,)+
+                    $name::Other(c) => c,
+                }
+            }
+        }
+    };
+}
+
 byte_enum! {
     /// Command identifiers (the command byte of §2.2), for the commands this codec implements.
     ///
@@ -100,93 +137,45 @@ impl Command {
     }
 }
 
-/// The result byte of an acknowledgement (§4.3): 0 for success, a negative error code
-/// otherwise.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum AckResult {
-    /// 0: the command was executed.
-    Ok,
-    /// -1: transfer error (the device received a damaged packet).
-    TransferError,
-    /// -2: parameter error (a value outside the device's range).
-    ParameterError,
-    /// -3: wrong mode error (the command is not allowed in the current mode, e.g.
-    /// StartChannelListMode before InitChannelListMode).
-    WrongModeError,
-    /// -5: InitAck only: the host does not support the device's protocol version.
-    VersionError,
-    /// -8: busy error (the device is still executing the previous command).
-    BusyError,
-    /// Any other code, kept as received.
-    Other(i8),
+signed_code_enum! {
+    /// The result byte of an acknowledgement (§4.3): 0 for success, a negative error code
+    /// otherwise.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum AckResult {
+        /// 0: the command was executed.
+        Ok = 0,
+        /// -1: transfer error (the device received a damaged packet).
+        TransferError = -1,
+        /// -2: parameter error (a value outside the device's range).
+        ParameterError = -2,
+        /// -3: wrong mode error (the command is not allowed in the current mode, e.g.
+        /// StartChannelListMode before InitChannelListMode).
+        WrongModeError = -3,
+        /// -5: InitAck only: the host does not support the device's protocol version.
+        VersionError = -5,
+        /// -8: busy error (the device is still executing the previous command).
+        BusyError = -8,
+    }
 }
 
 impl AckResult {
-    /// The code for the signed byte `code` (every byte has one meaning).
-    pub const fn from_code(code: i8) -> AckResult {
-        match code {
-            0 => AckResult::Ok,
-            -1 => AckResult::TransferError,
-            -2 => AckResult::ParameterError,
-            -3 => AckResult::WrongModeError,
-            -5 => AckResult::VersionError,
-            -8 => AckResult::BusyError,
-            other => AckResult::Other(other),
-        }
-    }
-
-    /// The signed byte on the wire.
-    pub const fn code(self) -> i8 {
-        match self {
-            AckResult::Ok => 0,
-            AckResult::TransferError => -1,
-            AckResult::ParameterError => -2,
-            AckResult::WrongModeError => -3,
-            AckResult::VersionError => -5,
-            AckResult::BusyError => -8,
-            AckResult::Other(c) => c,
-        }
-    }
-
     /// Whether the command was executed.
     pub const fn is_ok(self) -> bool {
         matches!(self, AckResult::Ok)
     }
 }
 
-/// The error a device reports unsolicited in [`Message::StimulationError`] (§4.3). Each
-/// stops the stimulation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum StimulationError {
-    /// -1: the emergency switch was pressed, or is not connected.
-    EmergencySwitch,
-    /// -2: electrode error (an electrode came off or its cable is broken).
-    Electrode,
-    /// -3: a stimulation module failed.
-    StimulationModule,
-    /// Any other code, kept as received.
-    Other(i8),
-}
-
-impl StimulationError {
-    /// The error for the signed byte `code`.
-    pub const fn from_code(code: i8) -> StimulationError {
-        match code {
-            -1 => StimulationError::EmergencySwitch,
-            -2 => StimulationError::Electrode,
-            -3 => StimulationError::StimulationModule,
-            other => StimulationError::Other(other),
-        }
-    }
-
-    /// The signed byte on the wire.
-    pub const fn code(self) -> i8 {
-        match self {
-            StimulationError::EmergencySwitch => -1,
-            StimulationError::Electrode => -2,
-            StimulationError::StimulationModule => -3,
-            StimulationError::Other(c) => c,
-        }
+signed_code_enum! {
+    /// The error a device reports unsolicited in [`Message::StimulationError`] (§4.3). Each
+    /// stops the stimulation.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum StimulationError {
+        /// -1: the emergency switch was pressed, or is not connected.
+        EmergencySwitch = -1,
+        /// -2: electrode error (an electrode came off or its cable is broken).
+        Electrode = -2,
+        /// -3: a stimulation module failed.
+        StimulationModule = -3,
     }
 }
 
