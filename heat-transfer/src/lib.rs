@@ -16,7 +16,7 @@
 //!   with integral action (C.1) against one linear controller ([`control`]).
 //!
 //! [`study`] runs all of it for one seed and returns a [`Report`] that serialises to the
-//! JSON the `heat-transfer` binary writes (keys as issue 21 lists them).
+//! JSON the `heat-transfer` binary writes.
 
 use std::collections::BTreeMap;
 

@@ -1,6 +1,6 @@
 //! `heat-transfer [--seed N] [--json FILE] [--figures DIR] [--data DIR]`: thesis App. E on
 //! the simulated air heater, each table printed beside the thesis's; `--json` writes the
-//! numbers (issue 21's keys), `--figures` the figures (PNG), `--data` the E.2 experiments
+//! numbers, `--figures` the figures (PNG), `--data` the E.2 experiments
 //! as a `fes-dataset/2` data set.
 
 use anyhow::{Context, bail};
@@ -228,7 +228,7 @@ fn print_scheduling_2d(r: &Report) {
     );
 }
 
-/// Prints the orderings of the errors the thesis reports (issue 21's keys).
+/// Prints the orderings of the errors the thesis reports, under their JSON keys.
 fn print_orderings(r: &Report) {
     println!("\n## Orderings\n");
     let o = &r.orderings;

@@ -525,7 +525,7 @@ impl DriverConfig {
     }
 
     /// Holds the interlocks and the CONFIG limits against the prescription: none may be
-    /// looser (issue 19, item 4). The driver refuses to start otherwise.
+    /// looser. The driver refuses to start otherwise.
     ///
     /// Amplitude, phase width, charge per phase, minimum IPI and pulses in any 1 s for the
     /// interlocks; amplitude, width, charge and pulses in any 1 s for the stimulator. The
@@ -1013,7 +1013,7 @@ mod tests {
         let mut expected = DriverConfig::with_defaults("can0", 40.0);
         expected.rt.on_missing_rights = fes_rt::rt::config::MissingRightsPolicy::Refuse;
         // The one intended difference: the limits cut to the shipped prescription's dose
-        // (20 mA, 200 us, 4 uC per phase; issue 19, item 4), which bounds them.
+        // (20 mA, 200 us, 4 uC per phase), which bounds them.
         expected.stimulator.max_amplitude_ua = 20_000;
         expected.stimulator.max_width_us = 200;
         expected.stimulator.max_charge_nc = 4000;

@@ -15,7 +15,7 @@
 //!   configuration, starts it over; an EMCY `config_invalid` ends it (refused). The
 //!   stimulator reads back the limits it applied (CONFIG_APPLIED, all pages): limits that
 //!   differ in any field end it too (refused), and no Arm is accepted until the read-back
-//!   equals what was sent (issue 19, item 4). A read-back still incomplete the retry time
+//!   equals what was sent. A read-back still incomplete the retry time
 //!   after the confirmation (a lost page) starts the configuration over.
 //! * **mode**: disarmed, armed, or the safe state. Only an Arm command arms (after checking
 //!   its preconditions: see [`crate::fault::ArmRefusal`]); every fault while armed sends NMT

@@ -11,8 +11,8 @@
 //! - [`output`]: the stimulator output as a typestate (an unarmed handle cannot send PULSE).
 //! - [`forward`]: the whole decision logic ([`forward::ForwardPath`]) without threads or clocks.
 //! - [`tx`]: the write seam ([`tx::CanTx`]): SocketCAN, or a counting sink;
-//!   [`serial_tx`]: its ScienceMode 2 implementation for a RehaStim 2 on a serial line
-//!   (issue 22), [`serial_rx`] its receive side (the device's answers as the bus events).
+//!   [`serial_tx`]: its ScienceMode 2 implementation for a RehaStim 2 on a serial line,
+//!   [`serial_rx`] its receive side (the device's answers as the bus events).
 //! - [`event`], [`fault`]: what the threads exchange, and the fault and refusal reasons.
 //! - [`config`]: the TOML configuration file.
 //! - [`bus`]: the receive thread (FORCE, STATUS, EMCY, error frames, link state, and frames

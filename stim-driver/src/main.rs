@@ -361,7 +361,7 @@ fn load_config(
             .map_err(Failure::Config)?;
     }
     // The prescription: read-only to this service, separate from its configuration. Nothing
-    // this driver would let through or send in CONFIG may exceed it (issue 19, item 4).
+    // this driver would let through or send in CONFIG may exceed it.
     let prescription = fes_prescription::Prescription::load(&config.prescription)
         .context("configuration: prescription")
         .map_err(Failure::Config)?;

@@ -231,7 +231,7 @@ pub fn run_report(
 }
 
 /// Test-only switch: the report thread panics this many ms after it starts (the fault
-/// suite's proof that a panicking thread stops the stimulator, issue 19 item 6). Logged
+/// suite's proof that a panicking thread stops the stimulator). Logged
 /// loudly when set; never set by the units or the installer.
 pub const ENV_TEST_PANIC_REPORT: &str = "FES_TEST_PANIC_REPORT_AFTER_MS";
 

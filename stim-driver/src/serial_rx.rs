@@ -1,4 +1,4 @@
-//! The ScienceMode 2 receive side (issue 22): one normal-priority thread that reads the
+//! The ScienceMode 2 receive side: one normal-priority thread that reads the
 //! RehaStim 2's packets from the serial line and hands the forward thread the SAME
 //! [`BusEvent`]s the CAN receive thread ([`crate::bus`]) produces, so that the forward
 //! path, its interlocks, its watchdog and the arming sequence stay as they are.

@@ -1,4 +1,4 @@
-//! The ScienceMode 2 side of the write seam (issue 22): [`ScienceModeTx`] implements
+//! The ScienceMode 2 side of the write seam: [`ScienceModeTx`] implements
 //! [`CanTx`], so the forward path, its interlocks and the arming typestate drive a Hasomed
 //! RehaStim 2 on a serial line exactly as they drive the CAN stimulator. Each frame the
 //! driver writes is translated into the ScienceMode 2 command with the same effect

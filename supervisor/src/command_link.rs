@@ -1,4 +1,4 @@
-//! [`CommandLink`]: the supervisor's orders to the driver, acknowledged (issue 19, item 3).
+//! [`CommandLink`]: the supervisor's orders to the driver, acknowledged.
 //!
 //! Every [`DriverCommand`] carries a sequence number; the driver's [`DriverStatus`] echoes
 //! the last one it handled with its result (accepted, or refused with a

@@ -211,7 +211,7 @@ impl<'a> Daemon<'a> {
         cfg: &'a SupervisorConfig,
         on_ready: impl FnOnce(&std::path::Path),
     ) -> Result<Self, DaemonError> {
-        // Every recording names the prescription it was made under (issue 19, item 4).
+        // Every recording names the prescription it was made under.
         let prescription_sha256 = if cfg.recording.enabled {
             let p = fes_prescription::Prescription::load(&cfg.recording.prescription)?;
             tracing::info!("{}", p.summary());

@@ -76,7 +76,7 @@ pub struct RecorderSettings {
     /// Free-form description of the run (goes into `protocol`).
     pub protocol: serde_json::Value,
     /// SHA-256 of the prescription file the run was made under (`dataset.json`
-    /// `prescription_sha256`; issue 19, item 4); None: none was read.
+    /// `prescription_sha256`); None: none was read.
     pub prescription_sha256: Option<String>,
 }
 

@@ -33,8 +33,8 @@ enum Command {
     Modify(cmd::modify::Args),
     /// Design the Local Controller Network by pole placement (thesis 6.5.3, Tables 6.1/6.2).
     Design(cmd::design::Args),
-    /// The pattern generator's loop variants side by side on step references (issue 17,
-    /// docs/control.md "Variants").
+    /// The pattern generator's loop variants side by side on step references
+    /// (docs/control.md "Variants").
     LcnVariants(cmd::lcn_variants::Args),
     /// Optimal stimulation patterns: FTI/FTIpP, random, trains, iterative and LCN methods
     /// (thesis ch. 6).

@@ -463,7 +463,7 @@ impl Stack {
     /// reports itself armed.
     ///
     /// The supervisor answers an Arm when it has queued it, not when the driver has acted
-    /// on it (issue 19, "acknowledged commands"): a driver that has not yet seen rt-core's
+    /// on it: a driver that has not yet seen rt-core's
     /// StimTick publisher alive refuses it and only logs why (seen once in a full test run:
     /// the Arm 14 ms before the driver's liveness check saw rt-core; the stack then never
     /// stimulated). Until the supervisor waits for the driver's answer itself, the bench

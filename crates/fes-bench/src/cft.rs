@@ -1,5 +1,5 @@
 //! The bench's verdict: the LCN's patterns against the front of constant-frequency trains
-//! (CFTs) on the same muscle (issue 17, docs/bench.md "The CFT front").
+//! (CFTs) on the same muscle (docs/bench.md "The CFT front").
 //!
 //! For the bench's reference profile, every CFT(f, n) from `min_hz` to `max_hz` in 1 Hz
 //! steps starts at each beat's onset with pulses at `onset + round(j 1000/f) ms` inside its

@@ -1,5 +1,5 @@
 //! The prescription file (`format = "fes-prescription/1"`, TOML): the dose ceilings of one
-//! patient's stimulation, kept apart from the device configuration (issue 19, item 4).
+//! patient's stimulation, kept apart from the device configuration.
 //!
 //! It is owned by root and read-only to the services (scripts/install: root:root 0644,
 //! `/etc/fes/prescription.toml`). stim-driver refuses to start when its interlocks or the

@@ -68,7 +68,7 @@ pub struct RtCoreConfig {
     #[serde(default = "default_period_us")]
     pub period_us: u64,
     /// The prescription file (`fes-prescription/1`) the pulse is held against at start:
-    /// amplitude, phase width and charge per phase may not exceed it (issue 19, item 4).
+    /// amplitude, phase width and charge per phase may not exceed it.
     /// Relative: to this file. None: not checked here (stim-driver still enforces it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prescription: Option<PathBuf>,

@@ -84,8 +84,8 @@ pub enum WatchError {
 }
 
 /// Follows the daemon's state: waits while it is disarmed, then while it is armed, and
-/// ends when stimulation ends (issue 19, item 2: every unplanned stop raises an alarm a
-/// waiting command can act on). Prints each change of state.
+/// ends when stimulation ends (every unplanned stop raises an alarm a waiting command can
+/// act on). Prints each change of state.
 pub fn watch(a: &WatchArgs) -> Result<WatchEnd, WatchError> {
     let usage = |m: String| WatchError::Usage(m);
     check_timeout(&a.socket).map_err(|e| usage(e.to_string()))?;

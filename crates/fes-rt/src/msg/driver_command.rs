@@ -66,7 +66,7 @@ impl Contract for DriverCommand {
     const TOPIC: &'static str = TOPIC_DRIVER_COMMAND;
     const QOS: PubSubQos = PubSubQos {
         // One commander: a second publisher (another process of the same user) is refused
-        // at creation (issue 19, item 6).
+        // at creation, so only the supervisor sends DriverCommands.
         max_publishers: 1,
         max_subscribers: 4,
         subscriber_buffer: 8,

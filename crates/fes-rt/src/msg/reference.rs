@@ -59,7 +59,7 @@ impl Contract for Reference {
     const TOPIC: &'static str = TOPIC_REFERENCE;
     const QOS: PubSubQos = PubSubQos {
         // One commander: a second publisher (another process of the same user) is refused
-        // at creation (issue 19, item 6).
+        // at creation, so only the supervisor sends References.
         max_publishers: 1,
         max_subscribers: 8,
         subscriber_buffer: 8,

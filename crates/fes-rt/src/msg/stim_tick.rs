@@ -78,7 +78,7 @@ impl StimTick {
     /// The operator stop of the reference is in effect.
     pub const FLAG_STOP: u16 = 1 << 8;
     /// The target is heading to rest (a zero reference still ramping down): the pattern
-    /// generator rested (added 2026-12, issue 17).
+    /// generator rested (added 2026-12).
     pub const FLAG_RESTING: u16 = 1 << 9;
     /// A contraction is running (the target is not resting) or a scheduled one starts
     /// within [`Self::CONTRACTION_AHEAD_MS`] (the reference preview says so): pulses may

@@ -15,7 +15,7 @@
 //! datagram to a unit by reading the sender's cgroup from `/proc` when it processes the
 //! datagram, which fails once the sender has exited, so a process that logs and exits at
 //! once may have its lines missing from `journalctl -u <unit>` (the boot test's missing
-//! second "safe-stop: NMT stop written", issue 19 item 7). A stream's lines are attributed
+//! second "safe-stop: NMT stop written"). A stream's lines are attributed
 //! by the stream, which systemd opened for the unit. Each line carries its priority as a
 //! `<N>` prefix, which journald reads (`SyslogLevelPrefix=`, on by default).
 

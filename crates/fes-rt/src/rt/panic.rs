@@ -2,7 +2,7 @@
 //!
 //! A panic is a bug, and a process of the stimulation chain must not go on with one thread
 //! dead: the driver's report thread, panicking alone, froze its liveness checks while the
-//! forward thread kept sending pulses (issue 19, item 6). Every process installs
+//! forward thread kept sending pulses. Every process installs
 //! [`install`] at start: the hook runs the process's safe move (the driver: NMT stop on its
 //! bus) first, then logs the panic (the journal at `error`, and stderr) for at most
 //! [`LOG_GRACE`], and aborts the whole process, so the rest of the chain sees it gone (the
