@@ -398,7 +398,7 @@ impl Drop for HeartbeatSender {
 }
 
 /// A host bus with only a tap station on it, for proving that a process refused bad input
-/// before it put anything on the bus (issue 10, item 3): start the process on
+/// before it put anything on the bus: start the process on
 /// [`SilentBus::iface`], then [`SilentBus::assert_silent`].
 pub struct SilentBus {
     dir: std::path::PathBuf,

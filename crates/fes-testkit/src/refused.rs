@@ -1,4 +1,4 @@
-//! The bad-input sweeps' check (issue 10, item 3).
+//! The bad-input sweeps' check.
 
 use std::process::Output;
 

@@ -1,4 +1,4 @@
-//! Acceptance of issue 21 for E.4.7 (Fig. E.8a) on seed 1: the LCN has no steady-state
+//! Acceptance for E.4.7 (Fig. E.8a) on seed 1: the LCN has no steady-state
 //! error, overshoots by at most 2 % and rises within 15 % of the scheduled rise time at
 //! alpha = 0.1, 0.5, 0.9 on its design model and on the simulated process;
 //! the linear controller designed at alpha = 0.5 meets its specification there only and

@@ -1,4 +1,4 @@
-//! Acceptance of issue 21 for identification on seed 1: Table E.1's delays, E.4.2's
+//! Acceptance for identification on seed 1: Table E.1's delays, E.4.2's
 //! first-order ARX (pole in 0.85-0.97, the signs of Table E.2), the orderings of Tables
 //! E.3-E.6, and Fig. E.7's shape (G_u falls, the pole moves inwards as the valve opens).
 

@@ -787,7 +787,7 @@ fn quiet_and_firing_ticks_are_valid_and_say_what_they_are() {
 }
 
 /// The commanding services have one publisher: a second one, from any process of the same
-/// user, is refused when it is made (issue 19, item 6), so only the supervisor sends
+/// user, is refused when it is made, so only the supervisor sends
 /// References and DriverCommands and only rt-core sends StimTicks.
 #[test]
 fn a_second_publisher_of_a_commanding_service_is_refused() {

@@ -570,7 +570,7 @@ fn bad_configuration_is_reported_clearly_and_exits_1() {
             "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\ntypo = 1\n",
             "typo",
         ),
-        // The bad-input sweep (issue 10): NaN, infinity, negative, huge, truncated.
+        // The bad-input sweep: NaN, infinity, negative, huge, truncated.
         (
             "schema = \"fes-rt-core/1\"\n[source]\nkind = \"test-pattern\"\nipi_ticks = 4\n[reference]\nstale_ramp_per_s = nan\n",
             "reference.stale_ramp_per_s",
@@ -762,7 +762,7 @@ fn a_restart_after_sigkill_reclaims_the_stale_services() {
 
 /// A 5x amplitude slip in rt-core's `[pulse]` (100 mA for the prescription's 20 mA) is
 /// refused at start, before the loop exists, so no StimTick (let alone a pulse) is ever
-/// published (issue 19, item 4); so are a longer phase and a charge above the
+/// published; so are a longer phase and a charge above the
 /// prescription's, and an unreadable prescription. The prescribed pulse starts.
 #[test]
 fn a_5x_amplitude_slip_is_refused_before_any_tick() {

@@ -690,8 +690,8 @@ fn bus_off_a_down_interface_and_lost_events_trip() {
     );
 }
 
-/// A frame on one of the driver's own identifiers that it did not write (issue 19, item
-/// 1): a trip in every mode, NMT stop at once, the named fault with the COB-ID and kind in
+/// A frame on one of the driver's own identifiers that it did not write: a trip in every
+/// mode, NMT stop at once, the named fault with the COB-ID and kind in
 /// `DriverStatus.fault_code` (0xFF30); every further one is stopped again without a new
 /// trip; only an Arm leaves it.
 #[test]
@@ -760,7 +760,7 @@ fn a_foreign_frame_on_an_own_identifier_trips_in_every_mode() {
     ));
 }
 
-/// STATUS reconciliation (issue 19, item 1): a stimulator that applied every PULSE written
+/// STATUS reconciliation: a stimulator that applied every PULSE written
 /// since the Arm, or all but those written within the in-flight window
 /// (`stimulator_timeout_ms`), passes; one pulse more than written, or one missing that
 /// was written before the window, trips 0xFF31 with NMT stop.
@@ -1125,7 +1125,7 @@ min_ipi_us = 2000
 max_pulses_per_s = 100
 "#;
 
-/// Bad-input sweep of the binary's configuration (issue 10, item 3): each malformed file
+/// Bad-input sweep of the binary's configuration: each malformed file
 /// makes `run --config FILE --check` and a real `run` on a host bus exit 1 with a short
 /// message naming the problem and no panic, and nothing reaches the bus.
 #[test]
@@ -1254,8 +1254,8 @@ fn malformed_configurations_are_refused_clearly_without_a_panic() {
     );
 }
 
-/// The driver's outcome of every pulse decision (what the recording records as delivered,
-/// issue 19 item 5): not armed before the Arm, sent while armed, refused by an interlock,
+/// The driver's outcome of every pulse decision (what the recording records as
+/// delivered): not armed before the Arm, sent while armed, refused by an interlock,
 /// not armed again after a disarm; one outcome per tick that asked for a pulse, none for
 /// the others.
 #[test]
@@ -1302,9 +1302,9 @@ fn every_pulse_decision_gets_its_outcome() {
     assert_eq!(r.bus.pulses().len(), 1);
 }
 
-/// Every command is acknowledged in the counters the DriverStatus carries (issue 19 item
-/// 3): an Arm refused with its reason, an Arm accepted, a Disarm and a SafeStop accepted,
-/// an invalid command refused as invalid.
+/// Every command is acknowledged in the counters the DriverStatus carries: an Arm refused
+/// with its reason, an Arm accepted, a Disarm and a SafeStop accepted, an invalid command
+/// refused as invalid.
 #[test]
 fn every_command_is_acknowledged_with_its_outcome() {
     let ack = |r: &Rig| {
@@ -1365,7 +1365,7 @@ fn every_command_is_acknowledged_with_its_outcome() {
 /// A liveness that stays unknown (the node's state unreadable) beyond the grace period
 /// counts as dead while armed: the StimTick publisher's trips PublisherDead, the
 /// supervisor's SupervisorDead; within the grace nothing trips, and an Arm is refused while
-/// the supervisor's has been unknown too long (issue 19, item 6).
+/// the supervisor's has been unknown too long.
 #[test]
 fn a_liveness_unknown_beyond_its_grace_counts_as_dead() {
     let s = settings();
@@ -1405,7 +1405,7 @@ fn a_liveness_unknown_beyond_its_grace_counts_as_dead() {
 }
 
 /// After CONFIG the stimulator reads back the limits it applied (CONFIG_APPLIED); the
-/// driver arms only when they equal what it sent (issue 19, item 4). A stimulator that
+/// driver arms only when they equal what it sent. A stimulator that
 /// applied a looser amplitude ceiling than requested is refused at arm, with NMT start never
 /// sent; one that read back nothing is refused too; an exact read-back arms.
 #[test]
@@ -1619,7 +1619,7 @@ fn an_incomplete_read_back_starts_the_configuration_over() {
 }
 
 /// The driver's interlocks and the limits it would send in CONFIG may not exceed the
-/// prescription (issue 19, item 4): a configuration with any looser limit, or no readable
+/// prescription: a configuration with any looser limit, or no readable
 /// prescription, is refused at start (`run --check` and a real `run`, exit 1, naming the
 /// prescription and the limit) before anything reaches the bus; the same limits cut to the
 /// dose start.

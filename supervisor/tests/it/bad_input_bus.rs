@@ -1,4 +1,4 @@
-//! Bad input emits nothing on the bus (issue 10, item 3): the virtual stimulator is started
+//! Bad input emits nothing on the bus: the virtual stimulator is started
 //! for real on a host bus with a tap listening, with a malformed flag each time. It must exit
 //! with a clear error naming what is wrong, put no frame on the bus (it would otherwise
 //! announce itself with a boot-up heartbeat) and open no station. stim-driver's malformed

@@ -1,5 +1,5 @@
-//! The supervisor's orders and the driver's acknowledgements ([`CommandLink`], issue 19
-//! item 3) over arbitrary interleavings: orders at any time, commands and statuses lost,
+//! The supervisor's orders and the driver's acknowledgements ([`CommandLink`]) over
+//! arbitrary interleavings: orders at any time, commands and statuses lost,
 //! arms refused, a driver that falls back to pre-operational by itself. After every step:
 //! "armed" is shown only while the driver really is armed; a refused arm is never
 //! confirmed. After a final quiet phase (nothing lost): every stop is acknowledged and the

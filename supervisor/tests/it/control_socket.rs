@@ -401,7 +401,7 @@ fn a_peer_the_policy_does_not_admit_is_refused() {
     assert!(!dir.join("s.sock").exists(), "socket removed on shutdown");
 }
 
-/// Bad-input sweep of the daemon's configuration file (issue 10, item 3): each malformed
+/// Bad-input sweep of the daemon's configuration file: each malformed
 /// file is refused by `supervisor run --check` with exit status 1 and a message naming the
 /// problem, without a panic, and without creating the control socket or the recording
 /// directory it names.
@@ -622,7 +622,7 @@ impl Drop for StopFixture {
     }
 }
 
-/// The operator's stop cannot be held up (issue 19, item 2). 16 clients trickle a byte every
+/// The operator's stop cannot be held up. 16 clients trickle a byte every
 /// 100 ms and never finish their request, and 16 peers the policy does not admit (run as
 /// uid 65534: run as it when the test runs as root, marked as it by the test's credential
 /// reader otherwise, [`foreign_marked_peer_of`]) connect and hold; meanwhile a `status` on the control
@@ -668,7 +668,7 @@ fn the_stop_is_answered_while_trickling_and_refused_peers_hold_connections() {
     assert!(r.ok, "{r:?}");
     let (r, stop_time) = f.stop();
     assert!(r.ok, "{r:?}");
-    // The issue's target is 100 ms (measured here: a few ms). The functional bound is half
+    // The target is 100 ms (measured here: a few ms). The functional bound is half
     // the total deadline: served behind a trickler, an answer waits at least a whole
     // deadline (1 s), so this separates "not held up" from "held up" on any host.
     eprintln!("status answered in {status_time:?}, stop in {stop_time:?}");

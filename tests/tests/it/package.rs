@@ -1,4 +1,4 @@
-//! The Debian packages `fes-stack` (rig) and `fes-stack-bench` (issue 20, item 7), built
+//! The Debian packages `fes-stack` (rig) and `fes-stack-bench`, built
 //! once per test run with `scripts/package --fast` (cargo-deb, release binaries; under the
 //! README's test command, by `scripts/test` before the tests: [`PACKAGES_ENV`]) and read
 //! with `dpkg-deb`:

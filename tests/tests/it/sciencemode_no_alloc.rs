@@ -1,4 +1,4 @@
-//! The driver's ScienceMode 2 sides allocate nothing per packet (issue 22: both transports
+//! The driver's ScienceMode 2 sides allocate nothing per packet (both transports are
 //! allocation-free on the hot path): the receive side's decoding and event mapping
 //! (`stim_driver::serial_rx::Receiver` behind a `fes_sciencemode::Decoder`, as the receive
 //! thread runs them) and the transmit side with its receive-side link

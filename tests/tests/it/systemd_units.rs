@@ -33,7 +33,7 @@ const SERVICES: [&str; 5] = [
     "fes-rt-core.service",
     "fes-supervisor.service",
 ];
-/// The private bus's network namespace (issue 19, item 1).
+/// The private bus's network namespace.
 const NETNS: &str = "fes-can-netns.service";
 /// Processes that share iceoryx2 services.
 const ICEORYX2_USERS: [&str; 3] = [
@@ -292,7 +292,7 @@ fn unit_graph_orders_and_binds_the_stack() {
     assert!(target.has_word("Install", "WantedBy", "multi-user.target"));
 }
 
-/// The private bus (issue 19, item 1): on both variants the CAN interface exists only in
+/// The private bus: on both variants the CAN interface exists only in
 /// the network namespace /run/netns/fes, made before it and removed after it; the driver's
 /// unit and the bench's virtual stimulator join it, nothing else does; the units'
 /// sandboxing does not fight it (no PrivateNetwork=, AF_CAN allowed, RestrictNamespaces=
@@ -766,7 +766,7 @@ fn installer_keeps_the_operators_configuration() {
 /// through its stderr stream, each line with its `<priority>` prefix: journald attributes a
 /// stream's lines to the unit, while a native-protocol datagram of a process that has
 /// already exited loses its unit (the boot test's missing second "safe-stop: NMT stop
-/// written" after a SIGKILL, issue 19 item 7). Run with `JOURNAL_STREAM` naming its stderr,
+/// written" after a SIGKILL). Run with `JOURNAL_STREAM` naming its stderr,
 /// as systemd starts it, on a host bus.
 #[test]
 fn safe_stop_logs_through_its_journal_stream_with_priorities() {
@@ -794,7 +794,7 @@ fn safe_stop_logs_through_its_journal_stream_with_priorities() {
     assert!(!line.contains('\u{1b}'), "no colour codes: {line}");
 }
 
-/// The prescription (issue 19, item 4) is shipped, bounds every shipped configuration, and
+/// The prescription is shipped, bounds every shipped configuration, and
 /// is installed root:root 0644 (read-only to the services, which run as `fes`), apart from
 /// the 0640 configuration; an upgrade never replaces an operator's prescription. The
 /// services cannot write it: every unit has `ProtectSystem=strict` and no writable path

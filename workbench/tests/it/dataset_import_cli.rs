@@ -1,4 +1,4 @@
-//! `fes dataset import` end to end (issue 20, item 1): a sim-muscle data set written out in a
+//! `fes dataset import` end to end: a sim-muscle data set written out in a
 //! foreign layout (time in seconds at 2 kHz, force in mN with the sensor's offset, a 0/1
 //! stimulation column, a quoted free-text column, the records concatenated with rests
 //! between them) is imported, identified with the same options as the original, and gives

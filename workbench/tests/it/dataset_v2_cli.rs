@@ -1,4 +1,4 @@
-//! The workbench and `fes-dataset/2` (issue 21): every command that takes `--data` refuses
+//! The workbench and `fes-dataset/2`: every command that takes `--data` refuses
 //! a version-2 data set with an error that names the format and says what reads it (the
 //! heat-transfer path), and `fes dataset inspect` describes a data set of either version.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test code: a failed assumption is a failed test

@@ -1,4 +1,4 @@
-//! Fault injection on the whole stack (issue 10): the four processes on the host bus
+//! Fault injection on the whole stack: the four processes on the host bus
 //! (fes_hostbus: the CAN frames over Unix datagrams, at the host's real-time
 //! latencies), a 120 beats/min cardiac profile, and then
 //!
@@ -132,7 +132,7 @@ impl Bench {
         let rows = stimulator_rows(&dir.join("stimulator.csv"));
         let run = recordings.last().expect("a recording run");
         let ds = DataSet::read(run).unwrap_or_else(|e| panic!("{}: {e}", run.display()));
-        // Every recording names the prescription it was made under (issue 19, item 4).
+        // Every recording names the prescription it was made under.
         let meta = std::fs::read_to_string(run.join("dataset.json")).unwrap_or_default();
         let meta: serde_json::Value = serde_json::from_str(&meta).unwrap_or_default();
         assert_eq!(
@@ -633,7 +633,7 @@ fn a_waiting_watch_alarms_on_an_unplanned_stop_only() {
 
 /// A thread of the driver panics while it stimulates (its report thread, by the test-only
 /// switch `FES_TEST_PANIC_REPORT_AFTER_MS`): the panic hook sends NMT stop and aborts the
-/// process (issue 19, item 6), so the stimulator leaves operation at once, well within its
+/// process, so the stimulator leaves operation at once, well within its
 /// own watchdog, and the supervisor names the driver dead. Before the hook, the forward
 /// thread went on sending pulses with the report thread (DriverStatus, liveness checks)
 /// dead, until the supervisor's 1 s DriverStatus timeout stopped it.
@@ -746,7 +746,7 @@ fn forged_pulse_frames_are_never_applied() {
 /// measured values); the rest is margin for the shared host's scheduling.
 const INTRUSION_STOP_BOUND_MS: f64 = 50.0;
 
-/// A valid frame in the host's name from a foreign sender (issue 19, item 1).
+/// A valid frame in the host's name from a foreign sender.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Foreign {
     /// NMT start to the stimulator (while armed it is a no-op for the stimulator: only
@@ -923,7 +923,7 @@ fn foreign_frame_attempt(kind: Foreign, attempt: u32) -> Result<f64, String> {
     Ok(stop_ms)
 }
 
-/// Valid host frames from a sender that is not the driver (issue 19, item 1): NMT start,
+/// Valid host frames from a sender that is not the driver: NMT start,
 /// a host heartbeat and the next PULSE, each with what the real driver would send (the
 /// codec's encoders; the PULSE's CRC, alive counter and sequence number as the driver's
 /// next). The stimulator cannot tell them from the driver's; the driver, which receives
@@ -1209,7 +1209,7 @@ fn files_under(root: &Path, prefix: &str, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// Issue 10, item 4: while the stack runs, the iceoryx2 shared memory and its management
+/// While the stack runs, the iceoryx2 shared memory and its management
 /// files (`/dev/shm/iox2_*`, `/tmp/iceoryx2/...`) and the host bus directory are private to
 /// the owner: no write access for the group, no access for others. (iceoryx2's one global
 /// 16-byte management segment, `*.global_mgmt`, is shared by design: it is how any user's
@@ -1282,7 +1282,7 @@ fn start_unarmed(
     (stack, dir)
 }
 
-/// Issue 19, item 4: a 5x amplitude slip in rt-core's file (100 mA for the prescription's
+/// A 5x amplitude slip in rt-core's file (100 mA for the prescription's
 /// 20 mA) is refused before any pulse: rt-core exits at start naming the prescription, so
 /// the stack never comes up, nothing is armed, and the stimulator applies no pulse.
 #[test]
@@ -1325,7 +1325,7 @@ fn a_5x_amplitude_slip_in_rt_core_is_refused_before_any_pulse() {
     );
 }
 
-/// Issue 19, item 4: a stimulator that applies a looser limit than the CONFIG asked for (the
+/// A stimulator that applies a looser limit than the CONFIG asked for (the
 /// virtual stimulator's test fault: it keeps its own 100 mA amplitude ceiling and reports
 /// it in CONFIG_APPLIED) is refused at arm: the driver names the differing limit, the
 /// stimulator is never started, no pulse is applied.

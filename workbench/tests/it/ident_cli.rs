@@ -263,7 +263,7 @@ fn identify_writes_the_fields_validation_figures() {
 /// A recording whose delivered pulses differ from the decided ones (the driver refused
 /// one) is refused by `fes identify` naming the counts and the flag; with
 /// `--allow-undelivered` the delivered pulses are fitted and the model says how many
-/// differed (issue 19, item 5).
+/// differed.
 #[test]
 fn identify_refuses_a_recording_with_undelivered_pulses_unless_allowed() {
     use fes_dataset::DataSet;

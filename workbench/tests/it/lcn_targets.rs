@@ -1,4 +1,4 @@
-//! Issue 17's targets for the shipped controllers (`models/{fast,slow}.lcn.json`), on the
+//! The targets the shipped controllers (`models/{fast,slow}.lcn.json`) must meet, on the
 //! deterministic in-process chain: the pattern generator on step references from rest, its
 //! pattern driving sim-muscle's Ding muscle outside the loop (thesis Fig. 6.6(b)); and the
 //! in-process bench's verdict against the constant-frequency trains (docs/bench.md).
@@ -172,8 +172,8 @@ fn no_constant_frequency_train_dominates_the_shipped_controller() {
 }
 
 /// The shipped fast controller is steady under fatigue with the outer loop (60 s at 0.3,
-/// the bench's fatigue run): every beat after the 10th within 2 % of the target (issue 17,
-/// item 5; `scripts/lcn-search` chose it among the designs that meet the step targets).
+/// the bench's fatigue run): every beat after the 10th within 2 % of the target
+/// (`scripts/lcn-search` chose it among the designs that meet the step targets).
 #[test]
 fn shipped_controller_is_steady_under_fatigue() {
     // The causal loop (planning under fatigue: `planning_bench`), on the profile as this

@@ -1,4 +1,4 @@
-//! The readers for other languages (issue 20, item 2) against files the workbench writes:
+//! The readers for other languages against files the workbench writes:
 //! `python/fes_io.py` (data set, recording, model files, `.hlog`, into pandas) through
 //! `python/test_fes_io.py`, and `matlab/load_fes_dataset.m` under octave-cli. The Rust
 //! side writes the files and what it knows of them; the other side must read the same.

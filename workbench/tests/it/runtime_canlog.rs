@@ -1,4 +1,4 @@
-//! `can.log` of a run on the host bus (issue 20, item 5): the whole stack runs armed for two
+//! `can.log` of a run on the host bus: the whole stack runs armed for two
 //! seconds while [`CanLog`] records the tap; the log is a `candump -L` file that cantools
 //! decodes with the project's DBC, every frame, and python-can's log reader reads frame
 //! for frame, with the PULSE frames of the run among them.

@@ -125,8 +125,8 @@ fn fatigue_outer_loop_on_holds_the_target_off_decays() {
 
 /// The shipped controller (`models/fast.lcn.json`, identified from sim-muscle data) in the
 /// bench's chain (`fes bench --in-process --fatigue`: sensor noise included): the
-/// acceptance criterion of issue 8 as the bench measures it. Outer loop on: every beat after
-/// the 10th within 10 % of the target; off: the contraction decays by more than 15 %.
+/// outer loop's acceptance criterion as the bench measures it. Outer loop on: every beat
+/// after the 10th within 10 % of the target; off: the contraction decays by more than 15 %.
 #[test]
 fn shipped_controller_fatigue_outer_loop_on_holds_every_beat_off_decays() {
     // The causal loop's figures (docs/bench.md); planning under fatigue:

@@ -194,7 +194,7 @@ fn a_run_reads_back_as_a_data_set_with_the_fed_samples() {
         assert_eq!(m, 0o640, "{f}: {m:o}");
     }
     let ds = DataSet::read(&dir).unwrap();
-    // The recording names the prescription it was made under (issue 19, item 4).
+    // The recording names the prescription it was made under.
     let meta: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("dataset.json")).unwrap()).unwrap();
     assert_eq!(meta["prescription_sha256"], PRESCRIPTION_SHA256);

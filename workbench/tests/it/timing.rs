@@ -47,7 +47,7 @@ fn f(v: &serde_json::Value, key: &str) -> f64 {
     v[key].as_f64().unwrap_or_else(|| panic!("{key}: {v}"))
 }
 
-/// Issue 22's acceptance: the bench on the ScienceMode transport (the virtual RehaStim 2
+/// The bench on the ScienceMode transport (the virtual RehaStim 2
 /// on a pty) tracks the same cardiac profile with the same pulses as on CAN (the host
 /// bus: the CAN frames over Unix datagrams, on any kernel): the same summary keys, the
 /// same pulses per contraction, and RMS tracking errors (model and measured force) within

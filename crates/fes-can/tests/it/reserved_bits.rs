@@ -1,6 +1,6 @@
 //! Unused bytes and bits must be zero in every message and CONFIG page: a frame with a
 //! reserved bit set is refused with `DecodeError::ReservedNonZero` naming the byte, so an
-//! accepted frame has one meaning and re-encodes to exactly the bytes received (issue 34).
+//! accepted frame has one meaning and re-encodes to exactly the bytes received.
 
 use fes_can::table::MESSAGES;
 use fes_can::{

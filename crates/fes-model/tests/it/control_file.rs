@@ -224,7 +224,7 @@ use super::json_mutation;
 /// Cases of the controller-file fuzz target: about 2.5 s in a debug build on one core.
 const CONTROLLER_FUZZ_CASES: u32 = 2500;
 
-/// Fuzz target (issue 10): a designed controller's valid file, mutated as in the model-file
+/// Fuzz target: a designed controller's valid file, mutated as in the model-file
 /// target. The loader must return an error value, or a controller whose file re-loads to the
 /// same gains and whose pattern generator builds; a panic fails the test. Non-UTF-8 inputs
 /// go through `Controller::load`, whose error must name the file.

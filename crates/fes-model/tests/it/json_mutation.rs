@@ -1,4 +1,4 @@
-//! Mutations of a valid JSON document for the file-loader fuzz targets (issue 10, item 2):
+//! Mutations of a valid JSON document for the file-loader fuzz targets:
 //! structural edits on the parsed tree (a number replaced by NaN / 1e308 / -1 / a huge
 //! array..., a key dropped or duplicated) written back as text, then optionally a byte-level
 //! edit (truncation, a flipped byte, an invalid UTF-8 sequence). The loaders must answer

@@ -537,7 +537,7 @@ use super::json_mutation;
 /// Cases of the model-file fuzz target: about 2.5 s in a debug build on one core.
 const MODEL_FUZZ_CASES: u32 = 3000;
 
-/// Fuzz target (issue 10): every structure's valid file, mutated (numbers replaced by
+/// Fuzz target: every structure's valid file, mutated (numbers replaced by
 /// NaN / 1e308 / -1 / a 10 000-element array..., keys dropped or duplicated, the text
 /// truncated, a byte flipped, non-UTF-8 inserted). The loader must return an error value or
 /// a model that passes validation with stability required and simulates to finite forces;

@@ -734,7 +734,7 @@ fn wrong_length_and_bad_values_are_reported() {
 #[test]
 fn a_config_with_a_reserved_byte_set_is_refused_naming_the_byte() {
     let mut b = Bench::new();
-    // The charge page uses bytes 0-3; byte 6 is reserved (issue 34).
+    // The charge page uses bytes 0-3; byte 6 is reserved.
     let [_, _, charge] = settings().ceiling.to_pages(5);
     let mut f = Message::Config(charge).encode().unwrap();
     f.data[6] = 0x01;

@@ -6,7 +6,7 @@ use sim_heat::plant::{
     step_delay,
 };
 
-/// Acceptance (issue 21): the delays read off the plant's step responses are within one
+/// Acceptance: the delays read off the plant's step responses are within one
 /// sample of Table E.1, for both inputs.
 #[test]
 fn delays_per_angle_within_one_sample_of_table_e1() {

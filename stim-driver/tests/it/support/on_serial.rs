@@ -1,4 +1,4 @@
-//! The `stim-driver` binary on the ScienceMode 2 transport (issue 22): the scripted
+//! The `stim-driver` binary on the ScienceMode 2 transport: the scripted
 //! StimTick publisher of [`crate::on_bus`] (a separate process), the driver process with
 //! `[transport] kind = "sciencemode"`, and the virtual RehaStim 2 (`sim-muscle
 //! rehastim2`'s code, in a thread of this process, on a pseudo-terminal, with the

@@ -314,7 +314,7 @@ fn booted_units_start_in_order_and_stop_safely() {
         "{r:#?}"
     );
     assert_eq!(r.value("rt-core-cpus"), "0", "{r:#?}");
-    // The private bus (issue 19, item 1): the interface only in /run/netns/fes, joined by
+    // The private bus: the interface only in /run/netns/fes, joined by
     // the driver and the virtual stimulator, not by rt-core (nor the host).
     assert_eq!(r.value("netns-host-iface"), "absent", "{r:#?}");
     assert_eq!(r.value("netns-fes-iface"), "present", "{r:#?}");
