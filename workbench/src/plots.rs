@@ -350,7 +350,7 @@ pub fn plot_latency(out: &Path, title: &str, curves: &[LatencyCurve]) -> Result<
     })
 }
 
-/// The CFT front (issue 17, [`fes_bench::cft`]): RMS tracking error against pulses per
+/// The CFT front ([`fes_bench::cft`]): RMS tracking error against pulses per
 /// contraction of every constant-frequency train (labelled every 10 Hz), the trains of
 /// equal FTI (within 5 %) filled green, and the LCN's point.
 pub fn plot_front(

@@ -1,5 +1,5 @@
-//! `fes lcn-variants`: the pattern generator's loop variants side by side (issue 17,
-//! docs/control.md "Variants"). Every candidate reading of the thesis's loop (rise-time
+//! `fes lcn-variants`: the pattern generator's loop variants side by side
+//! (docs/control.md "Variants"). Every candidate reading of the thesis's loop (rise-time
 //! rule, p3, the shaper's sum, the anti-windup rule, the state fed back) is a named
 //! variant of the default; each is designed on the same model with the same rise times,
 //! run on step references from rest, and its pattern drives the Ding muscle (and, with

@@ -29,7 +29,7 @@ u8_enum! {
 }
 
 /// What the driver did with a [`super::DriverCommand`] (the acknowledgement a
-/// [`DriverStatus`] carries, issue 19 item 3).
+/// [`DriverStatus`] carries).
 #[repr(u8)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum CommandResult {
