@@ -46,12 +46,8 @@ EXAMPLES
 #[derive(Debug, clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// Data-set directory (fes-dataset/1, e.g. from `sim-muscle record`).
-    #[arg(long)]
-    pub data: PathBuf,
-    /// Local model structure.
-    #[arg(long, value_enum)]
-    pub structure: StructureArg,
+    #[command(flatten)]
+    pub fit: FitArgs,
     /// Number of units M (validity functions / local models), 1..=16; 1 = linear model.
     #[arg(long)]
     pub units: usize,
@@ -63,16 +59,21 @@ pub struct Args {
     /// residual tests of MATLAB's `resid` (`resid.csv`, `resid.png`).
     #[arg(long)]
     pub validation: Option<PathBuf>,
-    #[command(flatten)]
-    pub fit: FitArgs,
     /// Format of the figures: png (raster) or svg (vector, for papers).
     #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
     pub format: workbench::plots::FigureFormat,
 }
 
-/// The options shared by identify, sweep and compare.
+/// What `fes identify` and `fes sweep` fit, and how: the data, the structure and the
+/// estimation options (every network size of a sweep is fitted as identify would).
 #[derive(Debug, Clone, clap::Args)]
 pub struct FitArgs {
+    /// Data-set directory (fes-dataset/1, e.g. from `sim-muscle record`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Local model structure.
+    #[arg(long, value_enum)]
+    pub structure: StructureArg,
     /// ARX order n (1..=3; ARX structures).
     #[arg(long, default_value_t = 2)]
     pub order: usize,
@@ -161,13 +162,8 @@ pub enum KnotsArg {
 }
 
 impl FitArgs {
-    /// Library options for `structure` and `units`, checked against the data's period.
-    pub fn options(
-        &self,
-        structure: StructureArg,
-        units: usize,
-        data_ts_s: f64,
-    ) -> Result<IdentOptions> {
+    /// Library options for `units`, checked against the data's period.
+    pub fn options(&self, units: usize, data_ts_s: f64) -> Result<IdentOptions> {
         let data_ms = data_ts_s * 1e3;
         let factor = self.ts_ms as f64 / data_ms;
         if self.ts_ms == 0 || (factor - factor.round()).abs() > 1e-9 || factor.round() < 1.0 {
@@ -202,7 +198,7 @@ impl FitArgs {
             );
         }
         let opts = IdentOptions {
-            structure: structure.into(),
+            structure: self.structure.into(),
             units,
             arx_order: self.order,
             ts_factor: factor.round() as usize,
@@ -237,7 +233,8 @@ pub fn load_records(dir: &Path) -> Result<RecordSet> {
 
 /// [`load_records`], refusing a recording whose deliveries differ from its decisions
 /// unless `--allow-undelivered`; returns the differences to stamp into the model.
-pub fn load_delivered(dir: &Path, fit: &FitArgs) -> Result<(RecordSet, Undelivered)> {
+pub fn load_delivered(fit: &FitArgs) -> Result<(RecordSet, Undelivered)> {
+    let dir = &fit.data;
     let records = load_records(dir)?;
     let undelivered = records
         .check_deliveries(fit.allow_undelivered)
@@ -318,8 +315,8 @@ pub fn print_summary(r: &Identified, data_ts_s: f64) {
 
 /// Runs `fes identify`.
 pub fn run(args: Args) -> Result<()> {
-    let (records, undelivered) = load_delivered(&args.data, &args.fit)?;
-    let opts = args.fit.options(args.structure, args.units, records.ts)?;
+    let (records, undelivered) = load_delivered(&args.fit)?;
+    let opts = args.fit.options(args.units, records.ts)?;
     let fb = Feedback::new("", args.fit.verbose);
     let result = fb.with_hooks(|h| identify(&records, &opts, h));
     fb.finish();

@@ -2,7 +2,7 @@
 //! Figs. 5.13-5.21, and the size with the lowest test MSSE (the thesis's rule).
 
 use super::identify::{FitArgs, load_delivered, stamp_undelivered};
-use super::{Feedback, StructureArg, fmt_err};
+use super::{Feedback, fmt_err};
 use anyhow::{Context, Result, bail};
 use fes_ident::ident::sweep::{Sweep, SweepRow, sweep};
 use fes_model::model::file;
@@ -24,20 +24,14 @@ EXAMPLE
 #[derive(Debug, clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// Data-set directory (fes-dataset/1).
-    #[arg(long)]
-    pub data: PathBuf,
-    /// Local model structure (see `fes identify --help`).
-    #[arg(long, value_enum)]
-    pub structure: StructureArg,
+    #[command(flatten)]
+    pub fit: FitArgs,
     /// Sizes: `A..B` (inclusive, as the thesis writes 1..10), `A..=B`, or one number.
     #[arg(long, default_value = "1..10", value_parser = parse_units)]
     pub units: RangeInclusive<usize>,
     /// Output directory for the table, plot and models (created if needed).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    #[command(flatten)]
-    pub fit: FitArgs,
     /// Format of the figures: png (raster) or svg (vector, for papers).
     #[arg(long, value_enum, default_value_t = workbench::plots::FigureFormat::Png)]
     pub format: workbench::plots::FigureFormat,
@@ -239,10 +233,8 @@ fn draw<DB: DrawingBackend>(
 
 /// Runs `fes sweep`.
 pub fn run(args: Args) -> Result<()> {
-    let (records, undelivered) = load_delivered(&args.data, &args.fit)?;
-    let opts = args
-        .fit
-        .options(args.structure, *args.units.start(), records.ts)?;
+    let (records, undelivered) = load_delivered(&args.fit)?;
+    let opts = args.fit.options(*args.units.start(), records.ts)?;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
@@ -285,12 +277,12 @@ pub fn run(args: Args) -> Result<()> {
         let md = dir.join("sweep.md");
         std::fs::write(
             &md,
-            format!("# {structure} on {}\n\n{text}", args.data.display()),
+            format!("# {structure} on {}\n\n{text}", args.fit.data.display()),
         )
         .with_context(|| format!("cannot write {}", md.display()))?;
         let js = dir.join("sweep.json");
         let json = serde_json::json!({
-            "data_set": args.data.display().to_string(),
+            "data_set": args.fit.data.display().to_string(),
             "structure": structure.name(),
             "options": opts.to_json(),
             "rows": sw.rows,
@@ -302,7 +294,7 @@ pub fn run(args: Args) -> Result<()> {
         plot(
             &sw.rows,
             sw.best,
-            &format!("{structure}, {}", args.data.display()),
+            &format!("{structure}, {}", args.fit.data.display()),
             &png,
         )?;
         println!("wrote {}", dir.display());
