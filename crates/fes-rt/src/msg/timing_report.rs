@@ -2,6 +2,7 @@
 //! stim-driver, probes -> supervisor).
 
 use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
 
 use super::service::{Contract, PubSubQos, TOPIC_TIMING};
 use super::validate::{ValidationError, known_flags, nonzero_seq, u8_enum};
@@ -24,7 +25,7 @@ u8_enum! {
 /// Percentiles of one latency distribution, nanoseconds (from an HdrHistogram with 3
 /// significant digits). All zero when `count` is 0.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Serialize, Deserialize)]
 #[type_name("fes::LatencySummary::v1")]
 pub struct LatencySummary {
     /// Number of values recorded.
@@ -61,9 +62,10 @@ impl LatencySummary {
 }
 
 /// Cumulative timing of a real-time loop since it started, published periodically by its
-/// telemetry thread (never by the real-time thread itself).
+/// telemetry thread (never by the real-time thread itself). Its JSON form (serde) is what
+/// rt-probe keeps of rt-core's last report in its summary.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Serialize, Deserialize)]
 #[type_name("fes::TimingReport::v2")]
 pub struct TimingReport {
     /// Sequence number, 1, 2, ... per publisher.

@@ -36,51 +36,6 @@ impl From<LatencySummary> for PercentilesNs {
     }
 }
 
-/// The last [`TimingReport`] the probe received from rt-core (JSON form).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct RtCoreTiming {
-    /// Ticks executed.
-    pub ticks: u64,
-    /// Skipped periods.
-    pub misses: u64,
-    /// Ticks preceded by skipped periods.
-    pub overruns: u64,
-    /// Telemetry records dropped.
-    pub queue_overflows: u64,
-    /// Heap allocations of the real-time thread after start-up.
-    pub hot_path_allocations: u64,
-    /// Rejected inputs.
-    pub rejected_inputs: u64,
-    /// Wake-up lateness.
-    pub wake_ns: PercentilesNs,
-    /// Input time.
-    pub input_ns: PercentilesNs,
-    /// Compute time.
-    pub compute_ns: PercentilesNs,
-    /// Publish time.
-    pub publish_ns: PercentilesNs,
-    /// `TimingReport` flags.
-    pub flags: u8,
-}
-
-impl From<&TimingReport> for RtCoreTiming {
-    fn from(r: &TimingReport) -> Self {
-        Self {
-            ticks: r.ticks,
-            misses: r.misses,
-            overruns: r.overruns,
-            queue_overflows: r.queue_overflows,
-            hot_path_allocations: r.hot_path_allocations,
-            rejected_inputs: r.rejected_inputs,
-            wake_ns: r.wake.into(),
-            input_ns: r.input.into(),
-            compute_ns: r.compute.into(),
-            publish_ns: r.publish.into(),
-            flags: r.flags,
-        }
-    }
-}
-
 /// What `rt-probe` writes with `--summary` when it exits (the default: nothing received).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct ProbeSummary {
@@ -100,8 +55,8 @@ pub struct ProbeSummary {
     pub final_seen: bool,
     /// Publish-to-receive latency.
     pub ipc_ns: PercentilesNs,
-    /// rt-core's last (ideally final) timing report.
-    pub rt_core: Option<RtCoreTiming>,
+    /// rt-core's last (ideally final) timing report, as received.
+    pub rt_core: Option<TimingReport>,
     /// Whether that report is rt-core's final one.
     pub rt_core_final: bool,
 }

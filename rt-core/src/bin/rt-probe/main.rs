@@ -26,7 +26,7 @@ use fes_rt::rt::exit::Exit;
 use fes_rt::rt::histogram::LatencyHistogram;
 use fes_rt::rt::hlog::HlogWriter;
 use fes_rt::rt::node::create_node;
-use fes_rt::rt::probe::{ProbeSummary, RECORD_HEADER, RtCoreTiming, TickRecord};
+use fes_rt::rt::probe::{ProbeSummary, RECORD_HEADER, TickRecord};
 use fes_rt::rt::signals::install_stop_handler;
 use fes_rt::rt::telemetry::{TAG_IPC, TAG_RECEIVE};
 use fes_rt::rt::{MissingRightsPolicy, RtConfig, enter_realtime};
@@ -270,7 +270,7 @@ impl Probe {
             let report = *sample.payload();
             drop(sample);
             if report.validate().is_ok() && report.source() == Ok(TimingSource::RtCore) {
-                self.summary.rt_core = Some(RtCoreTiming::from(&report));
+                self.summary.rt_core = Some(report);
                 self.summary.rt_core_final = report.flags & TimingReport::FLAG_FINAL != 0;
             }
         }
