@@ -7,36 +7,33 @@
 //! A PULSE frame's CRC covers the frame's COB-ID (two bytes, little endian) followed by
 //! payload bytes 0-6, so a frame copied onto another identifier fails the check (the
 //! AUTOSAR E2E "data ID" idea).
+//!
+//! The arithmetic is the `crc` crate's, with its catalogue entry [`crc::CRC_8_SAE_J1850`]
+//! and a lookup table it builds at compile time; this module only names the parameters and
+//! keeps the register visible between updates.
 
-/// The generator polynomial (normal notation, x^8 implicit).
-pub const POLY: u8 = 0x1D;
-/// Initial register value.
-pub const INIT: u8 = 0xFF;
-/// Value XORed into the register before it is returned.
-pub const XOR_OUT: u8 = 0xFF;
+use crc::{CRC_8_SAE_J1850, Crc};
 
-/// Byte-wise lookup table, built at compile time from [`POLY`].
-const TABLE: [u8; 256] = build_table();
+/// The generator polynomial (normal notation, x^8 implicit): 0x1D.
+pub const POLY: u8 = CRC_8_SAE_J1850.poly;
+/// Initial register value: 0xFF.
+pub const INIT: u8 = CRC_8_SAE_J1850.init;
+/// Value XORed into the register before it is returned: 0xFF.
+pub const XOR_OUT: u8 = CRC_8_SAE_J1850.xorout;
 
-const fn build_table() -> [u8; 256] {
-    let mut table = [0u8; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut reg = i as u8;
-        let mut bit = 0;
-        while bit < 8 {
-            reg = if reg & 0x80 != 0 {
-                (reg << 1) ^ POLY
-            } else {
-                reg << 1
-            };
-            bit += 1;
-        }
-        table[i] = reg;
-        i += 1;
-    }
-    table
-}
+// The parameters the module doc and the wire format (docs/can-protocol.md) state.
+const _: () = assert!(
+    POLY == 0x1D
+        && INIT == 0xFF
+        && XOR_OUT == 0xFF
+        && !CRC_8_SAE_J1850.refin
+        && !CRC_8_SAE_J1850.refout
+        && CRC_8_SAE_J1850.check == 0x4B
+        && CRC_8_SAE_J1850.residue == 0xC4
+);
+
+/// The table-driven engine (one 256-byte table, built at compile time).
+static J1850: Crc<u8> = Crc::<u8>::new(&CRC_8_SAE_J1850);
 
 /// Incremental CRC-8/SAE-J1850 computation (no allocation, `const`-friendly state).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -58,9 +55,11 @@ impl Crc8 {
 
     /// Feeds `bytes` into the register.
     pub fn update(&mut self, bytes: &[u8]) -> &mut Self {
-        for &b in bytes {
-            self.register = TABLE[usize::from(self.register ^ b)];
-        }
+        // Width 8 and no reflection: the digest starts from the register as it is, and its
+        // result is the register XOR `XOR_OUT`.
+        let mut digest = J1850.digest_with_initial(self.register);
+        digest.update(bytes);
+        self.register = digest.finalize() ^ XOR_OUT;
         self
     }
 

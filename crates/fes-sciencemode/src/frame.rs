@@ -24,6 +24,8 @@
 //! and uses it as a check. (The checksum position may hold any byte, 0xF0 and 0x0F
 //! included: the decoder reads it by position.)
 
+use crc::{CRC_8_SMBUS, Crc};
+
 use crate::error::{DecodeError, EncodeError};
 use crate::message::{Message, Packet};
 
@@ -48,31 +50,25 @@ pub const fn is_special(b: u8) -> bool {
     matches!(b, START_BYTE | STOP_BYTE | STUFFING_BYTE)
 }
 
-const CRC8_TABLE: [u8; 256] = {
-    let mut table = [0u8; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut crc = i as u8;
-        let mut bit = 0;
-        while bit < 8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
-            bit += 1;
-        }
-        table[i] = crc;
-        i += 1;
-    }
-    table
-};
+/// The checksum's engine: CRC-8/SMBUS from the `crc` crate's catalogue (polynomial 0x07,
+/// initial value 0, no reflection, no final XOR; check value 0xF4), its lookup table built
+/// at compile time.
+static SMBUS: Crc<u8> = Crc::<u8>::new(&CRC_8_SMBUS);
 
-/// CRC-8 (polynomial 0x07, initial value 0, no reflection, no final XOR) of `bytes`.
+// The parameters §2.2's checksum needs, as the module doc states them.
+const _: () = assert!(
+    CRC_8_SMBUS.poly == 0x07
+        && CRC_8_SMBUS.init == 0
+        && !CRC_8_SMBUS.refin
+        && !CRC_8_SMBUS.refout
+        && CRC_8_SMBUS.xorout == 0
+        && CRC_8_SMBUS.check == 0xF4
+);
+
+/// CRC-8 (polynomial 0x07, initial value 0, no reflection, no final XOR; CRC-8/SMBUS,
+/// check value 0xF4) of `bytes`.
 pub fn crc8(bytes: &[u8]) -> u8 {
-    bytes
-        .iter()
-        .fold(0u8, |crc, &b| CRC8_TABLE[usize::from(crc ^ b)])
+    SMBUS.checksum(bytes)
 }
 
 /// The length of `data` after byte stuffing.
