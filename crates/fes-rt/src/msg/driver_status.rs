@@ -306,13 +306,7 @@ impl DriverStatus {
 
 impl Contract for DriverStatus {
     const TOPIC: &'static str = TOPIC_DRIVER_STATUS;
-    const QOS: PubSubQos = PubSubQos {
-        max_publishers: 1,
-        max_subscribers: 8,
-        subscriber_buffer: 16,
-        history: 1,
-        max_loaned_samples: 2,
-    };
+    const QOS: PubSubQos = PubSubQos::status_report(1);
 
     fn validate(&self) -> Result<(), ValidationError> {
         nonzero_seq(self.seq)?;

@@ -64,6 +64,30 @@ pub struct PubSubQos {
     pub max_loaned_samples: usize,
 }
 
+impl PubSubQos {
+    /// The QoS of a status or report topic ([`super::DriverStatus`], [`super::TimingReport`]):
+    /// a periodic snapshot of which subscribers act on the newest sample, from up to
+    /// `max_publishers` senders.
+    ///
+    /// - `history: 1`: a subscriber that connects late (a restarted supervisor) gets the last
+    ///   snapshot at once instead of waiting up to a period for the next;
+    /// - `subscriber_buffer: 16`: a reader that falls behind for a while (a second and more
+    ///   of DriverStatus at its 100 ms period) still finds the recent snapshots; beyond that
+    ///   the oldest is overwritten, and the publisher never waits;
+    /// - `max_loaned_samples: 2`: iceoryx2's default; the publishers are reporting threads,
+    ///   not the 1 ms loop, so their shared-memory segment is not trimmed to one loan;
+    /// - `max_subscribers: 8`, as on most topics.
+    pub const fn status_report(max_publishers: usize) -> Self {
+        Self {
+            max_publishers,
+            max_subscribers: 8,
+            subscriber_buffer: 16,
+            history: 1,
+            max_loaned_samples: 2,
+        }
+    }
+}
+
 /// A message type together with its topic, its quality of service and its validation.
 pub trait Contract: Copy + Debug + ZeroCopySend + 'static {
     /// Topic name (appended to the prefix).

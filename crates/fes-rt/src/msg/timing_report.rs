@@ -125,13 +125,7 @@ impl TimingReport {
 
 impl Contract for TimingReport {
     const TOPIC: &'static str = TOPIC_TIMING;
-    const QOS: PubSubQos = PubSubQos {
-        max_publishers: 8,
-        max_subscribers: 8,
-        subscriber_buffer: 16,
-        history: 1,
-        max_loaned_samples: 2,
-    };
+    const QOS: PubSubQos = PubSubQos::status_report(8);
 
     fn validate(&self) -> Result<(), ValidationError> {
         nonzero_seq(self.seq)?;
