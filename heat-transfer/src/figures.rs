@@ -14,6 +14,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use fes_figure::TAB10;
 use fes_ident::ident::miso;
 use fes_model::control::io_design::PolyLcn;
 use fes_model::model::miso::MisoArx;
@@ -39,14 +40,9 @@ struct Panel {
     series: Vec<Series>,
 }
 
-const COLORS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(255, 127, 14),
-    RGBColor(23, 190, 207),
-];
+/// The lines' colours, in the order the figures number them: tab10's blue, red, green,
+/// purple, orange and cyan.
+const COLORS: [RGBColor; 6] = [TAB10[0], TAB10[3], TAB10[2], TAB10[4], TAB10[1], TAB10[9]];
 
 fn draw_error(path: &Path, e: impl std::fmt::Display) -> StudyError {
     StudyError::Figure {

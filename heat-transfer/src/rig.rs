@@ -7,6 +7,7 @@
 
 use std::path::Path;
 
+use fes_figure::TAB10;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor;
@@ -17,10 +18,10 @@ use crate::StudyError;
 pub const SIZE: (u32, u32) = (1000, 440);
 
 const WALL: RGBColor = RGBColor(60, 60, 60);
-const AIR: RGBColor = RGBColor(31, 119, 180);
-const HOT: RGBColor = RGBColor(214, 39, 40);
-const VALVE: RGBColor = RGBColor(44, 160, 44);
-const SIGNAL: RGBColor = RGBColor(148, 103, 189);
+const AIR: RGBColor = TAB10[0];
+const HOT: RGBColor = TAB10[3];
+const VALVE: RGBColor = TAB10[2];
+const SIGNAL: RGBColor = TAB10[4];
 
 /// Centre line of the air path (pixels from the top).
 const AXIS: i32 = 250;
