@@ -91,31 +91,14 @@ pub fn plot_records(
         return Err(PlotError::BadSize { width, height });
     }
     let size = (width, height);
-    let ext = out
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    let drawn = match ext.as_deref() {
-        Some("png") => draw(
-            BitMapBackend::new(out, size).into_drawing_area(),
-            ds,
-            records,
-            title,
-            size,
-        )
-        .map_err(|e| Box::new(e) as Box<dyn std::error::Error + Send + Sync>),
-        Some("svg") => draw(
-            SVGBackend::new(out, size).into_drawing_area(),
-            ds,
-            records,
-            title,
-            size,
-        )
-        .map_err(|e| Box::new(e) as Box<dyn std::error::Error + Send + Sync>),
-        _ => {
-            return Err(PlotError::NotPng {
-                path: out.to_path_buf(),
-            });
-        }
+    let drawn = fes_figure::by_extension!(out, size, |root| {
+        draw(root, ds, records, title, size)
+            .map_err(|e| Box::new(e) as Box<dyn std::error::Error + Send + Sync>)
+    });
+    let Some(drawn) = drawn else {
+        return Err(PlotError::NotPng {
+            path: out.to_path_buf(),
+        });
     };
     drawn.map_err(|source| PlotError::Draw {
         path: out.to_path_buf(),
@@ -149,11 +132,7 @@ fn draw<DB: DrawingBackend>(
     let root = root.titled(title, ("sans-serif", 18))?;
     let (upper, lower) = root.split_vertically(size.1 * 18 / 100);
 
-    let mut top = ChartBuilder::on(&upper)
-        .margin_left(10)
-        .margin_right(20)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..total, 0.0..1.25)?;
+    let mut top = fes_figure::pulse_strip(&upper).build_cartesian_2d(0.0..total, 0.0..1.25)?;
     top.configure_mesh()
         .disable_mesh()
         .disable_x_axis()
@@ -163,19 +142,10 @@ fn draw<DB: DrawingBackend>(
         .draw()?;
     for (r, &t0) in selected().zip(&starts) {
         let pulses = r.pulse.iter().enumerate().filter(|(_, p)| **p);
-        top.draw_series(pulses.map(|(k, _)| {
-            let t = t0 + k as f64 * ts_ms;
-            PathElement::new(vec![(t, 0.0), (t, 1.0)], BLACK.stroke_width(1))
-        }))?;
+        top.draw_series(pulses.map(|(k, _)| fes_figure::pulse_mark(t0 + k as f64 * ts_ms)))?;
     }
 
-    let mut bottom = ChartBuilder::on(&lower)
-        .margin_left(10)
-        .margin_right(20)
-        .margin_bottom(5)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..total, low..1.08)?;
+    let mut bottom = fes_figure::time_panel(&lower).build_cartesian_2d(0.0..total, low..1.08)?;
     bottom
         .configure_mesh()
         .light_line_style(WHITE.mix(0.0))
