@@ -17,6 +17,16 @@ pub struct PlotError {
     pub message: String,
 }
 
+impl PlotError {
+    /// The error of a figure's `path` that is neither a `.png` nor an `.svg` file.
+    pub fn not_a_figure(path: &Path) -> Self {
+        PlotError {
+            path: path.to_path_buf(),
+            message: "figures are written as .png or .svg files".into(),
+        }
+    }
+}
+
 /// The formats figures are written in, chosen by the output file's extension (plotters'
 /// bitmap and SVG backends; plotters has no PDF backend).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -37,21 +47,6 @@ impl FigureFormat {
         }
     }
 
-    /// The format of `path`, by its extension.
-    pub fn of(path: &Path) -> Result<Self, PlotError> {
-        let ext = path
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase());
-        match ext.as_deref() {
-            Some("png") => Ok(FigureFormat::Png),
-            Some("svg") => Ok(FigureFormat::Svg),
-            _ => Err(PlotError {
-                path: path.to_path_buf(),
-                message: "figures are written as .png or .svg files".into(),
-            }),
-        }
-    }
-
     /// `stem.<ext>` in `dir`.
     pub fn file(self, dir: &Path, stem: &str) -> PathBuf {
         dir.join(format!("{stem}.{}", self.ext()))
@@ -59,19 +54,16 @@ impl FigureFormat {
 }
 
 /// Runs `$body` with `$root` the drawing area of a `$size` figure at `$path`, drawn with
-/// the bitmap or the SVG backend by the path's extension ([`FigureFormat::of`]; its error
-/// is returned with `?`). The body is compiled once per backend.
+/// the bitmap or the SVG backend by the path's extension (`fes_figure::by_extension!`); for
+/// any other name, [`PlotError::not_a_figure`] is returned with `?`. The body is compiled
+/// once per backend.
 #[macro_export]
 macro_rules! on_figure {
     ($path:expr, $size:expr, |$root:ident| $body:block) => {{
-        match $crate::plots::FigureFormat::of($path)? {
-            $crate::plots::FigureFormat::Png => {
-                let $root = plotters::prelude::BitMapBackend::new($path, $size).into_drawing_area();
-                $body
-            }
-            $crate::plots::FigureFormat::Svg => {
-                let $root = plotters::prelude::SVGBackend::new($path, $size).into_drawing_area();
-                $body
+        match ::fes_figure::by_extension!($path, $size, |$root| $body) {
+            ::std::option::Option::Some(drawn) => drawn,
+            ::std::option::Option::None => {
+                ::std::result::Result::Err($crate::plots::PlotError::not_a_figure($path))?
             }
         }
     }};
@@ -134,10 +126,7 @@ pub fn plot_run(
         root.fill(&WHITE).map_err(|x| e(&x))?;
         let root = root.titled(title, ("sans-serif", 20)).map_err(|x| e(&x))?;
         let (upper, lower) = root.split_vertically(size.1 * 15 / 100);
-        let mut top = ChartBuilder::on(&upper)
-            .margin_left(10)
-            .margin_right(20)
-            .y_label_area_size(70)
+        let mut top = fes_figure::pulse_strip(&upper)
             .build_cartesian_2d(from_s..to_s, 0.0..1.2)
             .map_err(|x| e(&x))?;
         top.configure_mesh()
@@ -151,7 +140,7 @@ pub fn plot_run(
             run.pulses_s
                 .iter()
                 .filter(|t| (from_s..to_s).contains(*t))
-                .map(|&t| PathElement::new(vec![(t, 0.0), (t, 1.0)], BLACK.stroke_width(1))),
+                .map(|&t| fes_figure::pulse_mark(t)),
         )
         .map_err(|x| e(&x))?;
         let in_window = |v: &[f64]| -> Vec<(f64, f64)> {
@@ -171,12 +160,7 @@ pub fn plot_run(
             .filter(|v| v.is_finite())
             .fold(0.1, f64::max)
             * 1.1;
-        let mut bottom = ChartBuilder::on(&lower)
-            .margin_left(10)
-            .margin_right(20)
-            .margin_bottom(5)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
+        let mut bottom = fes_figure::time_panel(&lower)
             .build_cartesian_2d(from_s..to_s, -0.05..ymax)
             .map_err(|x| e(&x))?;
         bottom

@@ -8,28 +8,15 @@ use std::ops::Range;
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow};
+use fes_figure::TAB10;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-/// The tab10 palette: distinguishable line colours.
-pub const PALETTE: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
-];
-
 /// Shading of extrapolated ranges (orange).
 pub const EXTRAPOLATION_BAND: RGBColor = RGBColor(255, 150, 0);
-/// Shading of ranges where a model is unstable (red).
-pub const UNSTABLE_BAND: RGBColor = RGBColor(214, 39, 40);
+/// Shading of ranges where a model is unstable (tab10's red).
+pub const UNSTABLE_BAND: RGBColor = TAB10[3];
 
 /// `c` mixed with white: `f` = 0 keeps it, 1 gives white (opaque, so PNGs stay small).
 pub fn lighten(c: RGBColor, f: f64) -> RGBColor {
@@ -37,9 +24,9 @@ pub fn lighten(c: RGBColor, f: f64) -> RGBColor {
     RGBColor(m(c.0), m(c.1), m(c.2))
 }
 
-/// Colour number `i` of the palette (wrapping).
+/// Colour number `i` of the tab10 palette (wrapping): distinguishable line colours.
 pub fn color(i: usize) -> RGBColor {
-    PALETTE[i % PALETTE.len()]
+    TAB10[i % TAB10.len()]
 }
 
 /// A polyline.
@@ -350,11 +337,7 @@ where
                 .map_err(drawing_failed)?;
         }
         chart
-            .draw_series(
-                p.impulses
-                    .iter()
-                    .map(|&x| PathElement::new(vec![(x, 0.0), (x, 1.0)], BLACK.stroke_width(1))),
-            )
+            .draw_series(p.impulses.iter().map(|&x| fes_figure::pulse_mark(x)))
             .map_err(drawing_failed)?;
         Ok(())
     }
