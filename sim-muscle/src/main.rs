@@ -18,7 +18,7 @@ use sim_muscle::plant::{MusclePlant, OnDevice, Pulse};
 use sim_muscle::plot::{default_selection, plot_records};
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::{ProtocolConfig, ProtocolKind};
-use sim_muscle::recorder::{Origin, record};
+use sim_muscle::recorder::{Normalise, Origin, record_normalised};
 use sim_muscle::sensor::{ForceSensor, Measured, SensorConfig};
 use sim_muscle::simulate::simulate;
 
@@ -293,6 +293,13 @@ struct RecordArgs {
     /// Replace the data set already in --out (only its dataset.json and record files).
     #[arg(long)]
     force: bool,
+    /// Normalise the force by this data set's scale (its `scale_n`) instead of this
+    /// recording's own peak, so that both share their units: a model's levels are
+    /// fractions of its data's scale, and a richer protocol reaching a higher peak would
+    /// otherwise make every level ask for more force. Records that exceed the reader's
+    /// bound (1.1 of the scale) are left out, and their number reported.
+    #[arg(long, value_name = "DIR")]
+    scale_from: Option<PathBuf>,
     /// Pattern family.
     #[arg(long, value_enum, default_value = "thesis")]
     protocol: ProtocolArg,
@@ -619,7 +626,24 @@ fn record_cmd(args: RecordArgs) -> Result<()> {
         seed: args.seed,
         noise: serde_json::to_value(sensor)?,
     };
-    let ds = record(&mut plant, &protocol, origin)?;
+    let norm = match &args.scale_from {
+        None => Normalise::Peak,
+        Some(dir) => Normalise::Scale(
+            DataSet::read(dir)
+                .with_context(|| format!("--scale-from {}", dir.display()))?
+                .header
+                .scale_n,
+        ),
+    };
+    let ds = record_normalised(&mut plant, &protocol, origin, norm)?;
+    if ds.records.len() < protocol.records {
+        eprintln!(
+            "left out {} of {} records: they exceed 1.1 of the scale {:.3} N",
+            protocol.records - ds.records.len(),
+            protocol.records,
+            ds.header.scale_n
+        );
+    }
     ds.write(&args.out, mode)?;
     eprintln!(
         "wrote {} records ({} train, {} test) to {}: scale {:.3} N, offset {:.3} N",

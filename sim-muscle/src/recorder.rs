@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use fes_dataset::{DataSet, Header, Record, Split};
+use fes_dataset::{DataSet, FORCE_SLACK, Header, Record, Split};
 
 use crate::plant::{MusclePlant, Pulse};
 use crate::protocol::{ProtocolConfig, ProtocolError, RecordPlan};
@@ -29,6 +29,19 @@ pub enum RecordError {
     NoForce {
         /// Estimated offset, N.
         offset_n: f64,
+    },
+    /// The scale to normalise by is not a positive force.
+    #[error("the force scale {0} N must be finite and > 0")]
+    Scale(f64),
+    /// Every training or every test record exceeds the scale given.
+    #[error(
+        "with scale {scale_n} N every training or every test record peaks above the reader's bound (this recording peaks at {peak} N)"
+    )]
+    AllAboveScale {
+        /// The scale given, N.
+        scale_n: f64,
+        /// This recording's offset-free peak, N.
+        peak: f64,
     },
     /// The muscle produced a non-finite force.
     #[error("record {record}: the muscle produced a non-finite force at sample {sample}")]
@@ -111,6 +124,19 @@ pub fn estimate_offset(raw: &RawRecords) -> f64 {
     if n == 0 { 0.0 } else { sum / n as f64 }
 }
 
+/// How a recording's force is normalised.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Normalise {
+    /// By the largest offset-free sample of this recording (thesis 5.1: the maximum is 1).
+    Peak,
+    /// By a given force, N: another data set's `scale_n`, so that two recordings of one
+    /// muscle share their units (a model's levels are fractions of its data's scale, so a
+    /// richer protocol that reaches a higher peak would otherwise shift every level). A
+    /// record whose force exceeds `1 + FORCE_SLACK` of it (the data-set reader's bound) is
+    /// left out, the others keeping their train or test membership.
+    Scale(f64),
+}
+
 /// Normalises the raw records into a data set: offset removed, divided by the largest
 /// offset-free sample (so the maximum is exactly 1; the noise floor straddles 0), first
 /// `protocol.train_records` records train.
@@ -118,6 +144,16 @@ pub fn build_dataset(
     raw: RawRecords,
     protocol: &ProtocolConfig,
     origin: Origin,
+) -> Result<DataSet, RecordError> {
+    build_normalised(raw, protocol, origin, Normalise::Peak)
+}
+
+/// [`build_dataset`] with the scale chosen by `norm`.
+pub fn build_normalised(
+    raw: RawRecords,
+    protocol: &ProtocolConfig,
+    origin: Origin,
+    norm: Normalise,
 ) -> Result<DataSet, RecordError> {
     let offset_n = estimate_offset(&raw);
     let peak = raw
@@ -129,25 +165,41 @@ pub fn build_dataset(
     if peak.is_nan() || peak <= 0.0 {
         return Err(RecordError::NoForce { offset_n });
     }
-    let scale_n = peak;
+    let scale_n = match norm {
+        Normalise::Peak => peak,
+        Normalise::Scale(s) if s.is_finite() && s > 0.0 => s,
+        Normalise::Scale(s) => return Err(RecordError::Scale(s)),
+    };
     let ts_s = protocol.ts_ms * 1e-3;
     let n = raw.plans.len();
-    let records = raw
-        .plans
-        .into_iter()
-        .zip(raw.force_n)
-        .enumerate()
-        .map(|(i, (plan, f))| {
-            let force = f.iter().map(|x| (x - offset_n) / scale_n).collect();
-            Record::uniform(
-                format!("record_{i:03}.csv"),
-                plan.kind,
-                ts_s,
-                plan.pulses,
-                force,
-            )
-        })
-        .collect();
+    let first = Split::first(protocol.train_records, n);
+    let mut split = Split {
+        train: Vec::new(),
+        test: Vec::new(),
+    };
+    let mut records = Vec::with_capacity(n);
+    for (i, (plan, f)) in raw.plans.into_iter().zip(raw.force_n).enumerate() {
+        let force: Vec<f64> = f.iter().map(|x| (x - offset_n) / scale_n).collect();
+        if force.iter().any(|&x| x > 1.0 + FORCE_SLACK) {
+            continue;
+        }
+        let k = records.len();
+        if first.train.contains(&i) {
+            split.train.push(k);
+        } else if first.test.contains(&i) {
+            split.test.push(k);
+        }
+        records.push(Record::uniform(
+            format!("record_{k:03}.csv"),
+            plan.kind,
+            ts_s,
+            plan.pulses,
+            force,
+        ));
+    }
+    if split.train.is_empty() || split.test.is_empty() {
+        return Err(RecordError::AllAboveScale { scale_n, peak });
+    }
     let protocol_json = serde_json::to_value(protocol).unwrap_or(serde_json::Value::Null);
     Ok(DataSet {
         header: Header {
@@ -160,7 +212,7 @@ pub fn build_dataset(
             scale_n,
             offset_n,
             ts_s,
-            split: Split::first(protocol.train_records, n),
+            split,
         },
         records,
     })
@@ -172,9 +224,19 @@ pub fn record(
     protocol: &ProtocolConfig,
     origin: Origin,
 ) -> Result<DataSet, RecordError> {
+    record_normalised(plant, protocol, origin, Normalise::Peak)
+}
+
+/// [`record`] with the scale chosen by `norm`.
+pub fn record_normalised(
+    plant: &mut dyn MusclePlant,
+    protocol: &ProtocolConfig,
+    origin: Origin,
+    norm: Normalise,
+) -> Result<DataSet, RecordError> {
     let plans = protocol.plan(origin.seed)?;
     let raw = run_records(plant, protocol, plans)?;
-    build_dataset(raw, protocol, origin)
+    build_normalised(raw, protocol, origin, norm)
 }
 
 #[cfg(test)]
@@ -228,6 +290,50 @@ mod tests {
         assert_eq!(ds.header.split.train.len(), 30);
         assert_eq!(ds.header.split.test.len(), 30);
         assert_eq!(ds.header.offset_n, offset);
+    }
+
+    /// Normalised by a given scale: a scale of half the peak leaves out exactly the records
+    /// that exceed 1.1 of it, keeps the others' train or test membership and their force
+    /// (scaled by 2 against the peak's normalisation); a scale that is not a positive force
+    /// is refused.
+    #[test]
+    fn a_given_scale_leaves_out_the_records_above_the_bound() {
+        let protocol = ProtocolConfig::thesis(Preset::Fast);
+        let cfg = MuscleConfig::preset(Preset::Fast);
+        let raw = || {
+            let mut plant = Muscle::new(cfg).expect("valid");
+            run_records(&mut plant, &protocol, protocol.plan(5).expect("plan")).expect("run")
+        };
+        let by_peak = build_dataset(raw(), &protocol, origin()).expect("build");
+        let half = by_peak.header.scale_n / 2.0;
+        let scaled =
+            build_normalised(raw(), &protocol, origin(), Normalise::Scale(half)).expect("build");
+        let kept: Vec<usize> = (0..by_peak.records.len())
+            .filter(|&i| by_peak.records[i].force.iter().all(|&x| 2.0 * x <= 1.1))
+            .collect();
+        assert!(!kept.is_empty() && kept.len() < by_peak.records.len());
+        assert_eq!(scaled.records.len(), kept.len());
+        assert_eq!(scaled.header.scale_n, half);
+        for (k, &i) in kept.iter().enumerate() {
+            let (a, b) = (&scaled.records[k], &by_peak.records[i]);
+            assert_eq!(a.kind, b.kind);
+            assert!(
+                a.force
+                    .iter()
+                    .zip(&b.force)
+                    .all(|(x, y)| (x - 2.0 * y).abs() < 1e-12)
+            );
+            assert_eq!(
+                scaled.header.split.train.contains(&k),
+                by_peak.header.split.train.contains(&i)
+            );
+        }
+        for bad in [0.0, -1.0, f64::NAN] {
+            assert!(matches!(
+                build_normalised(raw(), &protocol, origin(), Normalise::Scale(bad)),
+                Err(RecordError::Scale(_))
+            ));
+        }
     }
 
     /// A plant sampled at another period than the protocol is refused.
