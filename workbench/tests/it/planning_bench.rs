@@ -123,16 +123,18 @@ fn planning_beats_every_train_on_the_fast_muscle() {
 }
 
 /// The price per pulse scaled by the level (`lambda_scale = "level"`, the shipped files'):
-/// at 0.7 it plans a pulse less than eq. 6.4's fixed price of 0.5 (12 against 13), and
-/// both beat every train that holds the level as closely.
+/// on the slow muscle at 0.7 it plans a pulse less than eq. 6.4's fixed price of 0.5 (5
+/// against 6), and both beat every train that holds the level as closely. (On the fast
+/// muscle the two prices plan the same counts at every level with the shipped model;
+/// docs/bench.md.)
 #[test]
 fn the_price_by_level_saves_a_pulse_at_0_7() {
-    let mut c = shipped("fast.lcn.json");
+    let mut c = shipped("slow.lcn.json");
     assert_eq!(c.settings.planning.lambda_scale, LambdaScale::Level);
-    let (by_level, _) = bench(&c, Preset::Fast, 0.7);
+    let (by_level, _) = bench(&c, Preset::Slow, 0.7);
     c.settings.planning.lambda_scale = LambdaScale::Fixed;
     c.settings.planning.lambda = 0.5;
-    let (fixed, _) = bench(&c, Preset::Fast, 0.7);
+    let (fixed, _) = bench(&c, Preset::Slow, 0.7);
     for v in [&by_level, &fixed] {
         assert_beats_every(Trains::HoldingTheLevel, v, 0.7);
     }
