@@ -73,6 +73,13 @@ pub struct Args {
     /// Price of each pulse a contraction has more or fewer than the last one (0: none).
     #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.count_change)]
     pub plan_count_change: f64,
+    /// Shortest interval between two planned pulses after the opening burst, ms (0: no
+    /// such rule). The thesis's patterns open with a doublet or triplet and go on evenly;
+    /// on a muscle with a catch-like effect a close pair later in the contraction is where
+    /// a fatiguing muscle departs most from the model (docs/control.md, section 11: the
+    /// shipped fast controller uses 15).
+    #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.burst_ipi_ms, value_name = "MS")]
+    pub plan_burst_ipi_ms: f64,
     /// Wall-clock planning budget per tick in rt-core, us.
     #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.budget_us)]
     pub plan_budget_us: f64,
@@ -128,6 +135,7 @@ fn planning_config(args: &Args) -> PlanningConfig {
         },
         mean_weight: args.plan_mean_weight,
         count_change: args.plan_count_change,
+        burst_ipi_ms: args.plan_burst_ipi_ms,
         budget_us: args.plan_budget_us,
         ..PlanningConfig::RECOMMENDED
     }

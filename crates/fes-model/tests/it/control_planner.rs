@@ -7,7 +7,9 @@
 use super::control_support::{TS, fast_muscle, table_6_1_specs};
 use fes_model::control::file::{Controller, ControllerSettings};
 use fes_model::control::pattern_generator::{PatternGenerator, TickInput, TickOutput};
-use fes_model::control::planner::{Deadline, LambdaScale, PlanningConfig, train_times};
+use fes_model::control::planner::{
+    Deadline, LambdaScale, PlanningConfig, PlanningConfigError, train_times,
+};
 use fes_model::control::preview::{Preview, PreviewPoint, slew};
 use fes_model::model::AdvancedForm;
 
@@ -556,4 +558,27 @@ fn a_pulse_lost_in_a_stall_is_planned_around_without_a_replan() {
     let next = onset + c.period;
     assert!(stalled.contains(&next), "the next onset fires: {stalled:?}");
     assert!(stalled.iter().all(|&k| k % c.period < c.on), "{stalled:?}");
+}
+
+/// `burst_ipi_ms` out of [0, 1000] ms (negative, not finite, longer than any horizon) is
+/// refused with its own error; 0 (no rule) and 15 are taken.
+#[test]
+fn a_burst_interval_out_of_range_is_refused() {
+    for bad in [-1.0, f64::NAN, f64::INFINITY, 1000.5] {
+        let cfg = PlanningConfig {
+            burst_ipi_ms: bad,
+            ..planning()
+        };
+        assert!(
+            matches!(cfg.validate(), Err(PlanningConfigError::BurstIpi(_))),
+            "{bad}"
+        );
+    }
+    for good in [0.0, 15.0] {
+        let cfg = PlanningConfig {
+            burst_ipi_ms: good,
+            ..planning()
+        };
+        assert_eq!(cfg.validate(), Ok(()));
+    }
 }
