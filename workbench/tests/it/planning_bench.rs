@@ -316,3 +316,72 @@ fn planning_under_fatigue_holds_the_mean_with_fewer_pulses() {
         "{pulses_planned:.2} planned vs {pulses_causal:.2} causal pulses per contraction"
     );
 }
+
+/// 90 s at 0.3 with fatigue and the outer loop: the shipped fast controller keeps close
+/// pairs to each contraction's opening (`burst_ipi_ms` 15), and every beat after the 10th
+/// stays within 5 % of the target. Without the rule, once fatigue has raised the level to
+/// about 0.39 the plan moves one plateau pulse of a seven-pulse pattern next to another
+/// (137 and 139 ms) and back, beat after beat: the fatigued muscle's catch-like gain answers
+/// the pair some 12 % above the model, the outer loop pulls the level down, the pair goes,
+/// the plateau falls 7 % short, and so on (docs/bench.md, "Under fatigue").
+#[test]
+fn under_long_fatigue_close_pairs_stay_in_the_opening() {
+    let c = shipped("fast.lcn.json");
+    assert_eq!(c.settings.planning.burst_ipi_ms, 15.0);
+    let run = |c: &Controller| {
+        let profile = ProfileSpec::Cardiac(CardiacSpec {
+            bpm: 75.0,
+            duty: 0.4,
+            amplitude: 0.3,
+            edge_rate_per_s: None,
+            outer_loop: Some(true),
+            start_rest_ms: None,
+        });
+        let s = SimSettings::bench_muscle(
+            c,
+            Preset::Fast,
+            true,
+            profile,
+            OuterLoopSettings::default(),
+            90.0,
+        )
+        .unwrap();
+        let r = simulate(c, &s).unwrap();
+        let worst = r.beats[10..]
+            .iter()
+            .filter_map(|b| b.measurement.plateau_mean)
+            .map(|p| (p - 0.3).abs() / 0.3)
+            .fold(0.0, f64::max);
+        // Intervals under 15 ms after the first of 15 ms or more, within each beat.
+        let ticks: Vec<usize> = (0..r.pulse.len()).filter(|&k| r.pulse[k]).collect();
+        let beat_ms = 800;
+        let mut late = 0;
+        let mut opened = false;
+        for w in ticks.windows(2) {
+            if w[0] / beat_ms != w[1] / beat_ms {
+                opened = false;
+                continue;
+            }
+            let short = w[1] - w[0] < 15;
+            late += usize::from(short && opened);
+            opened |= !short;
+        }
+        (worst, late)
+    };
+    let (worst, late) = run(&c);
+    assert_eq!(late, 0, "close pairs after the opening");
+    assert!(
+        worst <= 0.05,
+        "worst beat after the 10th {:.1} %",
+        100.0 * worst
+    );
+    let mut without = c.clone();
+    without.settings.planning.burst_ipi_ms = 0.0;
+    let (worst_without, late_without) = run(&without);
+    assert!(late_without > 0);
+    assert!(
+        worst_without > 0.08,
+        "without the rule: worst beat {:.1} %",
+        100.0 * worst_without
+    );
+}
