@@ -257,6 +257,29 @@ fn planned_runs_are_deterministic() {
     assert!(a.planner.planned_ticks > 1000, "{:?}", a.planner);
 }
 
+/// The bench's fatigue run (`fes bench --in-process --fatigue --amplitude 0.3`): the fast
+/// muscle with fatigue, the outer loop on, `seconds` long.
+fn under_fatigue(c: &Controller, seconds: f64) -> fes_bench::simulation::SimResult {
+    let profile = ProfileSpec::Cardiac(CardiacSpec {
+        bpm: 75.0,
+        duty: 0.4,
+        amplitude: 0.3,
+        edge_rate_per_s: None,
+        outer_loop: Some(true),
+        start_rest_ms: None,
+    });
+    let s = SimSettings::bench_muscle(
+        c,
+        Preset::Fast,
+        true,
+        profile,
+        OuterLoopSettings::default(),
+        seconds,
+    )
+    .unwrap();
+    simulate(c, &s).unwrap()
+}
+
 /// 60 s at 0.3 with fatigue and the outer loop (the bench's fatigue run): with planning the
 /// contractions after the 10th hold the target on average within 2 % and every one within
 /// 5 %, with fewer pulses per contraction than the causal loop of the same file. (The
@@ -266,24 +289,7 @@ fn planned_runs_are_deterministic() {
 fn planning_under_fatigue_holds_the_mean_with_fewer_pulses() {
     let c = shipped("fast.lcn.json");
     let run = |c: &Controller| {
-        let profile = ProfileSpec::Cardiac(CardiacSpec {
-            bpm: 75.0,
-            duty: 0.4,
-            amplitude: 0.3,
-            edge_rate_per_s: None,
-            outer_loop: Some(true),
-            start_rest_ms: None,
-        });
-        let s = SimSettings::bench_muscle(
-            c,
-            Preset::Fast,
-            true,
-            profile,
-            OuterLoopSettings::default(),
-            60.0,
-        )
-        .unwrap();
-        let r = simulate(c, &s).unwrap();
+        let r = under_fatigue(c, 60.0);
         let plateaus: Vec<f64> = r
             .beats
             .iter()
@@ -329,24 +335,7 @@ fn under_long_fatigue_close_pairs_stay_in_the_opening() {
     let c = shipped("fast.lcn.json");
     assert_eq!(c.settings.planning.burst_ipi_ms, 15.0);
     let run = |c: &Controller| {
-        let profile = ProfileSpec::Cardiac(CardiacSpec {
-            bpm: 75.0,
-            duty: 0.4,
-            amplitude: 0.3,
-            edge_rate_per_s: None,
-            outer_loop: Some(true),
-            start_rest_ms: None,
-        });
-        let s = SimSettings::bench_muscle(
-            c,
-            Preset::Fast,
-            true,
-            profile,
-            OuterLoopSettings::default(),
-            90.0,
-        )
-        .unwrap();
-        let r = simulate(c, &s).unwrap();
+        let r = under_fatigue(c, 90.0);
         let worst = r.beats[10..]
             .iter()
             .filter_map(|b| b.measurement.plateau_mean)
