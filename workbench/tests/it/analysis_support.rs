@@ -132,3 +132,20 @@ pub fn column(h: &[String], rows: &[Vec<String>], name: &str) -> Vec<f64> {
         .unwrap_or_else(|| panic!("no column {name}"));
     rows.iter().map(|r| r[i].parse().expect("number")).collect()
 }
+
+/// The bench's cardiac profile (`fes bench`: 75 beats/min, duty 0.4, the outer loop on) at
+/// `amplitude`, resting `start_rest_ms` before the first contraction (None: the profile's
+/// default).
+pub fn bench_profile(
+    amplitude: f64,
+    start_rest_ms: Option<f64>,
+) -> supervisor::profile::ProfileSpec {
+    supervisor::profile::ProfileSpec::Cardiac(supervisor::profile::CardiacSpec {
+        bpm: 75.0,
+        duty: 0.4,
+        amplitude,
+        edge_rate_per_s: None,
+        outer_loop: Some(true),
+        start_rest_ms,
+    })
+}

@@ -9,6 +9,8 @@
 
 use std::path::Path;
 
+use crate::analysis_support::bench_profile;
+
 use fes_bench::simulation::{SimSettings, simulate};
 use fes_bench::summary::{AnalysisInput, RunTiming, summarise};
 use fes_ident::analysis::osp::ForceResponse;
@@ -18,7 +20,6 @@ use sim_muscle::muscle::{Muscle, MuscleConfig};
 use sim_muscle::preset::Preset;
 use sim_muscle::simulate::MuscleResponse;
 use supervisor::outer_loop::OuterLoopSettings;
-use supervisor::profile::{CardiacSpec, ProfileSpec};
 
 const LEVELS: [f64; 7] = [0.1, 0.15, 0.2, 0.3, 0.5, 0.7, 0.9];
 
@@ -118,14 +119,7 @@ fn fast_muscle_patterns_are_the_thesis_shapes_at_every_level() {
 fn no_constant_frequency_train_dominates_the_shipped_controller() {
     let c = shipped("fast");
     for amplitude in [0.2, 0.3, 0.4] {
-        let profile = ProfileSpec::Cardiac(CardiacSpec {
-            bpm: 75.0,
-            duty: 0.4,
-            amplitude,
-            edge_rate_per_s: None,
-            outer_loop: Some(true),
-            start_rest_ms: None,
-        });
+        let profile = bench_profile(amplitude, None);
         let settings =
             SimSettings::bench(&c, false, profile, OuterLoopSettings::default(), 30.0).unwrap();
         let run = simulate(&c, &settings).unwrap();
@@ -182,14 +176,7 @@ fn shipped_controller_is_steady_under_fatigue() {
     // 2 % is met with little margin.
     let mut c = shipped("fast");
     c.settings.planning.mode = fes_model::control::planner::PlanningMode::Off;
-    let profile = ProfileSpec::Cardiac(CardiacSpec {
-        bpm: 75.0,
-        duty: 0.4,
-        amplitude: 0.3,
-        edge_rate_per_s: None,
-        outer_loop: Some(true),
-        start_rest_ms: Some(0.0),
-    });
+    let profile = bench_profile(0.3, Some(0.0));
     let settings =
         SimSettings::bench(&c, true, profile, OuterLoopSettings::default(), 60.0).unwrap();
     let run = simulate(&c, &settings).unwrap();

@@ -9,13 +9,14 @@
 
 use std::path::Path;
 
+use crate::analysis_support::bench_profile;
+
 use fes_bench::cft::FrontVerdict;
 use fes_bench::simulation::{SimSettings, simulate};
 use fes_model::control::file::Controller;
 use fes_model::control::planner::{LambdaScale, PlanningMode};
 use sim_muscle::preset::Preset;
 use supervisor::outer_loop::OuterLoopSettings;
-use supervisor::profile::{CardiacSpec, ProfileSpec};
 
 fn shipped(name: &str) -> Controller {
     Controller::load(
@@ -28,14 +29,7 @@ fn shipped(name: &str) -> Controller {
 
 /// The in-process bench at `amplitude`, as `fes bench --in-process --muscle M`.
 fn bench(c: &Controller, preset: Preset, amplitude: f64) -> (FrontVerdict, u64) {
-    let profile = ProfileSpec::Cardiac(CardiacSpec {
-        bpm: 75.0,
-        duty: 0.4,
-        amplitude,
-        edge_rate_per_s: None,
-        outer_loop: Some(true),
-        start_rest_ms: None,
-    });
+    let profile = bench_profile(amplitude, None);
     let s = SimSettings::bench_muscle(
         c,
         preset,
@@ -155,14 +149,7 @@ fn the_price_by_level_saves_a_pulse_at_0_7() {
 fn the_first_contraction_is_planned_like_every_other() {
     let c = shipped("slow.lcn.json");
     let first_two = |start_rest_ms: Option<f64>| {
-        let profile = ProfileSpec::Cardiac(CardiacSpec {
-            bpm: 75.0,
-            duty: 0.4,
-            amplitude: 0.4,
-            edge_rate_per_s: None,
-            outer_loop: Some(true),
-            start_rest_ms,
-        });
+        let profile = bench_profile(0.4, start_rest_ms);
         let s = SimSettings::bench_muscle(
             &c,
             Preset::Slow,
@@ -233,14 +220,7 @@ fn on_the_slow_muscle_the_trains_that_track_better_miss_the_level() {
 #[test]
 fn planned_runs_are_deterministic() {
     let c = shipped("fast.lcn.json");
-    let profile = ProfileSpec::Cardiac(CardiacSpec {
-        bpm: 75.0,
-        duty: 0.4,
-        amplitude: 0.5,
-        edge_rate_per_s: None,
-        outer_loop: Some(true),
-        start_rest_ms: None,
-    });
+    let profile = bench_profile(0.5, None);
     let s = SimSettings::bench_muscle(
         &c,
         Preset::Fast,
@@ -260,14 +240,7 @@ fn planned_runs_are_deterministic() {
 /// The bench's fatigue run (`fes bench --in-process --fatigue --amplitude 0.3`): the fast
 /// muscle with fatigue, the outer loop on, `seconds` long.
 fn under_fatigue(c: &Controller, seconds: f64) -> fes_bench::simulation::SimResult {
-    let profile = ProfileSpec::Cardiac(CardiacSpec {
-        bpm: 75.0,
-        duty: 0.4,
-        amplitude: 0.3,
-        edge_rate_per_s: None,
-        outer_loop: Some(true),
-        start_rest_ms: None,
-    });
+    let profile = bench_profile(0.3, None);
     let s = SimSettings::bench_muscle(
         c,
         Preset::Fast,
