@@ -11,7 +11,7 @@ use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
 use sim_muscle::plant::MusclePlant;
 use sim_muscle::preset::Preset;
 use sim_muscle::protocol::ProtocolConfig;
-use sim_muscle::recorder::{Origin, record};
+use sim_muscle::recorder::{Normalise, Origin, record_normalised};
 use sim_muscle::sensor::{ForceSensor, Measured, SensorConfig};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -25,7 +25,22 @@ fn tmp(name: &str) -> fes_testkit::Scratch {
 
 /// The data set `sim-muscle record --preset <preset> --seed <seed>` writes.
 fn record_preset(preset: Preset, seed: u64) -> DataSet {
-    let protocol = ProtocolConfig::thesis(preset);
+    record_protocol(
+        preset,
+        seed,
+        &ProtocolConfig::thesis(preset),
+        Normalise::Peak,
+    )
+}
+
+/// The data set `sim-muscle record --preset <preset> --seed <seed>` writes with `protocol`
+/// and the scale chosen by `norm` (`--scale-from`).
+fn record_protocol(
+    preset: Preset,
+    seed: u64,
+    protocol: &ProtocolConfig,
+    norm: Normalise,
+) -> DataSet {
     let cfg = MuscleConfig::preset(preset);
     let mut muscle = Muscle::new(cfg).expect("preset muscle");
     let fmax = max_force(&mut muscle);
@@ -39,7 +54,7 @@ fn record_preset(preset: Preset, seed: u64) -> DataSet {
         seed,
         noise: serde_json::Value::Null,
     };
-    record(&mut plant, &protocol, origin).expect("record")
+    record_normalised(&mut plant, protocol, origin, norm).expect("record")
 }
 
 /// The fast and slow data sets, recorded once per test binary.
@@ -849,26 +864,7 @@ fn every_unit_of_the_shipped_fast_model_is_reached_by_its_training_data() {
         train_min_ms: 250,
         ..ProtocolConfig::thesis(Preset::Fast)
     };
-    let cfg = MuscleConfig::preset(Preset::Fast);
-    let mut muscle = Muscle::new(cfg).expect("preset muscle");
-    let fmax = max_force(&mut muscle);
-    muscle.reset();
-    let sensor = SensorConfig::defaults_for(fmax, 1);
-    let mut plant = Measured::new(muscle, ForceSensor::new(sensor, cfg.ts_s).expect("sensor"));
-    let origin = Origin {
-        source: "sim-muscle (ident_cli test)".into(),
-        preset: Some(Preset::Fast.name().into()),
-        parameters: cfg.parameters(),
-        seed: 1,
-        noise: serde_json::Value::Null,
-    };
-    let rich = sim_muscle::recorder::record_normalised(
-        &mut plant,
-        &protocol,
-        origin,
-        sim_muscle::recorder::Normalise::Scale(scale_n),
-    )
-    .expect("record");
+    let rich = record_protocol(Preset::Fast, 1, &protocol, Normalise::Scale(scale_n));
     // The records that exceed 1.1 of the thesis scale (the fastest trains) are left out.
     assert_eq!(
         (rich.records.len(), rich.header.split.train.len()),
