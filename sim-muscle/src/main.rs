@@ -9,7 +9,7 @@ use fes_rt::rt::exit::Exit;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use fes_dataset::{DataSet, WriteMode};
+use fes_dataset::{DataSet, FORCE_SLACK, WriteMode};
 use sim_muscle::ding::{FatigueParams, PulseWidthParams};
 use sim_muscle::lmn_plant::LmnPlant;
 use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
@@ -638,9 +638,10 @@ fn record_cmd(args: RecordArgs) -> Result<()> {
     let ds = record_normalised(&mut plant, &protocol, origin, norm)?;
     if ds.records.len() < protocol.records {
         eprintln!(
-            "left out {} of {} records: they exceed 1.1 of the scale {:.3} N",
+            "left out {} of {} records: they exceed {} of the scale {:.3} N",
             protocol.records - ds.records.len(),
             protocol.records,
+            1.0 + FORCE_SLACK,
             ds.header.scale_n
         );
     }
