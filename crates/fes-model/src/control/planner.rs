@@ -1527,6 +1527,9 @@ fn rollout(
 /// not (the opening burst of thesis 6.5.4; `burst_ipi` 0: always).
 #[inline]
 fn opens_only_with_bursts(t: &[u16], burst_ipi: usize) -> bool {
+    if burst_ipi == 0 {
+        return true;
+    }
     let mut opened = false;
     for p in t.windows(2) {
         let short = (p[1].saturating_sub(p[0]) as usize) < burst_ipi;
