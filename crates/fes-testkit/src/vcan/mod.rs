@@ -29,7 +29,10 @@ mod native;
 mod process;
 mod shell;
 mod uml;
-pub use uml::{MODULES as UML_CAN_MODULES, MODULES_ROOT as UML_MODULES_ROOT};
+pub use uml::{
+    GUEST_GLIBC_TUNABLES as UML_GUEST_GLIBC_TUNABLES, MODULES as UML_CAN_MODULES,
+    MODULES_ROOT as UML_MODULES_ROOT, kernel_command as uml_kernel_command,
+};
 
 /// Set in a prepared environment: the CAN interface to use ("inside" mode).
 pub const ENV_IFACE: &str = "FES_VCAN_IFACE";
