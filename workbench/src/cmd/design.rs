@@ -80,6 +80,13 @@ pub struct Args {
     /// shipped fast controller uses 15).
     #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.burst_ipi_ms, value_name = "MS")]
     pub plan_burst_ipi_ms: f64,
+    /// Lowest contraction level that may open with a burst (0: every level); below it no
+    /// two planned pulses come closer than --plan-burst-ipi-ms at all. The opening doublet
+    /// buys a high level's fast rise; at low levels a fatiguing muscle answers it above the
+    /// model (docs/control.md, section 11, "Bursts by level": the shipped fast controller
+    /// uses 0.35).
+    #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.burst_min_level, value_name = "LEVEL")]
+    pub plan_burst_min_level: f64,
     /// Wall-clock planning budget per tick in rt-core, us.
     #[arg(long, default_value_t = PlanningConfig::RECOMMENDED.budget_us)]
     pub plan_budget_us: f64,
@@ -136,6 +143,7 @@ fn planning_config(args: &Args) -> PlanningConfig {
         mean_weight: args.plan_mean_weight,
         count_change: args.plan_count_change,
         burst_ipi_ms: args.plan_burst_ipi_ms,
+        burst_min_level: args.plan_burst_min_level,
         budget_us: args.plan_budget_us,
         ..PlanningConfig::RECOMMENDED
     }

@@ -131,6 +131,15 @@ pub struct PlanningConfig {
     /// `m` comes only while every earlier interval of the contraction is shorter than `m`.
     #[serde(default)]
     pub burst_ipi_ms: f64,
+    /// Lowest contraction level (its highest target) that may open with a burst (0: every
+    /// level, the rule of files without the key). Below it no interval of the contraction
+    /// is shorter than `burst_ipi_ms`. The opening doublet buys the fast rise a high level
+    /// needs, but at low levels a fatiguing muscle answers it above the model, and the
+    /// plan's switch from evenly spread pulses to a pattern with a doublet, as the outer
+    /// loop raises the level, is then the worst beat of the run (docs/control.md,
+    /// section 11, "Bursts by level").
+    #[serde(default)]
+    pub burst_min_level: f64,
     /// Relaxation counted after a contraction's end, at most, ms (the horizon ends at the
     /// next onset if that is sooner).
     pub max_tail_ms: u32,
@@ -166,6 +175,7 @@ impl PlanningConfig {
         plateau_start: 0.5,
         count_change: 2.0,
         burst_ipi_ms: 0.0,
+        burst_min_level: 0.0,
         min_hz: 5,
         max_hz: 100,
         max_tail_ms: 500,
@@ -189,6 +199,9 @@ pub enum PlanningConfigError {
     /// `burst_ipi_ms` must be finite, non-negative and at most a horizon.
     #[error("planning burst_ipi_ms = {0} must be finite and in [0, 1000]")]
     BurstIpi(f64),
+    /// `burst_min_level` must be finite and non-negative.
+    #[error("planning burst_min_level = {0} must be finite and >= 0")]
+    BurstMinLevel(f64),
     /// `plateau_start` must lie in [0, 1).
     #[error("planning plateau_start = {0} must be in [0, 1)")]
     PlateauStart(f64),
@@ -235,6 +248,9 @@ impl PlanningConfig {
         }
         if !(self.burst_ipi_ms.is_finite() && (0.0..=1000.0).contains(&self.burst_ipi_ms)) {
             return Err(PlanningConfigError::BurstIpi(self.burst_ipi_ms));
+        }
+        if !(self.burst_min_level.is_finite() && self.burst_min_level >= 0.0) {
+            return Err(PlanningConfigError::BurstMinLevel(self.burst_min_level));
         }
         if !(self.plateau_start.is_finite() && (0.0..1.0).contains(&self.plateau_start)) {
             return Err(PlanningConfigError::PlateauStart(self.plateau_start));
@@ -386,6 +402,8 @@ struct Window {
     e: usize,
     /// The contraction's level: the highest target over `a..b`.
     level: f64,
+    /// Whether the contraction may open with a burst (`burst_min_level`).
+    burst: bool,
     /// First tick a pulse may come after the last one fired (the minimum interval).
     first_ok: usize,
     /// Tick of the base state (rollouts start here; earlier pulses are history).
@@ -875,6 +893,7 @@ impl Planner {
             pa,
             e,
             level: level(&b.r[a..bb]),
+            burst: level(&b.r[a..bb]) >= self.cfg.burst_min_level,
             first_ok,
             base_at: 0,
             base: *st,
@@ -1089,7 +1108,7 @@ impl Planner {
         self.stats.steps += (w.e - w.base_at) as u64;
         b.cand.n = n;
         b.cand.j = sse.cost(self.cfg.mean_weight, w) + lambda * (n - keep) as f64 + change(n);
-        let shaped = opens_only_with_bursts(b.cand.pulses(), self.burst_ipi);
+        let shaped = opens_only_with_bursts(b.cand.pulses(), self.burst_ipi, w.burst);
         if shaped && (b.cand.j < b.inc.j || !b.inc.j.is_finite()) {
             b.inc = b.cand;
         }
@@ -1259,7 +1278,11 @@ impl Planner {
     /// The train's first `m` pulses become the incumbent (checkpoints follow later).
     fn adopt_train(&mut self, m: usize, j: f64) {
         if !self.agrees_with_the_past(&self.bufs.train[..m])
-            || !opens_only_with_bursts(&self.bufs.train[..m], self.burst_ipi)
+            || !opens_only_with_bursts(
+                &self.bufs.train[..m],
+                self.burst_ipi,
+                self.win.is_none_or(|w| w.burst),
+            )
         {
             return;
         }
@@ -1430,7 +1453,7 @@ impl Planner {
                 x0.min(t(i))
             }
         };
-        opens_only_with_bursts(c.pulses(), self.burst_ipi).then_some(tau as usize)
+        opens_only_with_bursts(c.pulses(), self.burst_ipi, w.burst).then_some(tau as usize)
     }
 
     /// Evaluates the candidate, which equals the incumbent before tick `tau`, from the
@@ -1524,13 +1547,14 @@ fn rollout(
 }
 
 /// Whether every interval shorter than `burst_ipi` ticks comes before the first that is
-/// not (the opening burst of thesis 6.5.4; `burst_ipi` 0: always).
+/// not (the opening burst of thesis 6.5.4; `burst_ipi` 0: always); without `burst`, whether
+/// there is no such interval at all.
 #[inline]
-fn opens_only_with_bursts(t: &[u16], burst_ipi: usize) -> bool {
+fn opens_only_with_bursts(t: &[u16], burst_ipi: usize, burst: bool) -> bool {
     if burst_ipi == 0 {
         return true;
     }
-    let mut opened = false;
+    let mut opened = !burst;
     for p in t.windows(2) {
         let short = (p[1].saturating_sub(p[0]) as usize) < burst_ipi;
         if short && opened {

@@ -582,3 +582,66 @@ fn a_burst_interval_out_of_range_is_refused() {
         assert_eq!(cfg.validate(), Ok(()));
     }
 }
+
+/// The intervals of each planned contraction's pulses, ms (the first contraction, which
+/// starts unannounced, left out).
+fn planned_intervals(c: Cardiac, cfg: PlanningConfig) -> Vec<Vec<usize>> {
+    let mut pg = controller(cfg).pattern_generator().unwrap();
+    let p = pulses(&run(&mut pg, c, 4 * c.period, true));
+    (1..4)
+        .map(|beat| {
+            let t: Vec<usize> = p.iter().copied().filter(|k| k / c.period == beat).collect();
+            t.windows(2).map(|w| w[1] - w[0]).collect()
+        })
+        .collect()
+}
+
+/// `burst_min_level`: a contraction below it has no interval shorter than `burst_ipi_ms`
+/// at all; at or above it the plan opens with its burst as without the key.
+#[test]
+fn only_contractions_at_the_burst_level_open_with_a_burst() {
+    let high = Cardiac {
+        level: 0.9,
+        ..CARDIAC
+    };
+    let with = |min_level: f64| PlanningConfig {
+        burst_ipi_ms: 15.0,
+        burst_min_level: min_level,
+        ..planning()
+    };
+    let free = planned_intervals(high, with(0.0));
+    // On this model 0.9 opens with a doublet, then no interval under 15 ms.
+    for beat in &free {
+        assert!(beat[0] < 15, "{free:?}");
+        assert!(beat[1..].iter().all(|&d| d >= 15), "{free:?}");
+    }
+    assert_eq!(planned_intervals(high, with(0.6)), free);
+    assert_eq!(planned_intervals(high, with(0.9)), free);
+    let even = planned_intervals(high, with(0.95));
+    for beat in &even {
+        assert!(beat.len() >= 10, "{even:?}");
+        assert!(beat.iter().all(|&d| d >= 15), "{even:?}");
+    }
+}
+
+/// `burst_min_level` negative or not finite is refused.
+#[test]
+fn a_burst_level_out_of_range_is_refused() {
+    for bad in [-0.1, f64::NAN, f64::INFINITY] {
+        let cfg = PlanningConfig {
+            burst_min_level: bad,
+            ..planning()
+        };
+        assert!(
+            matches!(cfg.validate(), Err(PlanningConfigError::BurstMinLevel(_))),
+            "{bad}"
+        );
+    }
+    for good in [0.0, 0.35, 2.0] {
+        let cfg = PlanningConfig {
+            burst_min_level: good,
+            ..planning()
+        };
+        assert_eq!(cfg.validate(), Ok(()));
+    }
+}
