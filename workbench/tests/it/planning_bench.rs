@@ -253,14 +253,17 @@ fn under_fatigue(c: &Controller, seconds: f64) -> fes_bench::simulation::SimResu
     simulate(c, &s).unwrap()
 }
 
-/// 60 s at 0.3 with fatigue and the outer loop (the bench's fatigue run): with planning the
-/// contractions after the 10th hold the target on average within 2 % and every one within
-/// 5 %, with fewer pulses per contraction than the causal loop of the same file. (The
-/// causal loop holds every beat within 2 %, `lcn_targets`; the planner's worst beat is the
-/// one where fatigue moves the plan from 6 to 7 pulses, docs/bench.md.)
+/// 60 s at 0.3 with fatigue and the outer loop (the bench's fatigue run): with planning every
+/// contraction after the 10th holds the target within 2 %, with fewer pulses per contraction
+/// than the causal loop of the same file (which holds 2 % too, `lcn_targets`). The shipped
+/// fast controller opens with a burst only from level 0.35 (`burst_min_level`); with bursts
+/// at every level the plan switches from six evenly spread pulses to seven opening with a
+/// doublet as fatigue raises the level, and the fatigued muscle answers the doublet above the
+/// model: that beat is 3 % over the target (docs/bench.md, "Under fatigue").
 #[test]
-fn planning_under_fatigue_holds_the_mean_with_fewer_pulses() {
+fn planning_under_fatigue_holds_every_beat_with_fewer_pulses() {
     let c = shipped("fast.lcn.json");
+    assert_eq!(c.settings.planning.burst_min_level, 0.35);
     let run = |c: &Controller| {
         let r = under_fatigue(c, 60.0);
         let plateaus: Vec<f64> = r
@@ -270,29 +273,31 @@ fn planning_under_fatigue_holds_the_mean_with_fewer_pulses() {
             .collect();
         let pulses =
             r.beats.iter().map(|b| b.measurement.pulses).sum::<u64>() as f64 / r.beats.len() as f64;
-        (plateaus, pulses)
+        assert!(plateaus.len() >= 73, "{} beats", plateaus.len());
+        let worst = plateaus[10..]
+            .iter()
+            .map(|p| (p - 0.3).abs() / 0.3)
+            .fold(0.0, f64::max);
+        (worst, pulses)
     };
-    let (planned, pulses_planned) = run(&c);
+    let (worst, pulses_planned) = run(&c);
     let (_, pulses_causal) = run(&off(c.clone()));
-    assert!(planned.len() >= 73, "{} beats", planned.len());
-    let after = &planned[10..];
-    let mean = after.iter().sum::<f64>() / after.len() as f64;
-    let worst = after
-        .iter()
-        .map(|p| (p - 0.3).abs() / 0.3)
-        .fold(0.0, f64::max);
     assert!(
-        (mean - 0.3).abs() <= 0.02 * 0.3,
-        "mean after beat 10 {mean:.4}"
-    );
-    assert!(
-        worst <= 0.05,
+        worst <= 0.02,
         "worst beat after the 10th {:.2} %",
         100.0 * worst
     );
     assert!(
         pulses_planned < pulses_causal,
         "{pulses_planned:.2} planned vs {pulses_causal:.2} causal pulses per contraction"
+    );
+    let mut bursts_everywhere = c.clone();
+    bursts_everywhere.settings.planning.burst_min_level = 0.0;
+    let (worst_everywhere, _) = run(&bursts_everywhere);
+    assert!(
+        worst_everywhere > 0.025,
+        "bursts at every level: worst beat {:.2} %",
+        100.0 * worst_everywhere
     );
 }
 
