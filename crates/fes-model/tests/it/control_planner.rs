@@ -560,26 +560,43 @@ fn a_pulse_lost_in_a_stall_is_planned_around_without_a_replan() {
     assert!(stalled.iter().all(|&k| k % c.period < c.on), "{stalled:?}");
 }
 
-/// `burst_ipi_ms` out of [0, 1000] ms (negative, not finite, longer than any horizon) is
-/// refused with its own error; 0 (no rule) and 15 are taken.
+/// The burst settings out of range are refused, each with its own error: `burst_ipi_ms`
+/// outside [0, 1000] ms (negative, not finite, longer than any horizon), `burst_min_level`
+/// negative or not finite; 0 (no rule) and the shipped values are taken.
 #[test]
-fn a_burst_interval_out_of_range_is_refused() {
-    for bad in [-1.0, f64::NAN, f64::INFINITY, 1000.5] {
-        let cfg = PlanningConfig {
-            burst_ipi_ms: bad,
-            ..planning()
-        };
-        assert!(
-            matches!(cfg.validate(), Err(PlanningConfigError::BurstIpi(_))),
-            "{bad}"
-        );
-    }
-    for good in [0.0, 15.0] {
-        let cfg = PlanningConfig {
-            burst_ipi_ms: good,
-            ..planning()
-        };
-        assert_eq!(cfg.validate(), Ok(()));
+fn burst_settings_out_of_range_are_refused() {
+    type Set = fn(f64) -> PlanningConfig;
+    type ItsError = fn(&PlanningConfigError) -> bool;
+    let ipi: Set = |v| PlanningConfig {
+        burst_ipi_ms: v,
+        ..planning()
+    };
+    let level: Set = |v| PlanningConfig {
+        burst_min_level: v,
+        ..planning()
+    };
+    let cases: [(Set, &[f64], &[f64], ItsError); 2] = [
+        (
+            ipi,
+            &[-1.0, f64::NAN, f64::INFINITY, 1000.5],
+            &[0.0, 15.0],
+            |e| matches!(e, PlanningConfigError::BurstIpi(_)),
+        ),
+        (
+            level,
+            &[-0.1, f64::NAN, f64::INFINITY],
+            &[0.0, 0.35, 2.0],
+            |e| matches!(e, PlanningConfigError::BurstMinLevel(_)),
+        ),
+    ];
+    for (set, bad, good, its_error) in cases {
+        for &v in bad {
+            let e = set(v).validate().unwrap_err();
+            assert!(its_error(&e), "{v}: {e}");
+        }
+        for &v in good {
+            assert_eq!(set(v).validate(), Ok(()), "{v}");
+        }
     }
 }
 
@@ -621,27 +638,5 @@ fn only_contractions_at_the_burst_level_open_with_a_burst() {
     for beat in &even {
         assert!(beat.len() >= 10, "{even:?}");
         assert!(beat.iter().all(|&d| d >= 15), "{even:?}");
-    }
-}
-
-/// `burst_min_level` negative or not finite is refused.
-#[test]
-fn a_burst_level_out_of_range_is_refused() {
-    for bad in [-0.1, f64::NAN, f64::INFINITY] {
-        let cfg = PlanningConfig {
-            burst_min_level: bad,
-            ..planning()
-        };
-        assert!(
-            matches!(cfg.validate(), Err(PlanningConfigError::BurstMinLevel(_))),
-            "{bad}"
-        );
-    }
-    for good in [0.0, 0.35, 2.0] {
-        let cfg = PlanningConfig {
-            burst_min_level: good,
-            ..planning()
-        };
-        assert_eq!(cfg.validate(), Ok(()));
     }
 }
