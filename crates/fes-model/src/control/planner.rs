@@ -886,14 +886,15 @@ impl Planner {
             self.n_prev = (old.a > 0).then_some(self.n_fired);
         }
         let pa = a + (self.cfg.plateau_start * (bb - a) as f64) as usize;
+        let lvl = level(&b.r[a..bb]);
         self.win = Some(Window {
             h0: now,
             a,
             b: bb,
             pa,
             e,
-            level: level(&b.r[a..bb]),
-            burst: level(&b.r[a..bb]) >= self.cfg.burst_min_level,
+            level: lvl,
+            burst: lvl >= self.cfg.burst_min_level,
             first_ok,
             base_at: 0,
             base: *st,
@@ -1153,7 +1154,7 @@ impl Planner {
             &mut self.stats,
         ) && tail.cost(mu, w) < self.bufs.inc.j
         {
-            self.adopt_train(0, tail.cost(mu, w));
+            self.adopt_train(w, 0, tail.cost(mu, w));
         }
         self.bufs.prev_train = [0; MAX_PLAN_PULSES];
         self.train_begin(w, self.cfg.min_hz)
@@ -1216,6 +1217,7 @@ impl Planner {
             ) && total.cost(mu, w) + lambda * (m as f64) + self.count_change(m) < self.bufs.inc.j
             {
                 self.adopt_train(
+                    w,
                     m,
                     total.cost(mu, w) + lambda * m as f64 + self.count_change(m),
                 );
@@ -1260,7 +1262,7 @@ impl Planner {
             // The whole train: judged over the horizon already run.
             let j = sse.cost(mu, w) + lambda * n as f64 + self.count_change(n);
             if j < self.bufs.inc.j {
-                self.adopt_train(n, j);
+                self.adopt_train(w, n, j);
             }
             self.bufs.prev_train = self.bufs.train;
             return self.train_begin(w, hz + 1);
@@ -1276,13 +1278,9 @@ impl Planner {
     }
 
     /// The train's first `m` pulses become the incumbent (checkpoints follow later).
-    fn adopt_train(&mut self, m: usize, j: f64) {
+    fn adopt_train(&mut self, w: &Window, m: usize, j: f64) {
         if !self.agrees_with_the_past(&self.bufs.train[..m])
-            || !opens_only_with_bursts(
-                &self.bufs.train[..m],
-                self.burst_ipi,
-                self.win.is_none_or(|w| w.burst),
-            )
+            || !opens_only_with_bursts(&self.bufs.train[..m], self.burst_ipi, w.burst)
         {
             return;
         }
