@@ -159,11 +159,13 @@ fn init_script(run_dir: &Path, nonce: &str, cmd: &GuestCommand) -> Result<String
         .ok_or_else(|| HarnessError::BadPath(cmd.cwd.clone()))?;
     let mut env: Vec<(String, String)> = std::env::vars().collect();
     env.extend(cmd.env.iter().cloned());
+    // The script exports GLIBC_TUNABLES once, first, for every guest program; a value of
+    // the caller's exported later would undo it.
+    env.retain(|(k, _)| k != "GLIBC_TUNABLES");
     env.push((ENV_IFACE.into(), GUEST_IFACE.into()));
     env.push((ENV_CAN_IFACE.into(), GUEST_IFACE.into()));
     env.push((ENV_BACKEND.into(), "uml".into()));
     env.push((ENV_NONCE.into(), nonce.into()));
-    env.push(("GLIBC_TUNABLES".into(), GUEST_GLIBC_TUNABLES.into()));
     env.push(("FES_VCAN_RUN_DIR".into(), dir.into()));
     env.push(("FES_IOX2_ROOT".into(), format!("{dir}/iceoryx2")));
     let exports = exports(env.iter().map(|(k, v)| (k.as_str(), v.as_str())));
@@ -345,7 +347,10 @@ mod tests {
         let cmd = GuestCommand {
             argv: vec!["/bin/echo".into(), "it's here".into()],
             cwd: PathBuf::from("/tmp/a dir"),
-            env: vec![("EXTRA".into(), "1".into())],
+            env: vec![
+                ("EXTRA".into(), "1".into()),
+                ("GLIBC_TUNABLES".into(), "glibc.malloc.check=3".into()),
+            ],
             timeout: Duration::from_secs(1),
         };
         let s = init_script(Path::new("/tmp/run1"), "abc", &cmd).unwrap();
@@ -356,9 +361,12 @@ mod tests {
         assert!(s.contains("cd '/tmp/a dir' ||"));
         assert!(s.contains("export EXTRA='1'\n"));
         assert!(s.contains("export FES_VCAN_IFACE='vcan0'\n"));
-        // Every guest program, from the first insmod on, keeps off AVX-512.
+        // Every guest program, from the first insmod on, keeps off AVX-512, whatever
+        // the caller's environment says.
         let tunables = format!("export GLIBC_TUNABLES='{GUEST_GLIBC_TUNABLES}'\n");
-        assert!(s.find(&tunables) < s.find("insmod"), "{s}");
+        let at = s.find(&tunables).expect("GLIBC_TUNABLES exported");
+        assert!(at < s.find("insmod").expect("insmod"), "{s}");
+        assert_eq!(s.matches("GLIBC_TUNABLES=").count(), 1, "{s}");
         assert!(s.contains("echo \"@@FES-VCAN-EXIT $N $?\""));
         // The script is valid shell.
         let out = Command::new("sh")
