@@ -187,6 +187,30 @@ pub struct FrontVerdict {
     pub ftipp_vs_best_cft: Option<f64>,
 }
 
+/// One pattern of [`FrontSettings::pattern_search`] and its score.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SearchedPattern {
+    /// Pulse times from each onset, ms.
+    pub offsets_ms: Vec<usize>,
+    /// Its score (`hz` and `n` unset).
+    pub point: FrontPoint,
+}
+
+/// The outcome of [`FrontSettings::pattern_search`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PatternSearch {
+    /// Pulses per contraction of every pattern searched.
+    pub pulses: usize,
+    /// Grid of the pulse times, ms.
+    pub grid_ms: usize,
+    /// Patterns scored.
+    pub patterns: usize,
+    /// The lowest RMS error of them all.
+    pub best: Option<SearchedPattern>,
+    /// The lowest RMS error among those missing the level by no more than asked.
+    pub best_holding_level: Option<SearchedPattern>,
+}
+
 /// Summaries written before the range was recorded compared 5-100 Hz.
 fn default_hz_range() -> (u32, u32) {
     (5, 100)
@@ -398,6 +422,102 @@ impl FrontSettings {
             .then(|| window.iter().sum::<f64>() / window.len() as f64)
     }
 
+    /// The point of the pattern that fires at `offsets` (ms from each onset) in every beat.
+    fn pattern_point(
+        &self,
+        beats: &[BeatWindow],
+        n: usize,
+        offsets: &[usize],
+        zero: Option<&[f64]>,
+        fti_1: f64,
+    ) -> Result<FrontPoint, sim_muscle::ding::ParamError> {
+        let measured = self.train_measured(beats, n, offsets, zero)?;
+        let mut pulse = vec![false; n];
+        for b in beats {
+            for &t in offsets {
+                if b.start + t < n {
+                    pulse[b.start + t] = true;
+                }
+            }
+        }
+        Ok(self.score(None, beats, &pulse, &measured, fti_1))
+    }
+
+    /// Every pattern of `pulses` pulses per contraction on this muscle, the same in every
+    /// beat of `run`: each pulse on a `grid_ms` grid inside the contraction (from its onset),
+    /// at least `min_interval_ms` after the one before. The best by RMS, and the best of
+    /// those missing the level by no more than `level_error` (the run's, to ask "does any
+    /// pattern of this count track better and hold the level as closely?"). The trains are
+    /// some of these patterns; this answers the question for every pattern, and so says
+    /// how far a pattern generator of this count can go at all (docs/bench.md, "Planning").
+    /// The work grows as the contraction's grid points to the power `pulses`: 1-3 pulses.
+    pub fn pattern_search(
+        &self,
+        run: &Series,
+        pulses: usize,
+        grid_ms: usize,
+        min_interval_ms: usize,
+        level_error: f64,
+    ) -> Result<PatternSearch, sim_muscle::ding::ParamError> {
+        let beats = beat_windows(run);
+        let n = run.pulse.len();
+        let mut out = PatternSearch {
+            pulses,
+            grid_ms,
+            patterns: 0,
+            best: None,
+            best_holding_level: None,
+        };
+        let Some(first) = beats.first().filter(|_| pulses > 0) else {
+            return Ok(out);
+        };
+        let fti_1 = self.twitch_fti(first)?;
+        let zero = self.zero_reading(n)?;
+        let (grid, gap) = (grid_ms.max(1), min_interval_ms.max(1));
+        let mut offsets: Vec<usize> = Vec::with_capacity(pulses);
+        let mut next = vec![0usize; pulses];
+        // Odometer over the grid: offsets[i] >= offsets[i - 1] + gap, all < on.
+        let mut i = 0;
+        loop {
+            if next[i] >= first.on {
+                if i == 0 {
+                    break;
+                }
+                offsets.pop();
+                i -= 1;
+                next[i] += grid;
+                continue;
+            }
+            offsets.push(next[i]);
+            if i + 1 < pulses {
+                next[i + 1] = (next[i] + gap).div_ceil(grid) * grid;
+                i += 1;
+                continue;
+            }
+            let point = self.pattern_point(&beats, n, &offsets, zero.as_deref(), fti_1)?;
+            out.patterns += 1;
+            let better = |b: &Option<SearchedPattern>| {
+                b.as_ref()
+                    .is_none_or(|b| point.rms_error < b.point.rms_error)
+            };
+            if better(&out.best) {
+                out.best = Some(SearchedPattern {
+                    offsets_ms: offsets.clone(),
+                    point,
+                });
+            }
+            if point.level_error <= level_error && better(&out.best_holding_level) {
+                out.best_holding_level = Some(SearchedPattern {
+                    offsets_ms: offsets.clone(),
+                    point,
+                });
+            }
+            offsets.pop();
+            next[i] += grid;
+        }
+        Ok(out)
+    }
+
     /// Every CFT(f, n) over `beats` (contraction `on` samples, `n` samples in all), scored;
     /// trains with the same pulses counted once, by their lowest frequency.
     fn front(
@@ -416,16 +536,9 @@ impl FrontSettings {
                 if !seen.insert(times[..k].to_vec()) {
                     continue;
                 }
-                let measured = self.train_measured(beats, n, &times[..k], zero.as_deref())?;
-                let mut pulse = vec![false; n];
-                for b in beats {
-                    for &t in &times[..k] {
-                        if b.start + t < n {
-                            pulse[b.start + t] = true;
-                        }
-                    }
-                }
-                let mut point = self.score(Some(hz), beats, &pulse, &measured, fti_1);
+                let mut point =
+                    self.pattern_point(beats, n, &times[..k], zero.as_deref(), fti_1)?;
+                point.hz = Some(hz);
                 point.n = Some(k as u32);
                 front.push(point);
             }
@@ -760,6 +873,72 @@ mod tests {
                 })
                 .collect(),
         }
+    }
+
+    /// Every pattern of one and of two pulses: as many as the grid gives ((on - gap)(on -
+    /// gap + 1) / 2 pairs), each train of that count among them with its own score, none
+    /// better than the best; the best holding the level misses it by no more than asked;
+    /// and a run of the best pattern scores as it.
+    #[test]
+    fn the_pattern_search_tries_every_pattern_and_keeps_the_best() {
+        let s = settings();
+        let on = 120;
+        let run = train_run(&s, 20.0, on, 4, None);
+        let v = s.verdict(&run).unwrap();
+        for (k, gap) in [(1, 1), (2, 1), (2, 10)] {
+            let r = s.pattern_search(&run, k, 1, gap, 0.05).unwrap();
+            let expected = if k == 1 {
+                on
+            } else {
+                (on - gap) * (on - gap + 1) / 2
+            };
+            assert_eq!(r.patterns, expected, "{k} pulses, gap {gap}");
+            let best = r.best.unwrap();
+            assert_eq!(best.offsets_ms.len(), k);
+            for p in v.cft_front.iter().filter(|p| p.n == Some(k as u32)) {
+                assert!(
+                    best.point.rms_error <= p.rms_error + 1e-15,
+                    "{p:?} vs {best:?}"
+                );
+            }
+            if let Some(held) = r.best_holding_level {
+                assert!(held.point.level_error <= 0.05, "{held:?}");
+                assert!(held.point.rms_error >= best.point.rms_error);
+            }
+            let any = s.pattern_search(&run, k, 1, gap, f64::INFINITY).unwrap();
+            assert_eq!(any.best_holding_level, any.best);
+        }
+        // The onset pulse is one of the single-pulse patterns, scored as the 5 Hz x 1 train.
+        let one = s.pattern_search(&run, 1, 1, 1, f64::INFINITY).unwrap();
+        let onset = v
+            .cft_front
+            .iter()
+            .find(|p| p.n == Some(1))
+            .unwrap()
+            .rms_error;
+        let best = one.best.unwrap();
+        assert!(best.point.rms_error <= onset);
+        // A run firing the best pair in every beat scores as the search said.
+        let pair = s.pattern_search(&run, 2, 1, 1, 0.0).unwrap().best.unwrap();
+        let mut pulse = vec![false; run.pulse.len()];
+        for b in beat_windows(&run) {
+            for &t in &pair.offsets_ms {
+                pulse[b.start + t] = true;
+            }
+        }
+        let measured = s.measured(&pulse).unwrap();
+        let own = s
+            .verdict(&Series {
+                pulse,
+                measured,
+                ..run.clone()
+            })
+            .unwrap()
+            .lcn;
+        assert!(
+            (own.rms_error - pair.point.rms_error).abs() < 1e-12,
+            "{own:?} vs {pair:?}"
+        );
     }
 
     /// The 20 Hz train (7 pulses) with its onset pulse left out in one beat of eight: 6.875

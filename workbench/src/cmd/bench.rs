@@ -94,6 +94,14 @@ pub struct Args {
     /// latencies) instead of running the processes on CAN.
     #[arg(long)]
     pub in_process: bool,
+    /// With `--in-process`: also try every pattern of K pulses per contraction (1-3), the
+    /// same in every beat, on the run's muscle: each pulse on a 1 ms grid (2 ms for 3),
+    /// the controller's minimum interval apart. Prints the best by RMS and the best that
+    /// misses the level by no more than the run: how far any pattern of that count can
+    /// go, trains or not (docs/bench.md, "Planning"). Seconds for 1 pulse, a minute for
+    /// 2, several for 3.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u8).range(1..=3), requires = "in_process")]
+    pub pattern_search: Option<u8>,
     /// The bus between stim-driver and the virtual stimulator. `can`: SocketCAN (native
     /// vcan0, or a User-Mode Linux guest when the kernel has no CAN: functional timings
     /// only); `host`: the host bus (the same frames over Unix datagrams, on this host at
@@ -613,7 +621,7 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
             target: a.amplitude,
             baseline: Some(baseline(a.muscle.preset(), a.amplitude, scale_n, delay)),
             uml: false,
-            front: Some(front),
+            front: Some(front.clone()),
         },
         RunTiming {
             rt_core: none,
@@ -632,33 +640,65 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
             p.windows, p.converged, p.replans, p.planned_ticks, p.causal_fallbacks, p.deadline_cuts
         );
     }
+    let mut extra = vec![("planner", serde_json::to_value(run.planner)?)];
+    if let Some(k) = a.pattern_search {
+        let k = usize::from(k);
+        let grid = if k > 2 { 2 } else { 1 };
+        let min_interval =
+            ((controller.settings.shaper.min_gap + 1) as f64 * controller.lmn.ts * 1e3).round();
+        let level_error = summary.front.as_ref().map_or(0.0, |v| v.lcn.level_error);
+        let r = front.pattern_search(&series, k, grid, min_interval as usize, level_error)?;
+        print_pattern_search(&r, level_error);
+        extra.push(("pattern_search", serde_json::to_value(&r)?));
+    }
     println!("  per beat: {}", beats_csv.display());
     println!("  per tick: {}", series_csv.display());
-    write_json_with(
-        &summary,
-        &plots,
-        a,
-        Some(("planner", serde_json::to_value(run.planner)?)),
-    )
+    write_json_with(&summary, &plots, a, &extra)
+}
+
+/// `--pattern-search`: the best patterns of the count searched.
+fn print_pattern_search(r: &fes_bench::cft::PatternSearch, level_error: f64) {
+    let show = |p: &Option<fes_bench::cft::SearchedPattern>| {
+        p.as_ref().map_or("none".to_string(), |p| {
+            format!(
+                "{:?} ms, RMS {}, level missed by {:.1} %",
+                p.offsets_ms,
+                fmt(p.point.rms_error, 4),
+                100.0 * p.point.level_error
+            )
+        })
+    };
+    println!(
+        "  every pattern of {} pulses ({} patterns, {} ms grid): best {}",
+        r.pulses,
+        r.patterns,
+        r.grid_ms,
+        show(&r.best)
+    );
+    println!(
+        "    ... of those, missing the level by no more than the run ({:.1} %): {}",
+        100.0 * level_error,
+        show(&r.best_holding_level)
+    );
 }
 
 /// `--json FILE`: the summary, the plots and the command line.
 fn write_json(summary: &Summary, plots: &[PathBuf], a: &Args) -> anyhow::Result<()> {
-    write_json_with(summary, plots, a, None)
+    write_json_with(summary, plots, a, &[])
 }
 
-/// [`write_json`] with one more key.
+/// [`write_json`] with more keys.
 fn write_json_with(
     summary: &Summary,
     plots: &[PathBuf],
     a: &Args,
-    extra: Option<(&str, serde_json::Value)>,
+    extra: &[(&str, serde_json::Value)],
 ) -> anyhow::Result<()> {
     if let Some(j) = &a.json {
         let mut v = serde_json::to_value(summary)?;
         if let Some(o) = v.as_object_mut() {
-            if let Some((k, x)) = extra {
-                o.insert(k.into(), x);
+            for (k, x) in extra {
+                o.insert((*k).into(), x.clone());
             }
             o.insert(
                 "plots".into(),
