@@ -117,23 +117,23 @@ fn planning_beats_every_train_on_the_fast_muscle() {
 }
 
 /// The price per pulse scaled by the level (`lambda_scale = "level"`, the shipped files'):
-/// on the slow muscle at 0.7 it plans a pulse less than eq. 6.4's fixed price of 0.5 (5
-/// against 6), and both beat every train that holds the level as closely. (On the fast
-/// muscle the two prices plan the same counts at every level with the shipped model;
-/// docs/bench.md.)
+/// on the fast muscle at 0.9 it plans fewer pulses than eq. 6.4's fixed price of 0.5 (15.14
+/// against 15.68 per contraction; the price by level is 0.9 there), and both beat every
+/// train that holds the level as closely. (At every other level of both muscles the two
+/// prices plan the same counts; docs/bench.md.)
 #[test]
-fn the_price_by_level_saves_a_pulse_at_0_7() {
-    let mut c = shipped("slow.lcn.json");
+fn the_price_by_level_saves_pulses_at_0_9() {
+    let mut c = shipped("fast.lcn.json");
     assert_eq!(c.settings.planning.lambda_scale, LambdaScale::Level);
-    let (by_level, _) = bench(&c, Preset::Slow, 0.7);
+    let (by_level, _) = bench(&c, Preset::Fast, 0.9);
     c.settings.planning.lambda_scale = LambdaScale::Fixed;
     c.settings.planning.lambda = 0.5;
-    let (fixed, _) = bench(&c, Preset::Slow, 0.7);
+    let (fixed, _) = bench(&c, Preset::Fast, 0.9);
     for v in [&by_level, &fixed] {
-        assert_beats_every(Trains::HoldingTheLevel, v, 0.7);
+        assert_beats_every(Trains::HoldingTheLevel, v, 0.9);
     }
     assert!(
-        by_level.lcn.pulses_per_contraction <= fixed.lcn.pulses_per_contraction - 0.9,
+        by_level.lcn.pulses_per_contraction <= fixed.lcn.pulses_per_contraction - 0.4,
         "by level {:?}, fixed {:?}",
         by_level.lcn,
         fixed.lcn
@@ -197,9 +197,12 @@ fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
 }
 
 /// Slow muscle, 0.2-0.5: a train of fewer pulses tracks better, but only by missing the
-/// level the outer loop regulates (one twitch holds the plateau at 0.125; docs/bench.md,
-/// "Why the slow muscle's low levels lose"); among the trains that hold the level as
-/// closely as the plan, none of its whole count tracks as well.
+/// level the outer loop regulates (one twitch at the onset holds the plateau at 0.125;
+/// docs/bench.md, "Why the slow muscle's low levels lose"); among the trains that hold the
+/// level as closely as the plan, none of its whole count tracks as well. At 0.2 the plan is
+/// one pulse, late enough (about 43 ms) for its twitch to hold the plateau: the local
+/// search reaches it from the two onset pulses the trains give by deleting one and moving
+/// the other later together (two pulses at 2 and 18 ms, RMS 0.125, without that move).
 #[test]
 fn on_the_slow_muscle_the_trains_that_track_better_miss_the_level() {
     let c = shipped("slow.lcn.json");
@@ -213,6 +216,15 @@ fn on_the_slow_muscle_the_trains_that_track_better_miss_the_level() {
             v.lcn
         );
         assert_beats_every(Trains::HoldingTheLevel, &v, amplitude);
+        if amplitude == 0.2 {
+            assert!(
+                v.lcn.pulses_per_contraction == 1.0
+                    && v.lcn.level_error < 0.01
+                    && v.lcn.rms_error < 0.095,
+                "0.2: {:?}",
+                v.lcn
+            );
+        }
     }
 }
 

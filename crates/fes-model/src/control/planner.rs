@@ -32,10 +32,13 @@
 //! stopped after each of its pulses (`CFT(f, n)`, so that on the model the plan is never
 //! worse than any train with no more pulses: with `J` minimal, `SSE_plan <= SSE_train +
 //! lambda (n_train - n_plan)`), then (3) a local search on the best: each pulse shifted by
-//! 1-8 ticks, deleted, or a pulse inserted, and every later pulse shifted together, first
-//! improvement, until a full pass improves nothing. Every rollout starts from the state
-//! stored at the pulse before the first change and stops as soon as its cost exceeds the
-//! best (branch and bound).
+//! 1-8 ticks, deleted, or a pulse inserted, every later pulse shifted together, or a pulse
+//! deleted with every later one moved 8, 16 or 32 ticks later (its force given back by the
+//! rest coming later: from the onset pair the trains give, the slow muscle's one pulse at
+//! 43 ms that holds 0.2 is two moves away, and neither a deletion nor a shift alone
+//! improves), first improvement, until a full pass improves nothing. Every rollout starts
+//! from the state stored at the pulse before the first change and stops as soon as its
+//! cost exceeds the best (branch and bound).
 //!
 //! **Receding.** The plan is made over the whole contraction before it starts and kept as
 //! the ticks pass; the search goes on within each tick's budget on the pulses not yet
@@ -447,9 +450,11 @@ enum Move {
     Delete,
     InsertBefore,
     Suffix(i16),
+    /// Delete the pulse and move every later one by the ticks given.
+    DeleteSuffix(i16),
 }
 
-const MOVES: [Move; 15] = [
+const MOVES: [Move; 18] = [
     Move::Shift(-1),
     Move::Shift(1),
     Move::Delete,
@@ -465,6 +470,9 @@ const MOVES: [Move; 15] = [
     Move::Suffix(-3),
     Move::Suffix(3),
     Move::Suffix(-6),
+    Move::DeleteSuffix(8),
+    Move::DeleteSuffix(16),
+    Move::DeleteSuffix(32),
 ];
 
 /// The planner's buffers: allocated once.
@@ -1449,6 +1457,22 @@ impl Planner {
                 }
                 c.n = n;
                 x0.min(t(i))
+            }
+            Move::DeleteSuffix(d) => {
+                if i + 1 >= n {
+                    return None;
+                }
+                let d = d as i64;
+                let x0 = t(i + 1) + d;
+                let xl = t(n - 1) + d;
+                if !fits(x0, prev, None) || xl >= hi {
+                    return None;
+                }
+                for k in i + 1..n {
+                    c.t[k - 1] = (t(k) + d) as u16;
+                }
+                c.n = n - 1;
+                t(i)
             }
         };
         opens_only_with_bursts(c.pulses(), self.burst_ipi, w.burst).then_some(tau as usize)
