@@ -53,6 +53,10 @@ use crate::summary::Series;
 /// contraction (fraction).
 pub const EQUAL_FTI: f64 = 0.05;
 
+/// Most beats [`FrontSettings`] simulates before it copies a settled beat (the slow
+/// muscle's force settles to 1e-12 within a few beats of 800 ms).
+pub const PERIODIC_BEATS: usize = 12;
+
 /// One beat of a run, in samples from the run's first.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BeatWindow {
@@ -268,11 +272,13 @@ impl FrontSettings {
 
     /// [`Self::measured`] of a train that repeats the same pulses (`offsets` from each
     /// onset) in every beat, over `n` samples. A muscle without fatigue whose beats all
-    /// have the same shape, one after the other, forgets each beat before the next: its
-    /// force is then periodic from the second beat on, so three beats are simulated (and
-    /// the periodicity checked to 1e-12 of the force scale) and the rest copied. Anything
-    /// else (fatigue, a filtering sensor, uneven beats, a force still changing from beat to
-    /// beat) is simulated in full.
+    /// have the same shape, one after the other, settles into the same force in every beat:
+    /// at once when it forgets each beat before the next (the fast muscle), after a few
+    /// beats when some force is left at each onset (the slow one, whose residue shrinks
+    /// geometrically from beat to beat). So up to [`PERIODIC_BEATS`] beats are simulated,
+    /// the first beat equal to the next (to 1e-12 of the force scale) found, and the rest
+    /// copied from it. Anything else (fatigue, a filtering sensor, uneven beats, a force
+    /// not settled by then) is simulated in full.
     fn train_measured(
         &self,
         beats: &[BeatWindow],
@@ -304,35 +310,50 @@ impl FrontSettings {
             .all(|(i, b)| b.period == p && b.on == first.on && b.start == first.start + i * p);
         let s0 = first.start;
         let end = s0 + beats.len() * p;
-        if self.muscle.fatigue.is_some() || !even || beats.len() < 3 || end > n {
+        let sim = PERIODIC_BEATS.min(beats.len());
+        if self.muscle.fatigue.is_some() || !even || sim < 3 || end > n {
             return full(self);
         }
-        // Three beats and the tail after the last one.
-        let tail = n - end;
-        let len = 3 * p + tail;
-        let mut muscle = Muscle::new(self.muscle)?;
-        let mut force = Vec::with_capacity(len + 1);
-        force.push(0.0);
-        for k in 0..len {
-            let fire = k < 3 * p && offsets.contains(&(k % p));
-            force.push(muscle.step(fire.then_some(Pulse::SUPRAMAXIMAL)));
-        }
+        // Beat after beat until one repeats the beat before it (to 1e-12 of the force
+        // scale), then the tail after the last beat from there: the state at the end of a
+        // settled beat is the state at the end of every later one.
         let tol = 1e-12 * self.scale_n;
-        if (0..p).any(|j| (force[p + j] - force[2 * p + j]).abs() > tol) {
-            return full(self);
+        let mut muscle = Muscle::new(self.muscle)?;
+        let mut force = Vec::with_capacity(sim * p + n - end + 1);
+        force.push(0.0);
+        let mut settled = None;
+        for beat in 0..sim {
+            for j in 0..p {
+                let fire = offsets.contains(&j);
+                force.push(muscle.step(fire.then_some(Pulse::SUPRAMAXIMAL)));
+            }
+            if beat >= 2
+                && (0..p).all(|j| (force[(beat - 1) * p + j] - force[beat * p + j]).abs() <= tol)
+            {
+                settled = Some(beat - 1);
+                break;
+            }
         }
+        // m: the first beat whose force the next beat repeats.
+        let Some(m) = settled else {
+            return full(self);
+        };
+        for _ in end..n {
+            force.push(muscle.step(None));
+        }
+        let tail_at = (m + 2) * p;
         // force[j]: the force j samples after the first onset (after j steps).
         let at = |k: usize| -> f64 {
             if k <= s0 {
                 return 0.0;
             }
             let j = k - s0;
-            if j <= p {
+            if j <= m * p {
                 force[j]
             } else if k < end {
-                force[p + (j - p) % p]
+                force[m * p + (j - m * p) % p]
             } else {
-                force[3 * p + (k - end)]
+                force[tail_at + (k - end)]
             }
         };
         Ok((0..n).map(|k| (at(k) + zero[k]) / self.scale_n).collect())
@@ -741,6 +762,36 @@ mod tests {
             assert_eq!(full.len(), fast.len());
             for (k, (a, b)) in full.iter().zip(&fast).enumerate() {
                 assert!((a - b).abs() < 1e-9, "{offsets:?}: sample {k}: {a} vs {b}");
+            }
+        }
+        // The slow muscle keeps some force at each onset: it settles after a few beats.
+        let mut slow = s.clone();
+        slow.muscle = MuscleConfig::preset(Preset::Slow);
+        let slow_beats: Vec<BeatWindow> = (0..16)
+            .map(|i| BeatWindow {
+                start: 3 + i * 500,
+                period: 500,
+                on: 300,
+            })
+            .collect();
+        let slow_n = 3 + 16 * 500 + 137;
+        let slow_zero = slow.zero_reading(slow_n).unwrap();
+        for offsets in [vec![0, 3, 40, 80, 120], (0..30).map(|k| k * 10).collect()] {
+            let mut pulse = vec![false; slow_n];
+            for b in &slow_beats {
+                for &t in &offsets {
+                    pulse[b.start + t] = true;
+                }
+            }
+            let full = slow.measured(&pulse).unwrap();
+            let fast = slow
+                .train_measured(&slow_beats, slow_n, &offsets, slow_zero.as_deref())
+                .unwrap();
+            for (k, (a, b)) in full.iter().zip(&fast).enumerate() {
+                assert!(
+                    (a - b).abs() < 1e-9,
+                    "slow {offsets:?}: sample {k}: {a} vs {b}"
+                );
             }
         }
         let mut tired = s.clone();
