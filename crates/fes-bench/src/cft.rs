@@ -472,6 +472,7 @@ impl FrontSettings {
     /// some of these patterns; this answers the question for every pattern, and so says
     /// how far a pattern generator of this count can go at all (docs/bench.md, "Planning").
     /// The work grows as the contraction's grid points to the power `pulses`: 1-3 pulses.
+    /// `progress` hears (patterns scored, patterns in all) now and then.
     pub fn pattern_search(
         &self,
         run: &Series,
@@ -479,6 +480,7 @@ impl FrontSettings {
         grid_ms: usize,
         min_interval_ms: usize,
         level_error: f64,
+        progress: &mut dyn FnMut(usize, usize),
     ) -> Result<PatternSearch, sim_muscle::ding::ParamError> {
         let beats = beat_windows(run);
         let n = run.pulse.len();
@@ -495,47 +497,33 @@ impl FrontSettings {
         let fti_1 = self.twitch_fti(first)?;
         let zero = self.zero_reading(n)?;
         let (grid, gap) = (grid_ms.max(1), min_interval_ms.max(1));
-        let mut offsets: Vec<usize> = Vec::with_capacity(pulses);
-        let mut next = vec![0usize; pulses];
-        // Odometer over the grid: offsets[i] >= offsets[i - 1] + gap, all < on.
-        let mut i = 0;
-        loop {
-            if next[i] >= first.on {
-                if i == 0 {
-                    break;
-                }
-                offsets.pop();
-                i -= 1;
-                next[i] += grid;
-                continue;
-            }
-            offsets.push(next[i]);
-            if i + 1 < pulses {
-                next[i + 1] = (next[i] + gap).div_ceil(grid) * grid;
-                i += 1;
-                continue;
-            }
-            let point = self.pattern_point(&beats, n, &offsets, zero.as_deref(), fti_1)?;
+        let mut total = 0usize;
+        for_each_pattern(pulses, first.on, grid, gap, &mut |_| {
+            total += 1;
+            Ok::<(), sim_muscle::ding::ParamError>(())
+        })?;
+        for_each_pattern(pulses, first.on, grid, gap, &mut |offsets| {
+            let point = self.pattern_point(&beats, n, offsets, zero.as_deref(), fti_1)?;
             out.patterns += 1;
+            if out.patterns.is_multiple_of(256) || out.patterns == total {
+                progress(out.patterns, total);
+            }
             let better = |b: &Option<SearchedPattern>| {
                 b.as_ref()
                     .is_none_or(|b| point.rms_error < b.point.rms_error)
             };
+            let searched = || SearchedPattern {
+                offsets_ms: offsets.to_vec(),
+                point,
+            };
             if better(&out.best) {
-                out.best = Some(SearchedPattern {
-                    offsets_ms: offsets.clone(),
-                    point,
-                });
+                out.best = Some(searched());
             }
             if point.level_error <= level_error && better(&out.best_holding_level) {
-                out.best_holding_level = Some(SearchedPattern {
-                    offsets_ms: offsets.clone(),
-                    point,
-                });
+                out.best_holding_level = Some(searched());
             }
-            offsets.pop();
-            next[i] += grid;
-        }
+            Ok(())
+        })?;
         Ok(out)
     }
 
@@ -651,6 +639,43 @@ impl FrontSettings {
             reference_fti_per_contraction: reference_fti,
             lcn_dominated,
         })
+    }
+}
+
+/// Calls `f` with every pattern of `pulses` pulse times on a `grid` inside `0..on`, each at
+/// least `gap` after the one before, in lexicographic order (an odometer over the grid).
+fn for_each_pattern<E>(
+    pulses: usize,
+    on: usize,
+    grid: usize,
+    gap: usize,
+    f: &mut dyn FnMut(&[usize]) -> Result<(), E>,
+) -> Result<(), E> {
+    if pulses == 0 {
+        return Ok(());
+    }
+    let mut offsets: Vec<usize> = Vec::with_capacity(pulses);
+    let mut next = vec![0usize; pulses];
+    let mut i = 0;
+    loop {
+        if next[i] >= on {
+            if i == 0 {
+                return Ok(());
+            }
+            offsets.pop();
+            i -= 1;
+            next[i] += grid;
+            continue;
+        }
+        offsets.push(next[i]);
+        if i + 1 < pulses {
+            next[i + 1] = (next[i] + gap).div_ceil(grid) * grid;
+            i += 1;
+            continue;
+        }
+        f(&offsets)?;
+        offsets.pop();
+        next[i] += grid;
     }
 }
 
@@ -937,7 +962,9 @@ mod tests {
         let run = train_run(&s, 20.0, on, 4, None);
         let v = s.verdict(&run).unwrap();
         for (k, gap) in [(1, 1), (2, 1), (2, 10)] {
-            let r = s.pattern_search(&run, k, 1, gap, 0.05).unwrap();
+            let r = s
+                .pattern_search(&run, k, 1, gap, 0.05, &mut |_, _| {})
+                .unwrap();
             let expected = if k == 1 {
                 on
             } else {
@@ -956,11 +983,15 @@ mod tests {
                 assert!(held.point.level_error <= 0.05, "{held:?}");
                 assert!(held.point.rms_error >= best.point.rms_error);
             }
-            let any = s.pattern_search(&run, k, 1, gap, f64::INFINITY).unwrap();
+            let any = s
+                .pattern_search(&run, k, 1, gap, f64::INFINITY, &mut |_, _| {})
+                .unwrap();
             assert_eq!(any.best_holding_level, any.best);
         }
         // The onset pulse is one of the single-pulse patterns, scored as the 5 Hz x 1 train.
-        let one = s.pattern_search(&run, 1, 1, 1, f64::INFINITY).unwrap();
+        let one = s
+            .pattern_search(&run, 1, 1, 1, f64::INFINITY, &mut |_, _| {})
+            .unwrap();
         let onset = v
             .cft_front
             .iter()
@@ -970,7 +1001,11 @@ mod tests {
         let best = one.best.unwrap();
         assert!(best.point.rms_error <= onset);
         // A run firing the best pair in every beat scores as the search said.
-        let pair = s.pattern_search(&run, 2, 1, 1, 0.0).unwrap().best.unwrap();
+        let pair = s
+            .pattern_search(&run, 2, 1, 1, 0.0, &mut |_, _| {})
+            .unwrap()
+            .best
+            .unwrap();
         let mut pulse = vec![false; run.pulse.len()];
         for b in beat_windows(&run) {
             for &t in &pair.offsets_ms {

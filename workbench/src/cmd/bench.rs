@@ -642,18 +642,43 @@ fn in_process(a: &Args, out: &Path) -> anyhow::Result<()> {
     }
     let mut extra = vec![("planner", serde_json::to_value(run.planner)?)];
     if let Some(k) = a.pattern_search {
-        let k = usize::from(k);
-        let grid = if k > 2 { 2 } else { 1 };
-        let min_interval =
-            ((controller.settings.shaper.min_gap + 1) as f64 * controller.lmn.ts * 1e3).round();
-        let level_error = summary.front.as_ref().map_or(0.0, |v| v.lcn.level_error);
-        let r = front.pattern_search(&series, k, grid, min_interval as usize, level_error)?;
-        print_pattern_search(&r, level_error);
+        let r = search_patterns(&controller, &front, &series, &summary, k)?;
         extra.push(("pattern_search", serde_json::to_value(&r)?));
     }
     println!("  per beat: {}", beats_csv.display());
     println!("  per tick: {}", series_csv.display());
     write_json_with(&summary, &plots, a, &extra)
+}
+
+/// `--pattern-search K`: every pattern of K pulses on the run's muscle (1 ms grid, 2 ms for
+/// three pulses; the controller's minimum interval apart), printed.
+fn search_patterns(
+    controller: &fes_model::control::file::Controller,
+    front: &fes_bench::cft::FrontSettings,
+    series: &Series,
+    summary: &Summary,
+    k: u8,
+) -> anyhow::Result<fes_bench::cft::PatternSearch> {
+    let k = usize::from(k);
+    let grid = if k > 2 { 2 } else { 1 };
+    let min_interval =
+        ((controller.settings.shaper.min_gap + 1) as f64 * controller.lmn.ts * 1e3).round();
+    let level_error = summary.front.as_ref().map_or(0.0, |v| v.lcn.level_error);
+    let bar = super::inputs::progress(0, &format!("every pattern of {k} pulses"));
+    let r = front.pattern_search(
+        series,
+        k,
+        grid,
+        min_interval as usize,
+        level_error,
+        &mut |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        },
+    )?;
+    bar.finish_and_clear();
+    print_pattern_search(&r, level_error);
+    Ok(r)
 }
 
 /// `--pattern-search`: the best patterns of the count searched.
