@@ -752,72 +752,59 @@ mod tests {
         assert_eq!(w[1].period, 800);
     }
 
-    /// The periodic shortcut of the front (three beats simulated, the rest copied) gives
-    /// the full simulation's measured force to 1e-9, with the run's noisy sensor, for a
-    /// doublet-led train, a single pulse and a 100 Hz train; with fatigue it falls back to
+    /// `beats` even beats of `period` ms from sample 3, contraction `on`, in `n` samples.
+    fn even_beats(count: usize, period: usize, on: usize) -> (Vec<BeatWindow>, usize) {
+        let beats = (0..count)
+            .map(|i| BeatWindow {
+                start: 3 + i * period,
+                period,
+                on,
+            })
+            .collect();
+        (beats, 3 + count * period + 137)
+    }
+
+    /// The periodic shortcut gives the full simulation's measured force to 1e-9.
+    fn assert_shortcut_is_full(s: &FrontSettings, beats: &[BeatWindow], n: usize, o: &[usize]) {
+        let zero = s.zero_reading(n).unwrap();
+        let mut pulse = vec![false; n];
+        for b in beats {
+            for &t in o {
+                pulse[b.start + t] = true;
+            }
+        }
+        let full = s.measured(&pulse).unwrap();
+        let fast = s.train_measured(beats, n, o, zero.as_deref()).unwrap();
+        assert_eq!(full.len(), fast.len());
+        for (k, (a, b)) in full.iter().zip(&fast).enumerate() {
+            assert!((a - b).abs() < 1e-9, "{o:?}: sample {k}: {a} vs {b}");
+        }
+    }
+
+    /// The periodic shortcut of the front (beats simulated until one repeats the one
+    /// before, the rest copied) gives the full simulation's measured force to 1e-9, with
+    /// the run's noisy sensor, for a doublet-led train, a single pulse and a 100 Hz train,
+    /// on the fast muscle (settled from the second beat) and on the slow one (which keeps
+    /// force at each onset and settles a few beats later); with fatigue it falls back to
     /// the full simulation, exactly.
     #[test]
     fn the_periodic_front_is_the_full_simulation() {
         let mut s = settings();
         s.sensor = Some(SensorConfig::defaults_for(s.scale_n, 7));
-        let beats: Vec<BeatWindow> = (0..6)
-            .map(|i| BeatWindow {
-                start: 3 + i * 800,
-                period: 800,
-                on: 320,
-            })
-            .collect();
-        let n = 3 + 6 * 800 + 137;
-        let zero = s.zero_reading(n).unwrap();
-        for offsets in [
+        let (beats, n) = even_beats(6, 800, 320);
+        let trains = [
             vec![0, 3, 40, 80, 120],
             vec![0],
-            (0..32).map(|k| k * 10).collect(),
-        ] {
-            let mut pulse = vec![false; n];
-            for b in &beats {
-                for &t in &offsets {
-                    pulse[b.start + t] = true;
-                }
-            }
-            let full = s.measured(&pulse).unwrap();
-            let fast = s
-                .train_measured(&beats, n, &offsets, zero.as_deref())
-                .unwrap();
-            assert_eq!(full.len(), fast.len());
-            for (k, (a, b)) in full.iter().zip(&fast).enumerate() {
-                assert!((a - b).abs() < 1e-9, "{offsets:?}: sample {k}: {a} vs {b}");
-            }
+            (0..32).map(|k| k * 10).collect::<Vec<usize>>(),
+        ];
+        for o in &trains {
+            assert_shortcut_is_full(&s, &beats, n, o);
         }
-        // The slow muscle keeps some force at each onset: it settles after a few beats.
         let mut slow = s.clone();
         slow.muscle = MuscleConfig::preset(Preset::Slow);
-        let slow_beats: Vec<BeatWindow> = (0..16)
-            .map(|i| BeatWindow {
-                start: 3 + i * 500,
-                period: 500,
-                on: 300,
-            })
-            .collect();
-        let slow_n = 3 + 16 * 500 + 137;
-        let slow_zero = slow.zero_reading(slow_n).unwrap();
-        for offsets in [vec![0, 3, 40, 80, 120], (0..30).map(|k| k * 10).collect()] {
-            let mut pulse = vec![false; slow_n];
-            for b in &slow_beats {
-                for &t in &offsets {
-                    pulse[b.start + t] = true;
-                }
-            }
-            let full = slow.measured(&pulse).unwrap();
-            let fast = slow
-                .train_measured(&slow_beats, slow_n, &offsets, slow_zero.as_deref())
-                .unwrap();
-            for (k, (a, b)) in full.iter().zip(&fast).enumerate() {
-                assert!(
-                    (a - b).abs() < 1e-9,
-                    "slow {offsets:?}: sample {k}: {a} vs {b}"
-                );
-            }
+        let (slow_beats, slow_n) = even_beats(16, 800, 320);
+        for o in &trains {
+            assert_shortcut_is_full(&slow, &slow_beats, slow_n, o);
         }
         let mut tired = s.clone();
         tired.muscle.fatigue = Some(sim_muscle::ding::FatigueParams::for_muscle(
@@ -830,6 +817,7 @@ mod tests {
                 pulse[b.start + t] = true;
             }
         }
+        let zero = tired.zero_reading(n).unwrap();
         assert_eq!(
             tired.measured(&pulse).unwrap(),
             tired
