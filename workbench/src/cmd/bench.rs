@@ -98,8 +98,8 @@ pub struct Args {
     /// same in every beat, on the run's muscle: each pulse on a 1 ms grid (2 ms for 3),
     /// the controller's minimum interval apart. Prints the best by RMS and the best that
     /// misses the level by no more than the run: how far any pattern of that count can
-    /// go, trains or not (docs/bench.md, "Planning"). Seconds for 1 pulse, a minute for
-    /// 2, several for 3.
+    /// go, trains or not (docs/bench.md, "Every pattern, not only trains"). Seconds for 1
+    /// pulse, about two minutes for 2, five (fast muscle) to twenty (slow) for 3.
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u8).range(1..=3), requires = "in_process")]
     pub pattern_search: Option<u8>,
     /// The bus between stim-driver and the virtual stimulator. `can`: SocketCAN (native
