@@ -1442,37 +1442,24 @@ impl Planner {
                 c.n = n + 1;
                 x
             }
-            Move::Suffix(d) => {
-                if i >= n {
+            Move::Suffix(d) | Move::DeleteSuffix(d) => {
+                // The pulses from `from` on move by d into the slots from i on (pulse i
+                // itself dropped when deleting).
+                let from = i + usize::from(matches!(mv, Move::DeleteSuffix(_)));
+                if from >= n {
                     return None;
                 }
                 let d = d as i64;
-                let x0 = t(i) + d;
+                let x0 = t(from) + d;
                 let xl = t(n - 1) + d;
                 if !fits(x0, prev, None) || xl >= hi {
                     return None;
                 }
-                for k in i..n {
-                    c.t[k] = (t(k) + d) as u16;
+                for k in from..n {
+                    c.t[i + k - from] = (t(k) + d) as u16;
                 }
-                c.n = n;
+                c.n = n - (from - i);
                 x0.min(t(i))
-            }
-            Move::DeleteSuffix(d) => {
-                if i + 1 >= n {
-                    return None;
-                }
-                let d = d as i64;
-                let x0 = t(i + 1) + d;
-                let xl = t(n - 1) + d;
-                if !fits(x0, prev, None) || xl >= hi {
-                    return None;
-                }
-                for k in i + 1..n {
-                    c.t[k - 1] = (t(k) + d) as u16;
-                }
-                c.n = n - 1;
-                t(i)
             }
         };
         opens_only_with_bursts(c.pulses(), self.burst_ipi, w.burst).then_some(tau as usize)
