@@ -286,17 +286,7 @@ impl FrontSettings {
         offsets: &[usize],
         zero: Option<&[f64]>,
     ) -> Result<Vec<f64>, sim_muscle::ding::ParamError> {
-        let full = |s: &Self| {
-            let mut pulse = vec![false; n];
-            for b in beats {
-                for &t in offsets {
-                    if b.start + t < n {
-                        pulse[b.start + t] = true;
-                    }
-                }
-            }
-            s.measured(&pulse)
-        };
+        let full = |s: &Self| s.measured(&pattern_pulses(beats, n, offsets));
         let Some(zero) = zero else {
             return full(self);
         };
@@ -453,14 +443,7 @@ impl FrontSettings {
         fti_1: f64,
     ) -> Result<FrontPoint, sim_muscle::ding::ParamError> {
         let measured = self.train_measured(beats, n, offsets, zero)?;
-        let mut pulse = vec![false; n];
-        for b in beats {
-            for &t in offsets {
-                if b.start + t < n {
-                    pulse[b.start + t] = true;
-                }
-            }
-        }
+        let pulse = pattern_pulses(beats, n, offsets);
         Ok(self.score(None, beats, &pulse, &measured, fti_1))
     }
 
@@ -640,6 +623,20 @@ impl FrontSettings {
             lcn_dominated,
         })
     }
+}
+
+/// The pulses, sample by sample over `n` samples, of a pattern that fires at `offsets`
+/// from each beat's onset.
+fn pattern_pulses(beats: &[BeatWindow], n: usize, offsets: &[usize]) -> Vec<bool> {
+    let mut pulse = vec![false; n];
+    for b in beats {
+        for &t in offsets {
+            if b.start + t < n {
+                pulse[b.start + t] = true;
+            }
+        }
+    }
+    pulse
 }
 
 /// Calls `f` with every pattern of `pulses` pulse times on a `grid` inside `0..on`, each at
