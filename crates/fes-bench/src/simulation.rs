@@ -50,11 +50,15 @@ pub struct SimSettings {
     pub max_train_hz: u32,
 }
 
-/// 100 Hz, or the rate of the controller's minimum pulse interval (its shaper's `min_gap`
-/// + 1 model samples) when that is lower.
+/// The controller's minimum pulse interval, s: its shaper's `min_gap` + 1 model samples.
+pub fn min_pulse_interval_s(controller: &Controller) -> f64 {
+    f64::from(controller.settings.shaper.min_gap + 1) * controller.lmn.ts
+}
+
+/// 100 Hz, or the rate of the controller's minimum pulse interval
+/// ([`min_pulse_interval_s`]) when that is lower.
 pub fn max_train_hz(controller: &Controller) -> u32 {
-    let interval_s = f64::from(controller.settings.shaper.min_gap + 1) * controller.lmn.ts;
-    ((1.0 / interval_s + 1e-9).floor() as u32).clamp(1, 100)
+    ((1.0 / min_pulse_interval_s(controller) + 1e-9).floor() as u32).clamp(1, 100)
 }
 
 impl SimSettings {

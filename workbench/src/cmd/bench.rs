@@ -661,8 +661,7 @@ fn search_patterns(
 ) -> anyhow::Result<fes_bench::cft::PatternSearch> {
     let k = usize::from(k);
     let grid = if k > 2 { 2 } else { 1 };
-    let min_interval =
-        ((controller.settings.shaper.min_gap + 1) as f64 * controller.lmn.ts * 1e3).round();
+    let min_interval = (fes_bench::simulation::min_pulse_interval_s(controller) * 1e3).round();
     let level_error = summary.front.as_ref().map_or(0.0, |v| v.lcn.level_error);
     let bar = super::inputs::progress(0, &format!("every pattern of {k} pulses"));
     let r = front.pattern_search(
