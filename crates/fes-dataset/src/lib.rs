@@ -13,7 +13,8 @@
 //! use the same format and the same validating reader, [`DataSet::read`]; every
 //! violation is reported with the file, line and field. Tables recorded elsewhere (any
 //! rate, columns, units and record layout) become data sets through [`import`]
-//! (`fes dataset import`).
+//! (`fes dataset import`); several recordings of one muscle become one data set through
+//! [`merge::merge`] (`fes dataset merge`).
 //!
 //! Plants other than muscle (several continuous-valued inputs and outputs, any sample
 //! period: the heat-transfer process of App. E) use version 2, `fes-dataset/2`, in
@@ -29,6 +30,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 pub mod import;
+pub mod merge;
 pub mod signals;
 
 /// Value of the `schema` field this module reads and writes.

@@ -1,7 +1,8 @@
 //! `fes dataset`: data sets from elsewhere. `fes dataset import` turns a table of force and
 //! stimulation recorded on another rig (any rate, units, column names and record layout)
 //! into a `fes-dataset/1` directory (`fes_dataset::import` does the work; this is its
-//! command line). `fes dataset inspect` describes a data set of either version
+//! command line). `fes dataset merge` joins recordings of one muscle into one data set
+//! (`fes_dataset::merge`). `fes dataset inspect` describes a data set of either version
 //! (`workbench::data::describe`).
 
 use std::path::PathBuf;
@@ -30,7 +31,46 @@ pub enum Command {
     /// Describe a data set of either version (fes-dataset/1: pulses and force;
     /// fes-dataset/2: named continuous channels): period, records, split, channels.
     Inspect(InspectArgs),
+    /// Merge recordings of one muscle into one data set, to identify a model from all of
+    /// them: records in order, the union of the splits, one force scale.
+    #[command(after_long_help = MERGE_HELP)]
+    Merge(MergeArgs),
 }
+
+/// `fes dataset merge` arguments.
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// The data-set directories (fes-dataset/1), two or more, in the order their records
+    /// take.
+    #[arg(required = true, num_args = 2..)]
+    pub dirs: Vec<PathBuf>,
+    /// Output data-set directory (must be empty or new, unless --force).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace the data set in --out.
+    #[arg(long)]
+    pub force: bool,
+}
+
+const MERGE_HELP: &str = "\
+WHAT IT DOES
+  Reads every data set, checks that they share the sample period and the force scale
+  (scale_n: normalised forces on different scales cannot be fitted together; record a
+  later set with `sim-muscle record --scale-from FIRST`), and writes one data set: the
+  records in order, renamed record_000.csv on; a training record stays a training record
+  and a test record a test record. Origin fields all sets share are kept; each set's own
+  (source, preset, seed, protocol, offset, first record) are under protocol.sets.
+
+  Why: a second recording adds what the first one lacks (close pulse pairs from rest, a
+  frequency band). docs/sim-muscle.md, \"fes dataset merge\".
+
+EXAMPLE
+  sim-muscle record --preset slow --seed 1 --out data/slow
+  sim-muscle record --preset slow --seed 3 --protocol rich --records 60 \\
+      --train-records 30 --rich-min-hz 4 --rich-max-hz 12 --doublet-min-ms 2 \\
+      --doublet-max-ms 6 --scale-from data/slow --out data/slow-pairs
+  fes dataset merge data/slow data/slow-pairs --out data/slow-all
+  fes identify --data data/slow-all --structure ss-eig-common --units 5 --out slow.lmn.json";
 
 /// `fes dataset inspect` arguments.
 #[derive(Debug, clap::Args)]
@@ -265,6 +305,7 @@ impl ImportArgs {
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         Command::Import(a) => run_import(*a),
+        Command::Merge(a) => run_merge(a),
         Command::Inspect(a) => {
             let text = workbench::data::describe(&a.dir)
                 .with_context(|| format!("cannot read data set {}", a.dir.display()))?;
@@ -272,6 +313,42 @@ pub fn run(args: Args) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn run_merge(a: MergeArgs) -> Result<()> {
+    let mut sets = Vec::with_capacity(a.dirs.len());
+    for dir in &a.dirs {
+        workbench::data::require_pulses(dir)?;
+        let set = DataSet::read(dir)
+            .with_context(|| format!("cannot read data set {}", dir.display()))?;
+        sets.push((dir.display().to_string(), set));
+    }
+    let merged = fes_dataset::merge::merge(&sets)?;
+    let mode = if a.force {
+        WriteMode::Overwrite
+    } else {
+        WriteMode::CreateNew
+    };
+    merged
+        .write(&a.out, mode)
+        .with_context(|| format!("cannot write the data set to {}", a.out.display()))?;
+    for (name, set) in &sets {
+        println!(
+            "{name:<30} {} records ({} train, {} test)",
+            set.records.len(),
+            set.header.split.train.len(),
+            set.header.split.test.len()
+        );
+    }
+    println!(
+        "{:<30} {} records ({} train, {} test), scale {} N",
+        a.out.display(),
+        merged.records.len(),
+        merged.header.split.train.len(),
+        merged.header.split.test.len(),
+        merged.header.scale_n
+    );
+    Ok(())
 }
 
 fn run_import(a: ImportArgs) -> Result<()> {

@@ -391,3 +391,56 @@ fn the_readme_use_your_own_data_commands_run() {
     assert_eq!(lcn["schema"], "fes-lcn/1");
     assert!(mine.join("analysis/report.md").exists());
 }
+
+/// `fes dataset merge`: two recordings become one data set that reads back with every
+/// record and the union of the splits; a set on another force scale is refused (exit 1,
+/// the message naming the set and the way to record it on one scale) and nothing is
+/// written; fewer than two sets is a usage error (exit 2).
+#[test]
+fn merge_joins_recordings_and_refuses_another_scale() {
+    let s = scratch("merge");
+    let a = small_recording();
+    let mut b = small_recording();
+    b.records.truncate(6);
+    b.header.split = fes_dataset::Split::first(2, 6);
+    let (da, db, out) = (s.join("a"), s.join("b"), s.join("ab"));
+    a.write(&da, WriteMode::CreateNew).unwrap();
+    b.write(&db, WriteMode::CreateNew).unwrap();
+    let path = |p: &Path| p.to_str().unwrap().to_owned();
+    let o = fes(&[
+        "dataset",
+        "merge",
+        &path(&da),
+        &path(&db),
+        "--out",
+        &path(&out),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let m = DataSet::read(&out).unwrap();
+    assert_eq!(m.records.len(), 14);
+    assert_eq!(m.header.split.train, vec![0, 1, 2, 3, 8, 9]);
+    assert_eq!(m.records[13].force, b.records[5].force);
+    assert_eq!(m.header.protocol["sets"][1]["first_record"], 8);
+    // Another force scale: refused, nothing written.
+    let mut c = b.clone();
+    c.header.scale_n *= 1.5;
+    let (dc, bad) = (s.join("c"), s.join("ac"));
+    c.write(&dc, WriteMode::CreateNew).unwrap();
+    let o = fes(&[
+        "dataset",
+        "merge",
+        &path(&da),
+        &path(&dc),
+        "--out",
+        &path(&bad),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o.stderr);
+    assert!(
+        err.contains(&path(&dc)) && err.contains("--scale-from"),
+        "{err}"
+    );
+    assert!(!bad.exists());
+    let o = fes(&["dataset", "merge", &path(&da), "--out", &path(&bad)]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+}
