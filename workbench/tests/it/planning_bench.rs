@@ -166,17 +166,20 @@ fn the_first_contraction_is_planned_like_every_other() {
     assert_eq!(first_two(Some(0.0)), (1, 2));
 }
 
-/// Slow muscle, 0.7 and 0.9: no train with no more pulses tracks as well, and a train
-/// beats the causal loop of the same file at both. At 0.9 the plan drives the top of the
-/// model's scheduling range, which the shipped model's data reach (every unit at least 2 %
-/// of the validity weight): on a model whose top units the data did not reach the plan
-/// tracked worse than the causal loop there. (At 0.2-0.5 a train of one or two pulses
-/// tracks better than the plan, which must hold the plateau the outer loop regulates:
-/// docs/bench.md, "Planning".)
+/// Slow muscle, 0.5, 0.7 and 0.9: no train with no more pulses tracks as well, and a train
+/// beats the causal loop of the same file at each. At 0.5 the plan's three pulses open
+/// with a close pair, which the shipped model answers as the muscle does because its data
+/// hold such pairs from rest (models/README.md; a model of the thesis protocol alone
+/// answers a 2 ms pair 20 % above the muscle, and its plan lost to 8 Hz x 2). At 0.9 the
+/// plan drives the top of the model's scheduling range, which the shipped model's data
+/// reach (every unit at least 2 % of the validity weight): on a model whose top units the
+/// data did not reach the plan tracked worse than the causal loop there. (At 0.2-0.4 a
+/// train of one or two pulses tracks better than the plan, which must hold the plateau the
+/// outer loop regulates: docs/bench.md, "Planning".)
 #[test]
-fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
+fn planning_beats_every_train_on_the_slow_muscle_at_0_5_0_7_and_0_9() {
     let c = shipped("slow.lcn.json");
-    for amplitude in [0.7, 0.9] {
+    for amplitude in [0.5, 0.7, 0.9] {
         let (v_off, _) = bench(&off(c.clone()), Preset::Slow, amplitude);
         assert!(
             !v_off.beats_every_cft,
@@ -196,7 +199,7 @@ fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
     }
 }
 
-/// Slow muscle, 0.2-0.5: a train of fewer pulses tracks better, but only by missing the
+/// Slow muscle, 0.2-0.4: a train of fewer pulses tracks better, but only by missing the
 /// level the outer loop regulates (one twitch at the onset holds the plateau at 0.125;
 /// docs/bench.md, "Why the slow muscle's low levels lose"); among the trains that hold the
 /// level as closely as the plan, none of its whole count tracks as well. At 0.2 the plan is
@@ -206,7 +209,7 @@ fn planning_beats_every_train_on_the_slow_muscle_at_0_7_and_0_9() {
 #[test]
 fn on_the_slow_muscle_the_trains_that_track_better_miss_the_level() {
     let c = shipped("slow.lcn.json");
-    for amplitude in [0.2, 0.3, 0.4, 0.5] {
+    for amplitude in [0.2, 0.3, 0.4] {
         let (v, _) = bench(&c, Preset::Slow, amplitude);
         assert!(!v.beats_every_cft, "{amplitude}: {:?}", v.lcn);
         let best = v.best_cft_no_more_pulses.unwrap();
