@@ -14,6 +14,7 @@ mod control_loop;
 mod dataset_format;
 mod dataset_fuzz;
 mod dataset_import;
+mod dataset_merge;
 mod dataset_signals;
 mod ident_estimation;
 mod ident_jacobian;
