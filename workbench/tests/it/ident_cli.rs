@@ -841,13 +841,11 @@ fn assert_every_unit_reached(name: &str, data: &DataSet) {
     }
 }
 
-/// The shipped slow model is identified on the thesis protocol merged with close pulse
-/// pairs from rest (models/README.md: `sim-muscle record --preset slow --seed 3 --protocol
-/// rich ... --doublet-max-ms 6 --scale-from target/models/data-slow`, then `fes dataset
-/// merge`), 5 units over `--range 0,0.5`; on those data every unit is reached.
-#[test]
-fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
-    let thesis = record_preset(Preset::Slow, 1);
+/// The slow muscle's recording of close pulse pairs from rest, at the thesis recording's
+/// scale `scale_n`: `sim-muscle record --preset slow --seed 3 --protocol rich --records 60
+/// --train-records 30 --rich-min-hz 4 --rich-max-hz 12 --doublet-min-ms 2 --doublet-max-ms 6
+/// --scale-from target/models/data-slow` (models/README.md).
+fn slow_pairs_recording(scale_n: f64) -> DataSet {
     let protocol = ProtocolConfig {
         kind: sim_muscle::protocol::ProtocolKind::Rich,
         records: 60,
@@ -858,19 +856,120 @@ fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
         doublet_max_ms: 6,
         ..ProtocolConfig::thesis(Preset::Slow)
     };
-    let pairs = record_protocol(
-        Preset::Slow,
-        3,
-        &protocol,
-        Normalise::Scale(thesis.header.scale_n),
-    );
+    let pairs = record_protocol(Preset::Slow, 3, &protocol, Normalise::Scale(scale_n));
     assert_eq!(
         (pairs.records.len(), pairs.header.split.train.len()),
         (60, 30)
     );
+    pairs
+}
+
+/// The shipped slow model is identified on the thesis protocol merged with close pulse
+/// pairs from rest (models/README.md), 6 units over `--range 0,0.5`; on those data every
+/// unit is reached.
+#[test]
+fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
+    let thesis = record_preset(Preset::Slow, 1);
+    let pairs = slow_pairs_recording(thesis.header.scale_n);
     let merged =
         fes_dataset::merge::merge(&[("thesis".into(), thesis), ("pairs".into(), pairs)]).unwrap();
     assert_every_unit_reached("slow", &merged);
+}
+
+/// models/README.md's recipe for the shipped slow model, run through the commands: the two
+/// recordings joined by `fes dataset merge`, then `fes identify` with the recipe's options,
+/// give the stored model (the same local models to 1e-9, the same train and test MSSE to
+/// 1e-6), so the file is what the recipe makes.
+#[test]
+fn the_shipped_slow_model_is_what_its_recipe_makes() {
+    let dir = tmp("slow_recipe");
+    let thesis = data_dir(Preset::Slow);
+    let scale_n = DataSet::read(thesis).unwrap().header.scale_n;
+    let pairs = dir.join("pairs");
+    slow_pairs_recording(scale_n)
+        .write(&pairs, WriteMode::CreateNew)
+        .unwrap();
+    let (merged, out) = (dir.join("all"), dir.join("slow.lmn.json"));
+    let path = |p: &Path| p.to_str().expect("utf8").to_owned();
+    let o = run(&[
+        "dataset",
+        "merge",
+        &path(thesis),
+        &path(&pairs),
+        "--out",
+        &path(&merged),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&[
+        "identify",
+        "--data",
+        &path(&merged),
+        "--structure",
+        "ss-eig-common",
+        "--units",
+        "6",
+        "--range",
+        "0,0.5",
+        "--zero-offsets",
+        "--starts",
+        "8",
+        "--out",
+        &path(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let again = file::load(&out).unwrap();
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let stored = file::load(models.join("slow.lmn.json")).unwrap();
+    let (a, b) = (&again.provenance, &stored.provenance);
+    for (what, x, y) in [
+        ("train", a.train_msse.unwrap(), b.train_msse.unwrap()),
+        ("test", a.test_msse.unwrap(), b.test_msse.unwrap()),
+    ] {
+        assert!(
+            (x - y).abs() <= 1e-6 * y,
+            "{what} MSSE {x:e} vs stored {y:e}"
+        );
+    }
+    let units = |p: &Path| -> serde_json::Value {
+        serde_json::from_slice::<serde_json::Value>(&std::fs::read(p).unwrap()).unwrap()["units"]
+            .clone()
+    };
+    assert_eq!(units(&out).as_array().map(Vec::len), Some(6), "six units");
+    assert_close_json(
+        &units(&out),
+        &units(&models.join("slow.lmn.json")),
+        1e-9,
+        "units",
+    );
+}
+
+/// Every number of `a` within `rel` (relative, or absolute below 1) of `b`'s at the same
+/// place; everything else equal.
+fn assert_close_json(a: &serde_json::Value, b: &serde_json::Value, rel: f64, at: &str) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            assert!((x - y).abs() <= rel * y.abs().max(1.0), "{at}: {x} vs {y}");
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "{at}: length");
+            for (i, (x, y)) in x.iter().zip(y).enumerate() {
+                assert_close_json(x, y, rel, &format!("{at}[{i}]"));
+            }
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            assert_eq!(
+                x.keys().collect::<Vec<_>>(),
+                y.keys().collect::<Vec<_>>(),
+                "{at}"
+            );
+            for (k, x) in x {
+                assert_close_json(x, &y[k], rel, &format!("{at}.{k}"));
+            }
+        }
+        _ => assert_eq!(a, b, "{at}"),
+    }
 }
 
 /// Peaks of the normalised force from rest, (model, muscle), for one pulse and for pairs
