@@ -115,7 +115,7 @@ impl<S: TickSource> PatternLoop<S> {
     /// ([`TickSource::missed`]: no pulse in them) so that it keeps wall-clock time. While
     /// the reference's operator stop is in effect no pulse is fired.
     pub fn step(&mut self, wake: &Wakeup) -> (StimTick, StepEvents) {
-        let target = self.references.advance(wake.wake_ns);
+        let target = self.references.advance_on_grid(wake.wake_ns, wake.grid_ns);
         let measured = self
             .feedback
             .as_ref()

@@ -111,14 +111,14 @@ impl ReferenceTracker {
     /// reflect yet (published before it), from a fresh preview. The supervisor publishes an
     /// edge's Reference after the edge, and on a loaded host by milliseconds; the schedule it
     /// announced is what the reference is now.
-    fn due_edge(&self, reference: &Reference, now_ns: u64) -> Option<PreviewEdge> {
+    fn due_edge(&self, reference: &Reference, now_ns: u64, grid_ns: u64) -> Option<PreviewEdge> {
         let p = self.preview.as_ref()?;
         if now_ns.saturating_sub(p.t_ns) > self.policy.stale_after_ns {
             return None;
         }
         p.edges()
             .iter()
-            .rfind(|e| e.t_ns <= now_ns && e.t_ns > reference.t_ns)
+            .rfind(|e| e.t_ns <= grid_ns && e.t_ns > reference.t_ns)
             .copied()
     }
 
@@ -150,8 +150,10 @@ impl ReferenceTracker {
     /// The preview of the tick at `now_ns`: the setpoint in effect now (`force` at `rate`:
     /// the reference, or an edge already due that it does not reflect yet), then every edge
     /// of the kept preview still ahead, at the tick it takes effect (edges on the same tick:
-    /// the later wins). None without a fresh preview (no older than `stale_after_ns`).
-    fn preview_at(&self, force: f64, rate: f64, now_ns: u64) -> Preview {
+    /// the later wins). None without a fresh preview (no older than `stale_after_ns` at
+    /// `now_ns`). The ticks are counted from the grid point `grid_ns` (see
+    /// [`Self::advance_on_grid`]).
+    fn preview_at(&self, force: f64, rate: f64, now_ns: u64, grid_ns: u64) -> Preview {
         let Some(p) = &self.preview else {
             return Preview::NONE;
         };
@@ -166,8 +168,8 @@ impl ReferenceTracker {
             rate_per_s: rate,
         };
         let mut n = 1;
-        for e in p.edges().iter().filter(|e| e.t_ns > now_ns) {
-            let at = (e.t_ns - now_ns).div_ceil(tick).min(u32::MAX as u64) as u32;
+        for e in p.edges().iter().filter(|e| e.t_ns > grid_ns) {
+            let at = (e.t_ns - grid_ns).div_ceil(tick).min(u32::MAX as u64) as u32;
             let point = PreviewPoint {
                 at,
                 force: e.force,
@@ -210,8 +212,23 @@ impl ReferenceTracker {
     /// reference's force at most at its `max_rate_per_s` (0: at once); a stale reference
     /// (older than `stale_after_ns`) moves it towards zero at `stale_ramp_per_s`; an operator
     /// stop sets it to zero at once. The elapsed time is measured between calls, so a stall
-    /// advances a ramp by the time that really passed.
+    /// advances a ramp by the time that really passed. The tick serves the time `now_ns`
+    /// (its grid point and wake-up in one: [`Self::advance_on_grid`]).
     pub fn advance(&mut self, now_ns: u64) -> Target {
+        self.advance_on_grid(now_ns, now_ns)
+    }
+
+    /// [`Self::advance`] for a tick woken at `now_ns` that serves the grid point `grid_ns`
+    /// (`<= now_ns`). The schedule is read on the grid: an announced edge takes effect at the
+    /// first tick whose grid point is at or after it, and the preview counts its ticks from
+    /// the grid point, so the tick an edge is announced for is the tick it takes effect
+    /// however late the announcing tick woke. Read from the wake-up time instead, a tick
+    /// woken later than the edge's offset within its period (0.2 ms on the process bench,
+    /// after a stall) announced the edge one tick early; the planner kept that onset for
+    /// the whole contraction and its opening pulse fell on the last tick at rest, where
+    /// nothing fires. Staleness and the ramp's elapsed time stay on the wake-up time.
+    pub fn advance_on_grid(&mut self, now_ns: u64, grid_ns: u64) -> Target {
+        let grid_ns = grid_ns.min(now_ns);
         let dt_s = self
             .last_advance_ns
             .map_or(0.0, |t| now_ns.saturating_sub(t) as f64 * 1e-9);
@@ -234,7 +251,7 @@ impl ReferenceTracker {
             (0.0, 0.0)
         } else if stale {
             (0.0, self.policy.stale_ramp_per_s)
-        } else if let Some(e) = self.due_edge(&reference, now_ns) {
+        } else if let Some(e) = self.due_edge(&reference, now_ns, grid_ns) {
             // The schedule's edge is due and its Reference not in yet: follow the schedule,
             // so that a contraction starts and ends when announced, not when the supervisor
             // gets round to publishing it. A stop still wins the moment it arrives.
@@ -253,7 +270,7 @@ impl ReferenceTracker {
             preview: if stale || stop {
                 Preview::NONE
             } else {
-                self.preview_at(desired, rate, now_ns)
+                self.preview_at(desired, rate, now_ns, grid_ns)
             },
         }
     }

@@ -247,3 +247,37 @@ fn an_edge_due_before_its_reference_arrives_is_the_setpoint_now() {
     t.offer(&reference(2, 400 * MS, 0.0), 400 * MS).unwrap();
     assert!(t.advance(421 * MS + 1).resting);
 }
+
+/// An edge is announced for the tick it takes effect, counted from the announcing tick's
+/// grid point: a tick woken late within its period (after a stall) announces the same
+/// tick as one woken on time. Counted from the wake-up time, a tick woken 0.5 ms late put
+/// an onset 0.2 ms after a grid point one tick early; the planner kept that onset for the
+/// whole contraction, and its opening pulse fell on the last tick at rest, where nothing
+/// fires (the process bench, slow muscle at 0.5: a beat that lost its opening pulse,
+/// docs/bench.md).
+#[test]
+fn an_edge_is_announced_for_the_tick_it_takes_effect_however_late_the_tick_woke() {
+    let mut t = tracker();
+    t.offer(&Reference::new(1, 10 * MS, 0.0), 10 * MS).unwrap();
+    let onset = PreviewEdge {
+        t_ns: 20 * MS + 200_000,
+        force: 0.3,
+        max_rate_per_s: 50.0,
+    };
+    let p = ReferencePreview::new(1, 10 * MS, 1, &[onset]);
+    t.offer_preview(&p, 10 * MS).unwrap();
+    for lateness in [20_000, 500_000, 900_000] {
+        let mut t = t;
+        let announced = t.advance_on_grid(12 * MS + lateness, 12 * MS).preview;
+        let at = u64::from(announced.points()[1].at);
+        // Every later tick woken 20 us after its grid point, as on a quiet host.
+        let rises = (13..40)
+            .find(|&k| !t.advance_on_grid(k * MS + 20_000, k * MS).resting)
+            .unwrap();
+        assert_eq!(
+            12 + at,
+            rises,
+            "announced {at} ticks ahead, woken {lateness} ns late"
+        );
+    }
+}
