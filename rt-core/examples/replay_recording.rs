@@ -30,18 +30,7 @@ struct Table {
 
 impl Table {
     fn read(path: &Path) -> Table {
-        let text =
-            std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let mut lines = text.lines();
-        let head = lines
-            .next()
-            .unwrap_or_default()
-            .split(',')
-            .map(String::from)
-            .collect();
-        let rows = lines
-            .map(|l| l.split(',').map(String::from).collect())
-            .collect();
+        let (head, rows) = fes_testkit::table::read_csv(path);
         Table { head, rows }
     }
 

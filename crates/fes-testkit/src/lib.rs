@@ -13,6 +13,7 @@
 //! * [`assert_refused`]: the bad-input sweeps' one check that a run refused its input
 //!   clearly (exit code, no panic, the offending name in a short message);
 //! * [`target_dir`]: the cargo target directory the tests were built in;
+//! * [`table`]: the tools' CSV files as a header and rows of fields;
 //! * [`noise`]: the host's own wake-up noise, measured beside a timing check, so that the
 //!   check is judged against what the host allowed in the same run (docs/latency.md);
 //! * `control` (feature `control`): the control tests' fixture, muscle-like Local Model
@@ -32,6 +33,7 @@ pub mod control;
 pub mod noise;
 mod refused;
 mod scratch;
+pub mod table;
 pub mod vcan;
 
 pub use refused::assert_refused;

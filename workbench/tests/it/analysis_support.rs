@@ -110,18 +110,7 @@ pub fn is_png(p: &Path) -> bool {
 
 /// Reads a CSV written by the tools: header names and rows of fields.
 pub fn csv(p: &Path) -> (Vec<String>, Vec<Vec<String>>) {
-    let text = std::fs::read_to_string(p).expect("csv");
-    let mut lines = text.lines();
-    let header = lines
-        .next()
-        .expect("header")
-        .split(',')
-        .map(String::from)
-        .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(String::from).collect())
-        .collect();
-    (header, rows)
+    fes_testkit::table::read_csv(p)
 }
 
 /// Column `name` of a CSV as numbers.
