@@ -841,13 +841,35 @@ fn assert_every_unit_reached(name: &str, data: &DataSet) {
     }
 }
 
+/// A rich-protocol recording (`sim-muscle record --protocol rich ... --scale-from`) of
+/// `preset` with `seed` and `protocol`, normalised by the thesis recording's `scale_n`:
+/// `records` records of which `train` train (those over 1.1 of the scale are left out).
+fn rich_recording(
+    preset: Preset,
+    seed: u64,
+    protocol: ProtocolConfig,
+    scale_n: f64,
+    (records, train): (usize, usize),
+) -> DataSet {
+    let protocol = ProtocolConfig {
+        kind: sim_muscle::protocol::ProtocolKind::Rich,
+        ..protocol
+    };
+    let set = record_protocol(preset, seed, &protocol, Normalise::Scale(scale_n));
+    assert_eq!(
+        (set.records.len(), set.header.split.train.len()),
+        (records, train)
+    );
+    assert_eq!(set.header.scale_n, scale_n);
+    set
+}
+
 /// The slow muscle's recording of close pulse pairs from rest, at the thesis recording's
 /// scale `scale_n`: `sim-muscle record --preset slow --seed 3 --protocol rich --records 60
 /// --train-records 30 --rich-min-hz 4 --rich-max-hz 12 --doublet-min-ms 2 --doublet-max-ms 6
 /// --scale-from target/models/data-slow` (models/README.md).
 fn slow_pairs_recording(scale_n: f64) -> DataSet {
     let protocol = ProtocolConfig {
-        kind: sim_muscle::protocol::ProtocolKind::Rich,
         records: 60,
         train_records: 30,
         rich_min_hz: 4.0,
@@ -856,12 +878,7 @@ fn slow_pairs_recording(scale_n: f64) -> DataSet {
         doublet_max_ms: 6,
         ..ProtocolConfig::thesis(Preset::Slow)
     };
-    let pairs = record_protocol(Preset::Slow, 3, &protocol, Normalise::Scale(scale_n));
-    assert_eq!(
-        (pairs.records.len(), pairs.header.split.train.len()),
-        (60, 30)
-    );
-    pairs
+    rich_recording(Preset::Slow, 3, protocol, scale_n, (60, 30))
 }
 
 /// The shipped slow model is identified on the thesis protocol merged with close pulse
@@ -874,6 +891,21 @@ fn every_unit_of_the_shipped_slow_model_is_reached_by_its_training_data() {
     let merged =
         fes_dataset::merge::merge(&[("thesis".into(), thesis), ("pairs".into(), pairs)]).unwrap();
     assert_every_unit_reached("slow", &merged);
+}
+
+/// `again` fits its data as `stored` did: the same train and test MSSE, relative 1e-6 (a
+/// shipped model re-identified with the options its provenance records).
+fn assert_same_fit(again: &fes_model::model::Lmn, stored: &fes_model::model::Lmn) {
+    let (a, b) = (&again.provenance, &stored.provenance);
+    for (what, x, y) in [
+        ("train", a.train_msse.unwrap(), b.train_msse.unwrap()),
+        ("test", a.test_msse.unwrap(), b.test_msse.unwrap()),
+    ] {
+        assert!(
+            (x - y).abs() <= 1e-6 * y,
+            "{what} MSSE {x:e} vs stored {y:e}"
+        );
+    }
 }
 
 /// models/README.md's recipe for the shipped slow model, run through the commands: the two
@@ -920,16 +952,7 @@ fn the_shipped_slow_model_is_what_its_recipe_makes() {
     let again = file::load(&out).unwrap();
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
     let stored = file::load(models.join("slow.lmn.json")).unwrap();
-    let (a, b) = (&again.provenance, &stored.provenance);
-    for (what, x, y) in [
-        ("train", a.train_msse.unwrap(), b.train_msse.unwrap()),
-        ("test", a.test_msse.unwrap(), b.test_msse.unwrap()),
-    ] {
-        assert!(
-            (x - y).abs() <= 1e-6 * y,
-            "{what} MSSE {x:e} vs stored {y:e}"
-        );
-    }
+    assert_same_fit(&again, &stored);
     let units = |p: &Path| -> serde_json::Value {
         serde_json::from_slice::<serde_json::Value>(&std::fs::read(p).unwrap()).unwrap()["units"]
             .clone()
@@ -1028,20 +1051,14 @@ fn the_shipped_slow_model_answers_close_pairs_as_the_muscle_does() {
 fn every_unit_of_the_shipped_fast_model_is_reached_by_its_training_data() {
     let scale_n = record_preset(Preset::Fast, 1).header.scale_n;
     let protocol = ProtocolConfig {
-        kind: sim_muscle::protocol::ProtocolKind::Rich,
         records: 90,
         train_records: 60,
         rich_min_hz: 20.0,
         train_min_ms: 250,
         ..ProtocolConfig::thesis(Preset::Fast)
     };
-    let rich = record_protocol(Preset::Fast, 1, &protocol, Normalise::Scale(scale_n));
     // The records that exceed 1.1 of the thesis scale (the fastest trains) are left out.
-    assert_eq!(
-        (rich.records.len(), rich.header.split.train.len()),
-        (77, 51)
-    );
-    assert_eq!(rich.header.scale_n, scale_n);
+    let rich = rich_recording(Preset::Fast, 1, protocol, scale_n, (77, 51));
     assert_every_unit_reached("fast", &rich);
 }
 
@@ -1102,16 +1119,7 @@ fn the_undelayed_class_reproduces_its_stored_fit() {
     };
     let again = fit("undelayed");
     assert_eq!(again.scheduling, stored.scheduling);
-    let (a, b) = (&again.provenance, &stored.provenance);
-    for (what, x, y) in [
-        ("train", a.train_msse.unwrap(), b.train_msse.unwrap()),
-        ("test", a.test_msse.unwrap(), b.test_msse.unwrap()),
-    ] {
-        assert!(
-            (x - y).abs() <= 1e-6 * y,
-            "{what} MSSE {x:e} vs stored {y:e}"
-        );
-    }
+    assert_same_fit(&again, &stored);
     for (i, share) in validity_shares(&models.join("thesis-fast.lmn.json"))
         .iter()
         .enumerate()
@@ -1122,7 +1130,7 @@ fn the_undelayed_class_reproduces_its_stored_fit() {
         );
     }
     let ours = fit("delayed").provenance.test_msse.unwrap();
-    let theirs = b.test_msse.unwrap();
+    let theirs = stored.provenance.test_msse.unwrap();
     assert!(
         (ours - theirs).abs() <= 0.05 * theirs,
         "delayed class test MSSE {ours:e} vs undelayed {theirs:e}"
