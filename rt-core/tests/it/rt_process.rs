@@ -402,8 +402,20 @@ fn a_stale_reference_ramps_the_target_to_zero_at_the_configured_rate() {
     // One reference, then silence.
     let node = create_node("test-stale").unwrap();
     let publisher = port::publisher::<Reference>(&node, &prefix).unwrap();
+    let ticks_seen = port::subscriber::<StimTick>(&node, &prefix).unwrap();
     let rt = start_rt_core(&path, false);
-    std::thread::sleep(Duration::from_millis(150));
+    // The reference goes out once, so only after rt-core ticks: its ports are connected
+    // before its first tick. A fixed 150 ms wait lost the one sample on a loaded host,
+    // where rt-core ticked first 250 ms after its start and no tick ever had a reference.
+    let started = std::time::Instant::now();
+    while ticks_seen.receive().unwrap().is_none() {
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "rt-core never ticked"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    std::thread::sleep(Duration::from_millis(50));
     let issued = monotonic_ns();
     publisher.send_copy(Reference::new(1, issued, 0.8)).unwrap();
     std::thread::sleep(Duration::from_millis(900));
