@@ -6,21 +6,22 @@
 //! docs/bench.md, "The slow muscle at 0.5 on the process bench", found a grid-timing fault
 //! this way.
 //!
-//! `cargo run --release -p rt-core --example replay_recording -- RUN_DIR CONTROLLER
+//! `cargo run --release -p rt-core --example replay_recording -- RUN_DIR CONFIG
 //! [FROM_NS TO_NS]`: RUN_DIR is a recording's `run-*` directory (`ticks.csv`,
-//! `references.csv`, `previews.csv`), CONTROLLER the `fes-lcn/1` file rt-core ran. Prints
+//! `references.csv`, `previews.csv`), CONFIG the `rt-core.toml` the run used (its
+//! controller, period, reference policy and pulse; `fes bench --out DIR` writes it to
+//! DIR). Model-mode controllers only: the measured force is not replayed. Prints
 //! every tick whose pulse differs from the recording, the tick's pulse and the plan in
 //! force (pulse times in ticks from the next tick) for ticks whose grid time lies in
 //! `[FROM_NS, TO_NS)`, and the planner's counters. Exit 1 when a decision differs.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // a tool: a failed step ends it with its message
 
 use std::path::Path;
-use std::time::Duration;
 
 use fes_rt::msg::{PreviewEdge, Reference, ReferencePreview};
 use fes_rt::rt::clock::Wakeup;
-use rt_core::rt::reference::ReferencePolicy;
-use rt_core::rt::{ControllerSource, PatternLoop, PulseSettings};
+use rt_core::rt::process_config::{RtCoreConfig, SourceConfig};
+use rt_core::rt::{ControllerSource, PatternLoop};
 
 /// A CSV file of the recording as rows of named fields.
 struct Table {
@@ -85,8 +86,8 @@ fn previews(t: &Table) -> Vec<ReferencePreview> {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let [dir, controller, window @ ..] = args.as_slice() else {
-        eprintln!("usage: replay_recording RUN_DIR CONTROLLER [FROM_NS TO_NS]");
+    let [dir, config, window @ ..] = args.as_slice() else {
+        eprintln!("usage: replay_recording RUN_DIR CONFIG [FROM_NS TO_NS]");
         std::process::exit(2);
     };
     let (from, to): (u64, u64) = match window {
@@ -97,21 +98,24 @@ fn main() {
     let refs = references(&Table::read(&dir.join("references.csv")));
     let pvs = previews(&Table::read(&dir.join("previews.csv")));
     let ticks = Table::read(&dir.join("ticks.csv"));
-    let source = ControllerSource::load(Path::new(controller), Duration::from_millis(1))
+    let config = RtCoreConfig::load(Path::new(config)).expect("rt-core configuration");
+    let SourceConfig::Controller { path } = &config.source else {
+        panic!("the run's source is not a controller file");
+    };
+    assert!(
+        config.feedback_max_age_ns().is_none(),
+        "a measured-force run: its force samples are not replayed"
+    );
+    let source = ControllerSource::load(path, config.period())
         .expect("controller")
         .without_plan_clock();
-    // rt-core's defaults ([reference] of rt-core.toml on the bench).
-    let policy = ReferencePolicy {
-        stale_after_ns: 100_000_000,
-        stale_ramp_per_s: 2.0,
-        tick_ns: 1_000_000,
-    };
-    let pulse = PulseSettings {
-        channel: 0,
-        amplitude_ua: 20_000,
-        width_us: 200,
-    };
-    let mut pl = PatternLoop::new(source, policy, None, pulse, false);
+    let mut pl = PatternLoop::new(
+        source,
+        config.reference_policy(),
+        None,
+        config.pulse_settings(),
+        false,
+    );
     let (mut ri, mut pi, mut differ) = (0, 0, 0usize);
     let mut plan = [0i64; 64];
     for row in &ticks.rows {
