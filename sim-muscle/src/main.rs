@@ -603,11 +603,7 @@ fn record_cmd(args: RecordArgs) -> Result<()> {
     protocol.validate()?;
     let mut chosen = choose_plant(&args.muscle, protocol.ts_ms * 1e-3, |_| Ok(()))?;
     let sensor = sensor_config(&args.sensor, chosen.plant.as_mut(), args.seed)?;
-    let mode = if args.force {
-        WriteMode::Overwrite
-    } else {
-        WriteMode::CreateNew
-    };
+    let mode = WriteMode::from_force(args.force);
     if args.out.exists() && !args.out.is_dir() {
         bail!("{} exists and is not a directory", args.out.display());
     }

@@ -229,6 +229,18 @@ pub enum WriteMode {
     Overwrite,
 }
 
+impl WriteMode {
+    /// The mode of a command's `--force` flag: [`WriteMode::Overwrite`] with it, else
+    /// [`WriteMode::CreateNew`].
+    pub fn from_force(force: bool) -> Self {
+        if force {
+            WriteMode::Overwrite
+        } else {
+            WriteMode::CreateNew
+        }
+    }
+}
+
 /// Which records identify the model and which test it (thesis 5.3: the first 30
 /// records train). Indices into [`DataSet::records`].
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

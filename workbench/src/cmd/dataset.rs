@@ -324,11 +324,7 @@ fn run_merge(a: MergeArgs) -> Result<()> {
         sets.push((dir.display().to_string(), set));
     }
     let merged = fes_dataset::merge::merge(&sets)?;
-    let mode = if a.force {
-        WriteMode::Overwrite
-    } else {
-        WriteMode::CreateNew
-    };
+    let mode = WriteMode::from_force(a.force);
     merged
         .write(&a.out, mode)
         .with_context(|| format!("cannot write the data set to {}", a.out.display()))?;
@@ -356,11 +352,7 @@ fn run_import(a: ImportArgs) -> Result<()> {
     let bytes = std::fs::read(&a.input).with_context(|| format!("{}", a.input.display()))?;
     let imported = import(&a.input, &bytes, &opts)?;
     let ds: &DataSet = &imported.dataset;
-    let mode = if a.force {
-        WriteMode::Overwrite
-    } else {
-        WriteMode::CreateNew
-    };
+    let mode = WriteMode::from_force(a.force);
     ds.write(&a.out, mode)
         .with_context(|| format!("cannot write the data set to {}", a.out.display()))?;
     let r = &imported.report;
