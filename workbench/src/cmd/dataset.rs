@@ -70,7 +70,8 @@ EXAMPLE
       --train-records 30 --rich-min-hz 4 --rich-max-hz 12 --doublet-min-ms 2 \\
       --doublet-max-ms 6 --scale-from data/slow --out data/slow-pairs
   fes dataset merge data/slow data/slow-pairs --out data/slow-all
-  fes identify --data data/slow-all --structure ss-eig-common --units 5 --out slow.lmn.json";
+  fes identify --data data/slow-all --structure ss-eig-common --units 6 --range 0,0.5 \\
+      --zero-offsets --starts 8 --out slow.lmn.json  (the shipped slow model's recipe)";
 
 /// `fes dataset inspect` arguments.
 #[derive(Debug, clap::Args)]
