@@ -138,3 +138,34 @@ pub fn bench_profile(
         start_rest_ms,
     })
 }
+
+/// Every number of the JSON value `a` equals `b`'s within `rel` (relative, with an absolute
+/// floor of `rel`), everything else equal; `provenance` objects are skipped (a model
+/// re-identified differs there only).
+pub fn assert_close(a: &serde_json::Value, b: &serde_json::Value, rel: f64, at: &str) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            assert!(
+                (x - y).abs() <= rel * x.abs().max(y.abs()).max(1.0),
+                "{at}: {x} vs {y}"
+            );
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "{at}: lengths");
+            for (i, (x, y)) in x.iter().zip(y).enumerate() {
+                assert_close(x, y, rel, &format!("{at}[{i}]"));
+            }
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            let keys: Vec<&String> = x.keys().filter(|k| *k != "provenance").collect();
+            let other: Vec<&String> = y.keys().filter(|k| *k != "provenance").collect();
+            assert_eq!(keys, other, "{at}: keys");
+            for k in keys {
+                assert_close(&x[k], &y[k], rel, &format!("{at}.{k}"));
+            }
+        }
+        _ => assert_eq!(a, b, "{at}"),
+    }
+}

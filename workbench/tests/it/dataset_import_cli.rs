@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use crate::analysis_support::assert_close;
 use fes_dataset::{DataSet, WriteMode};
 use sim_muscle::muscle::{Muscle, MuscleConfig, max_force};
 use sim_muscle::plant::MusclePlant;
@@ -124,36 +125,6 @@ fn identify(data: &Path, out: &Path) -> serde_json::Value {
     ]);
     assert!(o.status.success(), "identify: {}", text(&o.stderr));
     serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap()
-}
-
-/// Every number of `a` equals `b`'s within `rel` (relative, with an absolute floor of
-/// `rel`), over the whole model but its provenance.
-fn assert_close(a: &serde_json::Value, b: &serde_json::Value, rel: f64, at: &str) {
-    use serde_json::Value;
-    match (a, b) {
-        (Value::Number(x), Value::Number(y)) => {
-            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
-            assert!(
-                (x - y).abs() <= rel * x.abs().max(y.abs()).max(1.0),
-                "{at}: {x} vs {y}"
-            );
-        }
-        (Value::Array(x), Value::Array(y)) => {
-            assert_eq!(x.len(), y.len(), "{at}: lengths");
-            for (i, (x, y)) in x.iter().zip(y).enumerate() {
-                assert_close(x, y, rel, &format!("{at}[{i}]"));
-            }
-        }
-        (Value::Object(x), Value::Object(y)) => {
-            let keys: Vec<&String> = x.keys().filter(|k| *k != "provenance").collect();
-            let other: Vec<&String> = y.keys().filter(|k| *k != "provenance").collect();
-            assert_eq!(keys, other, "{at}: keys");
-            for k in keys {
-                assert_close(&x[k], &y[k], rel, &format!("{at}.{k}"));
-            }
-        }
-        _ => assert_eq!(a, b, "{at}"),
-    }
 }
 
 #[test]
